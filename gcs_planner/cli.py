@@ -1,0 +1,52 @@
+"""`gcs-planner`: one command, a subcommand per job; thin over the library.
+
+Each subcommand lives in gcs_planner/commands/<name>.py with ``add_arguments(parser)`` and
+``run(args) -> int``; a module docstring's first line is its help text. User mistakes
+(UserError) print one line and exit 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from importlib import import_module
+
+from gcs_planner import __version__
+from gcs_planner.errors import UserError
+
+COMMANDS = ["plan"]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="gcs-planner", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"gcs-planner {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        module = import_module(f"gcs_planner.commands.{name.replace('-', '_')}")
+        help_text = (module.__doc__ or name).strip().splitlines()[0]
+        p = sub.add_parser(name, help=help_text, description=module.__doc__)
+        module.add_arguments(p)
+        p.set_defaults(run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return int(args.run(args) or 0)
+    except UserError as exc:
+        print(f"gcs-planner {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"gcs-planner {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

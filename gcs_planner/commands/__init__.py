@@ -1,0 +1,1 @@
+"""Subcommands of `gcs-planner` (see gcs_planner.cli)."""

@@ -1,0 +1,1 @@
+"""MAVLink adaptor: plans to mission items, the mission protocol client, links, plan files."""

@@ -1,0 +1,52 @@
+"""Typed MAVLink values shared by the client, the mock autopilot and the file formats."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from enum import IntEnum
+
+__all__ = ["MissionItem", "MissionType"]
+
+
+class MissionType(IntEnum):
+    """MAV_MISSION_TYPE: which of a vehicle's three lists a transfer is about."""
+
+    MISSION = 0
+    FENCE = 1
+    RALLY = 2
+    ALL = 255  # only valid in MISSION_CLEAR_ALL
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One MISSION_ITEM_INT, field for field.
+
+    x, y: latitude, longitude [degE7] for global frames (local frames: metres x 1e4).
+    z: altitude [m] in the item's frame (GLOBAL_RELATIVE_ALT_INT: above home).
+    param1..param4: command parameters as MAV_CMD defines them.
+    """
+
+    seq: int
+    frame: int
+    command: int
+    current: int = 0
+    autocontinue: int = 1
+    param1: float = 0.0
+    param2: float = 0.0
+    param3: float = 0.0
+    param4: float = 0.0
+    x: int = 0
+    y: int = 0
+    z: float = 0.0
+    mission_type: int = MissionType.MISSION
+
+    @property
+    def lat_deg(self) -> float:
+        return self.x / 1e7
+
+    @property
+    def lon_deg(self) -> float:
+        return self.y / 1e7
+
+    def with_seq(self, seq: int) -> MissionItem:
+        return replace(self, seq=seq)

@@ -1,0 +1,144 @@
+"""The Plan: what every planner returns and what the MAVLink adaptor turns into missions.
+
+All positions are local ENU metres about ``Plan.origin`` (see gcs_planner.geo), times are
+seconds from the mission start, speeds m/s. A plan serialises to plain JSON (plan.json).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gcs_planner.geo import Origin
+
+__all__ = ["Plan", "VehiclePlan"]
+
+
+@dataclass
+class VehiclePlan:
+    """One vehicle's planned flight.
+
+    waypoints: (N, 3) ENU [m] the vehicle must pass, start first; becomes mission waypoints.
+    times_s: (N,) planned arrival time at each waypoint [s from mission start].
+    speeds_mps: (N,) ground speed on the leg that ends at each waypoint [m/s] (entry 0 unused).
+    path: (M, 3) the smoothed (e.g. Dubins) path sampled densely [m]; what the vehicle should fly.
+    path_times_s: (M,) time at each path sample [s].
+    takeoff_delay_s: hold on the ground this long after the fleet start (delayed take-off).
+    final_action: "land", "rtl" or "loiter" after the last waypoint.
+    acceptance_radius_m: waypoint acceptance radius given to the autopilot.
+    cost: named cost terms of the planner; feasible: the independent checker's verdict.
+    """
+
+    vehicle_id: str
+    sysid: int
+    waypoints: np.ndarray
+    times_s: np.ndarray
+    speeds_mps: np.ndarray
+    path: np.ndarray
+    path_times_s: np.ndarray
+    vehicle_type: str = "multirotor"
+    turn_radius_m: float = 0.0
+    takeoff_delay_s: float = 0.0
+    final_action: str = "land"
+    acceptance_radius_m: float = 2.0
+    cost: dict[str, float] = field(default_factory=dict)
+    feasible: bool = True
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.waypoints = np.asarray(self.waypoints, dtype=float).reshape(-1, 3)
+        self.times_s = np.asarray(self.times_s, dtype=float).reshape(-1)
+        self.speeds_mps = np.asarray(self.speeds_mps, dtype=float).reshape(-1)
+        self.path = np.asarray(self.path, dtype=float).reshape(-1, 3)
+        self.path_times_s = np.asarray(self.path_times_s, dtype=float).reshape(-1)
+        n = len(self.waypoints)
+        if len(self.times_s) != n or len(self.speeds_mps) != n:
+            raise ValueError(
+                f"vehicle {self.vehicle_id}: waypoints ({n}), times_s ({len(self.times_s)}) and"
+                f" speeds_mps ({len(self.speeds_mps)}) must have the same length"
+            )
+        if len(self.path) != len(self.path_times_s):
+            raise ValueError(
+                f"vehicle {self.vehicle_id}: path ({len(self.path)}) and path_times_s"
+                f" ({len(self.path_times_s)}) must have the same length"
+            )
+
+    def to_dict(self) -> dict:
+        return {
+            "vehicle_id": self.vehicle_id,
+            "sysid": self.sysid,
+            "vehicle_type": self.vehicle_type,
+            "turn_radius_m": self.turn_radius_m,
+            "takeoff_delay_s": self.takeoff_delay_s,
+            "final_action": self.final_action,
+            "acceptance_radius_m": self.acceptance_radius_m,
+            "waypoints": self.waypoints.round(4).tolist(),
+            "times_s": self.times_s.round(4).tolist(),
+            "speeds_mps": self.speeds_mps.round(4).tolist(),
+            "path": self.path.round(4).tolist(),
+            "path_times_s": self.path_times_s.round(4).tolist(),
+            "cost": self.cost,
+            "feasible": self.feasible,
+            "notes": self.notes,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> VehiclePlan:
+        return cls(**d)
+
+
+@dataclass
+class Plan:
+    """A planner's output for the whole fleet."""
+
+    origin: Origin
+    planner: str
+    vehicles: list[VehiclePlan]
+    metrics: dict = field(default_factory=dict)
+    events: list[dict] = field(default_factory=list)
+
+    @property
+    def feasible(self) -> bool:
+        return all(v.feasible for v in self.vehicles)
+
+    def vehicle(self, vehicle_id: str) -> VehiclePlan:
+        for v in self.vehicles:
+            if v.vehicle_id == vehicle_id:
+                return v
+        raise KeyError(f"no vehicle {vehicle_id!r} in plan")
+
+    def to_dict(self) -> dict:
+        return {
+            "origin": {
+                "lat_deg": self.origin.lat_deg,
+                "lon_deg": self.origin.lon_deg,
+                "alt_m": self.origin.alt_m,
+            },
+            "planner": self.planner,
+            "metrics": self.metrics,
+            "events": self.events,
+            "vehicles": [v.to_dict() for v in self.vehicles],
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Plan:
+        return cls(
+            origin=Origin(**d["origin"]),
+            planner=d["planner"],
+            vehicles=[VehiclePlan.from_dict(v) for v in d["vehicles"]],
+            metrics=d.get("metrics", {}),
+            events=d.get("events", []),
+        )
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), separators=(",", ":"))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.to_json())
+
+    @classmethod
+    def load(cls, path: str | Path) -> Plan:
+        return cls.from_dict(json.loads(Path(path).read_text()))

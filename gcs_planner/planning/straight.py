@@ -1,0 +1,42 @@
+"""Straight-line baseline: climb over the start, fly straight to the goal at cruise altitude.
+
+Useful as the simplest plan that still exercises the whole chain (missions, flight, logging);
+it ignores obstacles and other vehicles, and says so in each vehicle's notes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.scenario import Scenario
+
+
+def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
+    del rng  # deterministic
+    spacing_m = float(scenario.planner.get("waypoint_spacing_m", 100.0))
+    vehicles = []
+    for v in scenario.vehicles:
+        start, goal = np.asarray(v.start), np.asarray(v.goal)
+        legs = max(1, int(np.ceil(np.linalg.norm(goal - start) / spacing_m)))
+        waypoints = start + np.linspace(0.0, 1.0, legs + 1)[:, None] * (goal - start)
+        seg = np.linalg.norm(np.diff(waypoints, axis=0), axis=1)
+        times = np.concatenate([[0.0], np.cumsum(seg) / v.speed_mps])
+        vehicles.append(
+            VehiclePlan(
+                vehicle_id=v.id,
+                sysid=v.sysid,
+                vehicle_type=v.type,
+                waypoints=waypoints,
+                times_s=times,
+                speeds_mps=np.full(len(times), v.speed_mps),
+                path=waypoints,
+                path_times_s=times,
+                turn_radius_m=v.turn_radius_m,
+                cost={"length_m": float(seg.sum())},
+                notes=["straight-line baseline: obstacles and other vehicles not considered"],
+            )
+        )
+        if progress:
+            progress(len(vehicles) / len(scenario.vehicles), v.id)
+    return Plan(origin=scenario.origin, planner="straight", vehicles=vehicles)
