@@ -23,6 +23,8 @@ Progress = Callable[[float, str], None]
 # name in the scenario file -> module exposing plan(scenario, rng, progress)
 PLANNERS: dict[str, str] = {
     "straight": "gcs_planner.planning.straight",
+    "coalition": "gcs_planner.planning.coalition",
+    "deconflict_4d": "gcs_planner.planning.deconflict4d",
 }
 
 
