@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+
+from gcs_planner.conformance import Track, conformance_report, format_report, point_to_polyline_m
+from gcs_planner.geo import Origin
+from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.scenario import Cylinder
+
+
+def _vehicle(sysid, y, speed=10.0):
+    wp = np.array([[0.0, y, 20.0], [200.0, y, 20.0]])
+    t = np.array([0.0, 200.0 / speed])
+    return VehiclePlan(f"uav{sysid}", sysid, wp, t, [speed, speed], wp, t)
+
+
+def _flown(vp, offset=(0.0, 0.0, 0.0), completed=True):
+    t = np.linspace(0, vp.path_times_s[-1], 201)
+    pos = np.stack([np.interp(t, vp.path_times_s, vp.path[:, k]) for k in range(3)], axis=1)
+    return Track(t, pos + np.asarray(offset), completed)
+
+
+def test_point_to_polyline_matches_brute_force():
+    rng = np.random.default_rng(3)
+    poly = rng.uniform(-50, 50, (7, 3))
+    pts = rng.uniform(-60, 60, (300, 3))
+    dense = np.concatenate(
+        [a + np.linspace(0, 1, 2001)[:, None] * (b - a) for a, b in zip(poly[:-1], poly[1:])]
+    )
+    brute = np.linalg.norm(pts[:, None] - dense[None], axis=2).min(axis=1)
+    np.testing.assert_allclose(point_to_polyline_m(pts, poly, chunk=64), brute, atol=0.06)
+
+
+def test_report_passes_on_plan_and_fails_on_drift_separation_obstacle_and_incomplete():
+    plan = Plan(Origin(47.0, 8.0, 400.0), "test", [_vehicle(1, 0.0), _vehicle(2, 30.0)])
+    good = {v.sysid: _flown(v) for v in plan.vehicles}
+    reports = conformance_report(plan, good, {1: 5.0, 2: 5.0})
+    assert all(r.passed for r in reports), format_report(reports)
+    assert reports[0].min_separation_m == pytest.approx(30.0, abs=1e-6)
+    assert reports[0].cross_track_max_m < 1e-6
+
+    drift = {1: _flown(plan.vehicles[0], offset=(0, 8, 0)), 2: good[2]}
+    r = conformance_report(plan, drift, {1: 5.0, 2: 5.0}, max_cross_track_m=5.0, acceptance_m=10.0)
+    assert not r[0].passed and "cross-track" in r[0].failures[0] and r[1].passed
+
+    close = {1: good[1], 2: _flown(plan.vehicles[1], offset=(0, -27, 0))}
+    r = conformance_report(plan, close, {1: 5.0, 2: 5.0}, max_cross_track_m=50.0, acceptance_m=40.0)
+    assert any("separation" in f for f in r[0].failures) and r[0].min_separation_m == pytest.approx(3.0)
+
+    tower = [Cylinder(x=100.0, y=0.0, radius_m=2.0, z_max_m=50.0)]
+    r = conformance_report(plan, good, {1: 5.0, 2: 5.0}, cylinders=tower)
+    assert any("obstacle" in f for f in r[0].failures) and r[1].passed
+
+    r = conformance_report(plan, {1: _flown(plan.vehicles[0], completed=False)}, {1: 5.0, 2: 5.0})
+    assert r[0].failures == ["mission not completed"] and r[1].failures == ["never airborne"]
+    assert "PASS" in format_report(conformance_report(plan, good, {1: 5.0, 2: 5.0}))
