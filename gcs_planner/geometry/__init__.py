@@ -1,0 +1,1 @@
+"""Geometry shared by the planners: Dubins paths, obstacles, time-parametrised separation checks."""
