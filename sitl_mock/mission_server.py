@@ -1,0 +1,581 @@
+"""Autopilot side of the MAVLink mission protocol, free of I/O, for the mock vehicle.
+
+The mock vehicle feeds every MISSION_* message to :meth:`MissionServer.handle` and calls
+:meth:`MissionServer.poll` on its clock; both return the messages to send back (pymavlink message
+objects, targeted at the partner). One server holds the three lists (mission, fence, rally).
+
+Choices where the autopilots differ or the spec is open:
+- Atomic by default: the stored list is replaced only when an upload completes, so a failed upload
+  leaves the previous mission intact. Real ArduPilot writes items as they arrive (a failed upload
+  leaves a mix of old and new); ``non_atomic=True`` emulates that so a client's failure reporting
+  can be tested against it.
+- ArduPilot-like: MISSION_REQUEST, re-request after 1 s, cancel with MISSION_ACK(OPERATION_CANCELLED)
+  after 8 s without an item, wrong seq -> MISSION_ACK(INVALID_SEQUENCE) and the session continues,
+  a second uploader or items from another system -> DENIED, downloads during an upload -> DENIED,
+  count over capacity -> NO_SPACE + STATUSTEXT, CLEAR_ALL while receiving or (mission) in AUTO ->
+  ERROR, a repeated final item after completion is dropped (no second ACK), values are rounded as
+  ArduPilot stores them (altitude in cm, whole-second hold time, whole-metre radii, non-_INT
+  frame numbers on read-back).
+- PX4-like: MISSION_REQUEST_INT, 250 ms re-request, 5 s timeout, wrong seq ignored (the timer
+  re-requests), a repeated final item is acknowledged again, MISSION_ACK(OPERATION_CANCELLED) from
+  the uploader cancels.
+- Both answer MISSION_REQUEST_INT with MISSION_ITEM_INT and legacy MISSION_REQUEST with MISSION_ITEM.
+- opaque_id: CRC-32 of the stored list (never 0, which means "unsupported"), sent in the final
+  MISSION_ACK, in MISSION_COUNT on download and in MISSION_CURRENT.
+- Scripted failures (:class:`Failure`) follow QGroundControl's MockLinkMissionItemHandler; the
+  ``*_FIRST_RESPONSE`` ones fire once, the others on every transfer until ``failure`` is reset.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+import zlib
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from enum import StrEnum
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.mavlink.enums import MissionResult, MissionState
+from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.wire import MissionAckMessage, MissionCountMessage, MissionCurrentMessage
+from sitl_mock.profiles import AutopilotProfile
+
+__all__ = ["Failure", "MissionServer"]
+
+log = logging.getLogger(__name__)
+
+_LIST_TYPES = (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
+_GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})
+_KNOWN_FRAMES = frozenset({0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21})
+_ARDUPILOT_FRAME_READBACK = {5: 0, 6: 3, 11: 10}  # ArduPilot reports the non-_INT frame numbers
+_NAV_WAYPOINT = 16
+_ITEM_PACK = struct.Struct("<HBHBBffffiifB")
+
+
+class Failure(StrEnum):
+    """Scripted failures after QGroundControl's MockLinkMissionItemHandler::FailureMode_t."""
+
+    NONE = "none"
+    READ_REQUEST_LIST_NO_RESPONSE = "read_request_list_no_response"
+    READ_REQUEST_LIST_FIRST_RESPONSE = "read_request_list_first_response"
+    READ_REQUEST0_NO_RESPONSE = "read_request0_no_response"
+    READ_REQUEST1_NO_RESPONSE = "read_request1_no_response"
+    READ_REQUEST0_FIRST_RESPONSE = "read_request0_first_response"
+    READ_REQUEST1_FIRST_RESPONSE = "read_request1_first_response"
+    READ_REQUEST0_INCORRECT_SEQUENCE = "read_request0_incorrect_sequence"
+    READ_REQUEST1_INCORRECT_SEQUENCE = "read_request1_incorrect_sequence"
+    READ_REQUEST0_ERROR_ACK = "read_request0_error_ack"
+    READ_REQUEST1_ERROR_ACK = "read_request1_error_ack"
+    WRITE_COUNT_NO_RESPONSE = "write_count_no_response"
+    WRITE_COUNT_FIRST_RESPONSE = "write_count_first_response"
+    WRITE_REQUEST1_NO_RESPONSE = "write_request1_no_response"
+    WRITE_REQUEST0_INCORRECT_SEQUENCE = "write_request0_incorrect_sequence"
+    WRITE_REQUEST1_INCORRECT_SEQUENCE = "write_request1_incorrect_sequence"
+    WRITE_REQUEST0_ERROR_ACK = "write_request0_error_ack"
+    WRITE_REQUEST1_ERROR_ACK = "write_request1_error_ack"
+    WRITE_FINAL_ACK_NO_RESPONSE = "write_final_ack_no_response"
+    WRITE_FINAL_ACK_ERROR_ACK = "write_final_ack_error_ack"
+
+
+_ONE_SHOT = frozenset(f for f in Failure if f.value.endswith("first_response"))
+
+
+@dataclass
+class _Upload:
+    """One upload session (a MISSION_COUNT or WRITE_PARTIAL_LIST being served)."""
+
+    partner: tuple[int, int]
+    first: int  # first seq requested (0, or start_index of a partial write)
+    last: int  # last seq requested (inclusive)
+    next_seq: int
+    last_receive_s: float
+    last_request_s: float
+    received: list[MissionItem] = field(default_factory=list)
+    partial: bool = False  # MISSION_WRITE_PARTIAL_LIST: replace items first..last only
+    silent: bool = False  # scripted: stop requesting (the session then times out)
+
+
+@dataclass(frozen=True)
+class _Completed:
+    """The last finished upload, to re-acknowledge a repeated final item (PX4 behaviour)."""
+
+    partner: tuple[int, int]
+    last_seq: int
+    opaque_id: int
+
+
+class MissionServer:
+    """Mission, fence and rally lists of one vehicle, served over the mission protocol.
+
+    Attributes the vehicle may set: ``failure`` / ``failure_result`` (scripted failures and the
+    MAV_MISSION_RESULT their error ACKs carry), ``on_change(mission_type)`` (a list was replaced),
+    ``on_current(seq)`` (MISSION_SET_CURRENT accepted), ``mission_running`` (vehicle in AUTO:
+    ArduPilot refuses CLEAR_ALL then), ``home`` (item reported at seq 0 of an empty ArduPilot-like
+    mission).
+    """
+
+    def __init__(
+        self,
+        sysid: int,
+        compid: int,
+        profile: AutopilotProfile,
+        *,
+        capacity: int | None = None,
+        non_atomic: bool = False,
+    ) -> None:
+        self.sysid = sysid
+        self.compid = compid
+        self.profile = profile
+        self.non_atomic = non_atomic
+        self.capacity = dict(profile.capacity)
+        if capacity is not None:
+            self.capacity[MissionType.MISSION] = capacity
+        self.failure: Failure = Failure.NONE
+        self.failure_result: MissionResult = MissionResult.ERROR
+        self.on_change: Callable[[int], None] | None = None
+        self.on_current: Callable[[int], None] | None = None
+        self.mission_running = False
+        self.home: MissionItem | None = None
+        self._lists: dict[int, list[MissionItem]] = {t: [] for t in _LIST_TYPES}
+        self._ids: dict[int, int] = dict.fromkeys(_LIST_TYPES, 0)
+        self._uploads: dict[int, _Upload] = {}
+        self._completed: dict[int, _Completed] = {}
+        self._fired: set[Failure] = set()
+        self._current_seq = 0
+        self._handlers: dict[
+            str, Callable[[mavlink.MAVLink_message, float], list[mavlink.MAVLink_message]]
+        ] = {
+            "MISSION_COUNT": self._on_count,
+            "MISSION_WRITE_PARTIAL_LIST": self._on_write_partial_list,
+            "MISSION_ITEM_INT": self._on_item,
+            "MISSION_ITEM": self._on_item,
+            "MISSION_REQUEST_LIST": self._on_request_list,
+            "MISSION_REQUEST_INT": self._on_request,
+            "MISSION_REQUEST": self._on_request,
+            "MISSION_ACK": self._on_ack,
+            "MISSION_CLEAR_ALL": self._on_clear_all,
+            "MISSION_SET_CURRENT": self._on_set_current,
+        }
+
+    # ----------------------------------------------------------------- public API for the vehicle
+    def handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        """Process one received MISSION_* message; returns the replies (others are ignored)."""
+        handler = self._handlers.get(msg.get_type())
+        if handler is None or msg.target_system not in (0, self.sysid):
+            return []
+        if msg.target_component not in (0, self.compid):
+            return []
+        mission_type = getattr(msg, "mission_type", MissionType.MISSION)
+        valid = (*_LIST_TYPES, MissionType.ALL) if handler == self._on_clear_all else _LIST_TYPES
+        if mission_type not in valid:
+            return [self._ack(msg, MissionResult.UNSUPPORTED, mission_type)]
+        return handler(msg, now_s)
+
+    def poll(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        """Re-request overdue items and cancel stalled uploads; call often (every <= 50 ms)."""
+        out: list[mavlink.MAVLink_message] = []
+        for mission_type, up in list(self._uploads.items()):
+            if now_s - up.last_receive_s > self.profile.timeout_s:
+                log.info(
+                    "sysid %d: upload of type %d timed out at seq %d", self.sysid, mission_type, up.next_seq
+                )
+                del self._uploads[mission_type]
+                ack = MissionAckMessage(*up.partner, MissionResult.OPERATION_CANCELLED, mission_type)
+                out.append(ack)
+            elif not up.silent and now_s - up.last_request_s >= self.profile.rerequest_s:
+                out.append(self._request(up, mission_type, up.next_seq, now_s))
+        return out
+
+    def next_deadline_s(self) -> float | None:
+        """Earliest time at which :meth:`poll` has something to do (None: nothing pending)."""
+        times = []
+        for up in self._uploads.values():
+            times.append(up.last_receive_s + self.profile.timeout_s)
+            if not up.silent:
+                times.append(up.last_request_s + self.profile.rerequest_s)
+        return min(times, default=None)
+
+    def items(self, mission_type: int = MissionType.MISSION) -> list[MissionItem]:
+        """The stored list (a copy) as the vehicle would fly it."""
+        return list(self._lists[mission_type])
+
+    def count(self, mission_type: int = MissionType.MISSION) -> int:
+        return len(self._lists[mission_type])
+
+    def opaque_id(self, mission_type: int = MissionType.MISSION) -> int:
+        """Id of the stored list (0 when empty)."""
+        return self._ids[mission_type]
+
+    def busy(self, mission_type: int = MissionType.MISSION) -> bool:
+        """True while an upload of this type is in progress."""
+        return mission_type in self._uploads
+
+    @property
+    def current_seq(self) -> int:
+        return self._current_seq
+
+    def set_current(self, seq: int) -> bool:
+        """Make ``seq`` the current mission item; False (nothing changed) when out of range."""
+        if not 0 <= seq < len(self._lists[MissionType.MISSION]):
+            return False
+        self._current_seq = seq
+        if self.on_current is not None:
+            self.on_current(seq)
+        return True
+
+    def mission_current(
+        self, mission_state: int | None = None, mission_mode: int = 0
+    ) -> MissionCurrentMessage:
+        """MISSION_CURRENT for the vehicle's 1 Hz stream; state defaults to NO_MISSION / NOT_STARTED."""
+        total = len(self._lists[MissionType.MISSION])
+        if mission_state is None:
+            mission_state = MissionState.NOT_STARTED if total else MissionState.NO_MISSION
+        return MissionCurrentMessage(
+            self._current_seq,
+            total if total else 65535,
+            int(mission_state),
+            mission_mode,
+            self._ids[MissionType.MISSION],
+            self._ids[MissionType.FENCE],
+            self._ids[MissionType.RALLY],
+        )
+
+    def forget(self) -> None:
+        """Reboot without persistent storage: every list, id and session is lost."""
+        self._lists = {t: [] for t in _LIST_TYPES}
+        self._ids = dict.fromkeys(_LIST_TYPES, 0)
+        self._uploads.clear()
+        self._completed.clear()
+        self._current_seq = 0
+
+    # ----------------------------------------------------------------- upload
+    def _on_count(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        mission_type = msg.mission_type
+        if self._fails(Failure.WRITE_COUNT_NO_RESPONSE) or self._fails_once(
+            Failure.WRITE_COUNT_FIRST_RESPONSE
+        ):
+            return []
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        up = self._uploads.get(mission_type)
+        if up is not None and up.partner != partner:
+            return [self._ack(msg, MissionResult.DENIED)]
+        self._uploads.pop(mission_type, None)  # the same GCS may restart
+        capacity = self.capacity[mission_type]
+        if msg.count > capacity:
+            text = f"Only {capacity} items are supported"
+            status = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, text.encode())
+            return [self._ack(msg, MissionResult.NO_SPACE), status]
+        if self._fails(Failure.WRITE_REQUEST0_ERROR_ACK):
+            return [self._ack(msg, self.failure_result)]
+        if msg.count == 0:
+            return [self._complete(partner, mission_type, 0, [], -1)]
+        if self.non_atomic:
+            del self._lists[mission_type][msg.count :]  # ArduPilot truncates at MISSION_COUNT
+        up = _Upload(partner, 0, msg.count - 1, 0, now_s, now_s)
+        self._uploads[mission_type] = up
+        seq = 1 if self._fails(Failure.WRITE_REQUEST0_INCORRECT_SEQUENCE) else 0
+        return [self._request(up, mission_type, seq, now_s)]
+
+    def _on_write_partial_list(
+        self, msg: mavlink.MAVLink_message, now_s: float
+    ) -> list[mavlink.MAVLink_message]:
+        mission_type = msg.mission_type
+        stored = len(self._lists[mission_type])
+        if not self.profile.supports_partial_write:
+            return [self._ack(msg, MissionResult.UNSUPPORTED)]
+        if mission_type in self._uploads:
+            return [self._ack(msg, MissionResult.DENIED)]
+        if not 0 <= msg.start_index <= msg.end_index < stored:
+            return [self._ack(msg, MissionResult.ERROR)]
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        up = _Upload(partner, msg.start_index, msg.end_index, msg.start_index, now_s, now_s, partial=True)
+        self._uploads[mission_type] = up
+        return [self._request(up, mission_type, up.next_seq, now_s)]
+
+    def _on_item(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        mission_type = msg.mission_type
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        up = self._uploads.get(mission_type)
+        if up is None:
+            done = self._completed.get(mission_type)
+            if (
+                self.profile.reacks_final_item
+                and done is not None
+                and done.partner == partner
+                and done.last_seq == msg.seq
+                and not self._fails(Failure.WRITE_FINAL_ACK_NO_RESPONSE)
+            ):
+                return [self._ack(msg, MissionResult.ACCEPTED, opaque_id=done.opaque_id)]
+            return []
+        if partner != up.partner:
+            return [self._ack(msg, MissionResult.DENIED)]
+        if msg.seq != up.next_seq:
+            return (
+                [self._ack(msg, MissionResult.INVALID_SEQUENCE)] if self.profile.uses_legacy_request else []
+            )
+        item, result = self._decode_item(msg)
+        if result != MissionResult.ACCEPTED:
+            del self._uploads[mission_type]
+            return [self._ack(msg, result)]
+        up.received.append(item)
+        if self.non_atomic:
+            self._store_in_place(mission_type, item)
+        up.next_seq += 1
+        up.last_receive_s = now_s
+        if up.next_seq > up.last:
+            return self._finish_upload(msg, mission_type, up)
+        if up.next_seq == up.first + 1:
+            if self._fails(Failure.WRITE_REQUEST1_ERROR_ACK):
+                del self._uploads[mission_type]
+                return [self._ack(msg, self.failure_result)]
+            if self._fails(Failure.WRITE_REQUEST1_NO_RESPONSE):
+                up.silent = True
+                return []
+            if self._fails(Failure.WRITE_REQUEST1_INCORRECT_SEQUENCE) and up.last > up.next_seq:
+                return [self._request(up, mission_type, up.next_seq + 1, now_s)]
+        return [self._request(up, mission_type, up.next_seq, now_s)]
+
+    def _finish_upload(self, msg: mavlink.MAVLink_message, mission_type: int, up: _Upload) -> list:
+        del self._uploads[mission_type]
+        if self._fails(Failure.WRITE_FINAL_ACK_ERROR_ACK):
+            return [self._ack(msg, self.failure_result)]
+        new = up.received
+        if up.partial:
+            new = list(self._lists[mission_type])
+            new[up.first : up.last + 1] = up.received
+        ack = self._complete(up.partner, mission_type, len(new), new, up.last)
+        return [] if self._fails(Failure.WRITE_FINAL_ACK_NO_RESPONSE) else [ack]
+
+    def _complete(
+        self, partner: tuple[int, int], mission_type: int, count: int, new: list[MissionItem], last_seq: int
+    ) -> MissionAckMessage:
+        self._replace(mission_type, new)
+        opaque = self._ids[mission_type]
+        self._completed[mission_type] = _Completed(partner, last_seq, opaque)
+        return MissionAckMessage(*partner, MissionResult.ACCEPTED, mission_type, opaque)
+
+    def _replace(self, mission_type: int, new: list[MissionItem]) -> None:
+        self._lists[mission_type] = list(new)
+        self._ids[mission_type] = _list_id(new, mission_type)
+        if mission_type == MissionType.MISSION and self._current_seq >= max(len(new), 1):
+            self._current_seq = 0
+        if self.on_change is not None:
+            self.on_change(mission_type)
+
+    def _store_in_place(self, mission_type: int, item: MissionItem) -> None:
+        stored = self._lists[mission_type]
+        self._ids[mission_type] = 0  # a half-written list is no known plan
+        if item.seq < len(stored):
+            stored[item.seq] = item
+        else:
+            stored.append(item)
+
+    def _request(self, up: _Upload, mission_type: int, seq: int, now_s: float) -> mavlink.MAVLink_message:
+        up.last_request_s = now_s
+        cls = mavlink.MAVLink_mission_request_message
+        if not self.profile.uses_legacy_request:
+            cls = mavlink.MAVLink_mission_request_int_message
+        return cls(up.partner[0], up.partner[1], seq, mission_type)
+
+    def _decode_item(self, msg: mavlink.MAVLink_message) -> tuple[MissionItem, MissionResult]:
+        """MISSION_ITEM(_INT) -> stored item (rounded like the profile's autopilot) and a verdict."""
+        x, y = msg.x, msg.y
+        if msg.get_type() == "MISSION_ITEM":  # legacy float message: degrees (global) or metres
+            scale = 1e7 if msg.frame in _GLOBAL_FRAMES else 1e4
+            x, y = round(x * scale), round(y * scale)
+        item = MissionItem(
+            seq=msg.seq,
+            frame=msg.frame,
+            command=msg.command,
+            current=msg.current,
+            autocontinue=msg.autocontinue,
+            param1=msg.param1,
+            param2=msg.param2,
+            param3=msg.param3,
+            param4=msg.param4,
+            x=int(x),
+            y=int(y),
+            z=msg.z,
+            mission_type=msg.mission_type,
+        )
+        if msg.frame not in _KNOWN_FRAMES:
+            return item, MissionResult.UNSUPPORTED_FRAME
+        if msg.command not in mavlink.enums["MAV_CMD"]:
+            return item, MissionResult.UNSUPPORTED
+        if msg.frame in _GLOBAL_FRAMES and (x or y):
+            if abs(x) > 90 * 10**7:
+                return item, MissionResult.INVALID_PARAM5_X
+            if abs(y) > 180 * 10**7:
+                return item, MissionResult.INVALID_PARAM6_Y
+        if not math.isfinite(msg.z):
+            return item, MissionResult.INVALID_PARAM7
+        if self.profile.rounds_values:
+            item = _ardupilot_storage(item)
+        return item, MissionResult.ACCEPTED
+
+    # ----------------------------------------------------------------- download
+    def _on_request_list(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        mission_type = msg.mission_type
+        if self._fails(Failure.READ_REQUEST_LIST_NO_RESPONSE) or self._fails_once(
+            Failure.READ_REQUEST_LIST_FIRST_RESPONSE
+        ):
+            return []
+        if mission_type in self._uploads:
+            return [self._ack(msg, MissionResult.DENIED)]
+        count = len(self._served(mission_type))
+        sysid, compid = msg.get_srcSystem(), msg.get_srcComponent()
+        return [MissionCountMessage(sysid, compid, count, mission_type, self._ids[mission_type])]
+
+    def _on_request(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        mission_type, seq = msg.mission_type, msg.seq
+        if mission_type in self._uploads:
+            return [self._ack(msg, MissionResult.DENIED)]
+        served = self._served(mission_type)
+        if not 0 <= seq < len(served):
+            return [self._ack(msg, MissionResult.INVALID_SEQUENCE)]
+        if seq in (0, 1):
+            failures = _READ_FAILURES[seq]
+            if self._fails(failures["no"]) or self._fails_once(failures["first"]):
+                return []
+            if self._fails(failures["error"]):
+                return [self._ack(msg, self.failure_result)]
+            if self._fails(failures["wrong"]):
+                seq = len(served)  # a seq the GCS did not ask for (and outside the list)
+        item = served[min(seq, len(served) - 1)]
+        return [_item_message(item, seq, msg, legacy=msg.get_type() == "MISSION_REQUEST")]
+
+    def _served(self, mission_type: int) -> list[MissionItem]:
+        """What a download returns: the stored list, with ArduPilot's home at seq 0 if it has one."""
+        items = self._lists[mission_type]
+        if mission_type == MissionType.MISSION and self.profile.home_at_seq0 and self.home is not None:
+            return [self.home.with_seq(0), *items[1:]]
+        return items
+
+    # ----------------------------------------------------------------- ack, clear, set current
+    def _on_ack(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        up = self._uploads.get(msg.mission_type)
+        partner = (msg.get_srcSystem(), msg.get_srcComponent())
+        cancels = msg.type == MissionResult.OPERATION_CANCELLED and not self.profile.uses_legacy_request
+        if up is not None and up.partner == partner and cancels:
+            del self._uploads[msg.mission_type]
+        return []
+
+    def _on_clear_all(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        types = _LIST_TYPES if msg.mission_type == MissionType.ALL else (msg.mission_type,)
+        refuse = any(t in self._uploads for t in types) or (
+            MissionType.MISSION in types and self.mission_running and self.profile.clear_denied_while_running
+        )
+        if refuse:
+            return [self._ack(msg, MissionResult.ERROR)]
+        for mission_type in types:
+            self._replace(mission_type, [])
+        return [self._ack(msg, MissionResult.ACCEPTED)]
+
+    def _on_set_current(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        if self.set_current(msg.seq):
+            return [self.mission_current()]
+        text = f"Set current: seq {msg.seq} out of range"
+        return [mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, text.encode())]
+
+    # ----------------------------------------------------------------- helpers
+    def _ack(
+        self,
+        msg: mavlink.MAVLink_message,
+        result: MissionResult,
+        mission_type: int | None = None,
+        opaque_id: int = 0,
+    ) -> MissionAckMessage:
+        if mission_type is None:
+            mission_type = msg.mission_type
+        return MissionAckMessage(msg.get_srcSystem(), msg.get_srcComponent(), result, mission_type, opaque_id)
+
+    def _fails(self, failure: Failure) -> bool:
+        return self.failure == failure
+
+    def _fails_once(self, failure: Failure) -> bool:
+        """A *_FIRST_RESPONSE failure: true the first time it is asked for, false afterwards."""
+        if self.failure != failure or failure in self._fired:
+            return False
+        self._fired.add(failure)
+        return True
+
+
+_READ_FAILURES = {
+    seq: {
+        "no": Failure(f"read_request{seq}_no_response"),
+        "first": Failure(f"read_request{seq}_first_response"),
+        "error": Failure(f"read_request{seq}_error_ack"),
+        "wrong": Failure(f"read_request{seq}_incorrect_sequence"),
+    }
+    for seq in (0, 1)
+}
+assert all(f in _ONE_SHOT for f in (_READ_FAILURES[0]["first"], _READ_FAILURES[1]["first"]))
+
+
+def _list_id(items: list[MissionItem], mission_type: int) -> int:
+    """opaque_id of a list: CRC-32 over the packed items, 0 only for an empty list."""
+    if not items:
+        return 0
+    crc = zlib.crc32(bytes([mission_type]))
+    for it in items:
+        packed = _ITEM_PACK.pack(
+            it.seq,
+            it.frame,
+            it.command,
+            it.current,
+            it.autocontinue,
+            it.param1,
+            it.param2,
+            it.param3,
+            it.param4,
+            it.x,
+            it.y,
+            it.z,
+            it.mission_type,
+        )
+        crc = zlib.crc32(packed, crc)
+    return crc or 1
+
+
+def _ardupilot_storage(item: MissionItem) -> MissionItem:
+    """What ArduPilot's AP_Mission keeps of an item: cm altitude, integer hold/radii, non-_INT frames."""
+    frame = _ARDUPILOT_FRAME_READBACK.get(item.frame, item.frame)
+    z = round(item.z * 100.0) / 100.0
+    if item.command != _NAV_WAYPOINT:
+        return replace(item, frame=frame, z=z)
+    return replace(
+        item,
+        frame=frame,
+        z=z,
+        param1=float(int(max(item.param1, 0.0))),
+        param2=float(int(item.param2)),
+        param3=float(int(item.param3)),
+    )
+
+
+def _item_message(
+    item: MissionItem, seq: int, request: mavlink.MAVLink_message, legacy: bool
+) -> mavlink.MAVLink_message:
+    """MISSION_ITEM_INT for MISSION_REQUEST_INT; float MISSION_ITEM (degrees) for legacy MISSION_REQUEST."""
+    target = (request.get_srcSystem(), request.get_srcComponent())
+    common = (
+        item.frame,
+        item.command,
+        item.current,
+        item.autocontinue,
+        item.param1,
+        item.param2,
+        item.param3,
+        item.param4,
+    )
+    if legacy:
+        scale = 1e7 if item.frame in _GLOBAL_FRAMES else 1e4
+        return mavlink.MAVLink_mission_item_message(
+            *target, seq, *common, item.x / scale, item.y / scale, item.z, request.mission_type
+        )
+    return mavlink.MAVLink_mission_item_int_message(
+        *target, seq, *common, item.x, item.y, item.z, request.mission_type
+    )
