@@ -1,0 +1,276 @@
+"""Plan -> MAVLink mission items (MISSION_ITEM_INT), fence and rally items from a scenario.
+
+One vehicle's plan becomes, in order:
+
+    [home]  [NAV_DELAY]  NAV_TAKEOFF  (DO_CHANGE_SPEED?  NAV_WAYPOINT)*  LAND | RTL | LOITER_UNLIM
+
+Choices where MAVLink or the autopilots leave room (all documented here, nowhere else):
+- Frames: items with a position use GLOBAL_RELATIVE_ALT_INT (z = metres above home = ENU up about
+  the plan origin); commands without a position (DO_CHANGE_SPEED, NAV_DELAY, RTL) use
+  MAV_FRAME_MISSION with x = y = 0, as QGroundControl and MAVSDK send them (PX4 rejects some
+  of them in a global frame).
+- Home (ArduPilot profile only): seq 0 is a NAV_WAYPOINT at the plan origin in MAV_FRAME_GLOBAL
+  with z = the origin's altitude AMSL, as Mission Planner writes it and ArduPilot returns it.
+  ArduPilot replaces it with its own home on upload. PX4 missions carry no home item.
+- current = 1 on seq 0 (the home item on ArduPilot, the first real item on PX4).
+- lat/lon: degE7 rounded half away from zero (:func:`deg_to_e7`); truncation (``int()``, as
+  pymavlink's mavwp does) biases every coordinate towards 0 by up to 1.1 cm.
+- Take-off: at the first waypoint's horizontal position, to its altitude if it is airborne
+  (>= ``MIN_TAKEOFF_ALT_M``), otherwise to the second waypoint's altitude. Fixed wings get a
+  minimum take-off pitch of ``FIXED_WING_TAKEOFF_PITCH_DEG`` in param1.
+- Delayed take-off: ``takeoff_delay_s > 0`` becomes MAV_CMD_NAV_DELAY (param1 = delay [s],
+  param2..4 = -1: no UTC time) before the take-off, so the vehicle waits on the ground after the
+  fleet-wide MISSION_START. Both ArduCopter and PX4 execute NAV_DELAY; it is the documented way to
+  delay a take-off in ArduCopter.
+- Speed: DO_CHANGE_SPEED before the first leg and before every leg whose planned speed differs from
+  the last one commanded by more than ``SPEED_TOLERANCE_MPS``. Speed type (param1): ground speed
+  (1) for multirotors, airspeed (0) for fixed wings (ArduPlane reads a ground-speed change as a
+  minimum ground speed); param3 = -1 keeps the throttle.
+- Waypoints: param2 = the plan's acceptance radius [m], param3 = 0 (pass through, no orbit),
+  param4 (yaw) = 0; ArduCopter ignores it and PX4's default MIS_YAWMODE points the nose at the
+  next waypoint. NaN is never emitted, so a downloaded list compares equal to the uploaded one.
+- Dwell: a zero-length leg in the plan (the same point twice, later in time) is a wait; it becomes
+  the hold time (param1) of the previous waypoint, or NAV_LOITER_TIME for a fixed wing, which
+  cannot hover.
+- Final action: "land" lands at the last waypoint (z = 0), "rtl" is NAV_RETURN_TO_LAUNCH,
+  "loiter" is NAV_LOITER_UNLIM over the last waypoint (radius = turn radius for fixed wings).
+- Fence (mission_type 1): the scenario's x/y bounds as an inclusion polygon, each cylinder
+  (radius + buffer) and each radar dome (its footprint) as an exclusion circle, in
+  MAV_FRAME_GLOBAL as QGroundControl sends fences. A MAVLink fence is 2-D, so an obstacle with a
+  finite top is excluded at every altitude: conservative, and a backstop only (the planner already
+  keeps clear).
+- Rally (mission_type 2): one point over each vehicle's start at its min_alt_m.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import replace
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.validate import MissionValidationError, validate_items
+from gcs_planner.plan import VehiclePlan
+from gcs_planner.scenario import Scenario
+
+__all__ = [
+    "AUTOPILOTS",
+    "MissionValidationError",
+    "deg_to_e7",
+    "plan_to_items",
+    "rally_items",
+    "round_half_away",
+    "scenario_fence_items",
+    "scenario_rally_items",
+    "validate_items",
+]
+
+AUTOPILOTS = ("ardupilot", "px4")
+FINAL_ACTIONS = ("land", "rtl", "loiter")
+MIN_TAKEOFF_ALT_M = 1.0
+FIXED_WING_TAKEOFF_PITCH_DEG = 15.0
+SPEED_TOLERANCE_MPS = 0.05
+DWELL_LEG_M = 0.01  # a leg shorter than this is a wait, not a move
+
+REL = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+NO_FRAME = mavlink.MAV_FRAME_MISSION
+SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0
+
+
+def round_half_away(values) -> np.ndarray:
+    """Round to the nearest integer, halves away from zero (2.5 -> 3, -2.5 -> -3); int64 array."""
+    a = np.asarray(values, dtype=float)
+    return (np.sign(a) * np.floor(np.abs(a) + 0.5)).astype(np.int64)
+
+
+def deg_to_e7(deg) -> np.ndarray:
+    """Degrees -> MAVLink int degE7, correctly rounded (half away from zero); int64 array."""
+    return round_half_away(np.asarray(deg, dtype=float) * 1e7)
+
+
+def plan_to_items(
+    vehicle_plan: VehiclePlan, origin: Origin, autopilot: str = "ardupilot"
+) -> list[MissionItem]:
+    """One vehicle's plan -> validated mission items (mission_type 0) for ``autopilot``."""
+    vp = vehicle_plan
+    if autopilot not in AUTOPILOTS:
+        raise MissionValidationError(
+            f"autopilot must be one of {AUTOPILOTS}, got {autopilot!r}", field="autopilot"
+        )
+    if vp.final_action not in FINAL_ACTIONS:
+        raise MissionValidationError(
+            f"vehicle {vp.vehicle_id}: final_action must be one of {FINAL_ACTIONS}, got {vp.final_action!r}",
+            field="final_action",
+        )
+    wps = vp.waypoints
+    if len(wps) == 0 or not np.all(np.isfinite(wps)):
+        raise MissionValidationError(
+            f"vehicle {vp.vehicle_id}: waypoints must be a non-empty (N, 3) array of finite metres",
+            field="waypoints",
+        )
+    lat, lon, _ = enu_to_geodetic(wps[:, 0], wps[:, 1], wps[:, 2], origin)
+    lat_e7, lon_e7 = deg_to_e7(lat), deg_to_e7(lon)
+    fixed_wing = vp.vehicle_type == "fixed_wing"
+
+    def at(i: int, command: int, z: float, p1=0.0, p2=0.0, p3=0.0, p4=0.0) -> MissionItem:
+        return MissionItem(0, REL, command, 0, 1, p1, p2, p3, p4, int(lat_e7[i]), int(lon_e7[i]), float(z))
+
+    items: list[MissionItem] = []
+    if autopilot == "ardupilot":
+        home_lat, home_lon = deg_to_e7([origin.lat_deg, origin.lon_deg])
+        items.append(
+            MissionItem(
+                0,
+                mavlink.MAV_FRAME_GLOBAL,
+                mavlink.MAV_CMD_NAV_WAYPOINT,
+                x=int(home_lat),
+                y=int(home_lon),
+                z=float(origin.alt_m),
+            )
+        )
+    if vp.takeoff_delay_s > 0:
+        items.append(
+            MissionItem(
+                0,
+                NO_FRAME,
+                mavlink.MAV_CMD_NAV_DELAY,
+                param1=float(vp.takeoff_delay_s),
+                param2=-1.0,
+                param3=-1.0,
+                param4=-1.0,
+            )
+        )
+    elif vp.takeoff_delay_s < 0 or not math.isfinite(vp.takeoff_delay_s):
+        raise MissionValidationError(
+            f"vehicle {vp.vehicle_id}: takeoff_delay_s must be >= 0, got {vp.takeoff_delay_s!r}",
+            field="takeoff_delay_s",
+        )
+    takeoff_alt = wps[0, 2] if wps[0, 2] >= MIN_TAKEOFF_ALT_M or len(wps) == 1 else wps[1, 2]
+    if takeoff_alt < MIN_TAKEOFF_ALT_M:
+        raise MissionValidationError(
+            f"vehicle {vp.vehicle_id}: take-off altitude {takeoff_alt:.2f} m is below {MIN_TAKEOFF_ALT_M} m",
+            field="waypoints",
+        )
+    pitch = FIXED_WING_TAKEOFF_PITCH_DEG if fixed_wing else 0.0
+    items.append(at(0, mavlink.MAV_CMD_NAV_TAKEOFF, takeoff_alt, p1=pitch))
+    items.extend(_legs(vp, at, fixed_wing))
+    last = len(wps) - 1
+    if vp.final_action == "land":
+        items.append(at(last, mavlink.MAV_CMD_NAV_LAND, 0.0))
+    elif vp.final_action == "rtl":
+        items.append(MissionItem(0, NO_FRAME, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH))
+    else:
+        radius = vp.turn_radius_m if fixed_wing else 0.0
+        items.append(at(last, mavlink.MAV_CMD_NAV_LOITER_UNLIM, wps[last, 2], p3=radius))
+    items = [replace(item, seq=i, current=int(i == 0)) for i, item in enumerate(items)]
+    validate_items(items)
+    return items
+
+
+def _legs(vp: VehiclePlan, at, fixed_wing: bool) -> list[MissionItem]:
+    """Waypoints 1..N-1 with speed changes before their legs and dwells as hold times."""
+    wps, times, speeds = vp.waypoints, vp.times_s, vp.speeds_mps
+    speed_type = SPEED_AIRSPEED if fixed_wing else SPEED_GROUNDSPEED
+    out: list[MissionItem] = []
+    commanded = None
+    last_nav = None  # index in ``out`` of the waypoint a dwell extends
+    for i in range(1, len(wps)):
+        if np.linalg.norm(wps[i] - wps[i - 1]) < DWELL_LEG_M:
+            hold_s = float(times[i] - times[i - 1])
+            if hold_s <= 0:
+                continue
+            if fixed_wing:
+                out.append(at(i, mavlink.MAV_CMD_NAV_LOITER_TIME, wps[i, 2], p1=hold_s, p3=vp.turn_radius_m))
+            elif last_nav is None:
+                out.append(
+                    at(i, mavlink.MAV_CMD_NAV_WAYPOINT, wps[i, 2], p1=hold_s, p2=vp.acceptance_radius_m)
+                )
+                last_nav = len(out) - 1
+            else:
+                prev = out[last_nav]
+                out[last_nav] = replace(prev, param1=prev.param1 + hold_s)
+            continue
+        speed = float(speeds[i])
+        if not (math.isfinite(speed) and speed > 0):
+            raise MissionValidationError(
+                f"vehicle {vp.vehicle_id}: speeds_mps[{i}] = {speed!r} must be > 0 on a leg of length > 0",
+                field="speeds_mps",
+            )
+        if commanded is None or abs(speed - commanded) > SPEED_TOLERANCE_MPS:
+            out.append(
+                MissionItem(
+                    0, NO_FRAME, mavlink.MAV_CMD_DO_CHANGE_SPEED, param1=speed_type, param2=speed, param3=-1.0
+                )
+            )
+            commanded = speed
+        out.append(at(i, mavlink.MAV_CMD_NAV_WAYPOINT, wps[i, 2], p2=vp.acceptance_radius_m))
+        last_nav = len(out) - 1
+    return out
+
+
+def _numbered(items: list[MissionItem]) -> list[MissionItem]:
+    return [item.with_seq(i) for i, item in enumerate(items)]
+
+
+def scenario_fence_items(scenario: Scenario) -> list[MissionItem]:
+    """Scenario bounds (inclusion polygon) and obstacles (exclusion circles) -> fence items (type 1)."""
+    origin = scenario.origin
+    items: list[MissionItem] = []
+
+    def geo(east, north):
+        lat, lon, _ = enu_to_geodetic(np.asarray(east, float), np.asarray(north, float), 0.0, origin)
+        return deg_to_e7(lat), deg_to_e7(lon)
+
+    fence, fence_frame = MissionType.FENCE, mavlink.MAV_FRAME_GLOBAL
+    if "x" in scenario.bounds and "y" in scenario.bounds:
+        (x0, x1), (y0, y1) = scenario.bounds["x"], scenario.bounds["y"]
+        lats, lons = geo([x0, x1, x1, x0], [y0, y0, y1, y1])  # counter-clockwise seen from above
+        cmd = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+        items += [
+            MissionItem(0, fence_frame, cmd, 0, 1, 4.0, x=int(a), y=int(b), mission_type=fence)
+            for a, b in zip(lats, lons, strict=True)
+        ]
+    circles = [(c.x, c.y, c.radius_m + c.buffer_m) for c in scenario.cylinders]
+    circles += [(h.x, h.y, h.radius_m) for h in scenario.hemispheres]
+    if circles:
+        cx, cy, radii = np.asarray(circles, dtype=float).T
+        lats, lons = geo(cx, cy)
+        cmd = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
+        items += [
+            MissionItem(0, fence_frame, cmd, 0, 1, float(r), x=int(a), y=int(b), mission_type=fence)
+            for a, b, r in zip(lats, lons, radii, strict=True)
+        ]
+    items = _numbered(items)
+    validate_items(items, mission_type=fence)
+    return items
+
+
+def rally_items(points_enu: Iterable, origin: Origin) -> list[MissionItem]:
+    """Rally points (K, 3) ENU [m] -> rally items (type 2), altitude relative to home."""
+    pts = np.asarray(list(points_enu), dtype=float).reshape(-1, 3)
+    lat, lon, _ = enu_to_geodetic(pts[:, 0], pts[:, 1], pts[:, 2], origin)
+    items = [
+        MissionItem(
+            i,
+            REL,
+            mavlink.MAV_CMD_NAV_RALLY_POINT,
+            0,
+            1,
+            x=int(a),
+            y=int(b),
+            z=float(z),
+            mission_type=MissionType.RALLY,
+        )
+        for i, (a, b, z) in enumerate(zip(deg_to_e7(lat), deg_to_e7(lon), pts[:, 2], strict=True))
+    ]
+    validate_items(items, mission_type=MissionType.RALLY)
+    return items
+
+
+def scenario_rally_items(scenario: Scenario) -> list[MissionItem]:
+    """One rally point over each vehicle's start, at the vehicle's minimum altitude."""
+    return rally_items([(v.start[0], v.start[1], v.min_alt_m) for v in scenario.vehicles], scenario.origin)

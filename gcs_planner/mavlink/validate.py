@@ -1,0 +1,145 @@
+"""Check a mission item list before anything is sent: a bad list never leaves the ground station.
+
+Rules (each failure names the item's seq and the field):
+- at most 65535 items (MISSION_COUNT.count is uint16) and at most the vehicle's ``capacity``;
+- ``seq`` equals the item's index (0..n-1) and every item has the list's ``mission_type``;
+- exactly one item has ``current = 1`` in a MISSION list (MAVSDK enforces this as well); fence and
+  rally lists may have none, never two;
+- ``frame`` and ``command`` are known MAVLink values (MAV_FRAME / MAV_CMD of the ardupilotmega
+  dialect, which includes common.xml), ``current`` and ``autocontinue`` are 0 or 1;
+- ``z`` is finite; ``param1..4`` are finite or NaN. NaN is allowed in params because MAVLink defines
+  it as "use the default / leave unchanged" (QGroundControl sends NaN yaw and stores it as null in
+  .plan files); infinity is never meaningful;
+- in global frames, ``x``/``y`` are integers with latitude in [-90, 90] deg and longitude in
+  [-180, 180] deg (degE7), except for commands that carry no position (DO_*, RTL, NAV_DELAY), whose
+  x/y must still fit int32.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from numbers import Integral, Real
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.types import MissionItem, MissionType
+
+__all__ = ["MAX_MISSION_COUNT", "MissionValidationError", "validate_items"]
+
+MAX_MISSION_COUNT = 65535  # MISSION_COUNT.count and seq are uint16
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+
+KNOWN_COMMANDS = frozenset(k for k, v in mavlink.enums["MAV_CMD"].items() if not v.name.endswith("ENUM_END"))
+KNOWN_FRAMES = frozenset(k for k, v in mavlink.enums["MAV_FRAME"].items() if not v.name.endswith("ENUM_END"))
+GLOBAL_FRAMES = frozenset(
+    {
+        mavlink.MAV_FRAME_GLOBAL,
+        mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+        mavlink.MAV_FRAME_GLOBAL_INT,
+        mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+        mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+        mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
+    }
+)
+# Commands whose x/y are not a position (speed changes, jumps, RTL, a timed delay).
+POSITIONLESS_COMMANDS = frozenset(
+    {
+        mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH,
+        mavlink.MAV_CMD_NAV_DELAY,
+    }
+    | {
+        k
+        for k in KNOWN_COMMANDS
+        if mavlink.enums["MAV_CMD"][k].name.startswith(("MAV_CMD_DO_", "MAV_CMD_CONDITION_"))
+    }
+) - {
+    mavlink.MAV_CMD_DO_SET_HOME,
+    mavlink.MAV_CMD_DO_LAND_START,
+    mavlink.MAV_CMD_DO_SET_ROI,
+    mavlink.MAV_CMD_DO_SET_ROI_LOCATION,
+    mavlink.MAV_CMD_DO_REPOSITION,
+}
+
+
+class MissionValidationError(UserError, ValueError):
+    """A mission item list is invalid; ``seq`` and ``field`` say where (None for list-wide faults)."""
+
+    def __init__(self, message: str, seq: int | None = None, field: str | None = None):
+        super().__init__(message)
+        self.seq = seq
+        self.field = field
+
+
+def validate_items(
+    items: Sequence[MissionItem],
+    capacity: int | None = None,
+    mission_type: int | None = None,
+) -> None:
+    """Raise MissionValidationError for the first problem in ``items``; return None if they are fine.
+
+    mission_type: the list's type; default: that of item 0 (MISSION for an empty list).
+    capacity: the vehicle's maximum item count, if known.
+    """
+    n = len(items)
+    if n > MAX_MISSION_COUNT:
+        raise MissionValidationError(
+            f"{n} items: count exceeds the MAVLink limit of {MAX_MISSION_COUNT}", field="count"
+        )
+    if capacity is not None and n > capacity:
+        raise MissionValidationError(
+            f"{n} items: count exceeds the vehicle's capacity {capacity}", field="count"
+        )
+    if mission_type is None:
+        mission_type = items[0].mission_type if n else MissionType.MISSION
+    currents = []
+    for index, item in enumerate(items):
+        _check_item(item, index, mission_type)
+        if item.current == 1:
+            currents.append(index)
+    if len(currents) > 1:
+        raise MissionValidationError(
+            f"item {currents[1]}: field current = 1 but item {currents[0]} is already current",
+            seq=currents[1],
+            field="current",
+        )
+    if mission_type == MissionType.MISSION and n and not currents:
+        raise MissionValidationError(
+            "no item has current = 1; exactly one item must be current", field="current"
+        )
+
+
+def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
+    def fail(field: str, problem: str) -> MissionValidationError:
+        value = getattr(item, field)
+        return MissionValidationError(
+            f"item {index}: field {field} = {value!r} {problem}", seq=index, field=field
+        )
+
+    if item.seq != index:
+        raise fail("seq", f"but the item is at index {index}; seq must run 0..n-1")
+    if item.mission_type != mission_type:
+        raise fail("mission_type", f"differs from the list's mission_type {int(mission_type)}")
+    if item.frame not in KNOWN_FRAMES:
+        raise fail("frame", "is not a known MAV_FRAME")
+    if item.command not in KNOWN_COMMANDS:
+        raise fail("command", "is not a known MAV_CMD")
+    for field in ("current", "autocontinue"):
+        if getattr(item, field) not in (0, 1):
+            raise fail(field, "must be 0 or 1")
+    for field in ("param1", "param2", "param3", "param4"):
+        value = getattr(item, field)
+        if isinstance(value, bool) or not isinstance(value, Real) or math.isinf(value):
+            raise fail(field, "must be a finite number (or NaN for 'default')")
+    if isinstance(item.z, bool) or not isinstance(item.z, Real) or not math.isfinite(item.z):
+        raise fail("z", "must be a finite altitude [m]")
+    for field in ("x", "y"):
+        value = getattr(item, field)
+        if isinstance(value, bool) or not isinstance(value, Integral) or not INT32_MIN <= value <= INT32_MAX:
+            raise fail(field, "must be an int32 (degE7 in global frames)")
+    if item.frame in GLOBAL_FRAMES and item.command not in POSITIONLESS_COMMANDS:
+        if not -900_000_000 <= item.x <= 900_000_000:
+            raise fail("x", f"(latitude {item.x / 1e7:.7f} deg) is outside [-90, 90] deg")
+        if not -1_800_000_000 <= item.y <= 1_800_000_000:
+            raise fail("y", f"(longitude {item.y / 1e7:.7f} deg) is outside [-180, 180] deg")
