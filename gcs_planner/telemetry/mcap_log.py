@@ -1,0 +1,352 @@
+"""FlightLogger: record a flight's MAVLink traffic, plan and scenario to one MCAP file.
+
+Layout (topics; ``{sysid}`` is the vehicle's MAVLink system id):
+
+- ``/mavlink/{sysid}/raw``: every frame exactly as received (encoding "mavlink", no schema);
+  log time = receive time. This is the lossless record that replay re-emits byte for byte.
+- ``/mavlink/{sysid}/{MSG_NAME}``: the decoded message as JSON (schema "mavlink.MSG_NAME",
+  generated from pymavlink's definitions, see gcs_planner.telemetry.schemas).
+- ``/vehicle/{sysid}/location``: foxglove.LocationFix from each GLOBAL_POSITION_INT
+  (altitude AMSL, see schemas.ALTITUDE_DATUMS), colour per vehicle.
+- ``/plan/routes`` and ``/scenario/obstacles``: foxglove.GeoJSON, written once at the start.
+- ``/events``: planner/flight events from ``log_event`` (JSON objects).
+- Attachments ``plan.json`` and ``scenario.toml``; metadata ``gcs_planner`` (tool version,
+  origin, vehicles, altitude datums, time base) at the start and ``gcs_planner.summary`` (frames
+  per vehicle) at close.
+
+Hot path: ``on_frame`` only appends to a list under a lock. The list is encoded (JSON from
+per-type templates, see encode.py), written into the open chunk and flushed as a zstd chunk by a
+background thread every ``flush_interval_s`` (default 0.5 s, so chunks reach the disk at least
+once a second), or by the caller when ``max_pending`` frames are waiting. Nothing is dropped:
+the pending list is unbounded in time but bounded in size by the synchronous drain.
+
+Time base: ``t_s`` is the receive time [s]. Unix time is expected (``time.time()``); a clock
+that is clearly not Unix time (< 1e9 s, e.g. ``loop.time()`` or a test's fake clock) is shifted
+once by a constant offset so that its first value maps to the wall clock at that moment.
+MCAP log times are integer nanoseconds since the Unix epoch.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import struct
+import threading
+import time
+import tomllib
+from pathlib import Path
+from typing import IO
+
+import numpy as np
+
+from gcs_planner import __version__
+from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.plan import Plan
+from gcs_planner.telemetry.colors import vehicle_color
+from gcs_planner.telemetry.encode import message_json
+from gcs_planner.telemetry.mcap_writer import ChunkedMcapWriter
+from gcs_planner.telemetry.schemas import (
+    ALTITUDE_DATUMS,
+    EVENT_SCHEMA,
+    GEOJSON_SCHEMA,
+    LOCATION_FIX_SCHEMA,
+    mavlink_json_schema,
+    schema_bytes,
+)
+
+__all__ = ["FlightLogger"]
+
+log = logging.getLogger(__name__)
+
+_TLOG_TIME = struct.Struct(">Q")
+_UNIX_TIME_MIN_S = 1e9  # 2001-09-09: anything smaller is a monotonic or fake clock
+_COVARIANCE_ZERO = "[0,0,0,0,0,0,0,0,0]"
+_CIRCLE_POINTS = 48
+
+
+class FlightLogger:
+    """Context manager writing one flight's MCAP log (and optionally a classic .tlog).
+
+    path: MCAP file path or a binary stream (closed only if we opened it).
+    origin: the scenario origin (ENU frame of the plan and obstacles).
+    plan / scenario_text: stored as attachments and drawn as GeoJSON on the map.
+    tlog_path: also write the .tlog stream (8-byte big-endian Unix time [us] + raw frame).
+    """
+
+    def __init__(
+        self,
+        path: str | Path | IO[bytes],
+        origin: Origin,
+        plan: Plan | None = None,
+        scenario_text: str | None = None,
+        tlog_path: str | Path | None = None,
+        flush_interval_s: float = 0.5,
+        max_pending: int = 20_000,
+        zstd_level: int = 3,
+    ) -> None:
+        self.origin = origin
+        self.plan = plan
+        self.scenario_text = scenario_text
+        self.flush_interval_s = flush_interval_s
+        self.max_pending = max_pending
+        self._writer = ChunkedMcapWriter(path, zstd_level=zstd_level, library=f"gcs-planner {__version__}")
+        self._tlog = open(tlog_path, "wb") if tlog_path is not None else None  # noqa: SIM115
+        self._pending: list[tuple[float, object, bytes]] = []
+        self._lock = threading.Lock()  # guards _pending
+        self._write_lock = threading.Lock()  # guards the writers
+        self._clock_offset_s: float | None = None
+        self._raw_channels: dict[int, int] = {}
+        self._json_channels: dict[tuple[int, type], int] = {}
+        self._location_channels: dict[int, int] = {}
+        self._schema_ids: dict[type, int] = {}
+        self._frames_per_sysid: dict[int, int] = {}
+        self._event_channel = 0
+        self._closed = False
+        self._stop = threading.Event()
+        self._start_ns = time.time_ns()
+        self._write_header()
+        self._thread = threading.Thread(target=self._flush_loop, name="flight-logger", daemon=True)
+        self._thread.start()
+
+    # -- public API ------------------------------------------------------------------------------
+    def __enter__(self) -> FlightLogger:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def on_frame(self, msg, raw: bytes, t_s: float) -> None:
+        """Record one received frame; matches MavlinkLink.subscribe's callback (msg, raw, t_s)."""
+        with self._lock:
+            self._pending.append((t_s, msg, raw))
+            drain = len(self._pending) >= self.max_pending
+        if drain:
+            self.flush()
+
+    def log_event(self, event: dict, t_s: float | None = None) -> None:
+        """Record a planner/flight event (a JSON-serialisable dict) at ``t_s`` (default: now)."""
+        if self._closed:
+            raise RuntimeError("FlightLogger.log_event after close()")
+        data = json.dumps(event, separators=(",", ":"), default=str).encode()
+        t_ns = self._to_ns(time.time() if t_s is None else t_s)
+        with self._write_lock:
+            self._writer.add_message(self._event_channel, t_ns, data)
+
+    def flush(self) -> None:
+        """Encode pending frames and write them as one complete chunk (and to the .tlog)."""
+        with self._lock:
+            batch, self._pending = self._pending, []
+        with self._write_lock:
+            if batch:
+                self._encode(batch)
+            self._writer.flush()
+            if self._tlog is not None:
+                self._tlog.flush()
+
+    @property
+    def frames_logged(self) -> int:
+        return sum(self._frames_per_sysid.values())
+
+    def close(self) -> None:
+        """Flush, write the summary and close; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        self._thread.join()
+        self.flush()
+        with self._write_lock:
+            self._writer.add_metadata(
+                "gcs_planner.summary",
+                {
+                    "frames_per_sysid": {str(k): v for k, v in sorted(self._frames_per_sysid.items())},
+                    "end_time_ns": str(time.time_ns()),
+                },
+            )
+            self._writer.finish()
+            if self._tlog is not None:
+                self._tlog.close()
+
+    # -- internals -------------------------------------------------------------------------------
+    def _flush_loop(self) -> None:
+        while not self._stop.wait(self.flush_interval_s):
+            try:
+                self.flush()
+            except Exception:  # keep logging alive; the error is reported once per interval
+                log.exception("flight logger flush failed")
+
+    def _to_ns(self, t_s: float) -> int:
+        if t_s < _UNIX_TIME_MIN_S:
+            if self._clock_offset_s is None:
+                self._clock_offset_s = time.time() - t_s
+            t_s += self._clock_offset_s
+        return int(t_s * 1e9)
+
+    def _encode(self, batch: list[tuple[float, object, bytes]]) -> None:
+        add = self._writer.add_message
+        raw_channels = self._raw_channels
+        json_channels = self._json_channels
+        counts = self._frames_per_sysid
+        tlog_parts: list[bytes] = []
+        for t_s, msg, raw in batch:
+            t_ns = self._to_ns(t_s)
+            raw = bytes(raw)
+            sysid = _frame_sysid(raw)
+            channel = raw_channels.get(sysid)
+            if channel is None:
+                channel = self._add_vehicle(sysid)
+            add(channel, t_ns, raw)
+            counts[sysid] += 1
+            if self._tlog is not None:
+                tlog_parts.append(_TLOG_TIME.pack((t_ns // 1000) & ~3))
+                tlog_parts.append(raw)
+            if msg is None or not hasattr(msg, "fieldnames"):
+                continue
+            key = (sysid, type(msg))
+            channel = json_channels.get(key)
+            if channel is None:
+                channel = self._add_json_channel(sysid, type(msg))
+            add(channel, t_ns, message_json(msg))
+            if msg.id == 33:  # GLOBAL_POSITION_INT
+                add(self._location_channels[sysid], t_ns, self._location_fix(sysid, msg, t_ns))
+        if tlog_parts:
+            self._tlog.write(b"".join(tlog_parts))
+
+    def _location_fix(self, sysid: int, msg, t_ns: int) -> bytes:
+        sec, nsec = divmod(t_ns, 1_000_000_000)
+        r, g, b = vehicle_color(sysid)[:3]
+        return (
+            f'{{"timestamp":{{"sec":{sec},"nsec":{nsec}}},"frame_id":"vehicle{sysid}",'
+            f'"latitude":{msg.lat * 1e-7!r},"longitude":{msg.lon * 1e-7!r},"altitude":{msg.alt * 1e-3!r},'
+            f'"position_covariance":{_COVARIANCE_ZERO},"position_covariance_type":0,'
+            f'"color":{{"r":{r / 255:.3f},"g":{g / 255:.3f},"b":{b / 255:.3f},"a":1}}}}'
+        ).encode()
+
+    def _add_vehicle(self, sysid: int) -> int:
+        w = self._writer
+        channel = w.register_channel(f"/mavlink/{sysid}/raw", "mavlink", 0, {"sysid": str(sysid)})
+        self._raw_channels[sysid] = channel
+        self._frames_per_sysid[sysid] = 0
+        self._location_channels[sysid] = w.register_channel(
+            f"/vehicle/{sysid}/location",
+            "json",
+            self._location_schema,
+            {"sysid": str(sysid), "altitude_datum": ALTITUDE_DATUMS["foxglove.LocationFix.altitude"]},
+        )
+        return channel
+
+    def _add_json_channel(self, sysid: int, cls: type) -> int:
+        schema_id = self._schema_ids.get(cls)
+        if schema_id is None:
+            schema = mavlink_json_schema(cls)
+            schema_id = self._writer.register_schema(schema["title"], "jsonschema", schema_bytes(schema))
+            self._schema_ids[cls] = schema_id
+        channel = self._writer.register_channel(
+            f"/mavlink/{sysid}/{cls.msgname}", "json", schema_id, {"sysid": str(sysid)}
+        )
+        self._json_channels[(sysid, cls)] = channel
+        return channel
+
+    def _write_header(self) -> None:
+        w = self._writer
+        self._location_schema = w.register_schema(
+            "foxglove.LocationFix", "jsonschema", schema_bytes(LOCATION_FIX_SCHEMA)
+        )
+        geojson_schema = w.register_schema("foxglove.GeoJSON", "jsonschema", schema_bytes(GEOJSON_SCHEMA))
+        event_schema = w.register_schema("gcs_planner.Event", "jsonschema", schema_bytes(EVENT_SCHEMA))
+        self._event_channel = w.register_channel("/events", "json", event_schema)
+        o = self.origin
+        planned = [v.sysid for v in self.plan.vehicles] if self.plan is not None else []
+        w.add_metadata(
+            "gcs_planner",
+            {
+                "tool": "gcs-planner",
+                "tool_version": __version__,
+                "origin": {"lat_deg": o.lat_deg, "lon_deg": o.lon_deg, "alt_m": o.alt_m},
+                "vehicles": planned,
+                "planner": self.plan.planner if self.plan is not None else "",
+                "altitude_datums": ALTITUDE_DATUMS,
+                "time_base": "MCAP log_time = receive time, ns since Unix epoch",
+                "start_time_ns": str(self._start_ns),
+            },
+        )
+        if self.plan is not None:
+            w.add_attachment("plan.json", "application/json", self.plan.to_json().encode(), self._start_ns)
+            routes = w.register_channel("/plan/routes", "json", geojson_schema)
+            w.add_message(routes, self._start_ns, _geojson_message(_plan_geojson(self.plan, o)))
+        if self.scenario_text is not None:
+            w.add_attachment("scenario.toml", "application/toml", self.scenario_text.encode(), self._start_ns)
+            features = _obstacle_features(self.scenario_text, o)
+            if features:
+                obstacles = w.register_channel("/scenario/obstacles", "json", geojson_schema)
+                collection = {"type": "FeatureCollection", "features": features}
+                w.add_message(obstacles, self._start_ns, _geojson_message(collection))
+        w.flush()
+
+
+def _frame_sysid(raw: bytes) -> int:
+    """System id from a MAVLink 2 (0xFD) or 1 (0xFE) frame header; 0 if the frame is too short."""
+    if len(raw) > 5 and raw[0] == 0xFD:
+        return raw[5]
+    return raw[3] if len(raw) > 3 else 0
+
+
+def _geojson_message(collection: dict) -> bytes:
+    return json.dumps({"geojson": json.dumps(collection, separators=(",", ":"))}).encode()
+
+
+def _plan_geojson(plan: Plan, origin: Origin) -> dict:
+    features = []
+    for v in plan.vehicles:
+        path = v.path if len(v.path) else v.waypoints
+        lat, lon, alt = enu_to_geodetic(path[:, 0], path[:, 1], path[:, 2], origin)
+        r, g, b = vehicle_color(v.sysid)[:3]
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {
+                    "type": "LineString",
+                    "coordinates": np.column_stack([lon, lat, alt]).round(8).tolist(),
+                },
+                "properties": {
+                    "name": f"plan {v.vehicle_id}",
+                    "vehicle_id": v.vehicle_id,
+                    "sysid": v.sysid,
+                    "style": {"color": f"#{r:02x}{g:02x}{b:02x}", "weight": 2, "dashArray": "4 4"},
+                },
+            }
+        )
+    return {"type": "FeatureCollection", "features": features}
+
+
+def _obstacle_features(scenario_text: str, origin: Origin) -> list[dict]:
+    """Cylinders and radar hemispheres as circle polygons (footprints) for the map."""
+    try:
+        data = tomllib.loads(scenario_text)
+    except tomllib.TOMLDecodeError:
+        log.warning("scenario text is not valid TOML; no obstacles drawn on the map")
+        return []
+    obstacles = data.get("obstacles", {})
+    shapes = [
+        ("cylinder", c, c.get("radius_m", 0) + c.get("buffer_m", 0)) for c in obstacles.get("cylinders", [])
+    ]
+    shapes += [("radar", h, h.get("radius_m", 0)) for h in obstacles.get("hemispheres", [])]
+    angles = np.linspace(0.0, 2.0 * np.pi, _CIRCLE_POINTS + 1)
+    features = []
+    for kind, d, radius in shapes:
+        east = d.get("x", 0.0) + radius * np.cos(angles)
+        north = d.get("y", 0.0) + radius * np.sin(angles)
+        lat, lon, _ = enu_to_geodetic(east, north, np.zeros_like(east), origin)
+        ring = np.column_stack([lon, lat]).round(8).tolist()
+        features.append(
+            {
+                "type": "Feature",
+                "geometry": {"type": "Polygon", "coordinates": [ring]},
+                "properties": {
+                    "name": kind,
+                    "radius_m": radius,
+                    "style": {"color": "#d62728" if kind == "cylinder" else "#ff7f0e", "weight": 1},
+                },
+            }
+        )
+    return features

@@ -1,0 +1,260 @@
+"""A small chunked MCAP writer built for many small messages (MAVLink telemetry).
+
+Why not ``mcap.writer.Writer`` directly: its ``add_message`` builds a record object and a
+message index entry per message (about 5 us each); a flight log writes two or three records per
+MAVLink frame, so the stock writer alone would cap logging near 60,000 records/s. Here messages
+are packed straight into the open chunk with one ``struct`` call, and the rest of the file
+(header, schemas, channels, attachments, metadata, summary, footer) is serialised by the mcap
+package's own record classes, so the layout is standard MCAP that any reader opens.
+
+Choices:
+- Schemas and channels are written in the data section *before* the chunk that first uses them,
+  never inside chunks, and repeated in the summary. A sequential reader of a truncated file
+  therefore knows every channel of every complete chunk.
+- No message index records: they cost 16 uncompressed bytes per message (more than a
+  compressed MAVLink frame). Chunk indexes are written, and MCAP readers (mcap Python, Foxglove)
+  read the messages of a chunk without message indexes.
+- ``flush()`` closes the open chunk, compresses it (zstd) and flushes the stream: whatever was
+  flushed survives a SIGKILL of the writer as complete chunks.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+from collections import defaultdict
+from pathlib import Path
+from typing import IO
+
+import zstandard
+from mcap.data_stream import RecordBuilder
+from mcap.opcode import Opcode
+from mcap.records import (
+    Attachment,
+    AttachmentIndex,
+    Channel,
+    Chunk,
+    ChunkIndex,
+    DataEnd,
+    Footer,
+    Header,
+    Metadata,
+    MetadataIndex,
+    Schema,
+    Statistics,
+    SummaryOffset,
+)
+from mcap.writer import MCAP0_MAGIC
+
+__all__ = ["ChunkedMcapWriter"]
+
+_MESSAGE_HEADER = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
+_MESSAGE_FIXED_LEN = 2 + 4 + 8 + 8
+
+
+class ChunkedMcapWriter:
+    """MCAP writer: integer-ns timestamps, output a path or a binary stream (closed only if opened).
+
+    zstd_level: compression level of chunks (3 is zstd's default; higher trades CPU for size).
+    """
+
+    def __init__(self, output: str | Path | IO[bytes], zstd_level: int = 3, library: str = "") -> None:
+        if isinstance(output, str | Path):
+            self._stream: IO[bytes] = open(output, "wb")  # noqa: SIM115 - closed in finish()
+            self._owns_stream = True
+        else:
+            self._stream = output
+            self._owns_stream = False
+        self._offset = 0
+        self._compressor = zstandard.ZstdCompressor(level=zstd_level)
+        self._schemas: list[Schema] = []
+        self._channels: list[Channel] = []
+        self._chunk = bytearray()
+        self._chunk_start_ns = 0
+        self._chunk_end_ns = 0
+        self._chunk_messages = 0
+        self._chunk_indexes: list[ChunkIndex] = []
+        self._attachment_indexes: list[AttachmentIndex] = []
+        self._metadata_indexes: list[MetadataIndex] = []
+        self._counts: dict[int, int] = defaultdict(int)
+        self._message_count = 0
+        self._start_ns: int | None = None
+        self._end_ns = 0
+        self._finished = False
+        self._write(MCAP0_MAGIC)
+        self._write_record(Header(profile="", library=library))
+
+    # -- definitions -----------------------------------------------------------------------------
+    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """Add a schema (e.g. encoding "jsonschema"); returns its id (>= 1)."""
+        schema = Schema(id=len(self._schemas) + 1, data=data, encoding=encoding, name=name)
+        self._schemas.append(schema)
+        self._write_record(schema)
+        return schema.id
+
+    def register_channel(
+        self, topic: str, message_encoding: str, schema_id: int, metadata: dict[str, str] | None = None
+    ) -> int:
+        """Add a channel (schema_id 0 = schemaless); returns its id (>= 1)."""
+        channel = Channel(
+            id=len(self._channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            schema_id=schema_id,
+            metadata=dict(metadata or {}),
+        )
+        self._channels.append(channel)
+        self._write_record(channel)
+        return channel.id
+
+    # -- messages --------------------------------------------------------------------------------
+    def add_message(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
+        """Append one message to the open chunk (publish time = log time)."""
+        chunk = self._chunk
+        chunk += _MESSAGE_HEADER.pack(
+            Opcode.MESSAGE, _MESSAGE_FIXED_LEN + len(data), channel_id, 0, log_time_ns, log_time_ns
+        )
+        chunk += data
+        if self._chunk_messages == 0:
+            self._chunk_start_ns = self._chunk_end_ns = log_time_ns
+        elif log_time_ns < self._chunk_start_ns:
+            self._chunk_start_ns = log_time_ns
+        elif log_time_ns > self._chunk_end_ns:
+            self._chunk_end_ns = log_time_ns
+        self._chunk_messages += 1
+        self._counts[channel_id] += 1
+
+    @property
+    def chunk_bytes(self) -> int:
+        """Uncompressed size of the open chunk [bytes]."""
+        return len(self._chunk)
+
+    @property
+    def message_count(self) -> int:
+        return self._message_count + self._chunk_messages
+
+    def flush(self) -> None:
+        """Close the open chunk (if it has messages), write it compressed, flush the stream."""
+        if self._chunk_messages:
+            data = bytes(self._chunk)
+            compressed = self._compressor.compress(data)
+            chunk = Chunk(
+                compression="zstd",
+                data=compressed,
+                message_start_time=self._chunk_start_ns,
+                message_end_time=self._chunk_end_ns,
+                uncompressed_crc=zlib.crc32(data),
+                uncompressed_size=len(data),
+            )
+            start = self._offset
+            length = self._write_record(chunk)
+            self._chunk_indexes.append(
+                ChunkIndex(
+                    message_start_time=self._chunk_start_ns,
+                    message_end_time=self._chunk_end_ns,
+                    chunk_start_offset=start,
+                    chunk_length=length,
+                    message_index_offsets={},
+                    message_index_length=0,
+                    compression="zstd",
+                    compressed_size=len(compressed),
+                    uncompressed_size=len(data),
+                )
+            )
+            if self._start_ns is None or self._chunk_start_ns < self._start_ns:
+                self._start_ns = self._chunk_start_ns
+            self._end_ns = max(self._end_ns, self._chunk_end_ns)
+            self._message_count += self._chunk_messages
+            self._chunk = bytearray()
+            self._chunk_messages = 0
+        self._stream.flush()
+
+    # -- attachments and metadata ----------------------------------------------------------------
+    def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int) -> None:
+        attachment = Attachment(
+            create_time=log_time_ns, log_time=log_time_ns, name=name, media_type=media_type, data=data
+        )
+        offset = self._offset
+        length = self._write_record(attachment)
+        self._attachment_indexes.append(
+            AttachmentIndex(
+                offset=offset,
+                length=length,
+                log_time=log_time_ns,
+                create_time=log_time_ns,
+                data_size=len(data),
+                name=name,
+                media_type=media_type,
+            )
+        )
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Add a metadata record; values must be strings (use JSON for structure)."""
+        data = {k: v if isinstance(v, str) else json.dumps(v) for k, v in data.items()}
+        offset = self._offset
+        length = self._write_record(Metadata(name=name, metadata=data))
+        self._metadata_indexes.append(MetadataIndex(offset=offset, length=length, name=name))
+
+    # -- end -------------------------------------------------------------------------------------
+    def finish(self) -> None:
+        """Write the last chunk, the summary section and the footer; close an owned stream."""
+        if self._finished:
+            return
+        self._finished = True
+        self.flush()
+        self._write_record(DataEnd(data_section_crc=0))
+        summary_start = self._offset
+        summary = RecordBuilder()
+        offsets: list[SummaryOffset] = []
+
+        def group(opcode: int, records: list) -> None:
+            if not records:
+                return
+            begin = summary.count
+            for record in records:
+                record.write(summary)
+            offsets.append(SummaryOffset(opcode, summary_start + begin, summary.count - begin))
+
+        stats = Statistics(
+            attachment_count=len(self._attachment_indexes),
+            channel_count=len(self._channels),
+            channel_message_counts=dict(self._counts),
+            chunk_count=len(self._chunk_indexes),
+            message_count=self._message_count,
+            message_end_time=self._end_ns,
+            message_start_time=self._start_ns or 0,
+            metadata_count=len(self._metadata_indexes),
+            schema_count=len(self._schemas),
+        )
+        group(Opcode.SCHEMA, self._schemas)
+        group(Opcode.CHANNEL, self._channels)
+        group(Opcode.STATISTICS, [stats])
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes)
+        group(Opcode.ATTACHMENT_INDEX, self._attachment_indexes)
+        group(Opcode.METADATA_INDEX, self._metadata_indexes)
+        summary_offset_start = summary_start + summary.count
+        for offset in offsets:
+            offset.write(summary)
+        summary_data = summary.end()
+        footer_prefix = struct.pack("<BQQQ", Opcode.FOOTER, 20, summary_start, summary_offset_start)
+        crc = zlib.crc32(footer_prefix, zlib.crc32(summary_data))
+        self._write(summary_data)
+        self._write_record(
+            Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc)
+        )
+        self._write(MCAP0_MAGIC)
+        self._stream.flush()
+        if self._owns_stream:
+            self._stream.close()
+
+    def _write_record(self, record) -> int:
+        builder = RecordBuilder()
+        record.write(builder)
+        data = builder.end()
+        self._write(data)
+        return len(data)
+
+    def _write(self, data: bytes) -> None:
+        self._stream.write(data)
+        self._offset += len(data)
