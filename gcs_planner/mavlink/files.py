@@ -72,6 +72,7 @@ class MissionFile:
     vehicle_type: int = mavlink.MAV_TYPE_QUADROTOR
     cruise_speed_mps: float = 15.0
     hover_speed_mps: float = 5.0
+    home_item: MissionItem | None = None  # a WPL file's row 0 as written (frame, params), if any
 
     def items(self, autopilot: str = "ardupilot") -> list[MissionItem]:
         """The mission to upload: home at seq 0 for ArduPilot (needs ``home``), none for PX4."""
@@ -82,14 +83,8 @@ class MissionFile:
                     "the file has no planned home position, which ArduPilot needs at seq 0"
                 )
             lat, lon, alt = self.home
-            home = MissionItem(
-                0,
-                mavlink.MAV_FRAME_GLOBAL,
-                mavlink.MAV_CMD_NAV_WAYPOINT,
-                x=int(deg_to_e7(lat)),
-                y=int(deg_to_e7(lon)),
-                z=float(alt),
-            )
+            home = self.home_item or MissionItem(0, mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_CMD_NAV_WAYPOINT)
+            home = replace(home, x=int(deg_to_e7(lat)), y=int(deg_to_e7(lon)), z=float(alt))
             body.insert(0, home)
         elif autopilot != "px4":
             raise MissionFileError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
@@ -109,6 +104,7 @@ class MissionFile:
         mission = list(items)
         if autopilot == "ardupilot" and mission:
             first, mission = mission[0], mission[1:]
+            kwargs.setdefault("home_item", first)
             if home is None:
                 home = (first.x / 1e7, first.y / 1e7, float(first.z))
         mission = [replace(item, seq=i) for i, item in enumerate(mission)]
