@@ -15,7 +15,7 @@ from importlib import import_module
 from gcs_planner import __version__
 from gcs_planner.errors import UserError
 
-COMMANDS = ["plan"]
+COMMANDS = ["plan", "replay", "import-tlog"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,74 @@
+"""Replay a flight log (MCAP) to Rerun (.rrd or a live viewer) or as MAVLink over UDP.
+
+    gcs-planner replay FLIGHT.mcap --rrd out.rrd
+    gcs-planner replay FLIGHT.mcap --to udpout:127.0.0.1:14550 --speed 4
+    gcs-planner replay FLIGHT.mcap --viewer        (spawns the Rerun viewer if installed)
+
+MAVLink replay re-emits every recorded frame byte for byte with its original timing divided by
+--speed, so QGroundControl or MAVProxy listening on that port sees the flight again. Truncated
+logs (a killed recorder) are replayed up to their last complete chunk.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from gcs_planner.errors import UserError
+from gcs_planner.progress import progress_bar
+from gcs_planner.telemetry.reader import read_flight
+from gcs_planner.telemetry.replay import parse_udp_url, replay_to_mavlink
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("flight", help="flight log (.mcap) written by fly / import-tlog")
+    p.add_argument("--rrd", help="write Rerun views to this .rrd file (headless)")
+    p.add_argument("--viewer", action="store_true", help="show the views in a spawned Rerun viewer")
+    p.add_argument("--to", metavar="udpout:HOST:PORT", help="re-emit the raw MAVLink frames to this address")
+    p.add_argument("--speed", type=float, default=1.0, help="MAVLink replay speed factor (0 = max) [1]")
+
+
+def run(args: argparse.Namespace) -> int:
+    if not (args.rrd or args.to or args.viewer):
+        raise UserError("nothing to do: give --rrd FILE, --viewer and/or --to udpout:HOST:PORT")
+    if args.speed < 0:
+        raise UserError(f"--speed must be >= 0, got {args.speed}")
+    if args.to:
+        parse_udp_url(args.to)
+    try:
+        flight = read_flight(args.flight)
+    except FileNotFoundError:
+        raise UserError(f"flight log {args.flight!r}: no such file") from None
+    note = f" (truncated log: recovered {flight.recovered_messages} messages)" if flight.truncated else ""
+    print(f"{args.flight}: {len(flight.frames)} frames from vehicles {flight.sysids}{note}")
+    if args.rrd or args.viewer:
+        _to_rerun(flight, args.rrd, args.viewer)
+    if args.to:
+        with progress_bar(len(flight.frames), f"replaying to {args.to}") as bar:
+
+            def progress(sent: int, total: int) -> None:
+                bar.n = sent
+                bar.refresh()
+
+            start = time.monotonic()
+            sent = replay_to_mavlink(flight, args.to, speed=args.speed, progress=progress)
+        print(f"sent {sent} frames to {args.to} in {time.monotonic() - start:.1f} s")
+    return 0
+
+
+def _to_rerun(flight, rrd_path: str | None, viewer: bool) -> None:
+    import rerun as rr
+
+    from gcs_planner.telemetry.rerun_views import APPLICATION_ID, flight_blueprint, log_flight_to_rerun
+
+    start = time.monotonic()
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=str(flight.path))
+    if viewer:
+        rec.spawn(default_blueprint=flight_blueprint())
+    if rrd_path:
+        rec.save(rrd_path, default_blueprint=flight_blueprint())
+    log_flight_to_rerun(flight, rec=rec)
+    rec.flush()
+    rec.disconnect()
+    if rrd_path:
+        print(f"wrote {rrd_path} in {time.monotonic() - start:.1f} s; open it with: rerun {rrd_path}")
