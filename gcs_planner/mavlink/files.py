@@ -21,6 +21,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.items import deg_to_e7
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.plan import Plan, VehiclePlan
 
 __all__ = [
     "MissionFile",
@@ -28,9 +29,12 @@ __all__ = [
     "file_frame",
     "item_frame",
     "load_mission_file",
+    "load_plan_json",
+    "mission_input",
     "mission_type_of",
     "plan_mission_file",
     "save_mission_file",
+    "select_vehicles",
 ]
 
 _TO_FILE = {
@@ -153,7 +157,7 @@ def save_mission_file(path: str | Path, mission_file: MissionFile, autopilot: st
         path.write_text(wpl.dumps_wpl(mission_file.items(autopilot)))
 
 
-def plan_mission_file(vehicle_plan, origin, autopilot: str = "ardupilot") -> MissionFile:
+def plan_mission_file(vehicle_plan: VehiclePlan, origin, autopilot: str = "ardupilot") -> MissionFile:
     """One vehicle of a Plan -> MissionFile (mission items from plan_to_items, home = plan origin)."""
     from gcs_planner.mavlink.items import plan_to_items
 
@@ -169,3 +173,47 @@ def plan_mission_file(vehicle_plan, origin, autopilot: str = "ardupilot") -> Mis
         cruise_speed_mps=cruise,
         hover_speed_mps=cruise,
     )
+
+
+def load_plan_json(path: str | Path) -> Plan:
+    """plan.json (from `gcs-planner plan`) -> Plan, with one-line errors."""
+    try:
+        return Plan.load(path)
+    except FileNotFoundError:
+        raise MissionFileError(f"{path}: no such file") from None
+    except (ValueError, KeyError, TypeError) as exc:
+        raise MissionFileError(f"{path}: not a valid plan.json: {exc!s}") from None
+
+
+def select_vehicles(
+    plan: Plan, vehicle_ids: list[str] | None = None, sysid: int | None = None
+) -> list[VehiclePlan]:
+    """The plan's vehicles named in ``vehicle_ids`` (all if None), or the one with ``sysid``."""
+    if vehicle_ids:
+        known = {v.vehicle_id: v for v in plan.vehicles}
+        missing = [v for v in vehicle_ids if v not in known]
+        if missing:
+            raise MissionFileError(f"vehicle {missing[0]!r} is not in the plan (it has {sorted(known)})")
+        return [known[v] for v in vehicle_ids]
+    if sysid is not None:
+        matches = [v for v in plan.vehicles if v.sysid == sysid]
+        if not matches:
+            raise MissionFileError(
+                f"no vehicle with sysid {sysid} in the plan (it has {[v.sysid for v in plan.vehicles]})"
+            )
+        return matches[:1]
+    return list(plan.vehicles)
+
+
+def mission_input(
+    path: str | Path, autopilot: str = "ardupilot", vehicle: str | None = None, sysid: int | None = None
+) -> MissionFile:
+    """A .plan, a WPL file, or plan.json (+ vehicle id, else the vehicle with ``sysid``) -> MissionFile."""
+    path = Path(path)
+    if path.suffix.lower() == ".json":
+        plan = load_plan_json(path)
+        (vp,) = select_vehicles(plan, [vehicle] if vehicle else None, sysid=sysid if not vehicle else None)[
+            :1
+        ]
+        return plan_mission_file(vp, plan.origin, autopilot)
+    return load_mission_file(path, autopilot=autopilot)

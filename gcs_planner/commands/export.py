@@ -1,0 +1,51 @@
+"""Export plan.json as QGroundControl .plan or Mission Planner WPL files, one per vehicle.
+
+Each vehicle's plan becomes the mission items that `upload` would send (see
+gcs_planner.mavlink.items). With --scenario, the .plan files also carry the scenario's geofence
+(bounds, obstacles) and rally points. Prints one table row per file written.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
+from gcs_planner.mavlink.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
+from gcs_planner.scenario import load_scenario
+
+SUFFIX = {"qgc": ".plan", "wpl": ".waypoints"}
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("plan", help="plan.json written by `gcs-planner plan`")
+    p.add_argument("--format", choices=sorted(SUFFIX), default="qgc", help="qgc (.plan JSON) or wpl [qgc]")
+    p.add_argument("--vehicle", action="append", help="vehicle id to export (repeatable; default: all)")
+    p.add_argument(
+        "--autopilot", choices=AUTOPILOTS, default="ardupilot", help="item conventions [ardupilot]"
+    )
+    p.add_argument("--scenario", help="scenario file: add its fence and rally points (.plan only)")
+    p.add_argument("-o", "--output-dir", default=".", help="directory for <vehicle><suffix> files [.]")
+
+
+def run(args: argparse.Namespace) -> int:
+    plan = load_plan_json(args.plan)
+    vehicles = select_vehicles(plan, args.vehicle)
+    fence, rally = [], []
+    if args.scenario:
+        if args.format != "qgc":
+            raise UserError("--scenario (fence and rally points) needs --format qgc; WPL holds one list")
+        scenario = load_scenario(args.scenario)
+        fence, rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
+    out_dir = Path(args.output_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    print(f"{'vehicle':<10} {'sysid':>5} {'items':>6} {'fence':>6} {'rally':>6}  file")
+    for vp in vehicles:
+        mf = plan_mission_file(vp, plan.origin, args.autopilot)
+        mf.fence, mf.rally = fence, rally
+        path = out_dir / f"{vp.vehicle_id}{SUFFIX[args.format]}"
+        save_mission_file(path, mf, autopilot=args.autopilot)
+        n = len(mf.items(args.autopilot))
+        print(f"{vp.vehicle_id:<10} {vp.sysid:>5} {n:>6} {len(fence):>6} {len(rally):>6}  {path}")
+    return 0
