@@ -1,0 +1,146 @@
+"""Interop with MAVSDK (C++ library, python `mavsdk` 4.x ctypes API) over real UDP on 127.0.0.1.
+
+- MAVSDK's own importers read our .plan and WPL files into exactly our items.
+- MAVSDK's MissionRaw client uploads to and downloads from our mock vehicle (both profiles).
+- Our MissionClient uploads to MAVSDK's MissionRawServer (the autopilot side of MAVSDK), which
+  receives exactly our items.
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+from dataclasses import replace
+
+import pytest
+
+mavsdk = pytest.importorskip("mavsdk")
+from mavsdk import ComponentType, Configuration, Mavsdk, log_subscribe  # noqa: E402
+from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
+from mavsdk.plugins.mission_raw import MissionRaw  # noqa: E402
+from mavsdk.plugins.mission_raw_server import MissionRawServer  # noqa: E402
+
+from gcs_planner.geo import Origin  # noqa: E402
+from gcs_planner.mavlink.files import file_frame, plan_mission_file  # noqa: E402
+from gcs_planner.mavlink.items import plan_to_items  # noqa: E402
+from gcs_planner.mavlink.planfile import dumps_plan  # noqa: E402
+from gcs_planner.mavlink.types import MissionItem  # noqa: E402
+from gcs_planner.mavlink.wpl import dumps_wpl  # noqa: E402
+from gcs_planner.plan import VehiclePlan  # noqa: E402
+
+ORIGIN = Origin(47.397742, 8.545594, 488.0)
+
+log_subscribe(lambda *args: True)  # keep MAVSDK's console logging out of test output
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def vehicle_plan(n: int = 8, **kw) -> VehiclePlan:
+    import numpy as np
+
+    wps = np.c_[
+        np.linspace(0, 70 * (n - 1), n), np.linspace(0, 30 * (n - 1), n), np.r_[0.0, np.full(n - 1, 25.0)]
+    ]
+    speeds = np.r_[0.0, np.where(np.arange(1, n) % 3, 8.0, 11.0)]
+    seg = np.linalg.norm(np.diff(wps, axis=0), axis=1)
+    times = np.r_[0.0, np.cumsum(seg / speeds[1:])]
+    return VehiclePlan("v", 1, wps, times, speeds, wps, times, **kw)
+
+
+def to_ours(raw) -> MissionItem:
+    return MissionItem(
+        raw.seq,
+        raw.frame,
+        raw.command,
+        raw.current,
+        raw.autocontinue,
+        raw.param1,
+        raw.param2,
+        raw.param3,
+        raw.param4,
+        raw.x,
+        raw.y,
+        raw.z,
+        raw.mission_type,
+    )
+
+
+def to_raw(it: MissionItem) -> RawItem:
+    return RawItem(
+        it.seq,
+        it.frame,
+        it.command,
+        it.current,
+        it.autocontinue,
+        it.param1,
+        it.param2,
+        it.param3,
+        it.param4,
+        it.x,
+        it.y,
+        it.z,
+        int(it.mission_type),
+    )
+
+
+class MavsdkServer:
+    """MAVSDK acting as an autopilot (sysid 1, compid 1) with MissionRawServer on udpin 127.0.0.1:port."""
+
+    def __init__(self):
+        self.port = free_udp_port()
+        self.mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.AUTOPILOT))
+        self.mavsdk.add_any_connection(f"udpin://127.0.0.1:{self.port}")
+        self.server = MissionRawServer(self.mavsdk.server_component())
+        self.received: list[list[MissionItem]] = []
+        self.event = threading.Event()
+
+        def incoming(result, plan, _user_data):
+            self.received.append([to_ours(it) for it in plan.mission_items])
+            self.event.set()
+
+        self.server.subscribe_incoming_mission(incoming)
+
+    def close(self):
+        self.mavsdk.destroy()
+
+
+def mavsdk_client(url: str) -> tuple[Mavsdk, MissionRaw]:
+    """MAVSDK as a ground station (sysid 255, compid 190) connected to ``url``; its MissionRaw plugin."""
+    client = Mavsdk(Configuration.create_manual(255, 190, True))
+    client.add_any_connection(url)
+    system = client.first_autopilot(10.0)
+    if system is None:
+        client.destroy()
+        pytest.fail(f"MAVSDK found no autopilot on {url} within 10 s")
+    return client, MissionRaw(system)
+
+
+@pytest.fixture(scope="module")
+def mavsdk_pair():
+    server = MavsdkServer()
+    client, raw = mavsdk_client(f"udpout://127.0.0.1:{server.port}")
+    yield server, raw
+    client.destroy()
+    server.close()
+
+
+@pytest.mark.parametrize("autopilot", ["ardupilot", "px4"])
+def test_mavsdk_imports_our_plan_and_wpl_files(mavsdk_pair, autopilot):
+    _, raw = mavsdk_pair
+    vp = vehicle_plan(takeoff_delay_s=5.0, final_action="rtl")
+    items = plan_to_items(vp, ORIGIN, autopilot)
+    as_in_files = [replace(it, frame=file_frame(it.frame)) for it in items]  # MAVSDK keeps the files' frames
+    wpl = [
+        to_ours(it) for it in raw.import_mission_planner_mission_from_string(dumps_wpl(items)).mission_items
+    ]
+    assert wpl == as_in_files
+    imported = raw.import_qgroundcontrol_mission_from_string(
+        dumps_plan(plan_mission_file(vp, ORIGIN, autopilot))
+    )
+    plan_items = [to_ours(it) for it in imported.mission_items]
+    body = as_in_files[1:] if autopilot == "ardupilot" else as_in_files  # .plan files carry no home item
+    assert plan_items == [replace(it, seq=i, current=int(i == 0)) for i, it in enumerate(body)]
