@@ -180,7 +180,7 @@ class FlightLogger:
             if self._clock_offset_s is None:
                 self._clock_offset_s = time.time() - t_s
             t_s += self._clock_offset_s
-        return int(t_s * 1e9)
+        return round(t_s * 1e9)
 
     def _encode(self, batch: list[tuple[float, object, bytes]]) -> None:
         add = self._writer.add_message
@@ -198,7 +198,7 @@ class FlightLogger:
             add(channel, t_ns, raw)
             counts[sysid] += 1
             if self._tlog is not None:
-                tlog_parts.append(_TLOG_TIME.pack((t_ns // 1000) & ~3))
+                tlog_parts.append(_TLOG_TIME.pack(((t_ns + 500) // 1000) & ~3))
                 tlog_parts.append(raw)
             if msg is None or not hasattr(msg, "fieldnames"):
                 continue

@@ -19,6 +19,7 @@ from pathlib import Path
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.plan import Plan
+from gcs_planner.telemetry.reader import RawFrame
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
@@ -28,12 +29,17 @@ __all__ = ["import_tlog", "iter_tlog", "write_tlog"]
 _TIME = struct.Struct(">Q")
 
 
-def write_tlog(frames: Iterable[tuple[float, bytes]], path: str | Path) -> int:
-    """Write (t_s [Unix], raw frame) pairs as a .tlog; returns the number of frames."""
+def write_tlog(frames: Iterable[RawFrame | tuple[int, bytes]], path: str | Path) -> int:
+    """Write (t_ns [Unix ns], raw frame) pairs, e.g. ``Flight.frames``, as a .tlog; returns the count.
+
+    Times are rounded to the microsecond and their two low bits cleared, as mavutil does (they
+    carry the link number in MAVProxy logs), so tlog -> MCAP -> tlog is byte-identical.
+    """
     n = 0
     with open(path, "wb") as f:
-        for t_s, raw in frames:
-            f.write(_TIME.pack(int(t_s * 1e6) & ~3) + bytes(raw))
+        for frame in frames:
+            t_ns, raw = (frame.t_ns, frame.data) if isinstance(frame, RawFrame) else frame
+            f.write(_TIME.pack(((t_ns + 500) // 1000) & ~3) + bytes(raw))
             n += 1
     return n
 
