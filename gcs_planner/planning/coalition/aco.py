@@ -1,0 +1,177 @@
+"""Division-of-labour ant colony (section 4.4, eqs. 26-32) maximising J = w1 J1 + w2 J2 - w3 J3 (eqs. 7-12).
+
+The leader solves one coalition: candidates = {leader} + potential members (their bids), tasks =
+the target's strike and assessment slots. Every candidate has a sub-colony; an *ant cluster* (one
+ant per candidate) builds one joint plan. ``m`` clusters are built in parallel as numpy arrays
+(m, candidates, tasks); no Python loop over ants.
+
+Per construction step, in every cluster:
+1. eq. 26-27: the ant that moves is drawn with probability proportional to its capability
+   C = L_frac * max_allowed(tau) * N_allowed / N_task * (N_max - N_cur), N_max = 1 (one task per
+   UAV per coalition, see model.py), L_frac its remaining-range fraction.
+2. eq. 28 (ACS rule): with q <= q0 it takes argmax tau^alpha eta^beta over its allowed tasks,
+   else a roulette draw; eta = 1 / (V + eps), V = w1 Cd + w2 Ct (eq. 29).
+   Cd (eq. 30): the Dubins length to the task entry pose, min-max normalised over the matrix.
+   Ct (eq. 31) is ill-posed as printed (read as a cost, it rewards arriving late). We use the
+   lateness fraction clip((t_v - t_s) / (t_e - t_s), 0, 1): t_s = earliest arrival of any
+   candidate at that task, t_e = t_s + time_scale_s.
+3. ACS local update on the chosen (candidate, task) pairs: tau <- (1 - rho) tau + rho tau0.
+After each iteration the global update (eq. 32, delta tau undefined in the paper): evaporate all
+by rho and deposit rho * max(J_best, 0.05) on the best plan's pairs (ACS "deposit by best").
+
+J of a plan (eqs. 7-12), normalised so the weights are comparable:
+- strike slots: lambda_0 = max over strikers of (ETA_k - offset_k), lambda_k = lambda_0 + offset_k
+  (the latest striker is the reference; the others stretch); assessment start = last strike +
+  delay; an assessor that cannot be there starts late.
+- J1 = sum_k F_k exp(-beta (t_done_k - t0)) / sum_k F_k (uncovered tasks give 0),
+- J2 = mean over members of the range fraction left after the task,
+- J3 = sum_k |t_predicted_k - t_required_k| / (n_tasks * time_scale_s), t_predicted = fastest
+  arrival (so J3 is the total stretching/waiting plus any lateness).
+Defaults (not in the paper): alpha 1, beta 2, q0 0.9, rho 0.1, tau0 1, 16 clusters, 30 iterations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gcs_planner.planning.coalition.model import ASSESS, STRIKE, CoalitionParams
+
+__all__ = ["CoalitionProblem", "Solution", "evaluate", "solve_aco"]
+
+EPS = 1e-3
+
+
+@dataclass
+class CoalitionProblem:
+    """One formation: candidates (index 0 = leader if it is capable) and task slots.
+
+    length_m[i, k]: shortest path length of candidate i from its pose at t_start to task k's entry.
+    """
+
+    length_m: np.ndarray  # (n, K)
+    speed_mps: np.ndarray  # (n,)
+    range_left_m: np.ndarray  # (n,) at t_start
+    range_max_m: np.ndarray  # (n,)
+    can_strike: np.ndarray  # (n,) bool (has munitions)
+    can_assess: np.ndarray  # (n,) bool
+    kind: np.ndarray  # (K,)
+    offset_s: np.ndarray  # (K,) strike slot offsets
+    reward: np.ndarray  # (K,) F_k
+    decay_per_s: float
+    assess_delay_s: float
+    assess_duration_s: float
+    t0_s: float  # tender time (decay reference)
+    t_start_s: float  # t_e^s: when members start flying their tasks
+
+    @property
+    def capable(self) -> np.ndarray:
+        """(n, K) bool: candidate i may take task k (payload, munitions and range)."""
+        cap = np.where(self.kind[None, :] == STRIKE, self.can_strike[:, None], self.can_assess[:, None])
+        return cap & (self.length_m < self.range_left_m[:, None])
+
+
+@dataclass
+class Solution:
+    assign: np.ndarray  # (K,) candidate index per task, -1 = uncovered
+    J: float
+    parts: dict[str, float]
+    t_required_s: np.ndarray  # (K,) lambda_k for strikes, required start for assessments
+    covered: bool
+
+
+def evaluate(assign: np.ndarray, prob: CoalitionProblem, params: CoalitionParams):
+    """J and its parts for plans `assign` (m, K); returns (J (m,), parts dict of (m,), t_required (m, K))."""
+    assign = np.atleast_2d(assign)
+    m, K = assign.shape
+    has = assign >= 0
+    a = np.where(has, assign, 0)
+    eta = prob.t_start_s + prob.length_m[a, np.arange(K)] / prob.speed_mps[a]
+    eta = np.where(has, eta, np.nan)
+    strike = prob.kind == STRIKE
+    lam0 = np.nanmax(np.where(strike, eta - prob.offset_s, np.nan), axis=1, initial=-np.inf)
+    lam0 = np.where(np.isfinite(lam0), lam0, prob.t_start_s)
+    t_last_strike = lam0 + (prob.offset_s[strike].max() if strike.any() else 0.0)
+    t_req = np.where(strike, lam0[:, None] + prob.offset_s, (t_last_strike + prob.assess_delay_s)[:, None])
+    start = np.where(strike, t_req, np.fmax(t_req, eta))
+    done = start + np.where(strike, 0.0, prob.assess_duration_s)
+    f = prob.reward * np.exp(-prob.decay_per_s * (done - prob.t0_s))
+    j1 = np.where(has, f, 0.0).sum(1) / prob.reward.sum()
+    used = prob.speed_mps[a] * (done - prob.t_start_s)
+    frac = (prob.range_left_m[a] - used) / prob.range_max_m[a]
+    j2 = np.where(has, frac, 0.0).sum(1) / np.maximum(has.sum(1), 1)
+    j3 = np.where(has, np.abs(start - eta), 0.0).sum(1) / (K * params.time_scale_s)
+    J = params.w1 * j1 + params.w2 * j2 - params.w3 * j3
+    return J, {"J1": j1, "J2": j2, "J3": j3}, t_req
+
+
+def _heuristic(prob: CoalitionProblem, params: CoalitionParams) -> np.ndarray:
+    """eta (n, K) of eqs. 28-31."""
+    L = prob.length_m
+    cd = (L - L.min()) / max(L.max() - L.min(), 1e-9)
+    t_v = prob.t_start_s + L / prob.speed_mps[:, None]
+    t_s = np.where(prob.capable, t_v, np.inf).min(0)
+    t_s = np.where(np.isfinite(t_s), t_s, t_v.min(0))
+    ct = np.clip((t_v - t_s) / params.time_scale_s, 0.0, 1.0)
+    return 1.0 / (params.w1 * cd + params.w2 * ct + EPS)
+
+
+def solve_aco(
+    prob: CoalitionProblem, params: CoalitionParams, rng: np.random.Generator, scale: int = 1
+) -> Solution:
+    """Best plan found by the colony (scale multiplies clusters and iterations, for the global baseline)."""
+    n, K = prob.length_m.shape
+    m, iters = params.ants * scale, params.iterations * scale
+    cap = prob.capable
+    tau = np.full((n, K), params.tau0)
+    eta_b = _heuristic(prob, params) ** params.beta
+    lfrac = np.clip(prob.range_left_m / prob.range_max_m, 0.0, 1.0)
+    rows = np.arange(m)
+    best_assign, best_J = np.full(K, -1), -np.inf
+    for _ in range(iters):
+        assign = np.full((m, K), -1)
+        busy = np.zeros((m, n), bool)
+        for _step in range(K):
+            allowed = cap[None] & ~busy[:, :, None] & (assign < 0)[:, None, :]  # (m, n, K)
+            n_allowed = allowed.sum(2)
+            tau_max = np.where(allowed, tau[None], 0.0).max(2)
+            c = lfrac[None] * tau_max * n_allowed / K * (~busy)  # eq. 27
+            total = c.sum(1)
+            live = total > 0
+            if not live.any():
+                break
+            cum = np.cumsum(c, 1)
+            ant = (cum < rng.random(m)[:, None] * total[:, None]).sum(1).clip(0, n - 1)  # eq. 26 roulette
+            score = np.where(allowed[rows, ant], tau[ant] ** params.alpha * eta_b[ant], 0.0)  # (m, K)
+            greedy = score.argmax(1)
+            scum = np.cumsum(score, 1)
+            roul = (scum < rng.random(m)[:, None] * scum[:, -1:]).sum(1).clip(0, K - 1)
+            task = np.where(rng.random(m) <= params.q0, greedy, roul)  # eq. 28
+            ok = live & (score[rows, task] > 0)
+            assign[rows[ok], task[ok]] = ant[ok]
+            busy[rows[ok], ant[ok]] = True
+            tau[ant[ok], task[ok]] = (1 - params.rho) * tau[ant[ok], task[ok]] + params.rho * params.tau0
+        J, _, _ = evaluate(assign, prob, params)
+        i = int(np.argmax(J))
+        if J[i] > best_J:
+            best_J, best_assign = float(J[i]), assign[i].copy()
+        tau *= 1 - params.rho  # eq. 32, global update by the best plan
+        has = best_assign >= 0
+        tau[best_assign[has], np.flatnonzero(has)] += params.rho * max(best_J, 0.05)
+    return make_solution(best_assign, prob, params)
+
+
+def make_solution(assign: np.ndarray, prob: CoalitionProblem, params: CoalitionParams) -> Solution:
+    J, parts, t_req = evaluate(assign[None], prob, params)
+    return Solution(
+        assign=assign,
+        J=float(J[0]),
+        parts={k: float(v[0]) for k, v in parts.items()},
+        t_required_s=t_req[0],
+        covered=bool((assign >= 0).all()),
+    )
+
+
+def task_kind_name(kind: int) -> str:
+    return "strike" if kind == STRIKE else "assess" if kind == ASSESS else "?"

@@ -1,0 +1,701 @@
+"""Event-driven swarm simulation of online coalition planning (seed 003, sections 3-5).
+
+Events (a time-ordered heap): target appears -> a recon UAV flies to the recon arc (eq. 16) ->
+recon done, needs revealed -> that UAV leads: tender to one-hop neighbours -> bids -> bid book
+closes -> formation (ACO / polynomial / global) and timed paths -> awards -> members fly, strike
+(munition consumed) or assess -> idle again. A failed formation (needs not covered) keeps the
+leader monitoring and re-tenders after ``retender_s``. Pop-up threats become known to the whole
+swarm when they appear (choice: the paper detects them within C^r but does not say how the news
+spreads); every executing leg that now crosses one is re-planned to the same goal and time.
+Idle UAVs keep station (choice: the paper's swarm gathers near the targets, U1 has 20 neighbours at
+T1): an idle UAV flies to a loiter circle centred on a ring of ``station_radius_m`` about the
+nearest known unfinished target (at its own bearing from it) and loiters there; stations are
+re-chosen when a target appears and whenever a UAV becomes idle.
+
+Per-UAV state machine: idle -> recon -> leader (tendering) -> idle | executing;
+idle -> locked (bid sent) -> executing (awarded) | idle (not awarded / timeout);
+executing -> idle. Range used is speed x time (every UAV always flies); a task is only given when
+the remaining range covers its path. Munitions are decremented at the strike and never go below 0.
+
+``SimResult.events`` is the timeline (tenders, bids, awards with time, vehicle, strike point,
+arrival time and attack angle, failures, strikes, assessments, re-plans); ``SimResult.award_legs``
+holds each awarded member's planned leg (for live upload, see ``leg_vehicle_plan``).
+"""
+
+from __future__ import annotations
+
+import heapq
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gcs_planner.planning.coalition import paths
+from gcs_planner.planning.coalition.aco import CoalitionProblem, make_solution, solve_aco
+from gcs_planner.planning.coalition.baselines import GLOBAL_SCALE, solve_polynomial
+from gcs_planner.planning.coalition.bus import MessageBus
+from gcs_planner.planning.coalition.contract_net import Award, Bid, Tender, bid_for, tender_times
+from gcs_planner.planning.coalition.model import STRIKE, Target, Threat, World
+from gcs_planner.planning.coalition.track import Leg, Loiter, Track
+
+__all__ = ["CoalitionSim", "SimResult"]
+
+log = logging.getLogger(__name__)
+
+IDLE, RECON, LEADER, LOCKED, EXECUTING = "idle", "recon", "leader", "locked", "executing"
+
+
+@dataclass
+class UavState:
+    state: str
+    munitions: int
+    track: Track
+    locked_to: int | None = None
+    stored: list[Target] = field(default_factory=list)  # tenders postponed by the conflict rule
+    strikes: int = 0
+
+
+@dataclass
+class TargetOutcome:
+    target_id: str
+    t_revealed_s: float | None = None
+    t_formed_s: float | None = None
+    tenders: int = 0
+    J: float = 0.0
+    parts: dict = field(default_factory=dict)
+    t_done_s: float | None = None
+    pending: int = 0
+    members: tuple[str, ...] = ()
+    sync_error_s: float = 0.0
+
+
+@dataclass
+class SimResult:
+    events: list[dict]
+    tracks: list[Track]
+    states: list[UavState]
+    outcomes: dict[str, TargetOutcome]
+    compute_s: list[float]
+    award_legs: dict[tuple[str, str], Leg]
+    t_end_s: float
+
+    @property
+    def effectiveness(self) -> float:
+        """Mean coalition effectiveness J over all targets (0 for a target never served)."""
+        return float(np.mean([o.J if o.t_done_s is not None else 0.0 for o in self.outcomes.values()]))
+
+    @property
+    def completion_s(self) -> float:
+        """Mean time from a target's reveal to its last task done, over completed targets."""
+        done = [o.t_done_s - o.t_revealed_s for o in self.outcomes.values() if o.t_done_s is not None]
+        return float(np.mean(done)) if done else math.nan
+
+
+class CoalitionSim:
+    def __init__(self, world: World, rng: np.random.Generator) -> None:
+        self.w, self.p, self.rng = world, world.params, rng
+        self.uavs = world.uavs
+        self.now = 0.0
+        self.heap: list = []
+        self.seq = 0
+        self.events: list[dict] = []
+        self.known: list[Threat] = [t for t in world.threats if t.appear_s <= 0]
+        self.tenders: dict[int, Tender] = {}
+        self.outcomes = {t.id: TargetOutcome(t.id) for t in world.targets}
+        self.compute_s: list[float] = []
+        self.award_legs: dict[tuple[str, str], Leg] = {}
+        self.st: list[UavState] = []
+        for u in self.uavs:
+            lo = Loiter.through(u.xy0[0], u.xy0[1], u.heading0_rad, 0.0, self.p.loiter_radius_m, u.speed_mps)
+            self.st.append(UavState(IDLE, u.munitions, Track([], lo)))
+        extra = np.array([world.extra_delay_s.get(u.id, 0.0) for u in self.uavs])
+        self.bus = MessageBus(
+            self.positions,
+            self.p.link_range_m,
+            self.p.delay_s,
+            rng,
+            self.p.delay_jitter_s,
+            extra if extra.any() else None,
+        )
+
+    # ---- plumbing
+    def positions(self, t_s: float) -> np.ndarray:
+        return np.array([s.track.state_at(t_s)[0, :2] for s in self.st])
+
+    def at(self, t_s: float, kind: str, **data) -> None:
+        heapq.heappush(self.heap, (t_s, self.seq, kind, data))
+        self.seq += 1
+
+    def log(self, kind: str, **data) -> None:
+        self.events.append({"t_s": round(self.now, 4), "event": kind, **data})
+
+    def range_left(self, i: int, t_s: float) -> float:
+        return self.uavs[i].range_max_m - self.uavs[i].speed_mps * t_s
+
+    def run(self) -> SimResult:
+        self.at(0.0, "restation")
+        for t in self.w.targets:
+            self.at(t.appear_s, "target_appear", target=t)
+        for th in self.w.threats:
+            if th.appear_s > 0:
+                self.at(th.appear_s, "threat_appear", threat=th)
+        while self.heap:
+            t, _, kind, data = heapq.heappop(self.heap)
+            if t > self.p.t_end_s:
+                break
+            self.now = t
+            getattr(self, "_on_" + kind)(**data)
+        return SimResult(
+            self.events,
+            [s.track for s in self.st],
+            self.st,
+            self.outcomes,
+            self.compute_s,
+            self.award_legs,
+            self.p.t_end_s,
+        )
+
+    # ---- idle station keeping
+    def _on_restation(self) -> None:
+        for i, s in enumerate(self.st):
+            if s.state == IDLE:
+                self._station(i)
+
+    def _station(self, i: int) -> None:
+        open_ = [t for t in self.w.targets if t.appear_s <= self.now and self.outcomes[t.id].t_done_s is None]
+        if not open_:
+            return
+        u, s = self.uavs[i], self.st[i]
+        q0 = s.track.state_at(self.now)[0]
+        c = np.array([t.approx_xy for t in open_])
+        d = np.hypot(*(c - q0[:2]).T)
+        tgt = c[int(np.argmin(d))]
+        away = (q0[:2] - tgt) / max(float(d.min()), 1e-9)
+        station = tgt + self.p.station_radius_m * away
+        a = math.atan2(q0[1] - station[1], q0[0] - station[0])
+        goal = paths.arc_start_pose(station, a, self.p.loiter_radius_m)[0]
+        if math.hypot(*(goal[:2] - q0[:2])) < 2 * self.p.loiter_radius_m:
+            return  # already there
+        route = paths.min_route(q0, goal, u.r_min_m, self.known, self.p.kappa)
+        segs, clear = paths.timed_route(route, route.length_m, self.known)
+        leg = paths.sample_segments(
+            segs, self.now, u.speed_mps, self.p.sample_ds_m, "transit", {"clear": clear}
+        )
+        s.track.start_leg(leg, self._circle_loiter(station, self.p.loiter_radius_m, leg, u.speed_mps))
+
+    # ---- recon
+    def _on_target_appear(self, target: Target) -> None:
+        ids = [u.id for u in self.uavs]
+        if target.recon_uav is not None and self.st[ids.index(target.recon_uav)].state == IDLE:
+            i = ids.index(target.recon_uav)
+        else:
+            idle = [u.index for u in self.uavs if u.recon and self.st[u.index].state == IDLE]
+            if not idle:
+                self.at(self.now + self.p.retender_s, "target_appear", target=target)
+                return
+            poses = np.array([self.st[i].track.state_at(self.now)[0] for i in idle])
+            r = np.array([self.uavs[i].r_min_m for i in idle])
+            i = idle[int(np.argmin(paths.free_heading_lengths(poses, np.asarray(target.approx_xy), r)))]
+        u, s = self.uavs[i], self.st[i]
+        s.state = RECON
+        q0 = s.track.state_at(self.now)[0]
+        arc0 = paths.arc_start_pose(target.xy, target.recon_angle_rad, self.p.detect_radius_m)[0]
+        route = paths.min_route(q0, arc0, u.r_min_m, self.known, self.p.kappa)
+        segs, _ = paths.timed_route(route, route.length_m, self.known)
+        leg = paths.sample_segments(
+            segs, self.now, u.speed_mps, self.p.sample_ds_m, "transit", {"target": target.id}
+        )
+        arc = paths.arc_leg(
+            target.xy,
+            self.p.detect_radius_m,
+            target.recon_angle_rad,
+            leg.t[-1],
+            target.recon_s,
+            u.speed_mps,
+            self.p.sample_ds_m,
+            "recon",
+            {"target": target.id},
+        )
+        full = _join(leg, arc, "recon", {"target": target.id, "arc_t0_s": float(arc.t[0])})
+        s.track.start_leg(full, self._circle_loiter(target.xy, self.p.detect_radius_m, full, u.speed_mps))
+        self.log("recon_start", uav=u.id, target=target.id, arrive_s=round(float(leg.t[-1]), 3))
+        self.at(float(arc.t[-1]), "recon_done", uav=i, target=target)
+        self._on_restation()
+
+    def _circle_loiter(self, centre, radius, leg: Leg, speed) -> Loiter:
+        end = leg.xy[-1]
+        return Loiter(
+            (float(centre[0]), float(centre[1])),
+            radius,
+            1.0,
+            float(leg.t[-1]),
+            float(math.atan2(end[1] - centre[1], end[0] - centre[0])),
+            speed,
+        )
+
+    def _on_recon_done(self, uav: int, target: Target) -> None:
+        out = self.outcomes[target.id]
+        out.t_revealed_s = self.now
+        self.log("recon_done", uav=self.uavs[uav].id, target=target.id)
+        self.st[uav].state = LEADER
+        self._tender(uav, target)
+
+    # ---- contract net
+    def _tender(self, leader: int, target: Target) -> None:
+        p = self.p
+        key = self.seq
+        glob = p.method == "global"
+        if glob:  # no link limits, no message delays: formation right away, paths from t0 + t_TA
+            t_close, t_es = self.now, self.now + p.t_ta_s
+        else:
+            t_close, t_es = tender_times(self.now, p)
+        loiter = self.st[leader].track.loiter
+        tender = Tender(
+            key,
+            leader,
+            target,
+            self.now,
+            t_close,
+            t_es,
+            loiter,
+            target.reward * (len(target.strike_angles_rad) + len(target.assess_angles_rad)),
+            len(target.strike_angles_rad),
+            len(target.assess_angles_rad),
+        )
+        self.tenders[key] = tender
+        self.outcomes[target.id].tenders += 1
+        if glob:
+            receivers = [i for i in range(len(self.uavs)) if i != leader]
+            for j in receivers:
+                self._on_tender_rx(j, key)
+        else:
+            receivers = list(self.bus.neighbours(leader, self.now))
+            for j in receivers:
+                t_arr = self.bus.arrival_s(leader, j, self.now)
+                if t_arr is not None:
+                    self.at(t_arr, "tender_rx", uav=j, key=key)
+        self.log(
+            "tender",
+            uav=self.uavs[leader].id,
+            target=target.id,
+            neighbours=len(receivers),
+            t_close_s=round(t_close, 4),
+            t_es_s=round(t_es, 4),
+            reward=tender.reward,
+        )
+        self.at(t_close, "close", key=key)
+
+    def _on_tender_rx(self, uav: int, key: int) -> None:
+        tender, s = self.tenders[key], self.st[uav]
+        if tender.cancelled:
+            return
+        own = []
+        if s.state == LEADER:
+            own = [
+                t
+                for t in self.tenders.values()
+                if t.leader == uav and not t.cancelled and t.t_close_s >= self.now
+            ]
+            if not own or own[0].reward >= tender.reward:
+                return
+        elif s.state != IDLE:
+            return
+        u = self.uavs[uav]
+        bid, why = bid_for(
+            uav,
+            s.track,
+            u.speed_mps,
+            u.r_min_m,
+            s.munitions,
+            u.assess,
+            self.range_left(uav, self.now),
+            tender,
+            self.now,
+            self.p,
+            check_range=self.p.method != "global",
+        )
+        if bid is None:
+            if why != "no matching capability":
+                self.log("not_bidding", uav=u.id, target=tender.target.id, reason=why)
+            return
+        if own:  # conflicting tenders: bid on the richer one, keep ours for later
+            own[0].cancelled = True
+            s.stored.append(own[0].target)
+            self.log("tender_postponed", uav=u.id, target=own[0].target.id, for_target=tender.target.id)
+            self._release_bidders(own[0])
+        s.state, s.locked_to = LOCKED, key
+        self.at(tender.t_es_s + self.p.delta_max_s, "unlock", uav=uav, key=key)
+        if self.p.method == "global":
+            tender.bids.append(bid)
+            return
+        t_arr = self.bus.arrival_s(uav, tender.leader, self.now)
+        self.log(
+            "bid",
+            uav=u.id,
+            target=tender.target.id,
+            eta_s=round(bid.eta_s, 3),
+            arrive_s=None if t_arr is None else round(t_arr, 4),
+        )
+        if t_arr is not None:
+            self.at(t_arr, "bid_rx", bid=bid)
+
+    def _on_bid_rx(self, bid: Bid) -> None:
+        tender = self.tenders[bid.tender_key]
+        if tender.cancelled:
+            return
+        if self.now > tender.t_close_s + 1e-9:
+            self.log(
+                "late_bid_ignored",
+                uav=self.uavs[bid.uav].id,
+                target=tender.target.id,
+                t_close_s=round(tender.t_close_s, 4),
+            )
+            return
+        tender.bids.append(bid)
+
+    def _on_unlock(self, uav: int, key: int) -> None:
+        s = self.st[uav]
+        if s.state == LOCKED and s.locked_to == key:
+            s.state, s.locked_to = IDLE, None
+            self._resume_stored(uav)
+            if s.state == IDLE:
+                self._station(uav)
+
+    def _release_bidders(self, tender: Tender) -> None:
+        for b in tender.bids:
+            self._on_unlock(b.uav, tender.key)
+
+    # ---- formation
+    def _on_close(self, key: int) -> None:
+        tender = self.tenders[key]
+        if tender.cancelled:
+            return
+        t_wall = time.perf_counter()
+        target, p = tender.target, self.p
+        leader = tender.leader
+        cands: list[int] = []
+        poses, munitions, assess, rleft, etas = [], [], [], [], []
+        if self.st[leader].state == LEADER:  # the leader itself is a candidate (eq. 24)
+            u = self.uavs[leader]
+            pose = self.st[leader].track.state_at(tender.t_es_s)[0]
+            d = float(paths.free_heading_lengths(pose[None], np.asarray(target.xy), u.r_min_m)[0])
+            cands.append(leader)
+            poses.append(pose)
+            munitions.append(self.st[leader].munitions)
+            assess.append(u.assess)
+            rleft.append(self.range_left(leader, tender.t_es_s))
+            etas.append(tender.t_es_s + d / u.speed_mps)
+        for b in tender.bids:
+            cands.append(b.uav)
+            poses.append(b.pose_at_tes)
+            munitions.append(b.munitions)
+            assess.append(b.can_assess)
+            rleft.append(b.range_left_m)
+            etas.append(b.eta_s)
+        kind, angle, offset = target.tasks()
+        K = len(kind)
+        if not cands:
+            return self._fail(tender, "no candidates", t_wall)
+        n = len(cands)
+        goals = self._task_poses(target, kind, angle)
+        poses_a = np.array(poses)
+        speed = np.array([self.uavs[i].speed_mps for i in cands])
+        rmin = np.array([self.uavs[i].r_min_m for i in cands])
+        L = paths.shortest_lengths(
+            np.repeat(poses_a, K, 0), np.tile(goals, (n, 1)), np.repeat(rmin, K)
+        ).reshape(n, K)
+        prob = CoalitionProblem(
+            length_m=L,
+            speed_mps=speed,
+            range_left_m=np.array(rleft),
+            range_max_m=np.array([self.uavs[i].range_max_m for i in cands]),
+            can_strike=np.array(munitions) > 0,
+            can_assess=np.array(assess),
+            kind=kind,
+            offset_s=offset,
+            reward=np.full(K, target.reward),
+            decay_per_s=target.decay_per_s,
+            assess_delay_s=target.assess_delay_s,
+            assess_duration_s=target.assess_duration_s,
+            t0_s=self.outcomes[target.id].t_revealed_s,
+            t_start_s=tender.t_es_s,
+        )
+        if p.method == "polynomial":
+            sol = solve_polynomial(prob, p, np.array(etas))
+        else:
+            sol = solve_aco(prob, p, self.rng, scale=GLOBAL_SCALE if p.method == "global" else 1)
+        if not sol.covered:
+            return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
+        # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
+        routes = [
+            paths.min_route(poses_a[sol.assign[k]], goals[k], rmin[sol.assign[k]], self.known, p.kappa)
+            for k in range(K)
+        ]
+        exact = L.copy()
+        for k in range(K):
+            exact[sol.assign[k], k] = routes[k].length_m
+        prob.length_m = exact
+        sol = make_solution(sol.assign, prob, p)
+        legs = []
+        for k in range(K):
+            i = sol.assign[k]
+            t_arrive = sol.t_required_s[k] if kind[k] == STRIKE else None
+            length = routes[k].length_m if t_arrive is None else speed[i] * (t_arrive - tender.t_es_s)
+            segs, clear = paths.timed_route(routes[k], max(length, routes[k].length_m), self.known)
+            leg = paths.sample_segments(
+                segs,
+                tender.t_es_s,
+                speed[i],
+                p.sample_ds_m,
+                "strike" if kind[k] == STRIKE else "transit",
+                {"target": target.id, "clear": clear},
+            )
+            legs.append(leg)
+        dt = time.perf_counter() - t_wall
+        self.compute_s.append(dt)
+        members = tuple(int(cands[i]) for i in sol.assign)
+        out = self.outcomes[target.id]
+        out.t_formed_s, out.J, out.parts = self.now, sol.J, sol.parts
+        out.members = tuple(self.uavs[m].id for m in members)
+        out.pending = K
+        self.log(
+            "formed",
+            uav=self.uavs[leader].id,
+            target=target.id,
+            candidates=n,
+            members=list(out.members),
+            J=round(sol.J, 4),
+            compute_s=round(dt, 4),
+        )
+        t_send = tender.t_es_s - p.delay_s
+        for k in range(K):
+            i = members[k]
+            award = Award(
+                leader,
+                i,
+                key,
+                target.id,
+                members,
+                "strike" if kind[k] == STRIKE else "assess",
+                float(angle[k]),
+                float(sol.t_required_s[k]),
+            )
+            t_arr = (
+                tender.t_es_s
+                if p.method == "global" or i == leader
+                else self.bus.arrival_s(leader, i, t_send)
+            )
+            entry = goals[k]
+            self.log(
+                "award",
+                uav=self.uavs[i].id,
+                sysid=self.uavs[i].sysid,
+                target=target.id,
+                task=award.task,
+                angle_deg=round(math.degrees(award.angle_rad) % 360, 3),
+                time_s=round(award.time_s, 4),
+                entry_xy=[round(float(entry[0]), 3), round(float(entry[1]), 3)],
+                strike_point=list(target.xy),
+                arrive_s=None if t_arr is None else round(t_arr, 4),
+            )
+            if t_arr is None:
+                out.pending -= 1
+                self.log("award_lost", uav=self.uavs[i].id, target=target.id)
+                continue
+            self.at(max(t_arr, self.now), "award_rx", award=award, leg=legs[k], k=k)
+        for b in tender.bids:  # not awarded: released by the award broadcast
+            if b.uav not in members:
+                self.at(tender.t_es_s, "unlock", uav=b.uav, key=key)
+        if leader not in members:
+            self.st[leader].state = IDLE
+            self._resume_stored(leader)
+
+    def _task_poses(self, target: Target, kind: np.ndarray, angle: np.ndarray) -> np.ndarray:
+        strike = paths.entry_poses(target.xy, angle, self.p.standoff_m)
+        arc = paths.arc_start_pose(target.xy, angle, self.p.assess_radius_m)
+        return np.where((kind == STRIKE)[:, None], strike, arc)
+
+    def _fail(self, tender: Tender, why: str, t_wall: float) -> None:
+        self.compute_s.append(time.perf_counter() - t_wall)
+        self.log(
+            "formation_failed",
+            uav=self.uavs[tender.leader].id,
+            target=tender.target.id,
+            reason=why,
+            candidates=len(tender.bids),
+        )
+        self._release_bidders(tender)
+        self.at(self.now + self.p.retender_s, "retender", uav=tender.leader, target=tender.target)
+
+    def _on_retender(self, uav: int, target: Target) -> None:
+        s = self.st[uav]
+        if s.state == LEADER:
+            self._tender(uav, target)
+        elif s.state == IDLE:
+            s.state = LEADER
+            self._tender(uav, target)
+        elif target not in s.stored:
+            s.stored.append(target)
+
+    def _resume_stored(self, uav: int) -> None:
+        s = self.st[uav]
+        if s.state == IDLE and s.stored:
+            self.at(self.now, "retender", uav=uav, target=s.stored.pop(0))
+
+    # ---- execution
+    def _on_award_rx(self, award: Award, leg: Leg, k: int) -> None:
+        i, s, u = award.uav, self.st[award.uav], self.uavs[award.uav]
+        s.state, s.locked_to = EXECUTING, None
+        target = next(t for t in self.w.targets if t.id == award.target_id)
+        key = (award.target_id, u.id)
+        if award.task == "strike":
+            s.track.start_leg(leg, self._safe_loiter(leg, u))
+            self.award_legs[key] = leg
+            self.at(float(leg.t[-1]), "strike", uav=i, award=award)
+        else:
+            arc = paths.arc_leg(
+                target.xy,
+                self.p.assess_radius_m,
+                award.angle_rad,
+                max(float(leg.t[-1]), award.time_s),
+                target.assess_duration_s,
+                u.speed_mps,
+                self.p.sample_ds_m,
+                "assess",
+                {"target": target.id},
+            )
+            if arc.t[0] > leg.t[-1] + 1e-9:  # early: circle on the assessment circle until the start time
+                wait = paths.arc_leg(
+                    target.xy,
+                    self.p.assess_radius_m,
+                    award.angle_rad - u.speed_mps * (arc.t[0] - leg.t[-1]) / self.p.assess_radius_m,
+                    float(leg.t[-1]),
+                    arc.t[0] - leg.t[-1],
+                    u.speed_mps,
+                    self.p.sample_ds_m,
+                    "transit",
+                )
+                leg = _join(leg, wait, leg.kind, leg.info)
+            full = _join(
+                leg,
+                arc,
+                "assess",
+                {"target": target.id, "clear": leg.info.get("clear", True), "arc_t0_s": float(arc.t[0])},
+            )
+            s.track.start_leg(full, self._circle_loiter(target.xy, self.p.assess_radius_m, full, u.speed_mps))
+            self.award_legs[key] = full
+            self.at(float(arc.t[0]), "assess_start", uav=i, award=award)
+            self.at(float(arc.t[-1]), "task_done", uav=i, award=award)
+
+    def _safe_loiter(self, leg: Leg, u) -> Loiter:
+        """Break-off loiter after a strike: turn left or right, whichever circle clears the known threats."""
+        x, y = leg.xy[-1]
+        h = leg.heading[-1]
+        for direction in (1.0, -1.0):
+            lo = Loiter.through(x, y, h, float(leg.t[-1]), self.p.loiter_radius_m, u.speed_mps, direction)
+            ring = lo.state(np.linspace(lo.t0_s, lo.t0_s + 2 * math.pi * lo.radius_m / u.speed_mps, 64))
+            if paths.clearance_m(ring[:, :2], self.known) >= 0:
+                return lo
+        return Loiter.through(x, y, h, float(leg.t[-1]), self.p.loiter_radius_m, u.speed_mps, 1.0)
+
+    def _on_strike(self, uav: int, award: Award) -> None:
+        s = self.st[uav]
+        if s.munitions <= 0:
+            raise RuntimeError(f"{self.uavs[uav].id} was awarded a strike without munitions")
+        s.munitions -= 1
+        s.strikes += 1
+        pose = s.track.state_at(self.now)[0]
+        self.log(
+            "strike",
+            uav=self.uavs[uav].id,
+            target=award.target_id,
+            planned_s=round(award.time_s, 4),
+            error_s=round(self.now - award.time_s, 4),
+            heading_deg=round(math.degrees(pose[2]) % 360, 3),
+            angle_deg=round(math.degrees(award.angle_rad) % 360, 3),
+            munitions_left=s.munitions,
+        )
+        self._task_done(uav, award)
+
+    def _on_assess_start(self, uav: int, award: Award) -> None:
+        self.log(
+            "assess_start",
+            uav=self.uavs[uav].id,
+            target=award.target_id,
+            planned_s=round(award.time_s, 4),
+            error_s=round(self.now - award.time_s, 4),
+        )
+
+    def _on_task_done(self, uav: int, award: Award) -> None:
+        self.log("assess_done", uav=self.uavs[uav].id, target=award.target_id)
+        self._task_done(uav, award)
+
+    def _task_done(self, uav: int, award: Award) -> None:
+        out = self.outcomes[award.target_id]
+        out.pending -= 1
+        if award.task == "strike":
+            out.sync_error_s = max(out.sync_error_s, abs(self.now - award.time_s))
+        if out.pending == 0:
+            out.t_done_s = self.now
+            self.log("target_done", target=award.target_id, J=round(out.J, 4))
+        self.st[uav].state = IDLE
+        self._resume_stored(uav)
+        if self.st[uav].state == IDLE:
+            self._station(uav)
+
+    # ---- pop-up threats
+    def _on_threat_appear(self, threat: Threat) -> None:
+        self.known.append(threat)
+        self.log("threat_appear", x=threat.x, y=threat.y, radius_m=threat.radius_m)
+        for i, s in enumerate(self.st):
+            if not s.track.legs or s.track.legs[-1].t[-1] <= self.now:
+                continue
+            leg = s.track.legs[-1]
+            ahead = leg.t >= self.now
+            if paths.clearance_m(leg.xy[ahead], [threat]) >= 0:
+                continue
+            self._replan(i, leg)
+
+    def _replan(self, i: int, leg: Leg) -> None:
+        """Re-route the rest of leg from the current pose around the known threats, same goal and time."""
+        u, s = self.uavs[i], self.st[i]
+        q0 = s.track.state_at(self.now)[0]
+        # goal: the leg's own end for strikes/transits; the arc start for recon/assess legs
+        kinds = leg.kind
+        j_goal = len(leg.t) - 1
+        if kinds in ("assess", "recon"):
+            j_goal = int(np.searchsorted(leg.t, leg.info.get("arc_t0_s", leg.t[-1])))
+        q1 = (
+            np.r_[leg.xy[-1], leg.heading[-1]]
+            if j_goal >= len(leg.t) - 1
+            else np.r_[leg.xy[j_goal], leg.heading[j_goal]]
+        )
+        route = paths.min_route(q0, q1, u.r_min_m, self.known, self.p.kappa)
+        t_goal = float(leg.t[min(j_goal, len(leg.t) - 1)])
+        length = max(route.length_m, u.speed_mps * (t_goal - self.now))
+        segs, clear = paths.timed_route(route, length, self.known)
+        new = paths.sample_segments(
+            segs, self.now, u.speed_mps, self.p.sample_ds_m, leg.kind, {**leg.info, "clear": clear}
+        )
+        late = float(new.t[-1] - t_goal)
+        if j_goal < len(leg.t) - 1:
+            rest = slice(j_goal + 1, None)
+            new = Leg(
+                np.r_[new.t, leg.t[rest] + late],
+                np.r_[new.xy, leg.xy[rest]],
+                np.r_[new.heading, leg.heading[rest]],
+                leg.kind,
+                new.info,
+            )
+        s.track.start_leg(new, s.track.loiter)
+        for (tid, uid), old in list(self.award_legs.items()):
+            if old is leg:
+                self.award_legs[(tid, uid)] = new
+        self.log("replan", uav=u.id, clear=clear, late_s=round(late, 4))
+
+
+def _join(a: Leg, b: Leg, kind: str, info: dict) -> Leg:
+    """Leg a then leg b (b starts where a ends)."""
+    return Leg(np.r_[a.t, b.t[1:]], np.r_[a.xy, b.xy[1:]], np.r_[a.heading, b.heading[1:]], kind, info)
