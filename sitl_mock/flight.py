@@ -1,0 +1,291 @@
+"""Kinematic flight models, stepped for every vehicle of a fleet at once with numpy.
+
+State lives in arrays indexed by vehicle (`Kinematics`); one `step(dt_s)` advances all vehicles,
+multirotors and fixed wings together, and `arrived()` tells which vehicles reached what their
+guidance was waiting for, so the per-vehicle Python logic runs only on events.
+
+Frame: local ENU [m] about the fleet origin (x east, y north, z up = altitude above the origin);
+heading ``psi`` [rad] counter-clockwise from east (project convention). Fully deterministic:
+fixed step, no randomness.
+
+Models (choices where the brief leaves them open):
+- Multirotor: a velocity command towards the target, capped by the commanded speed, by
+  ``sqrt(2 a d)`` when it must stop at the target (so it brakes within the acceleration limit),
+  and by ``KP_POS * d`` near it; velocity changes limited to ``accel_mps2`` per second,
+  horizontal speed to ``max_speed_mps``, climb/sink to their limits. Yaw follows the velocity.
+  Pass-through waypoints keep cruise speed and round the corner under the acceleration limit.
+- Fixed wing: constant airspeed (the commanded speed, clamped to [min, max]); heading rate
+  limited to ``g tan(max_bank) / v``, which bounds the turn radius below by ``v^2 / (g tan
+  max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Loiter is a
+  clockwise circle (ArduPilot's default direction) with a lateral correction
+  ``atan(K_CIRCLE (d - R) / R)``. Landing spirals down on the loiter circle at ``land_speed_mps``.
+- Wind [m/s] is added to the ground velocity and not compensated by the guidance's heading, so
+  it bends the track while the closed loop still reaches each target. ``drift_mps`` integrates
+  into an offset between the navigated and the reported position: a navigation drift the
+  vehicle does not see, the fault conformance checks must catch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+__all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics"]
+
+G_MPS2 = 9.80665
+KP_POS = 1.0  # [1/s] position -> velocity gain near a stop point
+KP_ALT = 1.0  # [1/s] altitude error -> climb rate gain
+KP_PSI = 1.5  # [1/s] heading error -> turn rate gain (saturates at the bank limit)
+K_CIRCLE = 2.0  # loiter circle radial correction gain [-]
+GROUND_TOL_M = 0.05  # touchdown when within this height of the ground
+ALT_TOL_M = 0.5  # takeoff reaches its altitude within this tolerance
+
+
+@dataclass(frozen=True)
+class Airframe:
+    """Limits of one vehicle type (SI units)."""
+
+    kind: str
+    cruise_speed_mps: float
+    max_speed_mps: float
+    min_speed_mps: float
+    accel_mps2: float
+    max_bank_rad: float
+    climb_rate_mps: float
+    sink_rate_mps: float
+    land_speed_mps: float
+    accept_radius_m: float
+    loiter_radius_m: float
+
+    @property
+    def min_turn_radius_m(self) -> float:
+        """Tightest turn at cruise speed [m] (fixed wing; 0 for a multirotor)."""
+        if self.kind != "fixed_wing":
+            return 0.0
+        return self.cruise_speed_mps**2 / (G_MPS2 * np.tan(self.max_bank_rad))
+
+
+# Defaults near ArduPilot's: WPNAV_SPEED 10 m/s, WPNAV_ACCEL 2.5 m/s^2, WPNAV_RADIUS 2 m,
+# LAND_SPEED 0.5 m/s (copter); AIRSPEED_CRUISE 22, ROLL_LIMIT 45 deg, TECS_CLMB_MAX 5 m/s (plane).
+AIRFRAMES: dict[str, Airframe] = {
+    "multirotor": Airframe(
+        kind="multirotor",
+        cruise_speed_mps=10.0,
+        max_speed_mps=15.0,
+        min_speed_mps=0.0,
+        accel_mps2=2.5,
+        max_bank_rad=np.radians(30.0),
+        climb_rate_mps=2.5,
+        sink_rate_mps=1.5,
+        land_speed_mps=1.0,
+        accept_radius_m=2.0,
+        loiter_radius_m=0.0,
+    ),
+    "fixed_wing": Airframe(
+        kind="fixed_wing",
+        cruise_speed_mps=20.0,
+        max_speed_mps=30.0,
+        min_speed_mps=12.0,
+        accel_mps2=2.0,
+        max_bank_rad=np.radians(45.0),
+        climb_rate_mps=5.0,
+        sink_rate_mps=4.0,
+        land_speed_mps=2.0,
+        accept_radius_m=30.0,
+        loiter_radius_m=60.0,
+    ),
+}
+
+
+class Guidance(IntEnum):
+    """What the guidance of one vehicle does this step."""
+
+    IDLE = 0  # on the ground, no motion
+    GOTO = 1  # fly to the target and stop there (fixed wing: like PASS)
+    PASS = 2  # fly to the target at commanded speed (pass-through)
+    HOLD = 3  # hold at the target: hover, or circle at loiter radius
+    CLIMB = 4  # take off: climb to the target altitude (fixed wing: on the current heading)
+    LAND = 5  # go to the target's horizontal position, then descend to the ground
+
+
+class Arrival(IntEnum):
+    """Which condition ends the current guidance target."""
+
+    NONE = 0
+    RADIUS_3D = 1  # within the acceptance radius in 3-D
+    RADIUS_2D = 2  # within the acceptance radius horizontally, or (fixed wing) past the target
+    ALTITUDE = 3  # reached the target altitude (takeoff)
+    LANDED = 4  # on the ground
+
+
+class Kinematics:
+    """Kinematic state of ``n`` vehicles as arrays (row i = vehicle i)."""
+
+    def __init__(self, airframes: list[Airframe], ground_enu_m: np.ndarray) -> None:
+        n = len(airframes)
+        self.n = n
+        self.is_fw = np.array([a.kind == "fixed_wing" for a in airframes], dtype=bool)
+        self.max_speed = np.array([a.max_speed_mps for a in airframes])
+        self.min_speed = np.array([a.min_speed_mps for a in airframes])
+        self.accel = np.array([a.accel_mps2 for a in airframes])
+        self.tan_bank = np.tan([a.max_bank_rad for a in airframes])
+        self.climb = np.array([a.climb_rate_mps for a in airframes])
+        self.sink = np.array([a.sink_rate_mps for a in airframes])
+        self.land_speed = np.array([a.land_speed_mps for a in airframes])
+        self.pos = np.array(ground_enu_m, dtype=float).reshape(n, 3).copy()
+        self.ground_z = self.pos[:, 2].copy()
+        self.vel = np.zeros((n, 3))
+        self.psi = np.full(n, np.pi / 2)  # facing north
+        self.roll = np.zeros(n)
+        self.pitch = np.zeros(n)
+        self.turn_rate = np.zeros(n)
+        self.speed_cmd = np.array([a.cruise_speed_mps for a in airframes])
+        self.mode = np.zeros(n, dtype=np.int8)
+        self.target = self.pos.copy()
+        self.leg_from = self.pos.copy()
+        self.accept_r = np.array([a.accept_radius_m for a in airframes])
+        self.loiter_r = np.array([max(a.loiter_radius_m, 1.0) for a in airframes])
+        self.arrival = np.zeros(n, dtype=np.int8)
+        self.wind = np.zeros((n, 3))
+        self.drift = np.zeros((n, 3))
+        self.offset = np.zeros((n, 3))
+
+    # --- commands (per vehicle, from the mission logic) ---------------------------------------
+    def command(
+        self,
+        i: int,
+        mode: Guidance,
+        target_m: np.ndarray | None = None,
+        arrival: Arrival = Arrival.NONE,
+        accept_radius_m: float | None = None,
+    ) -> None:
+        """Set vehicle i's guidance; the leg starts at its current position."""
+        self.mode[i] = mode
+        self.leg_from[i] = self.pos[i]
+        self.target[i] = self.pos[i] if target_m is None else target_m
+        self.arrival[i] = arrival
+        if accept_radius_m is not None:
+            self.accept_r[i] = accept_radius_m
+
+    def place(self, i: int, pos_m: np.ndarray) -> None:
+        """Put vehicle i at rest on the ground at ``pos_m`` (reboot, reset)."""
+        self.pos[i] = pos_m
+        self.pos[i, 2] = self.ground_z[i]
+        self.vel[i] = 0.0
+        self.roll[i] = self.pitch[i] = self.turn_rate[i] = 0.0
+        self.offset[i] = 0.0
+        self.command(i, Guidance.IDLE)
+
+    # --- queries -------------------------------------------------------------------------------
+    def reported_pos(self) -> np.ndarray:
+        """Positions as the vehicles report them [m], including injected navigation drift."""
+        return self.pos + self.offset
+
+    def ground_vel(self) -> np.ndarray:
+        """Velocity over ground [m/s] (air velocity plus wind while airborne)."""
+        return self.vel + self.wind * self.airborne()[:, None]
+
+    def airborne(self) -> np.ndarray:
+        return self.pos[:, 2] > self.ground_z + GROUND_TOL_M
+
+    def arrived(self) -> np.ndarray:
+        """Boolean mask of vehicles whose arrival condition holds now."""
+        d = self.target - self.pos
+        dist_h = np.hypot(d[:, 0], d[:, 1])
+        dist_3 = np.sqrt(dist_h**2 + d[:, 2] ** 2)
+        leg = self.target[:, :2] - self.leg_from[:, :2]
+        passed = self.is_fw & (np.einsum("ij,ij->i", -d[:, :2], leg) > 0.0)
+        a = self.arrival
+        return (
+            ((a == Arrival.RADIUS_3D) & (dist_3 <= self.accept_r))
+            | ((a == Arrival.RADIUS_2D) & ((dist_h <= self.accept_r) | passed))
+            | ((a == Arrival.ALTITUDE) & (self.pos[:, 2] >= self.target[:, 2] - ALT_TOL_M))
+            | ((a == Arrival.LANDED) & (self.pos[:, 2] <= self.ground_z + GROUND_TOL_M))
+        )
+
+    # --- dynamics -----------------------------------------------------------------------------
+    def step(self, dt_s: float) -> None:
+        """Advance every vehicle by ``dt_s`` seconds."""
+        active = self.mode != Guidance.IDLE
+        mr = active & ~self.is_fw
+        fw = active & self.is_fw
+        if mr.any():
+            self._step_multirotor(mr, dt_s)
+        if fw.any():
+            self._step_fixed_wing(fw, dt_s)
+        idle = ~active
+        self.vel[idle] = 0.0
+        self.turn_rate[idle] = 0.0
+        air = self.airborne()
+        self.pos += (self.vel + self.wind * air[:, None]) * dt_s
+        self.offset += self.drift * air[:, None] * dt_s
+        below = self.pos[:, 2] < self.ground_z
+        self.pos[below, 2] = self.ground_z[below]
+        self.vel[below, 2] = np.maximum(self.vel[below, 2], 0.0)
+
+    def _step_multirotor(self, m: np.ndarray, dt_s: float) -> None:
+        pos, tgt, mode = self.pos[m], self.target[m], self.mode[m]
+        d = tgt - pos
+        dist_h = np.hypot(d[:, 0], d[:, 1])
+        unit_h = d[:, :2] / np.maximum(dist_h, 1e-9)[:, None]
+        speed = np.minimum(self.speed_cmd[m], self.max_speed[m])
+        stops = mode != Guidance.PASS
+        brake = np.minimum(np.sqrt(2.0 * self.accel[m] * dist_h), KP_POS * dist_h)
+        speed = np.where(stops, np.minimum(speed, brake), speed)
+        speed = np.where(mode == Guidance.CLIMB, 0.0, speed)
+        v_des = np.empty_like(d)
+        v_des[:, :2] = unit_h * speed[:, None]
+        vz = np.clip(KP_ALT * d[:, 2], -self.sink[m], self.climb[m])
+        landing = mode == Guidance.LAND
+        vz = np.where(landing, np.where(dist_h > self.accept_r[m], 0.0, -self.land_speed[m]), vz)
+        v_des[:, 2] = vz
+        dv = v_des - self.vel[m]
+        max_dv = self.accel[m] * dt_s
+        dv_h = np.hypot(dv[:, 0], dv[:, 1])
+        dv[:, :2] *= np.minimum(1.0, max_dv / np.maximum(dv_h, 1e-9))[:, None]
+        dv[:, 2] = np.clip(dv[:, 2], -max_dv, max_dv)
+        vel = self.vel[m] + dv
+        v_h = np.hypot(vel[:, 0], vel[:, 1])
+        vel[:, :2] *= np.minimum(1.0, self.max_speed[m] / np.maximum(v_h, 1e-9))[:, None]
+        self.vel[m] = vel
+        psi = np.where(v_h > 0.3, np.arctan2(vel[:, 1], vel[:, 0]), self.psi[m])
+        acc = dv / dt_s
+        fwd = acc[:, 0] * np.cos(psi) + acc[:, 1] * np.sin(psi)
+        left = -acc[:, 0] * np.sin(psi) + acc[:, 1] * np.cos(psi)
+        self.pitch[m] = -np.arctan(fwd / G_MPS2)
+        self.roll[m] = -np.arctan(left / G_MPS2)
+        self.turn_rate[m] = _wrap(psi - self.psi[m]) / dt_s
+        self.psi[m] = psi
+
+    def _step_fixed_wing(self, m: np.ndarray, dt_s: float) -> None:
+        pos, tgt, mode = self.pos[m], self.target[m], self.mode[m]
+        v = np.clip(self.speed_cmd[m], self.min_speed[m], self.max_speed[m])
+        d = tgt[:, :2] - pos[:, :2]
+        bearing = np.arctan2(d[:, 1], d[:, 0])
+        r = self.loiter_r[m]
+        radial = np.hypot(d[:, 0], d[:, 1])
+        out_angle = np.arctan2(-d[:, 1], -d[:, 0])  # direction centre -> vehicle
+        circle = out_angle - np.pi / 2 - np.arctan(K_CIRCLE * (radial - r) / r)
+        psi = self.psi[m]
+        circling = (mode == Guidance.HOLD) | (mode == Guidance.LAND)
+        psi_des = np.where(circling, circle, np.where(mode == Guidance.CLIMB, psi, bearing))
+        max_rate = G_MPS2 * self.tan_bank[m] / v
+        rate = np.clip(KP_PSI * _wrap(psi_des - psi), -max_rate, max_rate)
+        psi = psi + rate * dt_s
+        target_z = np.where(mode == Guidance.LAND, self.ground_z[m], tgt[:, 2])
+        vz = np.clip(KP_ALT * (target_z - pos[:, 2]), -self.sink[m], self.climb[m])
+        vz = np.where(mode == Guidance.LAND, np.maximum(vz, -self.land_speed[m]), vz)
+        vz = np.clip(vz, -0.9 * v, 0.9 * v)
+        v_h = np.sqrt(v**2 - vz**2)
+        self.vel[m] = np.column_stack([v_h * np.cos(psi), v_h * np.sin(psi), vz])
+        self.turn_rate[m] = rate
+        self.roll[m] = -np.arctan(rate * v / G_MPS2)
+        self.pitch[m] = np.arcsin(vz / v)
+        self.psi[m] = _wrap(psi)
+
+
+def _wrap(angle_rad: np.ndarray) -> np.ndarray:
+    """Wrap angles to [-pi, pi)."""
+    return (angle_rad + np.pi) % (2.0 * np.pi) - np.pi

@@ -1,0 +1,319 @@
+"""Mission execution and guided actions of one mock vehicle, on top of the batch kinematics.
+
+The navigator turns the current mission item (or a guided action: takeoff, hold, RTL, land) into
+a guidance command for its row of `Kinematics`, then waits for one event: arrival (the fleet
+calls `on_arrived`) or a simulated-time timer (`on_timer`). Continuations are stored as the
+next callable, so each action reads top to bottom.
+
+Supported items: NAV_WAYPOINT (param1 hold [s], param2 acceptance radius [m], 0 = airframe
+default), NAV_TAKEOFF, DO_CHANGE_SPEED (param2 [m/s]), NAV_LOITER_TIME (param1 [s], param3
+radius [m]), NAV_LOITER_UNLIM, NAV_LAND (lat/lon 0 = here), NAV_RETURN_TO_LAUNCH. Others are
+skipped with a STATUSTEXT, as ArduPilot skips commands it cannot run.
+
+Choices where the spec or the autopilots differ:
+- MISSION_ITEM_REACHED is sent for every item: for a nav item when its position or altitude is
+  reached (before any hold or loiter time, as the MAVLink spec describes), at touchdown for
+  LAND and for RTL on a multirotor, and when a DO item has been executed.
+- A multirotor passes through a waypoint without braking when the next nav item is also a
+  waypoint and there is no hold time; otherwise it stops at the waypoint. A fixed wing never
+  stops, and counts a waypoint reached inside its radius or once past it (ArduPlane).
+- After the last item the vehicle holds (hover / loiter circle) in AUTO; mission_state COMPLETE.
+- RTL: to home at max(current altitude, ``RTL_ALT_M`` above home), then a multirotor lands and
+  disarms, a fixed wing circles home.
+- Item altitudes: frames GLOBAL(_INT) are AMSL, GLOBAL_RELATIVE_ALT(_INT) and the terrain frames
+  are above home (flat terrain at home altitude).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+import numpy as np
+
+from gcs_planner.geo import geodetic_to_enu
+from gcs_planner.mavlink.enums import MissionState
+from gcs_planner.mavlink.types import MissionItem
+from sitl_mock.flight import Airframe, Arrival, Guidance
+from sitl_mock.world import World
+
+__all__ = ["RTL_ALT_M", "Navigator"]
+
+log = logging.getLogger(__name__)
+
+NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME = 16, 17, 19
+NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF = 20, 21, 22
+DO_CHANGE_SPEED = 178
+NAV_COMMANDS = {NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF}
+AMSL_FRAMES = {0, 5}  # MAV_FRAME_GLOBAL, GLOBAL_INT
+RTL_ALT_M = 15.0
+
+
+class Navigator:
+    """What one vehicle flies: mission items in AUTO, or a guided action."""
+
+    def __init__(
+        self,
+        world: World,
+        index: int,
+        airframe: Airframe,
+        home_enu_m: np.ndarray,
+        first_seq: int,
+        emit_reached: Callable[[int], None],
+        emit_progress: Callable[[], None],
+        emit_text: Callable[[str], None],
+        landed: Callable[[], None],
+    ) -> None:
+        self.world, self.i, self.airframe = world, index, airframe
+        self.home_enu_m = np.asarray(home_enu_m, dtype=float)
+        self.first_seq = first_seq
+        self._emit_reached, self._emit_progress = emit_reached, emit_progress
+        self._emit_text, self._landed = emit_text, landed
+        self.items: list[MissionItem] = []
+        self._targets = np.zeros((0, 3))
+        self.seq = 0
+        self.last_seq = -1
+        self.state = MissionState.NO_MISSION
+        self.running = False
+        self.reached: list[tuple[int, float]] = []  # (seq, sim time [s]) in order
+        self._next_arrival: Callable[[], None] | None = None
+        self._next_timer: Callable[[], None] | None = None
+
+    # --- mission list ------------------------------------------------------------------------
+    @property
+    def has_mission(self) -> bool:
+        return len(self.items) > self.first_seq
+
+    @property
+    def total(self) -> int:
+        """MISSION_CURRENT.total: executable items (home excluded), 65535 without a mission."""
+        return len(self.items) - self.first_seq if self.has_mission else 65535
+
+    def load(self, items: list[MissionItem]) -> None:
+        """Take a new mission list; a running mission continues at the same seq with the new items."""
+        self.items = list(items)
+        self._targets = self._item_targets(self.items)
+        self.last_seq = len(self.items) - 1
+        if not self.has_mission:
+            self.running = False
+            self.state = MissionState.NO_MISSION
+            self.seq = 0
+            self.hold()
+        elif self.running:
+            self.seq = min(max(self.seq, self.first_seq), self.last_seq)
+            self._execute()
+        else:
+            self.seq = self.first_seq
+            self.state = MissionState.NOT_STARTED
+        self._emit_progress()
+
+    def set_current(self, seq: int) -> bool:
+        """Jump to item ``seq``; False (nothing changed) when it is out of range."""
+        if not (0 <= seq < len(self.items)) or not self.has_mission:
+            return False
+        self.seq = max(seq, self.first_seq)
+        if self.running:
+            self._execute()
+        elif self.state == MissionState.COMPLETE:
+            self.state = MissionState.PAUSED
+        self._emit_progress()
+        return True
+
+    def start(self, first: int | None = None, last: int | None = None) -> None:
+        """Run the mission (AUTO and armed): from ``first`` (default: current) to ``last`` (default: end)."""
+        if not self.has_mission:
+            return
+        if first is not None:
+            self.seq = max(first, self.first_seq)
+        elif self.state == MissionState.COMPLETE:
+            self.seq = self.first_seq
+        self.last_seq = len(self.items) - 1 if last is None else last
+        self.running = True
+        self.state = MissionState.ACTIVE
+        self._execute()
+        self._emit_progress()
+
+    def pause(self) -> None:
+        """Leave the mission (mode changed away from AUTO): PAUSED if it was running."""
+        if self.running:
+            self.running = False
+            self.state = MissionState.PAUSED
+            self._emit_progress()
+
+    # --- guided actions ----------------------------------------------------------------------
+    def idle(self) -> None:
+        self._wait(None)
+        self.world.kin.command(self.i, Guidance.IDLE)
+
+    def hold(self) -> None:
+        """Hover here, or circle here at the default loiter radius; on the ground: stay idle."""
+        kin = self.world.kin
+        if not kin.airborne()[self.i]:
+            self.idle()
+            return
+        self._wait(None)
+        kin.loiter_r[self.i] = max(self.airframe.loiter_radius_m, 1.0)
+        kin.command(self.i, Guidance.HOLD, kin.pos[self.i].copy())
+
+    def takeoff(self, alt_m: float, done: Callable[[], None] | None = None) -> None:
+        """Climb to ``alt_m`` above home, then hold (or call ``done``)."""
+        kin = self.world.kin
+        target = kin.pos[self.i].copy()
+        target[2] = self.home_enu_m[2] + alt_m
+        self._wait(done or self.hold)
+        kin.command(self.i, Guidance.CLIMB, target, Arrival.ALTITUDE)
+
+    def land(self, target_m: np.ndarray | None = None, done: Callable[[], None] | None = None) -> None:
+        """Land at ``target_m``'s horizontal position (default: here); disarm on touchdown."""
+        kin = self.world.kin
+        target = kin.pos[self.i].copy() if target_m is None else np.asarray(target_m, dtype=float).copy()
+        target[2] = kin.ground_z[self.i]
+        kin.loiter_r[self.i] = max(self.airframe.loiter_radius_m, 1.0)
+
+        def touchdown() -> None:
+            self.idle()
+            self._landed()
+            if done is not None:
+                done()
+
+        self._wait(touchdown)
+        kin.command(self.i, Guidance.LAND, target, Arrival.LANDED)
+
+    def rtl(self, done: Callable[[], None] | None = None) -> None:
+        """Return home at RTL altitude; a multirotor lands there, a fixed wing circles it."""
+        kin = self.world.kin
+        target = self.home_enu_m.copy()
+        target[2] = max(kin.pos[self.i, 2], self.home_enu_m[2] + RTL_ALT_M)
+        fixed_wing = self.airframe.kind == "fixed_wing"
+
+        def at_home() -> None:
+            if fixed_wing:
+                self.hold()
+                if done is not None:
+                    done()
+            else:
+                self.land(self.home_enu_m, done)
+
+        self._wait(at_home)
+        radius = self.airframe.loiter_radius_m if fixed_wing else self.airframe.accept_radius_m
+        kin.command(self.i, Guidance.GOTO, target, Arrival.RADIUS_2D, max(radius, 1.0))
+
+    # --- events from the fleet loop ----------------------------------------------------------
+    def on_arrived(self) -> None:
+        step, self._next_arrival = self._next_arrival, None
+        self.world.kin.arrival[self.i] = Arrival.NONE
+        if step is not None:
+            step()
+
+    def on_timer(self) -> None:
+        step, self._next_timer = self._next_timer, None
+        if step is not None:
+            step()
+
+    def _wait(self, on_arrival: Callable[[], None] | None) -> None:
+        self._next_arrival = on_arrival
+        self._next_timer = None
+        self.world.timers[self.i] = np.inf
+        self.world.kin.arrival[self.i] = Arrival.NONE
+
+    def _after(self, delay_s: float, step: Callable[[], None]) -> None:
+        self._next_timer = step
+        self.world.timers[self.i] = self.world.sim_time_s + delay_s
+
+    # --- mission items -----------------------------------------------------------------------
+    def _execute(self) -> None:
+        item = self.items[self.seq]
+        seq = self.seq
+        kin, i, af = self.world.kin, self.i, self.airframe
+        target = self._target(seq)
+        cmd = item.command
+        if cmd == NAV_WAYPOINT:
+            radius = item.param2 if item.param2 > 0 else af.accept_radius_m
+            hold_s = max(item.param1, 0.0)
+            passing = af.kind == "fixed_wing" or (hold_s == 0 and self._next_nav_is_waypoint(seq))
+            arrival = Arrival.RADIUS_2D if af.kind == "fixed_wing" else Arrival.RADIUS_3D
+            self._wait(lambda: self._reached_then(seq, hold_s))
+            kin.command(i, Guidance.PASS if passing else Guidance.GOTO, target, arrival, radius)
+        elif cmd == NAV_TAKEOFF:
+            self.takeoff(item.z if item.frame not in AMSL_FRAMES else target[2] - self.home_enu_m[2],
+                         done=lambda: self._reached_then(seq, 0.0))  # fmt: skip
+        elif cmd in (NAV_LOITER_TIME, NAV_LOITER_UNLIM):
+            radius = abs(item.param3) if item.param3 else af.loiter_radius_m
+            kin.loiter_r[i] = max(radius, 1.0)
+            hold_s = max(item.param1, 0.0) if cmd == NAV_LOITER_TIME else np.inf
+            arrive_r = max(radius, af.accept_radius_m)
+            arrival = Arrival.RADIUS_2D if af.kind == "fixed_wing" else Arrival.RADIUS_3D
+            self._wait(lambda: self._reached_then(seq, hold_s))
+            kin.command(i, Guidance.GOTO, target, arrival, arrive_r)
+        elif cmd == NAV_LAND:
+            self.land(target, done=lambda: self._item_done(seq))
+        elif cmd == NAV_RETURN_TO_LAUNCH:
+            self.rtl(done=lambda: self._item_done(seq))
+        elif cmd == DO_CHANGE_SPEED:
+            if item.param2 > 0:
+                kin.speed_cmd[i] = float(np.clip(item.param2, af.min_speed_mps, af.max_speed_mps))
+            self._item_done(seq)
+        else:
+            self._emit_text(f"Skipping unsupported mission command {cmd}")
+            self._advance()
+
+    def _reached_then(self, seq: int, hold_s: float) -> None:
+        """Nav item reached: report it, hold/loiter for ``hold_s`` (inf = forever), then advance."""
+        self._report(seq)
+        if hold_s <= 0:
+            self._advance()
+            return
+        kin = self.world.kin
+        self._wait(None)
+        kin.command(self.i, Guidance.HOLD, self._target(seq) if self.items[seq].command != NAV_TAKEOFF
+                    else kin.pos[self.i].copy())  # fmt: skip
+        if np.isfinite(hold_s):
+            self._after(hold_s, self._advance)
+
+    def _item_done(self, seq: int) -> None:
+        self._report(seq)
+        self._advance()
+
+    def _report(self, seq: int) -> None:
+        self.reached.append((seq, self.world.sim_time_s))
+        self._emit_reached(seq)
+
+    def _advance(self) -> None:
+        if not self.running:
+            return
+        if self.seq >= self.last_seq:
+            self.running = False
+            self.state = MissionState.COMPLETE
+            self._emit_text("Mission complete")
+            if self.world.kin.airborne()[self.i]:
+                self.hold()
+            self._emit_progress()
+            return
+        self.seq += 1
+        self._emit_progress()
+        self._execute()
+
+    def _next_nav_is_waypoint(self, seq: int) -> bool:
+        for item in self.items[seq + 1 : self.last_seq + 1]:
+            if item.command in NAV_COMMANDS:
+                return item.command == NAV_WAYPOINT
+        return False
+
+    def _target(self, seq: int) -> np.ndarray:
+        """Item ``seq``'s target [m ENU]; lat/lon 0 means the vehicle's current position."""
+        target = self._targets[seq].copy()
+        item = self.items[seq]
+        if item.x == 0 and item.y == 0:
+            target[:2] = self.world.kin.pos[self.i, :2]
+        return target
+
+    def _item_targets(self, items: list[MissionItem]) -> np.ndarray:
+        if not items:
+            return np.zeros((0, 3))
+        lat = np.array([it.x / 1e7 for it in items])
+        lon = np.array([it.y / 1e7 for it in items])
+        rel = np.array([it.frame not in AMSL_FRAMES for it in items])
+        z = np.array([it.z for it in items], dtype=float)
+        alt_amsl = np.where(rel, z + self.world.frame.alt_m + self.home_enu_m[2], z)
+        e, n, u = geodetic_to_enu(lat, lon, alt_amsl, self.world.frame)
+        return np.column_stack([e, n, u])

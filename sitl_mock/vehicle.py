@@ -1,0 +1,508 @@
+"""One mock autopilot: its UDP link, message dispatch, commands, mission server and navigator.
+
+The vehicle owns no physics: a fleet `World` holds every vehicle's kinematics in arrays and the
+vehicle keeps its row index (`attach`). Mission-protocol messages go to the I/O-free
+`MissionServer` (sitl_mock/mission_server.py); the vehicle sends whatever it returns.
+
+Commands (COMMAND_LONG or COMMAND_INT), each answered with COMMAND_ACK:
+COMPONENT_ARM_DISARM, DO_SET_MODE (ArduPilot: param2 = custom mode; PX4: param2/param3 = main/sub
+mode), MISSION_START (param1 first, param2 last item; 0/0 = whole mission), DO_SET_MISSION_CURRENT
+(FAILED when out of range), NAV_TAKEOFF (param7 [m above home]), NAV_RETURN_TO_LAUNCH, NAV_LAND,
+PREFLIGHT_REBOOT_SHUTDOWN, REQUEST_MESSAGE / REQUEST_AUTOPILOT_CAPABILITIES (AUTOPILOT_VERSION,
+HOME_POSITION); anything else -> UNSUPPORTED. SET_MODE and MISSION_SET_CURRENT messages work too.
+
+Choices where the autopilots differ (we are lenient where a strict check would only get in the
+way of a GCS under test, strict where a GCS must handle the refusal):
+- Arming is allowed in any mode; a vehicle armed in AUTO with a mission starts it.
+- MISSION_START needs a mission (FAILED otherwise) but not arming: like ArduCopter it switches to
+  AUTO and the mission runs as soon as the vehicle is armed.
+- Entering AUTO without a mission fails (ArduPilot). NAV_TAKEOFF needs arming and the ground and
+  switches to TAKEOFF (plane, PX4) or GUIDED (copter). Disarming in the air needs force (21196).
+- A vehicle disarms itself on touchdown.
+- Reboot: lists lost unless ``persist_mission``, disarmed on the ground at home, peers forgotten
+  (the GCS's next heartbeat reconnects it), time_boot_ms restarts.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.mavlink.enums import CommandResult, MissionState, px4_custom_mode
+from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.wire import MissionCurrentMessage
+from sitl_mock import telemetry
+from sitl_mock.faults import LinkFaults
+from sitl_mock.flight import AIRFRAMES, Airframe
+from sitl_mock.link import VehicleLink, mavlink
+from sitl_mock.mission_exec import Navigator
+from sitl_mock.mission_server import MissionServer
+from sitl_mock.profiles import PROFILES
+from sitl_mock.world import World
+
+__all__ = ["DEFAULT_HOME", "MockVehicle", "VehicleState"]
+
+log = logging.getLogger(__name__)
+
+DEFAULT_HOME = Origin(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zurich)
+COMPID = 1
+FORCE_MAGIC = 21196
+DEFAULT_TAKEOFF_ALT_M = 10.0
+_MAV_TYPE = {"multirotor": mavlink.MAV_TYPE_QUADROTOR, "fixed_wing": mavlink.MAV_TYPE_FIXED_WING}
+_CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """Snapshot of one vehicle (thread-safe to pass around)."""
+
+    sysid: int
+    armed: bool
+    mode: str
+    airborne: bool
+    mission_seq: int
+    mission_total: int
+    mission_state: MissionState
+    mission_count: int
+    reached: tuple[int, ...]
+    battery_pct: float
+    sim_time_s: float
+
+
+class MockVehicle:
+    """A mock autopilot with system id ``sysid`` on UDP ``host:port`` (0 = ephemeral port)."""
+
+    def __init__(
+        self,
+        sysid: int,
+        profile: str = "ardupilot",
+        vehicle_type: str = "multirotor",
+        home: Origin = DEFAULT_HOME,
+        port: int = 0,
+        faults: LinkFaults | None = None,
+        capacity: int | None = None,
+        *,
+        host: str = "127.0.0.1",
+        persist_mission: bool = False,
+        non_atomic: bool = False,
+        airframe: Airframe | None = None,
+    ) -> None:
+        if not (isinstance(sysid, int) and 1 <= sysid <= 254):
+            raise ValueError(f"vehicle sysid must be an integer in 1..254, got {sysid!r}")
+        if profile not in PROFILES:
+            raise ValueError(f"vehicle profile must be one of {sorted(PROFILES)}, got {profile!r}")
+        if vehicle_type not in AIRFRAMES:
+            raise ValueError(f"vehicle_type must be one of {sorted(AIRFRAMES)}, got {vehicle_type!r}")
+        if not (isinstance(port, int) and 0 <= port <= 65535):
+            raise ValueError(f"vehicle port must be in 0..65535, got {port!r}")
+        self.sysid = sysid
+        self.profile = PROFILES[profile]
+        self.vehicle_type = vehicle_type
+        self.airframe = airframe or AIRFRAMES[vehicle_type]
+        self.home = home
+        self.host, self.port = host, port
+        self.persist_mission = persist_mission
+        self.mission_server = MissionServer(
+            sysid, COMPID, self.profile, capacity=capacity, non_atomic=non_atomic
+        )
+        self.mission_server.on_change = self._on_list_change
+        self.mission_server.on_current = self._on_server_current
+        self.link = VehicleLink(sysid, self._on_message, faults or LinkFaults())
+        self._modes = self.profile.modes[vehicle_type]
+        self._default_mode = next(m for m in ("STABILIZE", "MANUAL") if m in self._modes)
+        self.mode = self._default_mode
+        self.armed = False
+        self.world: World | None = None
+        self.index = -1
+        self.nav: Navigator | None = None
+        self.boot_sim_s = 0.0
+        self._pending_start: tuple[int | None, int | None] | None = None
+        self._syncing_seq = False
+        self._after_ack: Callable[[], None] | None = None  # runs once the COMMAND_ACK is sent
+        self._dispatch = {
+            "COMMAND_LONG": self._on_command,
+            "COMMAND_INT": self._on_command,
+            "SET_MODE": self._on_set_mode,
+        }
+        self._commands = {
+            mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
+            mavlink.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
+            mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
+            mavlink.MAV_CMD_DO_SET_MISSION_CURRENT: self._cmd_set_current,
+            mavlink.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
+            mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_rtl,
+            mavlink.MAV_CMD_NAV_LAND: self._cmd_land,
+            mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: self._cmd_reboot,
+            mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
+            mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
+        }
+
+    # --- lifecycle ---------------------------------------------------------------------------
+    def attach(self, world: World, index: int, home_enu_m: np.ndarray) -> None:
+        """Bind to row ``index`` of a fleet's world (done by MockFleet before `start`)."""
+        self.world, self.index = world, index
+        self.home_enu_m = np.asarray(home_enu_m, dtype=float)
+        self.nav = Navigator(
+            world, index, self.airframe, self.home_enu_m, 1 if self.profile.home_at_seq0 else 0,
+            emit_reached=self._emit_reached, emit_progress=self._emit_progress,
+            emit_text=self.statustext, landed=self._on_landed,
+        )  # fmt: skip
+        if self.profile.home_at_seq0:
+            h = self.home
+            self.mission_server.home = MissionItem(
+                seq=0, frame=0, command=16, x=round(h.lat_deg * 1e7), y=round(h.lon_deg * 1e7), z=h.alt_m
+            )
+        self.boot_sim_s = world.sim_time_s
+
+    async def start(self) -> None:
+        await self.link.open(self.host, self.port)
+
+    def close(self) -> None:
+        self.link.close()
+
+    @property
+    def address(self) -> tuple[str, int]:
+        return self.link.address
+
+    # --- queries -----------------------------------------------------------------------------
+    def position_enu(self) -> np.ndarray:
+        """Reported position [m] ENU about the fleet origin (up = altitude above it)."""
+        return self._world.kin.reported_pos()[self.index].copy()
+
+    def position_geodetic(self) -> tuple[float, float, float]:
+        """Reported position: latitude, longitude [deg], altitude [m AMSL]."""
+        e, n, u = self.position_enu()
+        lat, lon, alt = enu_to_geodetic(e, n, u, self._world.frame)
+        return lat, lon, alt
+
+    @property
+    def state(self) -> VehicleState:
+        nav = self._nav
+        return VehicleState(
+            sysid=self.sysid,
+            armed=self.armed,
+            mode=self.mode,
+            airborne=bool(self._world.kin.airborne()[self.index]),
+            mission_seq=nav.seq,
+            mission_total=nav.total,
+            mission_state=nav.state,
+            mission_count=len(nav.items),
+            reached=tuple(seq for seq, _ in nav.reached),
+            battery_pct=float(self._world.battery_pct[self.index]),
+            sim_time_s=self._world.sim_time_s,
+        )
+
+    @property
+    def time_boot_ms(self) -> int:
+        return int((self._world.sim_time_s - self.boot_sim_s) * 1000.0) & 0xFFFFFFFF
+
+    # --- actions (also used by the fleet's fault scripting) ----------------------------------
+    def reboot(self) -> None:
+        """Restart the autopilot: lists lost unless persisted, disarmed at home, peers forgotten."""
+        if not self.persist_mission:
+            self.mission_server.forget()
+        world, i = self._world, self.index
+        self.armed = False
+        world.armed[i] = False
+        self._set_mode_name(self._default_mode)
+        self._pending_start = None
+        nav = self._nav
+        nav.running = False
+        nav.reached.clear()
+        world.kin.place(i, self.home_enu_m)
+        world.kin.speed_cmd[i] = self.airframe.cruise_speed_mps
+        nav.load(self.mission_server.items(MissionType.MISSION))
+        self.boot_sim_s = world.sim_time_s
+        self.link.forget_peers()
+        log.info("vehicle %d rebooted", self.sysid)
+
+    def set_faults(self, faults: LinkFaults) -> None:
+        self.link.set_faults(faults)
+
+    def send(self, msg: mavlink.MAVLink_message) -> None:
+        self.link.send(msg)
+
+    def statustext(self, text: str, severity: int = mavlink.MAV_SEVERITY_INFO) -> None:
+        self.send(telemetry.statustext(severity, text))
+
+    def poll(self, wall_now_s: float) -> None:
+        """Mission-protocol timers (wall clock: the GCS's re-request and timeout clock)."""
+        for msg in self.mission_server.poll(wall_now_s):
+            self.send(msg)
+
+    # --- telemetry ---------------------------------------------------------------------------
+    def send_status(self) -> None:
+        """The 1 Hz group: HEARTBEAT, SYS_STATUS, BATTERY_STATUS, VFR_HUD, MISSION_CURRENT."""
+        world, i = self._world, self.index
+        kin = world.kin
+        airborne = bool(kin.airborne()[i])
+        self.send(telemetry.heartbeat(
+            _MAV_TYPE[self.vehicle_type], self.profile.autopilot, self.armed, self._modes[self.mode],
+            self.armed or airborne,
+        ))  # fmt: skip
+        battery = float(world.battery_pct[i])
+        current = float(world.current_a()[i])
+        self.send(telemetry.sys_status(battery, current))
+        self.send(telemetry.battery_status(battery, current, float(world.consumed_mah[i])))
+        vel = kin.vel[i]
+        gvel = kin.ground_vel()[i]
+        throttle = 0 if not airborne else 50
+        alt = float(kin.reported_pos()[i, 2] + world.frame.alt_m)
+        self.send(telemetry.vfr_hud(
+            float(np.linalg.norm(vel)), float(math.hypot(gvel[0], gvel[1])), float(kin.psi[i]), throttle, alt,
+            float(gvel[2]),
+        ))  # fmt: skip
+        self.send(self._mission_current())
+
+    def send_home(self) -> None:
+        self.send(telemetry.home_position(self.home.lat_deg, self.home.lon_deg, self.home.alt_m))
+
+    def _mission_current(self) -> MissionCurrentMessage:
+        nav, srv = self._nav, self.mission_server
+        ids = (srv.opaque_id(t) for t in (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY))
+        mode = 1 if self.mode == "AUTO" else 2
+        return MissionCurrentMessage(nav.seq if nav.has_mission else 0, nav.total, int(nav.state), mode, *ids)
+
+    # --- receive -----------------------------------------------------------------------------
+    def _on_message(self, msg: mavlink.MAVLink_message, addr: tuple) -> None:
+        target = getattr(msg, "target_system", 0)
+        if target not in (0, self.sysid):
+            return
+        mtype = msg.get_type()
+        if mtype.startswith("MISSION_"):
+            for reply in self.mission_server.handle(msg, self._wall_now()):
+                self.send(reply)
+            return
+        handler = self._dispatch.get(mtype)
+        if handler is not None:
+            handler(msg)
+
+    def _wall_now(self) -> float:
+        return asyncio.get_running_loop().time()
+
+    def _on_command(self, msg: mavlink.MAVLink_message) -> None:
+        if msg.target_component not in (0, COMPID):
+            return
+        if msg.get_type() == "COMMAND_INT":
+            params = (msg.param1, msg.param2, msg.param3, msg.param4, float(msg.x), float(msg.y), msg.z)
+        else:
+            params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
+        handler = self._commands.get(msg.command)
+        result = CommandResult.UNSUPPORTED if handler is None else handler(*params)
+        self.send(mavlink.MAVLink_command_ack_message(
+            msg.command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+        ))  # fmt: skip
+        after, self._after_ack = self._after_ack, None
+        if after is not None:
+            after()
+
+    def _on_set_mode(self, msg: mavlink.MAVLink_message) -> None:
+        name = self.profile.mode_name(msg.custom_mode, self.vehicle_type)
+        ok = name is not None and self._set_mode_name(name)
+        result = CommandResult.ACCEPTED if ok else CommandResult.FAILED
+        self.send(mavlink.MAVLink_command_ack_message(
+            mavlink.MAVLINK_MSG_ID_SET_MODE, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+        ))  # fmt: skip
+
+    # --- commands ----------------------------------------------------------------------------
+    def _cmd_arm(self, p1: float, p2: float, *_: float) -> CommandResult:
+        world, i = self._world, self.index
+        if p1 >= 0.5:
+            if not self.armed:
+                self.armed = True
+                world.armed[i] = True
+                self.statustext("Arming motors")
+                self.send_home()
+                if self.mode == "AUTO":
+                    first, last = self._pending_start or (None, None)
+                    self._pending_start = None
+                    self._nav.start(first, last)
+                elif self.mode == "TAKEOFF":
+                    self._nav.takeoff(DEFAULT_TAKEOFF_ALT_M)
+            return CommandResult.ACCEPTED
+        if not self.armed:
+            return CommandResult.ACCEPTED
+        if world.kin.airborne()[i] and round(p2) != FORCE_MAGIC:
+            self.statustext("Disarm refused: in flight", mavlink.MAV_SEVERITY_WARNING)
+            return CommandResult.FAILED
+        self._disarm()
+        world.kin.place(i, world.kin.pos[i])
+        return CommandResult.ACCEPTED
+
+    def _cmd_set_mode(self, p1: float, p2: float, p3: float, *_: float) -> CommandResult:
+        custom = px4_custom_mode(int(p2), int(p3)) if self.profile.name == "px4" else int(p2)
+        name = self.profile.mode_name(custom, self.vehicle_type)
+        if name is None:
+            return CommandResult.DENIED
+        return CommandResult.ACCEPTED if self._set_mode_name(name) else CommandResult.FAILED
+
+    def _cmd_mission_start(self, p1: float, p2: float, *_: float) -> CommandResult:
+        nav = self._nav
+        if not nav.has_mission:
+            self.statustext("Mission start: no mission", mavlink.MAV_SEVERITY_WARNING)
+            return CommandResult.FAILED
+        count = len(nav.items)
+        first, last = int(p1), int(p2)
+        first_seq = None if first == 0 else first
+        last_seq = None if last == 0 else last
+        if not (0 <= first < count) or (
+            last_seq is not None and not (max(first, nav.first_seq) <= last < count)
+        ):
+            return CommandResult.DENIED
+        if not self._set_mode_name("AUTO", start=False):
+            return CommandResult.FAILED
+        if self.armed:
+            nav.start(first_seq if first_seq is not None else nav.first_seq, last_seq)
+        else:
+            self._pending_start = (first_seq if first_seq is not None else nav.first_seq, last_seq)
+        return CommandResult.ACCEPTED
+
+    def _cmd_set_current(self, p1: float, p2: float, *_: float) -> CommandResult:
+        seq = int(p1)
+        nav = self._nav
+        if seq != -1 and not nav.set_current(seq):
+            return CommandResult.FAILED
+        if round(p2) == 1 and nav.state == MissionState.COMPLETE:
+            nav.state = MissionState.PAUSED
+            self._emit_progress()
+        return CommandResult.ACCEPTED
+
+    def _cmd_takeoff(self, *params: float) -> CommandResult:
+        alt_m = params[6]
+        if (
+            not self.armed
+            or self._world.kin.airborne()[self.index]
+            or not (math.isfinite(alt_m) and alt_m > 0)
+        ):
+            return CommandResult.FAILED
+        self._set_mode_name("TAKEOFF" if "TAKEOFF" in self._modes else "GUIDED", start=False)
+        self._nav.takeoff(alt_m)
+        self.statustext(f"Takeoff to {alt_m:.1f} m")
+        return CommandResult.ACCEPTED
+
+    def _cmd_rtl(self, *_: float) -> CommandResult:
+        return CommandResult.ACCEPTED if self._set_mode_name("RTL") else CommandResult.FAILED
+
+    def _cmd_land(self, *_: float) -> CommandResult:
+        if "LAND" not in self._modes:
+            return CommandResult.UNSUPPORTED
+        return CommandResult.ACCEPTED if self._set_mode_name("LAND") else CommandResult.FAILED
+
+    def _cmd_reboot(self, p1: float, *_: float) -> CommandResult:
+        if round(p1) != 1:
+            return CommandResult.UNSUPPORTED
+        if self.armed:
+            return CommandResult.DENIED
+        self._after_ack = self.reboot  # reboot after the ACK has left
+        return CommandResult.ACCEPTED
+
+    def _cmd_request_message(self, p1: float, *_: float) -> CommandResult:
+        msg_id = int(p1)
+        if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            self._send_version()
+        elif msg_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
+            self.send_home()
+        else:
+            return CommandResult.UNSUPPORTED
+        return CommandResult.ACCEPTED
+
+    def _cmd_capabilities(self, *_: float) -> CommandResult:
+        self._send_version()
+        return CommandResult.ACCEPTED
+
+    def _send_version(self) -> None:
+        self.send(
+            mavlink.MAVLink_autopilot_version_message(
+                _CAPABILITIES, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, self.sysid
+            )
+        )  # fmt: skip  uid = sysid: two mocks with one sysid stay distinguishable by port only
+
+    # --- modes -------------------------------------------------------------------------------
+    def _set_mode_name(self, name: str, start: bool = True) -> bool:
+        """Switch to mode ``name`` and act on it; False (nothing changed) when refused."""
+        nav = self._nav
+        if name not in self._modes:
+            return False
+        if name == "AUTO" and not nav.has_mission:
+            self.statustext("Mode change to AUTO failed: no mission", mavlink.MAV_SEVERITY_WARNING)
+            return False
+        changed = name != self.mode
+        self.mode = name
+        self.mission_server.mission_running = name == "AUTO"
+        airborne = bool(self._world.kin.airborne()[self.index])
+        if name != "AUTO":
+            nav.pause()
+            self._pending_start = None
+        if name == "AUTO":
+            if start and self.armed and (changed or not nav.running):
+                nav.start()
+        elif name == "RTL":
+            nav.rtl() if airborne else nav.idle()
+        elif name == "LAND":
+            nav.land() if airborne else nav.idle()
+        elif name == "TAKEOFF":
+            if start and self.armed and not airborne:
+                nav.takeoff(DEFAULT_TAKEOFF_ALT_M)
+        else:
+            nav.hold()
+        if changed:
+            self.statustext(f"Mode {name}")
+        return True
+
+    # --- callbacks from the navigator and the mission server ---------------------------------
+    def _emit_reached(self, seq: int) -> None:
+        self.send(mavlink.MAVLink_mission_item_reached_message(seq))
+
+    def _emit_progress(self) -> None:
+        nav = self._nav
+        if nav.has_mission and self.mission_server.current_seq != nav.seq:
+            self._syncing_seq = True
+            try:
+                self.mission_server.set_current(nav.seq)
+            finally:
+                self._syncing_seq = False
+        self.send(self._mission_current())
+
+    def _on_landed(self) -> None:
+        self.statustext("Landed")
+        self._disarm()
+
+    def _disarm(self) -> None:
+        self.armed = False
+        self._world.armed[self.index] = False
+        self._nav.idle()
+        self.statustext("Disarming motors")
+
+    def _on_list_change(self, mission_type: int) -> None:
+        if mission_type == MissionType.MISSION:
+            self._nav.load(self.mission_server.items(MissionType.MISSION))
+
+    def _on_server_current(self, seq: int) -> None:
+        if not self._syncing_seq:
+            self._nav.set_current(seq)
+
+    @property
+    def _world(self) -> World:
+        if self.world is None:
+            raise RuntimeError(f"vehicle {self.sysid} is not part of a running MockFleet")
+        return self.world
+
+    @property
+    def _nav(self) -> Navigator:
+        if self.nav is None:
+            raise RuntimeError(f"vehicle {self.sysid} is not part of a running MockFleet")
+        return self.nav
