@@ -1,0 +1,183 @@
+"""RRT* in 3-D among vertical cylinders (with buffers), domes and an altitude band; seeded.
+
+The standard RRT* (Karaman & Frazzoli 2011) as seed 000 uses it for initial paths (the paper's
+printed steer direction and near-set centre are typos; this is the standard algorithm):
+sample (goal-biased), nearest, steer by ``step_m``, collision-check the edge, choose the cheapest
+collision-free parent among the near set, rewire the near set through the new node and pass the
+cost decrease on to the rewired subtrees.
+
+Choices where the paper is open (documented for reproducibility):
+- Edges are valid when every cylinder is cleared by ``radius + buffer + margin_m`` (buffers are
+  treated as hard here so the initial paths sit outside the threat band) and both ends lie in the
+  altitude band (a straight edge between two in-band points stays in the band).
+- Sampling box: the scenario bounds if given, else the start/goal box padded by ``pad_m``;
+  altitudes uniform in the band. Goal bias 10 %.
+- Near radius ``min(gamma (log n / n)^(1/3), 3 step_m)`` with gamma from the sampling volume.
+- Nearest/near queries: a cKDTree rebuilt every ``rebuild_every`` insertions plus a brute-force
+  scan of the nodes added since (so queries stay exact while the tree is not rebuilt each step).
+- The start->goal straight edge is tried first (open field: no tree needed). After the goal is
+  first reached, ``extra_iterations`` more samples refine the path; the result is then shortcut
+  greedily (drop a vertex when the edge that skips it is valid).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gcs_planner.geometry.obstacles import Obstacles
+
+__all__ = ["RRTConfig", "RRTResult", "rrt_star", "shortcut"]
+
+
+@dataclass(frozen=True)
+class RRTConfig:
+    step_m: float = 40.0
+    max_iterations: int = 3000
+    extra_iterations: int = 300
+    goal_bias: float = 0.1
+    margin_m: float = 2.0
+    rebuild_every: int = 64
+
+
+@dataclass(frozen=True)
+class RRTResult:
+    path: np.ndarray | None  # (K, 3) start..goal, None when no path was found
+    cost_m: float
+    iterations: int
+    nodes: int
+
+
+def edges_valid(
+    obstacles: Obstacles, a: np.ndarray, b: np.ndarray, z_band: tuple[float, float], margin_m: float
+) -> np.ndarray:
+    """True (...) where segments a -> b (..., 3) clear every obstacle's buffer + margin and stay in band."""
+    ok = np.ones(np.shape(a)[:-1], dtype=bool)
+    if len(obstacles.radius_m):
+        d = obstacles.cylinder_distances(a, b)
+        ok &= np.all(d > obstacles.radius_m + obstacles.buffer_m + margin_m, axis=-1)
+    if len(obstacles.dome_radius_m):
+        ok &= np.all(obstacles.dome_distances(a, b) > obstacles.dome_radius_m + margin_m, axis=-1)
+    lo, hi = z_band
+    for p in (a, b):
+        ok &= (p[..., 2] >= lo - 1e-9) & (p[..., 2] <= hi + 1e-9)
+    return ok
+
+
+def rrt_star(
+    start: np.ndarray,
+    goal: np.ndarray,
+    obstacles: Obstacles,
+    box_lo: np.ndarray,
+    box_hi: np.ndarray,
+    rng: np.random.Generator,
+    cfg: RRTConfig = RRTConfig(),
+) -> RRTResult:
+    """Plan start -> goal (both (3,), inside the band box_lo[2]..box_hi[2])."""
+    start, goal = np.asarray(start, float), np.asarray(goal, float)
+    band = (float(box_lo[2]), float(box_hi[2]))
+
+    def valid(a, b):
+        return edges_valid(obstacles, a, b, band, cfg.margin_m)
+
+    if valid(start, goal):
+        return RRTResult(np.vstack([start, goal]), float(np.linalg.norm(goal - start)), 0, 2)
+    n_max = cfg.max_iterations + 1
+    nodes = np.empty((n_max, 3))
+    parent = np.full(n_max, -1)
+    cost = np.zeros(n_max)
+    nodes[0] = start
+    n = 1
+    tree, tree_n = cKDTree(nodes[:1]), 1
+    volume = float(np.prod(np.maximum(box_hi - box_lo, 1.0)))
+    gamma = 2.0 * (1.0 + 1.0 / 3.0) ** (1.0 / 3.0) * (volume / (4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
+    first_hit = None
+    it = 0
+    for it in range(1, cfg.max_iterations + 1):
+        if first_hit is not None and it - first_hit >= cfg.extra_iterations:
+            break
+        target = goal if rng.random() < cfg.goal_bias else rng.uniform(box_lo, box_hi)
+        if n - tree_n >= cfg.rebuild_every:
+            tree, tree_n = cKDTree(nodes[:n]), n
+        near_i = _nearest(tree, tree_n, nodes, n, target)
+        d = target - nodes[near_i]
+        dist = float(np.linalg.norm(d))
+        new = target if dist <= cfg.step_m else nodes[near_i] + d * (cfg.step_m / dist)
+        if not valid(nodes[near_i], new):
+            continue
+        radius = min(gamma * (math.log(n + 1) / (n + 1)) ** (1.0 / 3.0), 3.0 * cfg.step_m)
+        near = _within(tree, tree_n, nodes, n, new, max(radius, 1e-6))
+        near = np.union1d(near, [near_i])
+        seg = np.linalg.norm(nodes[near] - new, axis=1)
+        ok = valid(nodes[near], np.broadcast_to(new, (len(near), 3)))
+        through = np.where(ok, cost[near] + seg, np.inf)
+        best = int(np.argmin(through))
+        k = n
+        nodes[k], parent[k], cost[k] = new, near[best], through[best]
+        n += 1
+        improve = ok & (cost[k] + seg < cost[near] - 1e-9)
+        for j, c_new in zip(near[improve], (cost[k] + seg)[improve]):
+            _reparent(parent, cost, n, int(j), k, float(c_new))
+        if first_hit is None and np.linalg.norm(goal - new) <= cfg.step_m and valid(new, goal):
+            first_hit = it
+    # connect the goal to the cheapest valid node within one step
+    d_goal = np.linalg.norm(nodes[:n] - goal, axis=1)
+    cand = np.flatnonzero(d_goal <= cfg.step_m)
+    if len(cand):
+        ok = valid(nodes[cand], np.broadcast_to(goal, (len(cand), 3)))
+        cand = cand[ok]
+    if not len(cand):
+        return RRTResult(None, math.inf, it, n)
+    total = cost[cand] + d_goal[cand]
+    j = int(cand[np.argmin(total)])
+    chain = [goal]
+    while j >= 0:
+        chain.append(nodes[j])
+        j = int(parent[j])
+    path = shortcut(np.array(chain[::-1]), lambda a, b: valid(a, b))
+    return RRTResult(path, float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()), it, n)
+
+
+def shortcut(path: np.ndarray, valid) -> np.ndarray:
+    """Greedy shortcut: from each kept vertex jump to the farthest vertex reachable by a valid edge."""
+    keep = [0]
+    i = 0
+    while i < len(path) - 1:
+        later = np.arange(len(path) - 1, i, -1)
+        ok = valid(np.broadcast_to(path[i], (len(later), 3)), path[later])
+        i = int(later[np.argmax(ok)]) if ok.any() else i + 1
+        keep.append(i)
+    return path[keep]
+
+
+def _nearest(tree: cKDTree, tree_n: int, nodes: np.ndarray, n: int, x: np.ndarray) -> int:
+    d_tree, i_tree = tree.query(x)
+    if n > tree_n:
+        tail = np.linalg.norm(nodes[tree_n:n] - x, axis=1)
+        j = int(np.argmin(tail))
+        if tail[j] < d_tree:
+            return tree_n + j
+    return int(i_tree)
+
+
+def _within(tree: cKDTree, tree_n: int, nodes: np.ndarray, n: int, x: np.ndarray, r: float) -> np.ndarray:
+    idx = np.asarray(tree.query_ball_point(x, r), dtype=int)
+    if n > tree_n:
+        tail = np.flatnonzero(np.linalg.norm(nodes[tree_n:n] - x, axis=1) <= r) + tree_n
+        idx = np.concatenate([idx, tail])
+    return idx
+
+
+def _reparent(parent: np.ndarray, cost: np.ndarray, n: int, j: int, new_parent: int, new_cost: float) -> None:
+    """Give node j a cheaper parent and pass the cost decrease on to its whole subtree."""
+    delta = cost[j] - new_cost
+    parent[j] = new_parent
+    frontier = np.array([j])
+    cost[j] = new_cost
+    while len(frontier):
+        children = np.flatnonzero(np.isin(parent[:n], frontier))
+        cost[children] -= delta
+        frontier = children
