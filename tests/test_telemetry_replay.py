@@ -1,0 +1,103 @@
+"""Replay to MAVLink (pymavlink listener gets the recorded frames byte for byte) and to Rerun."""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+
+import pytest
+from telemetry_frames import ORIGIN, SCENARIO_TEXT, flight_frames, make_plan
+
+from gcs_planner.cli import main
+from gcs_planner.errors import UserError
+from gcs_planner.telemetry import FlightLogger, read_flight, replay_to_mavlink
+from gcs_planner.telemetry.replay import parse_udp_url
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def flight_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("replay") / "flight.mcap"
+    with FlightLogger(path, ORIGIN, plan=make_plan([1, 2, 3]), scenario_text=SCENARIO_TEXT) as logger:
+        for msg, raw, t_s in flight_frames([1, 2, 3], samples=20):
+            logger.on_frame(msg, raw, t_s)
+    return path
+
+
+def _listen(conn, expected: int, out: list, timeout_s: float = 10.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while len(out) < expected and time.monotonic() < deadline:
+        msg = conn.recv_match(blocking=True, timeout=0.2)
+        if msg is not None and msg.get_type() != "BAD_DATA":
+            out.append(bytes(msg.get_msgbuf()))
+
+
+def test_replay_to_pymavlink_listener_is_byte_identical_and_timed(flight_path):
+    flight = read_flight(flight_path)
+    conn = mavutil.mavlink_connection("udpin:127.0.0.1:0", dialect="ardupilotmega")
+    port = conn.port.getsockname()[1]
+    received: list[bytes] = []
+    listener = threading.Thread(target=_listen, args=(conn, len(flight.frames), received))
+    listener.start()
+    speed = 8.0
+    start = time.monotonic()
+    sent = replay_to_mavlink(flight, f"udpout:127.0.0.1:{port}", speed=speed)
+    elapsed = time.monotonic() - start
+    listener.join()
+    conn.close()
+    assert sent == len(flight.frames) == 3 * (20 + 2 * 2) + 3
+    assert received == [f.data for f in flight.frames]
+    span_s = flight.end_time_s - flight.start_time_s
+    assert span_s / speed * 0.9 <= elapsed <= span_s / speed + 2.0
+
+
+def test_replay_schedule_scales_with_speed(flight_path):
+    flight = read_flight(flight_path)
+    now = [0.0]
+    sleeps: list[float] = []
+
+    def sleep(dt: float) -> None:
+        sleeps.append(dt)
+        now[0] += dt
+
+    replay_to_mavlink(flight, "udpout:127.0.0.1:9", speed=4.0, sleep=sleep, clock=lambda: now[0])
+    assert sum(sleeps) == pytest.approx((flight.end_time_s - flight.start_time_s) / 4.0, rel=1e-6)
+
+
+def test_bad_udp_url_is_a_user_error():
+    with pytest.raises(UserError, match="udpout:HOST:PORT"):
+        parse_udp_url("tcp:localhost:14550")
+
+
+def test_replay_command_writes_a_non_empty_rrd_with_all_views(flight_path, tmp_path, capsys):
+    rrd = tmp_path / "out.rrd"
+    assert main(["replay", str(flight_path), "--rrd", str(rrd)]) == 0
+    assert rrd.stat().st_size > 1000
+    from rerun.chunk import RrdReader
+
+    entities = {chunk.entity_path for chunk in RrdReader(rrd).stream()}
+    for s in (1, 2, 3):
+        assert {
+            f"/map/plan/{s}",
+            f"/map/track/{s}",
+            f"/map/vehicle/{s}",
+            f"/world/plan/{s}",
+            f"/world/track/{s}",
+            f"/world/vehicle/{s}",
+            f"/series/altitude_m/{s}",
+            f"/series/ground_speed_mps/{s}",
+            f"/series/mission_item/{s}",
+            f"/series/link_loss/{s}",
+        } <= entities
+    assert {"/world/obstacles/cylinders", "/world/obstacles/radars/0", "/map/obstacles"} <= entities
+    rows = sum(c.num_rows for c in RrdReader(rrd).stream() if c.entity_path == "/world/vehicle/2")
+    assert rows == 20
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_replay_command_needs_a_target(flight_path, capsys):
+    assert main(["replay", str(flight_path)]) == 2
+    assert "nothing to do" in capsys.readouterr().err
