@@ -1,0 +1,253 @@
+"""Conflict-free 4-D trajectories among manned traffic (seed 004), planner name ``deconflict_4d``.
+
+Reads the scenario, builds the problem (UAV flight plans with timed take-off / arrival, dynamics
+per vehicle type, manned aircraft tracks -> predicted no-fly zones), runs the staged method of
+planner.py and returns a Plan whose vehicles carry the timed waypoints, per-leg speeds (for
+DO_CHANGE_SPEED), the take-off delay and the densely sampled flown path.
+
+Scenario keys (besides the common ones of gcs_planner.scenario):
+    [planner]      name = "deconflict_4d", seed, any Settings field (planner.py), and
+                   confidence (0.95), safety_m (manned safety distance, 5.0), min_mode_weight (0.01)
+    [[vehicles]]   takeoff_s (planned take-off, 0), arrival_s (planned arrival at the goal; default
+                   take-off + climb + straight distance / speed_mps), v_max_mps, a_max_mps2,
+                   climb_mps, descent_mps, min_turn_radius_m, max_time_error_s, limit ("axis"|"norm")
+                   override the vehicle type's Dynamics (trajectory.DYNAMICS)
+    [[manned]]     id, dt_s, and either track = [[t_s, x, y, z], ...] (observed, last at planning
+                   time or before) or position_m + velocity_mps + observed_s (a constant-velocity
+                   track observed for observed_s up to t = 0);
+                   [[manned.modes]] name, velocity_mps, sigma_mps, strength, weight (prior per mode)
+                   or history = [[[x, y, z], ...], ...] (tracks to fit the prior from)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.planning.deconflict4d.manned import (
+    MannedTrack,
+    predict_zones,
+    prior_from_history,
+    prior_from_velocity,
+)
+from gcs_planner.planning.deconflict4d.planner import Outcome, Problem, Settings, UavSpec, full_polyline, run
+from gcs_planner.planning.deconflict4d.trajectory import DYNAMICS
+from gcs_planner.scenario import Scenario, ScenarioError
+
+__all__ = ["build_problem", "plan", "to_plan"]
+
+NAME = "deconflict_4d"
+_ZONE_KEYS = {"confidence": 0.95, "safety_m": 5.0, "min_mode_weight": 0.01}
+_DYN_KEYS = (
+    "v_max_mps",
+    "a_max_mps2",
+    "climb_mps",
+    "descent_mps",
+    "min_turn_radius_m",
+    "max_time_error_s",
+    "limit",
+)
+
+
+def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
+    problem = build_problem(scenario)
+    return to_plan(scenario, problem, run(problem, rng, progress))
+
+
+def _settings(scenario: Scenario) -> tuple[Settings, dict[str, float]]:
+    fields = {f.name: f for f in dataclasses.fields(Settings)}
+    kwargs, zone = {}, dict(_ZONE_KEYS)
+    for key, value in scenario.planner.items():
+        if key in ("name", "seed"):
+            continue
+        if key in zone:
+            zone[key] = float(value)
+            continue
+        if key not in fields:
+            raise ScenarioError(
+                f"{scenario.name}: planner.{key} is not a deconflict_4d setting (got {value!r})"
+            )
+        default = getattr(Settings(), key)
+        if isinstance(default, bool) != isinstance(value, bool) or not isinstance(value, int | float | bool):
+            raise ScenarioError(f"{scenario.name}: planner.{key} must be like {default!r}, got {value!r}")
+        kwargs[key] = type(default)(value)
+    return Settings(**kwargs), zone
+
+
+def _uav(scenario: Scenario, i: int) -> UavSpec:
+    v = scenario.vehicles[i]
+    raw = scenario.raw.get("vehicles", [])[i]
+    where = f"{scenario.name}: vehicles[{i}]"
+    overrides = {k: raw[k] for k in _DYN_KEYS if k in raw}
+    if v.type == "fixed_wing" and "min_turn_radius_m" not in overrides:
+        overrides["min_turn_radius_m"] = v.turn_radius_m
+    try:
+        dyn = dataclasses.replace(DYNAMICS[v.type], **overrides)
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+    start, goal = np.asarray(v.start, dtype=float), np.asarray(v.goal, dtype=float)
+    if dyn.vertical_takeoff and (start[2] <= 0 or goal[2] <= 0):
+        raise ScenarioError(
+            f"{where}: start/goal z must be > 0 (the climb is planned), got {v.start} / {v.goal}"
+        )
+    takeoff = float(raw.get("takeoff_s", 0.0))
+    climb = start[2] / dyn.climb_mps if dyn.vertical_takeoff else 0.0
+    arrival = float(raw.get("arrival_s", takeoff + climb + np.linalg.norm(goal - start) / v.speed_mps))
+    if not arrival > takeoff + climb:
+        raise ScenarioError(
+            f"{where}: arrival_s must be after take-off + climb ({takeoff + climb:.1f} s), got {arrival}"
+        )
+    return UavSpec(
+        id=v.id,
+        sysid=v.sysid,
+        vehicle_type=v.type,
+        start=start,
+        goal=goal,
+        takeoff_s=takeoff,
+        arrival_s=arrival,
+        separation_m=v.separation_m,
+        dyn=dyn,
+        z_min_m=v.min_alt_m,
+        z_max_m=v.max_alt_m,
+    )
+
+
+def _manned_track(d: dict[str, Any], where: str) -> MannedTrack:
+    dt = float(d.get("dt_s", 1.0))
+    if "track" in d:
+        arr = np.asarray(d["track"], dtype=float)
+        if arr.ndim != 2 or arr.shape[1] != 4:
+            raise ScenarioError(f"{where}: track must be [[t_s, x, y, z], ...], got shape {arr.shape}")
+        times, pos = arr[:, 0], arr[:, 1:]
+    else:
+        try:
+            p0 = np.asarray(d["position_m"], dtype=float)
+            vel = np.asarray(d["velocity_mps"], dtype=float)
+            observed = float(d.get("observed_s", 10.0))
+        except KeyError as exc:
+            raise ScenarioError(
+                f"{where}: needs track or position_m + velocity_mps (missing {exc})"
+            ) from None
+        times = np.arange(-round(observed / dt), 1) * dt
+        pos = p0 + times[:, None] * vel
+    modes = []
+    for k, m in enumerate(d.get("modes", [])):
+        name = str(m.get("name", f"mode{k}"))
+        if "history" in m:
+            prior = prior_from_history([np.asarray(t, dtype=float) for t in m["history"]], dt)
+        else:
+            try:
+                prior = prior_from_velocity(
+                    m["velocity_mps"], m["sigma_mps"], float(m.get("strength", 10.0)), dt
+                )
+            except KeyError as exc:
+                raise ScenarioError(
+                    f"{where}: modes[{k}] needs velocity_mps and sigma_mps (missing {exc})"
+                ) from None
+        modes.append((name, prior, float(m.get("weight", 1.0))))
+    if not modes:
+        raise ScenarioError(f"{where}: needs at least one [[manned.modes]] prior")
+    try:
+        return MannedTrack(str(d.get("id", where)), times, pos, dt, tuple(modes))
+    except ValueError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+
+
+def build_problem(scenario: Scenario) -> Problem:
+    """Scenario -> Problem (settings, UAV specs, manned no-fly zones, waypoint box)."""
+    settings, zone_cfg = _settings(scenario)
+    if not scenario.vehicles:
+        raise ScenarioError(f"{scenario.name}: deconflict_4d needs at least one [[vehicles]] entry")
+    uavs = [_uav(scenario, i) for i in range(len(scenario.vehicles))]
+    ends = np.array([p for u in uavs for p in (u.start, u.goal)])
+    extent = ends.max(axis=0) - ends.min(axis=0)
+    pad = np.maximum(20.0, 0.25 * extent.max())
+    lower, upper = ends.min(axis=0) - pad, ends.max(axis=0) + pad
+    for k, axis in enumerate("xy"):
+        if axis in scenario.bounds:
+            lower[k], upper[k] = scenario.bounds[axis]
+    # zones must cover the latest instant any UAV can be airborne
+    horizon = max(
+        u.arrival_s + settings.max_delay_s + 3.0 * (u.arrival_s - u.takeoff_s) + u.goal[2] / u.dyn.descent_mps
+        for u in uavs
+    )
+    zones = []
+    for j, d in enumerate(scenario.raw.get("manned", [])):
+        track = _manned_track(d, f"{scenario.name}: manned[{j}]")
+        zones += predict_zones(
+            track, j, horizon, zone_cfg["safety_m"], zone_cfg["confidence"], zone_cfg["min_mode_weight"]
+        )
+    return Problem(uavs=uavs, zones=zones, settings=settings, lower_m=lower, upper_m=upper)
+
+
+def to_plan(scenario: Scenario, problem: Problem, out: Outcome) -> Plan:
+    """Outcome -> Plan: timed waypoints, per-leg speeds, take-off delay, dense path per UAV."""
+    in_conflict = {c["a"] for c in out.remaining} | {c["b"] for c in out.remaining}
+    in_conflict |= {c["a"] for c in out.metrics["dense_check"]["conflicts"]}
+    vehicles = []
+    for u, tr, (path, path_t) in zip(problem.uavs, out.tracks, out.paths, strict=True):
+        _, times, goal_idx = full_polyline(u, tr)
+        off = 1 if u.dyn.vertical_takeoff else 0
+        wp_times = times[off : goal_idx + 1]
+        legs = np.linalg.norm(np.diff(tr.waypoints, axis=0), axis=1) / np.diff(wp_times)
+        first = u.dyn.climb_mps if u.dyn.vertical_takeoff else legs[0]
+        notes = [f"planned take-off {u.takeoff_s:.1f} s, delayed by {tr.delay_s:.1f} s"] if tr.delay_s else []
+        if u.id in in_conflict:
+            notes.append("conflicts remain: see plan metrics conflicts_remaining")
+        vehicles.append(
+            VehiclePlan(
+                vehicle_id=u.id,
+                sysid=u.sysid,
+                vehicle_type=u.vehicle_type,
+                waypoints=tr.waypoints,
+                times_s=wp_times,
+                speeds_mps=np.concatenate([[first], legs]),
+                path=path,
+                path_times_s=path_t,
+                turn_radius_m=u.dyn.min_turn_radius_m,
+                takeoff_delay_s=float(path_t[0]),
+                cost={
+                    "length_m": float(np.linalg.norm(np.diff(tr.waypoints, axis=0), axis=1).sum()),
+                    "arrival_error_s": float(abs(wp_times[-1] - u.arrival_s)),
+                    "delay_s": float(tr.delay_s),
+                },
+                feasible=u.id not in in_conflict and out.metrics["limits_ok"],
+                notes=notes,
+            )
+        )
+    metrics = dict(out.metrics)
+    metrics["manned"] = _manned_summary(scenario, problem)
+    return Plan(origin=scenario.origin, planner=NAME, vehicles=vehicles, metrics=metrics, events=out.events)
+
+
+def _manned_summary(scenario: Scenario, problem: Problem) -> list[dict]:
+    """Per manned aircraft: last observation and the mean velocity of the most likely mode
+    (the constant-velocity truth of the scenarios), plus its zones' largest semi-axis."""
+    out = []
+    for j, d in enumerate(scenario.raw.get("manned", [])):
+        track = _manned_track(d, f"manned[{j}]")
+        zones = [z for z in problem.zones if z.owner == j]
+        best = max(zones, key=lambda z: z.weight)
+        vel = (best.centres_m[1] - best.centres_m[0]) / track.dt_s
+        out.append(
+            {
+                "id": track.id,
+                "t0_s": float(track.times_s[-1]),
+                "position_m": track.positions_m[-1].round(3).tolist(),
+                "velocity_mps": vel.round(4).tolist(),
+                "zones": [
+                    {
+                        "name": z.name,
+                        "weight": round(z.weight, 4),
+                        "max_semi_axis_m": round(float(z.axes_m.max()), 2),
+                    }
+                    for z in zones
+                ],
+                "horizon_s": float(best.times_s[-1]),
+                "observed_velocity_mps": (track.displacements.mean(axis=0) / track.dt_s).round(4).tolist(),
+            }
+        )
+    return out

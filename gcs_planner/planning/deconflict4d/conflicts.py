@@ -1,0 +1,175 @@
+"""Conflict detection between timed polylines by analytic closest approach (CPA).
+
+Two UAVs conflict when their distance drops below the separation at any common instant. Both
+trajectories are piecewise linear in time, so over every pair of legs whose time windows
+overlap the relative position is linear, ``d(s) = d0 + dv s`` for ``s in [0, T]``, and the
+closest approach is exact: ``s* = clip(-d0.dv / |dv|^2, 0, T)``. No time step is needed, so
+1 m separation at 10 m/s closing speed (which a 0.05 s sampling step would barely catch) is
+handled exactly. Everything is vectorised over candidate solutions, pairs and leg pairs.
+
+A UAV-manned conflict is the same computation in the frame of the manned aircraft's
+uncertainty ellipsoid: rotating by the ellipsoid's axes and dividing by its (inflated)
+semi-axes maps the ellipsoid to the unit sphere and keeps motion linear, so "enters the region"
+is "whitened closest approach < 1" (see manned.py for how the regions are built).
+
+Counting (the paper sorts UAVs by their number of conflicts): a UAV's count is the number of
+*other aircraft* (UAVs and manned) it conflicts with at least once, not the number of leg pairs.
+Pairs are pre-filtered by space-time bounding boxes so large fleets stay cheap.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gcs_planner.planning.deconflict4d.trajectory import leg_velocities
+
+__all__ = [
+    "candidate_pairs",
+    "closest_approach",
+    "conflict_counts",
+    "pair_closest_approach",
+    "zone_closest_approach",
+]
+
+# elements of one (pairs x legs x legs) block before the work is split into chunks
+_CHUNK_ELEMENTS = 2_000_000
+
+
+def _cpa(d0: np.ndarray, dv: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Min of |d0 + dv s| over s in [0, span] and its argmin s; arrays (..., 3), (...)."""
+    vv = np.einsum("...i,...i->...", dv, dv)
+    s = -np.einsum("...i,...i->...", d0, dv) / np.where(vv > 0, vv, 1.0)
+    s = np.clip(np.where(vv > 0, s, 0.0), 0.0, span)
+    d = d0 + dv * s[..., None]
+    return np.sqrt(np.einsum("...i,...i->...", d, d)), s
+
+
+def closest_approach(
+    pa: np.ndarray,
+    ta: np.ndarray,
+    pb: np.ndarray,
+    tb: np.ndarray,
+    rot_b: np.ndarray | None = None,
+    scale_b: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Minimum distance between two timed polylines over their common time, and when.
+
+    pa (..., Wa, 3), ta (..., Wa); pb (..., Wb, 3), tb (..., Wb); leading axes broadcast.
+    Optional metric per leg of b: ``rot_b`` (..., Wb-1, 3, 3) whose rows are the ellipsoid axes
+    and ``scale_b`` (..., Wb-1, 3) the semi-axes; the distance is then measured as
+    ``|diag(1/scale) rot d|`` (1 = on the ellipsoid surface).
+    Returns (d_min (...), t_min (...)); d_min is +inf when the time spans never overlap.
+    """
+    ta0, ta1 = ta[..., :-1, None], ta[..., 1:, None]
+    tb0, tb1 = tb[..., None, :-1], tb[..., None, 1:]
+    lo = np.maximum(ta0, tb0)
+    hi = np.minimum(ta1, tb1)
+    valid = hi > lo
+    va = leg_velocities(pa, ta)[..., :, None, :]
+    vb = leg_velocities(pb, tb)[..., None, :, :]
+    pos_a = pa[..., :-1, None, :] + va * (lo - ta0)[..., None]
+    pos_b = pb[..., None, :-1, :] + vb * (lo - tb0)[..., None]
+    d0, dv = pos_a - pos_b, va - vb
+    if rot_b is not None:
+        rot = rot_b[..., None, :, :, :]
+        d0 = np.einsum("...ij,...j->...i", rot, d0)
+        dv = np.einsum("...ij,...j->...i", rot, dv)
+    if scale_b is not None:
+        d0 = d0 / scale_b[..., None, :, :]
+        dv = dv / scale_b[..., None, :, :]
+    dist, s = _cpa(d0, dv, np.where(valid, hi - lo, 0.0))
+    dist = np.where(valid, dist, np.inf)
+    flat = dist.reshape(*dist.shape[:-2], -1)
+    k = np.argmin(flat, axis=-1)
+    d_min = np.take_along_axis(flat, k[..., None], axis=-1)[..., 0]
+    t_flat = (lo + s).reshape(flat.shape)
+    t_min = np.take_along_axis(t_flat, k[..., None], axis=-1)[..., 0]
+    return d_min, t_min
+
+
+def candidate_pairs(points: np.ndarray, times: np.ndarray, reach_m: np.ndarray) -> np.ndarray:
+    """UAV pairs (P, 2), i < j, whose space-time boxes come within reach in ANY candidate.
+
+    points (B, U, W, 3), times (B, U, W); reach_m (B, U) is how far each UAV's own influence
+    extends (half the separation plus its corner deviation margin).
+    """
+    lo = points.min(axis=2) - reach_m[..., None]
+    hi = points.max(axis=2) + reach_m[..., None]
+    t_lo, t_hi = times.min(axis=2), times.max(axis=2)
+    overlap = np.all(
+        (lo[:, :, None, :] <= hi[:, None, :, :]) & (lo[:, None, :, :] <= hi[:, :, None, :]), axis=-1
+    )
+    overlap &= (t_lo[:, :, None] < t_hi[:, None, :]) & (t_lo[:, None, :] < t_hi[:, :, None])
+    i, j = np.nonzero(np.triu(overlap.any(axis=0), k=1))
+    return np.stack([i, j], axis=1)
+
+
+def pair_closest_approach(
+    points: np.ndarray, times: np.ndarray, pairs: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closest approach (B, P) distance [m] and time [s] for the given UAV pairs (P, 2)."""
+    n_b, _, n_w, _ = points.shape
+    n_p = len(pairs)
+    d_min = np.full((n_b, n_p), np.inf)
+    t_min = np.zeros((n_b, n_p))
+    step = max(1, _CHUNK_ELEMENTS // max(1, n_b * (n_w - 1) ** 2))
+    for start in range(0, n_p, step):
+        sl = slice(start, start + step)
+        i, j = pairs[sl, 0], pairs[sl, 1]
+        d_min[:, sl], t_min[:, sl] = closest_approach(points[:, i], times[:, i], points[:, j], times[:, j])
+    return d_min, t_min
+
+
+def zone_closest_approach(
+    points: np.ndarray,
+    times: np.ndarray,
+    zone_points: np.ndarray,
+    zone_times: np.ndarray,
+    zone_rot: np.ndarray,
+    zone_axes: np.ndarray,
+    margin_m: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Whitened closest approach of every UAV to every moving ellipsoid zone.
+
+    points (B, U, W, 3), times (B, U, W); zones Z with centre polylines zone_points (Z, H, 3),
+    zone_times (Z, H), axes rotation per leg zone_rot (Z, H-1, 3, 3) and semi-axes
+    zone_axes (Z, H-1, 3) [m]; margin_m (B, U) is added to every semi-axis of the zone when
+    checking that UAV. Returns (d (B, U, Z) with < 1 meaning inside, t (B, U, Z)).
+    """
+    n_b, n_u = points.shape[:2]
+    n_z = len(zone_points)
+    d_out = np.full((n_b, n_u, n_z), np.inf)
+    t_out = np.zeros((n_b, n_u, n_z))
+    for z in range(n_z):  # few zones (manned aircraft x motion modes); vectorised inside
+        scale = zone_axes[z][None, None] + margin_m[..., None, None]
+        d_out[..., z], t_out[..., z] = closest_approach(
+            points, times, zone_points[z][None, None], zone_times[z][None, None], zone_rot[z], scale
+        )
+    return d_out, t_out
+
+
+def conflict_counts(
+    n_uav: int,
+    pairs: np.ndarray,
+    pair_conflict: np.ndarray,
+    zone_conflict: np.ndarray,
+    zone_owner: np.ndarray,
+) -> np.ndarray:
+    """Conflicting-aircraft count per UAV (B, U) from pair flags (B, P) and zone flags (B, U, Z).
+
+    A manned aircraft counts once however many of its motion-mode zones a UAV enters;
+    ``zone_owner`` (Z,) gives the manned aircraft index of each zone.
+    """
+    n_b = pair_conflict.shape[0]
+    counts = np.zeros((n_b, n_uav), dtype=int)
+    if len(pairs):
+        flags = pair_conflict.astype(int)
+        np.add.at(counts, (slice(None), pairs[:, 0]), flags)
+        np.add.at(counts, (slice(None), pairs[:, 1]), flags)
+    if zone_conflict.shape[-1]:
+        n_m = int(zone_owner.max()) + 1
+        per_manned = np.zeros((n_b, n_uav, n_m), dtype=bool)
+        for z, owner in enumerate(zone_owner):
+            per_manned[..., owner] |= zone_conflict[..., z]
+        counts += per_manned.sum(axis=-1)
+    return counts
