@@ -9,6 +9,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavwp  # noqa: E402
@@ -273,3 +275,31 @@ def test_load_mission_file_errors(tmp_path):
         load_mission_file(tmp_path / "x.txt")
     with pytest.raises(MissionFileError, match="planned home"):
         MissionFile(mission=[]).items("ardupilot")
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=32)
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            st.integers(-900_000_000, 900_000_000),
+            st.integers(-1_800_000_000, 1_800_000_000),
+            finite,
+            finite,
+            finite,
+            st.sampled_from([0, 2, 6, 11]),  # frames 3, 5, 10 are written as their twins,
+        ),
+        min_size=1,
+        max_size=8,
+    )
+)
+def test_wpl_and_plan_round_trip_any_items(rows):
+    items = [
+        MissionItem(i, frame, 16, int(i == 0), 1, p1, p2, 0.0, 0.0, x=x, y=y, z=z)
+        for i, (x, y, p1, p2, z, frame) in enumerate(rows)
+    ]
+    assert loads_wpl_items(dumps_wpl(items)) == items
+    mf = MissionFile.from_items(items, "px4", home=(1.0, 2.0, 3.0))
+    assert loads_plan(dumps_plan(mf)).items("px4") == items
