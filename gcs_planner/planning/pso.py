@@ -61,7 +61,7 @@ Mutation = Callable[[np.ndarray, int, int, np.random.Generator], np.ndarray]
 Progress = Callable[[float, str], None]
 
 INERTIA_SCHEDULES = ("constant", "linear", "exponential")
-MUTATION_STAGES = ("before_velocity", "after_move")
+MUTATION_STAGES = ("before_velocity", "after_move", "gbest_greedy")
 
 
 @dataclass(frozen=True)
@@ -224,6 +224,12 @@ def minimize(
                 progress(len(history) / total_iters, f"round {rnd + 1} iteration {t} best {gbest_c:.6g}")
             if t == cfg.iterations:
                 break
+            if cfg.mutation is not None and cfg.mutation_stage == "gbest_greedy":
+                trial = np.clip(cfg.mutation(gbest_x[None, :], t, cfg.iterations, rng), lower, upper)
+                tc = float(np.asarray(cost(trial), dtype=float).reshape(-1)[0])
+                evaluations += 1
+                if tc < gbest_c:  # NaN compares False: rejected
+                    gbest_c, gbest_x = tc, trial[0]
             if cfg.mutation is not None and cfg.mutation_stage == "before_velocity":
                 x = np.clip(cfg.mutation(x, t, cfg.iterations, rng), lower, upper)
             w = inertia_weight(cfg, t, cfg.iterations)
