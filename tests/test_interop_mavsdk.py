@@ -144,3 +144,41 @@ def test_mavsdk_imports_our_plan_and_wpl_files(mavsdk_pair, autopilot):
     plan_items = [to_ours(it) for it in imported.mission_items]
     body = as_in_files[1:] if autopilot == "ardupilot" else as_in_files  # .plan files carry no home item
     assert plan_items == [replace(it, seq=i, current=int(i == 0)) for i, it in enumerate(body)]
+
+
+@pytest.fixture(scope="module")
+def mock_fleet():
+    sitl_mock = pytest.importorskip("sitl_mock")
+    with sitl_mock.MockFleet(vehicles=[{"profile": "ardupilot"}, {"profile": "px4"}], home=ORIGIN) as fleet:
+        yield fleet
+
+
+def stored(fleet, sysid: int, mission_type: int = 0) -> list[MissionItem]:
+    return fleet.call(lambda: fleet.vehicle(sysid).mission_server.items(mission_type))
+
+
+@pytest.mark.parametrize(("sysid", "autopilot"), [(1, "ardupilot"), (2, "px4")])
+def test_mavsdk_mission_raw_client_uploads_to_and_downloads_from_mock(mock_fleet, sysid, autopilot):
+    host, port = mock_fleet.vehicle(sysid).address
+    client, raw = mavsdk_client(f"udpout://{host}:{port}")
+    try:
+        items = plan_to_items(vehicle_plan(n=12, takeoff_delay_s=2.0), ORIGIN, autopilot)
+        raw.upload_mission([to_raw(it) for it in items])
+        held = stored(mock_fleet, sysid)
+        if autopilot == "ardupilot":  # ArduPilot reads relative-altitude items back in frame 3
+            assert held == [replace(it, frame=file_frame(it.frame)) for it in items]
+        else:
+            assert held == items
+        downloaded = [to_ours(it) for it in raw.download_mission()]
+        # `current` in a download marks the vehicle's current item, not the uploaded flag
+        assert [replace(it, current=0) for it in downloaded] == [replace(it, current=0) for it in held]
+        if autopilot == "px4":
+            rally = [
+                MissionItem(i, 6, 5100, 0, 1, x=473977420 + 1000 * i, y=85455940, z=30.0, mission_type=2)
+                for i in range(3)
+            ]
+            raw.upload_rally_points([to_raw(it) for it in rally])
+            assert stored(mock_fleet, sysid, 2) == rally
+            assert [to_ours(it) for it in raw.download_rallypoints()] == rally
+    finally:
+        client.destroy()
