@@ -11,6 +11,8 @@ from gcs_planner.geometry.dubins import (
     WORDS,
     lift,
     min_length_for_climb,
+    sample_batch,
+    shortest_batch,
     shortest_path,
     shortest_path_free_heading,
     stretch_to_length,
@@ -172,3 +174,17 @@ def test_lift_reports_climb_violation():
 def test_invalid_radius_raises():
     with pytest.raises(ValueError, match="radii"):
         word_lengths(np.zeros(3), np.ones(3), 0.0)
+
+
+def test_batch_shortest_and_sampling_match_single_paths():
+    q0, q1, r0, r1 = _random_problems(50, seed=8, unequal=True)
+    word, lengths, radii = shortest_batch(q0, q1, r0, r1)
+    s = np.linspace(0, 1, 7)[None, :] * lengths.sum(axis=1)[:, None]
+    poses = sample_batch(q0, word, lengths, radii, s)
+    for i in range(len(q0)):
+        single = shortest_path(tuple(q0[i]), tuple(q1[i]), r0[i], r1[i])
+        assert WORDS[word[i]] == single.word
+        assert np.allclose(lengths[i], single.lengths)
+        ref = single.sample(s[i])
+        assert np.allclose(poses[i, :, :2], ref[:, :2], atol=1e-7)
+        assert np.allclose(_wrapdiff(poses[i, :, 2], ref[:, 2]), 0, atol=1e-9)

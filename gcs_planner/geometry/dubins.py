@@ -52,6 +52,8 @@ __all__ = [
     "LiftedPath",
     "lift",
     "min_length_for_climb",
+    "sample_batch",
+    "shortest_batch",
     "shortest_path",
     "shortest_path_free_heading",
     "stretch_to_length",
@@ -60,6 +62,7 @@ __all__ = [
 
 WORDS = ("LSL", "RSR", "LSR", "RSL", "RLR", "LRL")
 _SIGN = {"L": 1.0, "R": -1.0, "S": 0.0}
+_WORD_SIGNS = np.array([[_SIGN[c] for c in w] for w in WORDS])
 _TWO_PI = 2.0 * math.pi
 _ANGLE_EPS = 1e-9
 
@@ -188,6 +191,49 @@ def word_lengths(
             better_b = b.sum(axis=1) < a.sum(axis=1)
             out[:, w] = np.where(better_b[:, None], b, a)
     return out
+
+
+def shortest_batch(
+    q0: np.ndarray, q1: np.ndarray, r0: np.ndarray | float, r1: np.ndarray | float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Shortest word of N problems at once: word index into WORDS (N,), lengths (N, 3), radii (N, 3).
+
+    Rows with no valid word (cannot happen for CSC words with equal radii) get lengths inf.
+    """
+    seg = word_lengths(q0, q1, r0, r1)
+    n = len(seg)
+    r0 = np.broadcast_to(np.asarray(r0, dtype=float), (n,))
+    r1 = r0 if r1 is None else np.broadcast_to(np.asarray(r1, dtype=float), (n,))
+    best = np.argmin(seg.sum(axis=2), axis=1)
+    lengths = seg[np.arange(n), best]
+    rm = np.minimum(r0, r1)
+    radii = np.column_stack([r0, np.where(best < 4, np.inf, rm), r1])
+    return best, lengths, radii
+
+
+def sample_batch(
+    q0: np.ndarray, word: np.ndarray, lengths: np.ndarray, radii: np.ndarray, s_m: np.ndarray
+) -> np.ndarray:
+    """Poses (N, K, 3) of N paths at arc lengths s_m (N, K) [m], clipped to each path; vectorised.
+
+    q0 (N, 3) start poses, word (N,) indices into WORDS, lengths (N, 3), radii (N, 3) as returned by
+    shortest_batch. Headings are not wrapped.
+    """
+    q0 = np.asarray(q0, dtype=float)
+    signs = _WORD_SIGNS[np.asarray(word)]  # (N, 3)
+    kappa = np.where(signs != 0, signs / np.where(np.isfinite(radii), radii, 1.0), 0.0)
+    starts = [q0]
+    for k in range(2):
+        starts.append(_advance_many(starts[-1], kappa[:, k], lengths[:, k]))
+    starts = np.stack(starts, axis=1)  # (N, 3 segments, 3)
+    bounds = np.cumsum(lengths, axis=1)
+    s = np.clip(np.asarray(s_m, dtype=float), 0.0, bounds[:, 2:3])
+    seg = (s > bounds[:, 0:1]).astype(int) + (s > bounds[:, 1:2])
+    seg_start = np.concatenate([np.zeros((len(q0), 1)), bounds[:, :2]], axis=1)
+    rows = np.broadcast_to(np.arange(len(q0))[:, None], s.shape)
+    ds = s - seg_start[rows, seg]
+    out = _advance_many(starts[rows, seg].reshape(-1, 3), kappa[rows, seg].ravel(), ds.ravel())
+    return out.reshape(*s.shape, 3)
 
 
 def shortest_path(

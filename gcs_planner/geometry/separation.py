@@ -1,7 +1,8 @@
 """Time-parametrised trajectories, inter-vehicle separation and the independent plan checker.
 
 Trajectories are piecewise linear in time between their samples (a plan's ``path`` /
-``path_times_s`` shifted by the take-off delay). A vehicle occupies the airspace only while it
+``path_times_s``, seconds from the mission start with any take-off delay already included, as
+VehiclePlan documents). A vehicle occupies the airspace only while it
 flies, from its first to its last sample time: before take-off it is on the ground at its start,
 after arrival it has landed (a choice: the scenario's goals are landing spots, not hover points).
 
@@ -79,8 +80,8 @@ class Trajectory:
 
     @classmethod
     def from_plan(cls, vp, separation_m: float = 0.0) -> Trajectory:
-        """Trajectory of a VehiclePlan (path samples, shifted by its take-off delay)."""
-        times = np.asarray(vp.path_times_s, dtype=float) + vp.takeoff_delay_s
+        """Trajectory of a VehiclePlan (path_times_s are seconds from the mission start, delay included)."""
+        times = np.asarray(vp.path_times_s, dtype=float)
         return cls(vp.vehicle_id, times, np.asarray(vp.path, dtype=float), separation_m)
 
 
