@@ -356,7 +356,7 @@ def problem_from_scenario(
 
 
 def follow_terrain(
-    env: ThreatEnv, track: np.ndarray, spacing_m: float, tolerance_m: float, margin_m: float = 1.0
+    env: ThreatEnv, track: np.ndarray, spacing_m: float, tolerance_m: float, margin_m: float = 5.0
 ) -> np.ndarray:
     """Mission waypoints (K, 3) [m] that fly ``track`` clear of terrain, radars and obstacles.
 
@@ -364,8 +364,10 @@ def follow_terrain(
     cylinders and lifted to terrain + h_safe, each with ``margin_m`` to spare (the paper repairs and
     checks only its 100 nodes, ~1.3 km apart, so the legs between them can cut into convex slopes
     or graze a dome). Waypoints are then thinned greedily: a leg grows while it stays within
-    ``tolerance_m`` of the cleaned track and its own resample (every spacing_m / 2) is no deeper
-    in any volume than the cleaned samples it replaces (zero when they are clean).
+    ``tolerance_m`` of the cleaned track and its own resample (every spacing_m / 2) keeps
+    ``margin_m / 2`` clear of every volume (a straight leg between two clear points can still cut a
+    convex dome, cylinder or slope; the half margin covers the sag between the check samples), or
+    is no deeper than the samples it replaces where those could not be cleaned.
     """
     dense = env.push_out(resample_path(track, spacing_m), margin_m)
     own = np.max(
@@ -386,7 +388,7 @@ def follow_terrain(
         allowed = max(own[i], own[j])
         while j + 1 < len(dense):
             allowed_next = max(allowed, own[j + 1])
-            if not _leg_ok(env, dense, i, j + 1, spacing_m, tolerance_m, allowed_next):
+            if not _leg_ok(env, dense, i, j + 1, spacing_m, tolerance_m, allowed_next - margin_m / 2):
                 break
             j, allowed = j + 1, allowed_next
         keep.append(j)

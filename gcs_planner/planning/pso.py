@@ -38,7 +38,9 @@ Mutation hook: any callable ``mutation(x, t, t_max, rng) -> x'`` (x is (P, D), t
 ``mutation_stage`` says where it runs: ``"before_velocity"`` (ACMPSO's step order: steps 4-5
 mutate the evaluated positions, then step 7 moves from the mutated positions; mutated points are
 not evaluated themselves) or ``"after_move"`` (mutate the new positions before they are
-evaluated). :class:`CauchyMutation` implements eqs. 20-21.
+evaluated) or ``"gbest_greedy"`` (after the bests are updated, mutate a copy of the global best,
+evaluate it - one extra cost row per iteration, counted - and keep it only if strictly better).
+:class:`CauchyMutation` implements eqs. 20-21.
 
 Choices where PSO papers are open (documented so runs are reproducible):
 r1, r2 are drawn per particle and per dimension by default (``per_dimension_random``); initial
