@@ -69,6 +69,7 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
+MAX_LEG = 64  # longest mission leg, in dense samples (6.4 km at 100 m)
 Progress = Callable[[float, str], None]
 
 ALGORITHMS = ("acmpso", "lpso", "bpso")
@@ -382,34 +383,34 @@ def follow_terrain(
         axis=1,
     )
     keep = [0]
-    i = 0
-    while i < len(dense) - 1:
-        j = i + 1
-        allowed = max(own[i], own[j])
-        while j + 1 < len(dense):
-            allowed_next = max(allowed, own[j + 1])
-            if not _leg_ok(env, dense, i, j + 1, spacing_m, tolerance_m, allowed_next - margin_m / 2):
-                break
-            j, allowed = j + 1, allowed_next
-        keep.append(j)
-        i = j
+    while keep[-1] < len(dense) - 1:
+        keep.append(_longest_leg(env, dense, own, keep[-1], tolerance_m, margin_m / 2))
     return dense[keep]
 
 
-def _leg_ok(
-    env: ThreatEnv, dense: np.ndarray, i: int, j: int, spacing_m: float, tolerance_m: float, allowed: float
-) -> bool:
-    frac = np.linspace(0.0, 1.0, j - i + 1)[:, None]
-    chord = dense[i] + frac * (dense[j] - dense[i])
-    if np.max(np.abs(chord - dense[i : j + 1])) > tolerance_m:
-        return False
-    fine = resample_path(dense[[i, j]], spacing_m / 2.0)
-    depth = max(
-        float(np.max(env.floor(fine[:, 0], fine[:, 1]) - fine[:, 2])),
-        float(np.max(env.radar_depth(fine), initial=-np.inf)),
-        float(np.max(env.cylinder_depth(fine), initial=-np.inf)),
-    )
-    return depth <= allowed
+def _longest_leg(
+    env: ThreatEnv, dense: np.ndarray, own: np.ndarray, i: int, tolerance_m: float, clearance_m: float
+) -> int:
+    """End j of the longest leg i -> j (at most MAX_LEG samples) whose every shorter leg also passes.
+
+    All candidate legs are checked at once: each is sampled at twice the track's resolution.
+    """
+    js = np.arange(i + 1, min(i + MAX_LEG, len(dense) - 1) + 1)
+    lengths = js - i
+    steps = np.arange(2 * lengths[-1] + 1)
+    frac = np.minimum(steps[None, :] / (2.0 * lengths[:, None]), 1.0)  # (m, S), padded with the end point
+    chord = dense[i] + frac[..., None] * (dense[js] - dense[i])[:, None, :]
+    track = dense[np.minimum(i + np.arange(lengths[-1] + 1)[None, :], js[:, None])]
+    deviation = np.max(np.abs(chord[:, ::2] - track), axis=(1, 2))
+    depth = np.max(env.floor(chord[..., 0], chord[..., 1]) - chord[..., 2], axis=1)
+    if len(env.radar_r):
+        depth = np.maximum(depth, env.radar_depth(chord).max(axis=(1, 2)))
+    if len(env.cyl_r):
+        depth = np.maximum(depth, env.cylinder_depth(chord).max(axis=(1, 2)))
+    allowed = np.maximum.accumulate(np.maximum(own[js], own[i])) - clearance_m
+    ok = (deviation <= tolerance_m) & (depth <= allowed)
+    ok[0] = True  # adjacent samples are always joined: nothing finer to fly
+    return int(js[np.argmin(ok) - 1] if not ok.all() else js[-1])
 
 
 def plan(scenario: Scenario, rng: np.random.Generator, progress: Progress | None = None) -> Plan:
