@@ -23,6 +23,7 @@ Progress = Callable[[float, str], None]
 # name in the scenario file -> module exposing plan(scenario, rng, progress)
 PLANNERS: dict[str, str] = {
     "straight": "gcs_planner.planning.straight",
+    "priority_swarm": "gcs_planner.planning.priority_swarm",
     "acmpso": "gcs_planner.planning.acmpso",
     "coalition": "gcs_planner.planning.coalition",
     "deconflict_4d": "gcs_planner.planning.deconflict4d",
