@@ -1,0 +1,744 @@
+"""Priority swarm planner (seed 000): RRT* initial paths, prioritised PSO with restarts, Dubins paths.
+
+Pipeline (../shared/seeds/digest-000-priority-swarm.md, the same method as PPSwarm, Drones 2024):
+
+1. Level 1: one RRT* path per UAV among the static obstacles; priorities from the task priority
+   (``Vehicle.priority``, higher first) and the path difficulty.
+2. Level 2: in priority order, one PSO swarm per UAV (a particle = the UAV's ``waypoints``
+   interior waypoints, 3 coordinates each) seeded with its RRT* path, the previous round's elites
+   and random particles, minimising F = b1 F1 + b2 F2 + b3 F3 + b4 F4 + F5 (eqs. 3-14) against the
+   static obstacles and the timed trajectories of the UAVs planned before it (the "global
+   obstacle list").
+3. Restart rounds: infeasible UAVs are promoted to the front and the round repeats; a UAV whose
+   previous path is still feasible against the new higher-priority set keeps it.
+4. The final Dubins paths are timed, checked by the independent checker
+   (gcs_planner.geometry.separation.check_plan, 0.5 s sampling); a UAV in conflict is re-planned
+   against everybody else, then delayed on the ground in ``delay_step_s`` steps; what still fails
+   is reported infeasible in its VehiclePlan (``feasible=False`` + notes), never silently.
+
+Choices where the paper is open (all settable under [planner] in the scenario file):
+- Path model: the polyline start -> waypoints -> goal is flown as planar Dubins paths between
+  consecutive waypoints with the vehicle's minimum turn radius, heading at each interior waypoint
+  = bisector of the in/out legs, start/goal heading = first/last leg; altitude linear along each
+  leg's arc length. So the PSO optimises the *flown, smoothed* path: Dubins smoothing is part of the
+  decoding, and the turn-radius constraint holds by construction.
+- Timing: constant speed ``speed_mps`` along the 3-D path from t = take-off delay; a UAV occupies
+  the airspace from take-off to arrival (goals are landing spots). Start/goal altitudes outside
+  the vehicle's band get a vertical take-off/landing column (clamped into the band).
+- F1 length = flown 3-D length / straight start-goal distance. F2 threat (eqs. 5-6) on the path
+  sampled every ``dt_s`` (point-to-axis distance, obstacles inflated by ``obstacle_margin_m``, which
+  covers the chord between samples): soft part = depth into the buffer / buffer width, integrated
+  along the path and divided by the straight distance; inside radius = HARD + depth. F3 altitude
+  (eqs. 7-8, the digest's reading): mean |z - band middle| / half band, HARD outside. F4 (eqs. 9-11)
+  = a1 sum(turn angles) + a2 sum(|climb-angle changes|) of the polyline, each divided by
+  pi (W - 2); climb angle above ``max_climb_deg`` = HARD + excess. F5 (eqs. 12-13): on the shared
+  0.5 s time grid a 4-D cKDTree (x, y, z, big * slice) finds higher-priority samples near each
+  particle sample; the closest approach of the two linear motions over the slice must exceed
+  max(separation_i, separation_j) + ``separation_margin_m``, else HARD + shortfall. HARD = 1e4
+  replaces the paper's infinity (violations still rank by size).
+- Weights b1..b4 = 1, 1, 0.1, 0.2 and a1 = a2 = 0.5 (the paper gives none).
+- PSO: the shared engine (gcs_planner.planning.pso), linear inertia 0.9 -> 0.4, c1 = c2 = 1.5,
+  v_max = 0.2 of the bound span. Initial swarm: the RRT* path resampled to W points by arc length,
+  ``elite_fraction`` of the swarm = the UAV's best particles of the previous round, ``noise``
+  particles = RRT* path + Gaussian noise (sigma = max(turn radius, 5 % of the xy span), 10 % of the
+  band in z), ``random_fraction`` uniform in the bounds. Bounds: the scenario [bounds] box, else
+  the box of all starts, goals and obstacles padded by ``pad_m``; z = the vehicle's band.
+- Priorities: sort by (-priority, -difficulty, index) with difficulty = RRT* length / straight
+  distance (constrained UAVs choose first). A UAV without an RRT* path starts from the straight line.
+- Rounds stop when every UAV is feasible or after ``rounds``; the best round (most feasible UAVs,
+  then lowest total cost) is kept.
+- Mission waypoints: the Dubins path decimated so every chord is within ``waypoint_tol_m`` of the
+  arc (plus every segment junction), so a waypoint-to-waypoint autopilot reproduces it; the dense
+  path (``Plan.path``) is sampled every min(dt_s * v, R / 4) for the checker.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gcs_planner.errors import UserError
+from gcs_planner.geometry.dubins import sample_batch, shortest_batch
+from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
+from gcs_planner.geometry.separation import check_plan
+from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.planning.pso import PSOConfig, minimize
+from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
+from gcs_planner.scenario import Scenario, Vehicle
+
+__all__ = ["SwarmConfig", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
+
+log = logging.getLogger(__name__)
+SLICE_SCALE = 1e7  # 4-D tree: samples of different time slices are this far apart
+
+
+@dataclass(frozen=True)
+class SwarmConfig:
+    """Planner parameters ([planner] table); see the module docstring for what each one means."""
+
+    waypoints: int = 5
+    particles: int = 30
+    iterations: int = 60
+    rounds: int = 3
+    elite_fraction: float = 0.15
+    random_fraction: float = 0.25
+    dt_s: float = 0.5
+    separation_margin_m: float = 2.0
+    obstacle_margin_m: float = 1.5
+    max_climb_deg: float = 20.0
+    b1: float = 1.0
+    b2: float = 1.0
+    b3: float = 0.1
+    b4: float = 0.2
+    a1: float = 0.5
+    pad_m: float = 100.0
+    rrt_step_m: float = 40.0
+    rrt_iterations: int = 1500
+    delay_step_s: float = 5.0
+    repairs: int = 4
+    waypoint_tol_m: float = 1.0
+    acceptance_radius_m: float = 2.0
+
+    @classmethod
+    def from_planner(cls, table: dict) -> SwarmConfig:
+        names = {f.name: f for f in dataclasses.fields(cls)}
+        kwargs = {}
+        for key, value in table.items():
+            if key in ("name", "seed"):
+                continue
+            if key not in names:
+                raise UserError(f"planner.{key} is not a priority_swarm parameter (known: {sorted(names)})")
+            kind = int if names[key].type == "int" else float
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, int | float)
+                or (kind is int and value != int(value))
+            ):
+                raise UserError(
+                    f"planner.{key} must be {'an integer' if kind is int else 'a number'}, got {value!r}"
+                )
+            kwargs[key] = kind(value)
+        cfg = cls(**kwargs)
+        for key in ("waypoints", "particles", "iterations", "rounds"):
+            if getattr(cfg, key) < 1:
+                raise UserError(f"planner.{key} must be >= 1, got {getattr(cfg, key)!r}")
+        if not 0 < cfg.dt_s <= 0.5:
+            raise UserError(f"planner.dt_s must be in (0, 0.5] s, got {cfg.dt_s!r}")
+        if cfg.elite_fraction + cfg.random_fraction > 1 or min(cfg.elite_fraction, cfg.random_fraction) < 0:
+            raise UserError(
+                f"planner.elite_fraction + random_fraction must be in [0, 1], got"
+                f" {cfg.elite_fraction!r} + {cfg.random_fraction!r}"
+            )
+        return cfg
+
+
+@dataclass
+class VehicleProblem:
+    """One UAV's optimisation problem: fixed ends inside its band, bounds, timing."""
+
+    index: int
+    vehicle: Vehicle
+    start: np.ndarray  # (3,) first point inside the band
+    goal: np.ndarray  # (3,) last point inside the band
+    lower: np.ndarray  # (D,)
+    upper: np.ndarray
+    n_wp: int
+    delay_s: float = 0.0
+
+    @property
+    def pre(self) -> np.ndarray:
+        """Take-off column below the start (0 or 1 point)."""
+        s = np.asarray(self.vehicle.start, dtype=float)
+        return s[None, :] if abs(s[2] - self.start[2]) > 1e-9 else np.empty((0, 3))
+
+    @property
+    def post(self) -> np.ndarray:
+        g = np.asarray(self.vehicle.goal, dtype=float)
+        return g[None, :] if abs(g[2] - self.goal[2]) > 1e-9 else np.empty((0, 3))
+
+    @property
+    def t_offset(self) -> float:
+        """Time [s] at which the Dubins part starts (delay + take-off column)."""
+        return self.delay_s + abs(self.vehicle.start[2] - self.start[2]) / self.vehicle.speed_mps
+
+    @property
+    def straight_m(self) -> float:
+        return max(float(np.linalg.norm(self.goal - self.start)), 1e-6)
+
+
+@dataclass
+class Decoded:
+    """Particles decoded into Dubins legs (P particles, W waypoints)."""
+
+    pts: np.ndarray  # (P, W, 3)
+    q0: np.ndarray  # (P*(W-1), 3) leg start poses
+    word: np.ndarray  # (P*(W-1),)
+    seg: np.ndarray  # (P*(W-1), 3)
+    radii: np.ndarray  # (P*(W-1), 3)
+    lh: np.ndarray  # (P, W-1) horizontal leg lengths
+    l3: np.ndarray  # (P, W-1) 3-D leg lengths
+    cum: np.ndarray  # (P, W)
+
+    @property
+    def total(self) -> np.ndarray:
+        return self.cum[:, -1]
+
+
+def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
+    """Particles (P, D) -> polyline + Dubins legs with bisector headings."""
+    p = len(x)
+    pts = np.concatenate(
+        [
+            np.broadcast_to(prob.start, (p, 1, 3)),
+            x.reshape(p, prob.n_wp, 3),
+            np.broadcast_to(prob.goal, (p, 1, 3)),
+        ],
+        axis=1,
+    )
+    d = np.diff(pts, axis=1)
+    theta = np.arctan2(d[..., 1], d[..., 0])  # (P, W-1)
+    turn = (theta[:, 1:] - theta[:, :-1] + math.pi) % (2 * math.pi) - math.pi
+    heading = np.concatenate([theta[:, :1], theta[:, :-1] + turn / 2, theta[:, -1:]], axis=1)
+    q = np.concatenate([pts[..., :2], heading[..., None]], axis=2)
+    q0 = q[:, :-1].reshape(-1, 3)
+    q1 = q[:, 1:].reshape(-1, 3)
+    word, seg, radii = shortest_batch(q0, q1, prob.vehicle.turn_radius_m)
+    lh = seg.sum(axis=1).reshape(p, -1)
+    l3 = np.hypot(lh, d[..., 2])
+    cum = np.concatenate([np.zeros((p, 1)), np.cumsum(l3, axis=1)], axis=1)
+    return Decoded(pts, q0, word, seg, radii, lh, l3, cum)
+
+
+def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
+    """Positions (P, K, 3) at 3-D arc lengths s (P, K) [m] (clipped to each path)."""
+    p, k = s.shape
+    n_leg = dec.lh.shape[1]
+    s = np.clip(s, 0.0, dec.total[:, None])
+    leg = np.minimum(np.sum(s[:, :, None] > dec.cum[:, None, 1:-1], axis=2), n_leg - 1)
+    rows = np.arange(p)[:, None]
+    l3 = dec.l3[rows, leg]
+    f = np.where(l3 > 0, (s - dec.cum[rows, leg]) / np.where(l3 > 0, l3, 1.0), 0.0)
+    z0 = dec.pts[rows, leg, 2]
+    z = z0 + f * (dec.pts[rows, leg + 1, 2] - z0)
+    flat = (rows * n_leg + leg).ravel()
+    xy = sample_batch(
+        dec.q0[flat], dec.word[flat], dec.seg[flat], dec.radii[flat], (f * dec.lh[rows, leg]).reshape(-1, 1)
+    )[:, 0, :2]
+    return np.concatenate([xy.reshape(p, k, 2), z[..., None]], axis=2)
+
+
+class Traffic:
+    """Timed samples of already-planned UAVs on the shared time grid, in a 4-D cKDTree."""
+
+    def __init__(self, dt_s: float) -> None:
+        self.dt_s = dt_s
+        self._pos: list[np.ndarray] = []
+        self._slice: list[np.ndarray] = []
+        self._sep: list[np.ndarray] = []
+        self.owner: dict[int, int] = {}  # vehicle index -> block number
+        self._tree: cKDTree | None = None
+        self.v_max = 0.0
+
+    def add(
+        self, vehicle_index: int, slices: np.ndarray, pos: np.ndarray, sep_m: float, speed: float
+    ) -> None:
+        """Add one UAV's samples at grid slices (K,) -> positions (K, 3)."""
+        self.owner[vehicle_index] = len(self._pos)
+        self._pos.append(np.asarray(pos, dtype=float))
+        self._slice.append(np.asarray(slices, dtype=int))
+        self._sep.append(np.full(len(slices), sep_m))
+        self.v_max = max(self.v_max, speed)
+        self._tree = None
+
+    def _build(self) -> None:
+        pos = np.concatenate(self._pos)
+        sl = np.concatenate(self._slice)
+        self.pos, self.slice, self.sep = pos, sl, np.concatenate(self._sep)
+        # index of the same vehicle's sample at the next slice (-1 at its last sample)
+        nxt = np.arange(1, len(pos) + 1)
+        ends = np.cumsum([len(p) for p in self._pos]) - 1
+        nxt[ends] = -1
+        self.next = nxt
+        self._tree = cKDTree(np.column_stack([pos, sl * SLICE_SCALE]))
+
+    def violations(
+        self, slices: np.ndarray, pos: np.ndarray, valid: np.ndarray, sep_m: float, margin_m: float
+    ):
+        """Separation shortfall [m] summed per particle and the number of violating samples.
+
+        slices (K,), pos (P, K, 3), valid (P, K): the particle samples on the grid.
+        """
+        p, k, _ = pos.shape
+        if not self._pos:
+            return np.zeros(p), np.zeros(p)
+        if self._tree is None:
+            self._build()
+        sep_max = max(float(self.sep.max()), sep_m) + margin_m
+        radius = sep_max + 2.0 * max(self.v_max, 1e-6) * self.dt_s
+        q = np.concatenate([pos, np.broadcast_to(slices * SLICE_SCALE, (p, k))[..., None]], axis=2)
+        idx = np.flatnonzero(valid.ravel())
+        if not len(idx):
+            return np.zeros(p), np.zeros(p)
+        n_nb = min(4, len(self.pos))
+        dist, nb = self._tree.query(q.reshape(-1, 4)[idx], k=n_nb, distance_upper_bound=radius)
+        dist, nb = dist.reshape(len(idx), n_nb), nb.reshape(len(idx), n_nb)
+        hit = np.isfinite(dist)
+        if not hit.any():
+            return np.zeros(p), np.zeros(p)
+        row, col = np.nonzero(hit)
+        j = nb[row, col]
+        flat = idx[row]
+        part, ks = np.divmod(flat, k)
+        a0 = pos[part, ks]
+        b0 = self.pos[j]
+        has_next = (ks + 1 < k) & valid[part, np.minimum(ks + 1, k - 1)] & (self.next[j] >= 0)
+        a1 = np.where(has_next[:, None], pos[part, np.minimum(ks + 1, k - 1)], a0)
+        b1 = np.where(has_next[:, None], self.pos[np.where(self.next[j] >= 0, self.next[j], j)], b0)
+        d0 = b0 - a0
+        dv = (b1 - a1) - d0
+        vv = np.sum(dv * dv, axis=1)
+        tau = np.clip(-np.sum(d0 * dv, axis=1) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
+        dmin = np.linalg.norm(d0 + tau[:, None] * dv, axis=1)
+        short = np.maximum(0.0, np.maximum(self.sep[j], sep_m) + margin_m - dmin)
+        depth = np.bincount(part, weights=short, minlength=p)
+        count = np.bincount(part, weights=(short > 0).astype(float), minlength=p)
+        return depth, count
+
+
+class CostModel:
+    """Eqs. 3-14 for one UAV, vectorised over a swarm (P, D) -> (P,), with a term breakdown."""
+
+    def __init__(
+        self, prob: VehicleProblem, obstacles: Obstacles, traffic: Traffic, cfg: SwarmConfig
+    ) -> None:
+        self.prob, self.obs, self.traffic, self.cfg = prob, obstacles, traffic, cfg
+        self.evaluations = 0
+
+    def grid(self, dec: Decoded) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Samples of every particle on the shared time grid: slices (K,), pos (P, K, 3), valid (P, K), s."""
+        v, dt, t0 = self.prob.vehicle.speed_mps, self.cfg.dt_s, self.prob.t_offset
+        k0 = math.ceil(t0 / dt - 1e-9)
+        k1 = math.ceil((t0 + float(dec.total.max()) / v) / dt + 1e-9)
+        slices = np.arange(k0, k1 + 1)
+        s = v * (slices * dt - t0)[None, :]
+        s = np.broadcast_to(s, (len(dec.total), len(slices)))
+        valid = s <= dec.total[:, None] + 1e-9
+        s = np.concatenate([np.zeros((len(dec.total), 1)), s, dec.total[:, None]], axis=1)
+        pos = positions_at_length(dec, s)
+        return slices, pos, valid, s
+
+    def terms(self, x: np.ndarray) -> dict[str, np.ndarray]:
+        cfg, prob, veh = self.cfg, self.prob, self.prob.vehicle
+        dec = decode(prob, np.atleast_2d(x))
+        slices, pos, valid, s = self.grid(dec)
+        ref = prob.straight_m
+        f1 = dec.total / ref
+        # F2 threat at the samples (obstacles inflated by the margin); ds = path length per sample
+        ds = np.diff(s, axis=1)
+        mid = 0.5 * (pos[:, 1:] + pos[:, :-1])
+        soft = np.zeros(len(f1))
+        hard = np.zeros(len(f1))
+        if len(self.obs.radius_m):
+            dxy = np.hypot(mid[..., 0, None] - self.obs.cx, mid[..., 1, None] - self.obs.cy)
+            band = (mid[..., 2, None] >= self.obs.z_min_m) & (mid[..., 2, None] <= self.obs.z_max_m)
+            r = self.obs.radius_m + cfg.obstacle_margin_m
+            depth_hard = np.where(band, np.maximum(0.0, r - dxy), 0.0)
+            buf = np.maximum(self.obs.buffer_m, 1e-9)
+            depth_soft = np.where(band, np.clip((r + self.obs.buffer_m - dxy) / buf, 0.0, 1.0), 0.0)
+            soft = np.sum(depth_soft.sum(axis=-1) * ds, axis=1) / ref
+            hard = np.sum((depth_hard > 0).sum(axis=-1), axis=1) * HARD_PENALTY + depth_hard.sum(axis=(1, 2))
+        if len(self.obs.dome_radius_m):
+            dd = np.linalg.norm(mid[..., None, :] - self.obs.dome_centre, axis=-1)
+            depth = np.maximum(0.0, self.obs.dome_radius_m + cfg.obstacle_margin_m - dd)
+            hard = hard + (depth > 0).sum(axis=(1, 2)) * HARD_PENALTY + depth.sum(axis=(1, 2))
+        # F3 altitude band (waypoints are bounded to the band, so HARD only guards the ends)
+        z = dec.pts[..., 2]
+        mid_z = 0.5 * (veh.min_alt_m + veh.max_alt_m)
+        half = max(0.5 * (veh.max_alt_m - veh.min_alt_m), 1e-6)
+        f3 = np.mean(np.abs(z - mid_z), axis=1) / half
+        out_band = np.maximum(0.0, np.maximum(veh.min_alt_m - z, z - veh.max_alt_m))
+        hard = hard + (out_band > 1e-9).sum(axis=1) * HARD_PENALTY + out_band.sum(axis=1)
+        # F4 smoothness: turn angles and climb-angle changes of the polyline
+        d = np.diff(dec.pts, axis=1)
+        a, b = d[:, :-1], d[:, 1:]
+        phi = np.arctan2(np.linalg.norm(np.cross(a, b), axis=2), np.sum(a * b, axis=2))
+        psi = np.arctan2(d[..., 2], np.maximum(dec.lh, 1e-9))
+        n_turn = max(prob.n_wp, 1) * math.pi
+        f4 = (
+            cfg.a1 * phi.sum(axis=1) / n_turn
+            + (1 - cfg.a1) * np.abs(np.diff(psi, axis=1)).sum(axis=1) / n_turn
+        )
+        climb_excess = np.maximum(0.0, np.abs(psi) - math.radians(cfg.max_climb_deg))
+        hard = hard + (climb_excess > 0).sum(axis=1) * HARD_PENALTY + climb_excess.sum(axis=1)
+        # F5 separation from higher-priority UAVs on the shared time grid
+        depth, count = self.traffic.violations(
+            slices, pos[:, 1:-1], valid, veh.separation_m, cfg.separation_margin_m
+        )
+        f5 = count * HARD_PENALTY + depth
+        total = cfg.b1 * f1 + cfg.b2 * soft + cfg.b3 * f3 + cfg.b4 * f4 + hard + f5
+        return {"F1": f1, "F2": soft, "F3": f3, "F4": f4, "F5": f5, "hard": hard, "total": total}
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        self.evaluations += len(x)
+        return self.terms(x)["total"]
+
+
+def prepare(
+    scenario: Scenario, cfg: SwarmConfig
+) -> tuple[list[VehicleProblem], Obstacles, np.ndarray, np.ndarray]:
+    """Vehicle problems, obstacle arrays and the xy box (lo, hi) shared by all planners of this cost."""
+    if not scenario.vehicles:
+        raise UserError(f"scenario {scenario.name!r} has no vehicles")
+    obstacles = Obstacles.from_scenario(scenario.cylinders, scenario.hemispheres)
+    pts = np.array([v.start for v in scenario.vehicles] + [v.goal for v in scenario.vehicles])[:, :2]
+    obs_xy = np.column_stack([obstacles.cx, obstacles.cy]).reshape(-1, 2)
+    allxy = np.vstack([pts, obs_xy])
+    lo = allxy.min(axis=0) - cfg.pad_m
+    hi = allxy.max(axis=0) + cfg.pad_m
+    if "x" in scenario.bounds:
+        lo[0], hi[0] = scenario.bounds["x"]
+    if "y" in scenario.bounds:
+        lo[1], hi[1] = scenario.bounds["y"]
+    problems = []
+    for i, v in enumerate(scenario.vehicles):
+        if not (v.min_alt_m < v.max_alt_m):
+            raise UserError(
+                f"vehicle {v.id}: min_alt_m must be < max_alt_m, got {v.min_alt_m} and {v.max_alt_m}"
+            )
+        if v.turn_radius_m <= 0:
+            raise UserError(f"vehicle {v.id}: turn_radius_m must be > 0, got {v.turn_radius_m}")
+        start = np.array(v.start, dtype=float)
+        goal = np.array(v.goal, dtype=float)
+        start[2] = np.clip(start[2], v.min_alt_m, v.max_alt_m)
+        goal[2] = np.clip(goal[2], v.min_alt_m, v.max_alt_m)
+        for name, p in (("start", start), ("goal", goal)):
+            if not (lo[0] <= p[0] <= hi[0] and lo[1] <= p[1] <= hi[1]):
+                raise UserError(f"vehicle {v.id}: {name} {tuple(p[:2])} is outside the scenario bounds")
+            if obstacles.contains(p[None, :])[0]:
+                raise UserError(f"vehicle {v.id}: {name} {tuple(p)} is inside an obstacle")
+        lower = np.tile([lo[0], lo[1], v.min_alt_m], cfg.waypoints)
+        upper = np.tile([hi[0], hi[1], v.max_alt_m], cfg.waypoints)
+        problems.append(VehicleProblem(i, v, start, goal, lower, upper, cfg.waypoints))
+    return problems, obstacles, lo, hi
+
+
+def resample_polyline(path: np.ndarray, n: int) -> np.ndarray:
+    """n points equally spaced by arc length along a polyline (ends included)."""
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    s = np.linspace(0.0, cum[-1], n)
+    return np.column_stack([np.interp(s, cum, path[:, k]) for k in range(3)])
+
+
+def initial_paths(problems, obstacles, lo, hi, cfg: SwarmConfig, rng: np.random.Generator):
+    """Level 1: RRT* path per UAV, resampled to the particle encoding; difficulty = length ratio."""
+    init, difficulty = [], []
+    for prob in problems:
+        v = prob.vehicle
+        res = rrt_star(
+            prob.start,
+            prob.goal,
+            obstacles,
+            np.array([lo[0], lo[1], v.min_alt_m]),
+            np.array([hi[0], hi[1], v.max_alt_m]),
+            rng,
+            RRTConfig(
+                step_m=cfg.rrt_step_m, max_iterations=cfg.rrt_iterations, margin_m=cfg.obstacle_margin_m
+            ),
+        )
+        path = res.path if res.path is not None else np.vstack([prob.start, prob.goal])
+        init.append(resample_polyline(path, cfg.waypoints + 2)[1:-1].ravel())
+        difficulty.append(res.cost_m / prob.straight_m if res.path is not None else math.inf)
+    return init, np.array(difficulty)
+
+
+def seed_swarm(
+    prob: VehicleProblem, base: np.ndarray, elites: np.ndarray | None, cfg: SwarmConfig, rng
+) -> np.ndarray:
+    """Initial particles: the inherited path, elites, noisy copies; the engine adds the random rest."""
+    n_random = int(round(cfg.random_fraction * cfg.particles))
+    n_elite = int(round(cfg.elite_fraction * cfg.particles)) if elites is not None else 0
+    n_noise = max(0, cfg.particles - n_random - n_elite - 1)
+    span = prob.upper - prob.lower
+    sigma = np.tile(
+        [
+            max(prob.vehicle.turn_radius_m, 0.05 * span[0]),
+            max(prob.vehicle.turn_radius_m, 0.05 * span[1]),
+            0.1 * span[2],
+        ],
+        prob.n_wp,
+    )
+    noisy = np.clip(base + rng.normal(size=(n_noise, len(base))) * sigma, prob.lower, prob.upper)
+    parts = [base[None, :], noisy]
+    if n_elite:
+        parts.append(elites[:n_elite])
+    return np.vstack(parts)
+
+
+def optimise(prob, obstacles, traffic, cfg: SwarmConfig, rng, init: np.ndarray, budget: int | None = None):
+    """One PSO run for one UAV; returns (best x, PSOResult, CostModel)."""
+    model = CostModel(prob, obstacles, traffic, cfg)
+    pso_cfg = PSOConfig(
+        particles=cfg.particles,
+        iterations=cfg.iterations,
+        inertia="linear",
+        c1=1.5,
+        c2=1.5,
+        max_evaluations=budget,
+    )
+    res = minimize(model, prob.lower, prob.upper, pso_cfg, rng, init=init)
+    return res.best_x, res, model
+
+
+def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: SwarmConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Grid slices (K,) and positions (K, 3) of one UAV's path for the traffic list (columns included)."""
+    model = CostModel(prob, Obstacles.from_scenario([]), Traffic(cfg.dt_s), cfg)
+    dec = decode(prob, x[None, :])
+    slices, pos, valid, _ = model.grid(dec)
+    slices, pos = slices[valid[0]], pos[0, 1:-1][valid[0]]
+    v = prob.vehicle
+    cols = []
+    for col, t_a, sign in ((prob.pre, prob.delay_s, 1), (prob.post, None, -1)):
+        if not len(col):
+            continue
+        top = prob.start if sign > 0 else prob.goal
+        dz = abs(top[2] - col[0, 2])
+        t_start = t_a if t_a is not None else prob.t_offset + float(dec.total[0]) / v.speed_mps
+        k = np.arange(
+            math.ceil(t_start / cfg.dt_s - 1e-9), math.floor((t_start + dz / v.speed_mps) / cfg.dt_s) + 1
+        )
+        frac = (k * cfg.dt_s - t_start) * v.speed_mps / max(dz, 1e-9)
+        a, b = (col[0], top) if sign > 0 else (top, col[0])
+        cols.append((k, a + np.clip(frac, 0, 1)[:, None] * (b - a)))
+    if cols:
+        ks = np.concatenate([slices] + [c[0] for c in cols])
+        ps = np.vstack([pos] + [c[1] for c in cols])
+        order = np.argsort(ks, kind="stable")
+        ks, ps = ks[order], ps[order]
+        keep = np.concatenate([[True], np.diff(ks) > 0])
+        slices, pos = ks[keep], ps[keep]
+    return slices, pos
+
+
+def _run_round(problems, obstacles, cfg, rng, order, init, elites, previous, progress, frac0, frac1):
+    """Plan every UAV in ``order`` against the ones before it. Returns best x, cost, result per UAV."""
+    traffic = Traffic(cfg.dt_s)
+    best_x, best_cost, results = {}, {}, {}
+    for n, i in enumerate(order):
+        prob = problems[i]
+        kept = False
+        if previous is not None and i in previous:
+            c = float(CostModel(prob, obstacles, traffic, cfg)(previous[i][None, :])[0])
+            if c < HARD_PENALTY:  # still feasible against the new higher-priority set: inherit it
+                best_x[i], best_cost[i], kept = previous[i], c, True
+        if not kept:
+            base = previous[i] if previous is not None and i in previous else init[i]
+            x0 = seed_swarm(prob, base, elites.get(i), cfg, rng)
+            if previous is not None and i in previous:
+                x0 = np.vstack([x0[:1], init[i][None, :], x0[1:]])[: cfg.particles]
+            x, res, _ = optimise(prob, obstacles, traffic, cfg, rng, x0)
+            best_x[i], best_cost[i], results[i] = x, res.best_cost, res
+            elites[i] = res.pbest_x
+        slices, pos = timed_samples(prob, best_x[i], cfg)
+        traffic.add(i, slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
+        if progress:
+            progress(frac0 + (frac1 - frac0) * (n + 1) / len(order), f"{prob.vehicle.id}")
+    return best_x, best_cost, results
+
+
+def build_vehicle_plan(prob: VehicleProblem, x: np.ndarray, cfg: SwarmConfig, terms: dict) -> VehiclePlan:
+    """Timed dense path, decimated mission waypoints and cost breakdown of one UAV."""
+    v = prob.vehicle
+    dec = decode(prob, x[None, :])
+    n_leg = dec.lh.shape[1]
+    r = v.turn_radius_m
+    max_angle = 2.0 * math.acos(max(-1.0, 1.0 - cfg.waypoint_tol_m / r))
+    dense_step = min(cfg.dt_s * v.speed_mps, r / 4.0)
+    wp_s, dense_s = [], []
+    for leg in range(n_leg):
+        seg = dec.seg[leg]
+        bounds = np.concatenate([[0.0], np.cumsum(seg)])
+        word = dec.word[leg]
+        s_wp = [0.0]
+        for k in range(3):
+            curved = word < 4 and k != 1 or word >= 4
+            n = max(1, math.ceil(seg[k] / r / max_angle)) if curved and seg[k] > 0 else 1
+            s_wp.extend(bounds[k] + seg[k] * np.arange(1, n + 1) / n)
+        lh = max(dec.lh[0, leg], 1e-12)
+        f_wp = np.unique(np.clip(np.array(s_wp) / lh, 0, 1))
+        n_dense = max(1, math.ceil(dec.lh[0, leg] / dense_step))
+        f_dense = np.union1d(np.linspace(0, 1, n_dense + 1), f_wp)
+        wp_s.append(dec.cum[0, leg] + f_wp * dec.l3[0, leg])
+        dense_s.append(dec.cum[0, leg] + f_dense * dec.l3[0, leg])
+    wp_s = np.unique(np.concatenate(wp_s))
+    dense_s = np.unique(np.concatenate(dense_s))
+    wp = positions_at_length(dec, wp_s[None, :])[0]
+    dense = positions_at_length(dec, dense_s[None, :])[0]
+    t_wp = prob.t_offset + wp_s / v.speed_mps
+    t_dense = prob.t_offset + dense_s / v.speed_mps
+    # drop waypoints closer than 0.5 m to the previous one (junctions that coincide)
+    keep = np.concatenate([[True], np.linalg.norm(np.diff(wp, axis=0), axis=1) > 0.5])
+    keep[-1] = True
+    wp, t_wp = wp[keep], t_wp[keep]
+    pre, post = prob.pre, prob.post
+    t_end = float(t_dense[-1])
+    if len(pre):
+        wp, t_wp = np.vstack([pre, wp]), np.concatenate([[prob.delay_s], t_wp])
+        dense, t_dense = np.vstack([pre, dense]), np.concatenate([[prob.delay_s], t_dense])
+    if len(post):
+        t_land = t_end + abs(post[0, 2] - prob.goal[2]) / v.speed_mps
+        wp, t_wp = np.vstack([wp, post]), np.concatenate([t_wp, [t_land]])
+        dense, t_dense = np.vstack([dense, post]), np.concatenate([t_dense, [t_land]])
+    cost = {k: float(np.asarray(val)[0]) for k, val in terms.items()}
+    cost["length_m"] = float(dec.total[0])
+    return VehiclePlan(
+        vehicle_id=v.id,
+        sysid=v.sysid,
+        vehicle_type=v.type,
+        waypoints=wp,
+        times_s=t_wp,
+        speeds_mps=np.full(len(wp), v.speed_mps),
+        path=dense,
+        path_times_s=t_dense,
+        turn_radius_m=r,
+        takeoff_delay_s=prob.delay_s,
+        acceptance_radius_m=cfg.acceptance_radius_m,
+        cost=cost,
+        feasible=cost["total"] < HARD_PENALTY,
+    )
+
+
+def build_plan(scenario, problems, obstacles, cfg, xs: dict, planner: str, metrics: dict) -> Plan:
+    """Plan from the chosen particle per UAV (cost terms against all higher-priority UAVs)."""
+    vehicles = []
+    for prob in problems:
+        terms = CostModel(prob, obstacles, Traffic(cfg.dt_s), cfg).terms(xs[prob.index][None, :])
+        vehicles.append(build_vehicle_plan(prob, xs[prob.index], cfg, terms))
+    return Plan(origin=scenario.origin, planner=planner, vehicles=vehicles, metrics=metrics)
+
+
+def repair_and_check(
+    scenario, problems, obstacles, cfg, rng, xs: dict, order: list[int], planner: str, metrics
+):
+    """Independent check; re-plan then delay conflicting UAVs; flag whatever still fails."""
+    rank = {i: n for n, i in enumerate(order)}
+    repairs = []
+    for attempt in range(cfg.repairs + 1):
+        plan_ = build_plan(scenario, problems, obstacles, cfg, xs, planner, metrics)
+        report = check_plan(plan_, scenario, step_s=cfg.dt_s, max_climb_rad=math.radians(cfg.max_climb_deg))
+        if report.ok or attempt == cfg.repairs:
+            break
+        ids = {p.vehicle.id: p.index for p in problems}
+        in_conflict = {c[0] for c in report.conflicts} | {c[1] for c in report.conflicts}
+        losers = {max(ids[a], ids[b], key=lambda i: rank[i]) for a, b, *_ in report.conflicts}
+        losers |= {ids[v] for v in report.bad_vehicles() - in_conflict}
+        for i in sorted(losers, key=lambda i: rank[i]):
+            prob = problems[i]
+            if attempt > 0:  # re-planning alone did not do it: wait on the ground as well
+                prob.delay_s += cfg.delay_step_s
+            traffic = Traffic(cfg.dt_s)
+            for other in problems:
+                if other.index != i:
+                    slices, pos = timed_samples(other, xs[other.index], cfg)
+                    traffic.add(other.index, slices, pos, other.vehicle.separation_m, other.vehicle.speed_mps)
+            x0 = seed_swarm(prob, xs[i], None, cfg, rng)
+            x, res, _ = optimise(prob, obstacles, traffic, cfg, rng, x0)
+            if res.best_cost <= float(CostModel(prob, obstacles, traffic, cfg)(xs[i][None, :])[0]):
+                xs[i] = x
+            repairs.append(
+                {
+                    "attempt": attempt,
+                    "vehicle": prob.vehicle.id,
+                    "delay_s": prob.delay_s,
+                    "cost": res.best_cost,
+                }
+            )
+    bad = report.bad_vehicles()
+    for vp in plan_.vehicles:
+        if vp.vehicle_id in bad:
+            vp.feasible = False
+            vp.notes.append(f"independent check failed: {report.summary()}")
+        elif not vp.feasible:
+            vp.notes.append("cost has a hard-constraint term (see cost)")
+        if vp.takeoff_delay_s > 0:
+            vp.notes.append(f"take-off delayed {vp.takeoff_delay_s:.1f} s to keep separation")
+        if vp.feasible:
+            vp.notes.append(
+                "independent check passed (obstacles, separation at 0.5 s, turn radius, band, climb)"
+            )
+    plan_.metrics["repairs"] = repairs
+    plan_.metrics["check"] = report.summary()
+    plan_.metrics["buffer_intrusions"] = report.buffer_intrusions
+    return plan_
+
+
+def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
+    """Priority swarm planner: see the module docstring."""
+    t_start = time.perf_counter()
+    cfg = SwarmConfig.from_planner(scenario.planner)
+    problems, obstacles, lo, hi = prepare(scenario, cfg)
+    init, difficulty = initial_paths(problems, obstacles, lo, hi, cfg, rng)
+    if progress:
+        progress(0.1, "RRT* initial paths")
+    order = sorted(range(len(problems)), key=lambda i: (-problems[i].vehicle.priority, -difficulty[i], i))
+    elites: dict[int, np.ndarray] = {}
+    previous = None
+    best = None
+    rounds = []
+    evaluations = 0
+    convergence = np.zeros(cfg.iterations)  # summed gbest (clipped at HARD) of the first round's swarms
+    to_1pct = []
+    for r in range(cfg.rounds):
+        frac0 = 0.1 + 0.8 * r / cfg.rounds
+        xs, costs, results = _run_round(
+            problems,
+            obstacles,
+            cfg,
+            rng,
+            order,
+            init,
+            elites,
+            previous,
+            progress,
+            frac0,
+            frac0 + 0.8 / cfg.rounds,
+        )
+        evaluations += sum(res.evaluations for res in results.values()) + len(problems)
+        infeasible = [i for i in order if costs[i] >= HARD_PENALTY]
+        total = float(sum(min(c, HARD_PENALTY) for c in costs.values()))
+        rounds.append(
+            {"round": r + 1, "infeasible": [problems[i].vehicle.id for i in infeasible], "cost": total}
+        )
+        for res in results.values():
+            to_1pct.append(res.iterations_to_within(0.01))
+            if r == 0:
+                h = np.minimum(res.history, HARD_PENALTY)
+                convergence[: len(h)] += h
+        if best is None or (len(infeasible), total) < (best[0], best[1]):
+            best = (len(infeasible), total, dict(xs), list(order))
+        if not infeasible:
+            break
+        order = infeasible + [i for i in order if i not in infeasible]  # promote the infeasible UAVs
+        previous = xs
+    _, _, xs, order = best
+    metrics = {
+        "rounds": rounds,
+        "evaluations": int(evaluations),
+        "priority_order": [problems[i].vehicle.id for i in order],
+        "rrt_difficulty": {p.vehicle.id: float(d) for p, d in zip(problems, difficulty)},
+    }
+    result = repair_and_check(scenario, problems, obstacles, cfg, rng, xs, order, "priority_swarm", metrics)
+    result.metrics["cost_total"] = float(sum(min(v.cost["total"], HARD_PENALTY) for v in result.vehicles))
+    result.metrics["feasible_count"] = sum(v.feasible for v in result.vehicles)
+    result.metrics["wall_time_s"] = time.perf_counter() - t_start
+    result.metrics["convergence"] = convergence.tolist()
+    result.metrics["iterations_to_1pct"] = float(np.mean(to_1pct)) if to_1pct else 0.0
+    if progress:
+        progress(1.0, "checked")
+    return result
