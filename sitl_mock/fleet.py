@@ -77,7 +77,7 @@ class MockFleet:
         rate_hz: float = 10.0,
         status_rate_hz: float = 1.0,
         home_rate_hz: float = 0.2,
-        physics_dt_s: float = 0.02,
+        physics_dt_s: float = 0.05,
         tick_s: float = 0.02,
     ) -> None:
         if (count is None) == (vehicles is None):

@@ -17,8 +17,9 @@ Models (choices where the brief leaves them open):
 - Fixed wing: constant airspeed (the commanded speed, clamped to [min, max]); heading rate
   limited to ``g tan(max_bank) / v``, which bounds the turn radius below by ``v^2 / (g tan
   max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Loiter is a
-  clockwise circle (ArduPilot's default direction) with a lateral correction
-  ``atan(K_CIRCLE (d - R) / R)``. Landing spirals down on the loiter circle at ``land_speed_mps``.
+  clockwise circle (ArduPilot's default direction): turn-rate feed-forward ``v / R`` plus a
+  lateral correction ``atan(K_CIRCLE (d - R) / R)``. Landing spirals down on the loiter circle
+  at ``land_speed_mps``.
 - Wind [m/s] is added to the ground velocity and not compensated by the guidance's heading, so
   it bends the track while the closed loop still reaches each target. ``drift_mps`` integrates
   into an offset between the navigated and the reported position: a navigation drift the
@@ -120,6 +121,10 @@ class Arrival(IntEnum):
     LANDED = 4  # on the ground
 
 
+_IDLE, _GOTO, _PASS, _HOLD, _CLIMB, _LAND = (int(g) for g in Guidance)
+_A_NONE, _A_3D, _A_2D, _A_ALT, _A_LANDED = (int(a) for a in Arrival)
+
+
 class Kinematics:
     """Kinematic state of ``n`` vehicles as arrays (row i = vehicle i)."""
 
@@ -192,98 +197,117 @@ class Kinematics:
 
     def arrived(self) -> np.ndarray:
         """Boolean mask of vehicles whose arrival condition holds now."""
-        d = self.target - self.pos
-        dist_h = np.hypot(d[:, 0], d[:, 1])
-        dist_3 = np.sqrt(dist_h**2 + d[:, 2] ** 2)
-        leg = self.target[:, :2] - self.leg_from[:, :2]
-        passed = self.is_fw & (np.einsum("ij,ij->i", -d[:, :2], leg) > 0.0)
         a = self.arrival
+        if not a.any():
+            return np.zeros(self.n, dtype=bool)
+        d = self.target - self.pos
+        dist_h2 = d[:, 0] ** 2 + d[:, 1] ** 2
+        r2 = self.accept_r**2
+        lx = self.target[:, 0] - self.leg_from[:, 0]
+        ly = self.target[:, 1] - self.leg_from[:, 1]
+        passed = self.is_fw & (d[:, 0] * lx + d[:, 1] * ly < 0.0)
+        z = self.pos[:, 2]
         return (
-            ((a == Arrival.RADIUS_3D) & (dist_3 <= self.accept_r))
-            | ((a == Arrival.RADIUS_2D) & ((dist_h <= self.accept_r) | passed))
-            | ((a == Arrival.ALTITUDE) & (self.pos[:, 2] >= self.target[:, 2] - ALT_TOL_M))
-            | ((a == Arrival.LANDED) & (self.pos[:, 2] <= self.ground_z + GROUND_TOL_M))
+            ((a == _A_3D) & (dist_h2 + d[:, 2] ** 2 <= r2))
+            | ((a == _A_2D) & ((dist_h2 <= r2) | passed))
+            | ((a == _A_ALT) & (z >= self.target[:, 2] - ALT_TOL_M))
+            | ((a == _A_LANDED) & (z <= self.ground_z + GROUND_TOL_M))
         )
 
     # --- dynamics -----------------------------------------------------------------------------
     def step(self, dt_s: float) -> None:
         """Advance every vehicle by ``dt_s`` seconds."""
-        active = self.mode != Guidance.IDLE
+        active = self.mode != _IDLE
         mr = active & ~self.is_fw
         fw = active & self.is_fw
         if mr.any():
-            self._step_multirotor(mr, dt_s)
+            self._step_multirotor(_rows(mr), dt_s)
         if fw.any():
-            self._step_fixed_wing(fw, dt_s)
-        idle = ~active
-        self.vel[idle] = 0.0
-        self.turn_rate[idle] = 0.0
-        air = self.airborne()
-        self.pos += (self.vel + self.wind * air[:, None]) * dt_s
-        self.offset += self.drift * air[:, None] * dt_s
+            self._step_fixed_wing(_rows(fw), dt_s)
+        if not active.all():
+            idle = ~active
+            self.vel[idle] = 0.0
+            self.turn_rate[idle] = 0.0
+        air = (self.pos[:, 2] > self.ground_z + GROUND_TOL_M)[:, None]
+        self.pos += (self.vel + self.wind * air) * dt_s
+        if self.drift.any():
+            self.offset += self.drift * air * dt_s
         below = self.pos[:, 2] < self.ground_z
-        self.pos[below, 2] = self.ground_z[below]
-        self.vel[below, 2] = np.maximum(self.vel[below, 2], 0.0)
+        if below.any():
+            self.pos[below, 2] = self.ground_z[below]
+            self.vel[below, 2] = np.maximum(self.vel[below, 2], 0.0)
 
-    def _step_multirotor(self, m: np.ndarray, dt_s: float) -> None:
-        pos, tgt, mode = self.pos[m], self.target[m], self.mode[m]
-        d = tgt - pos
-        dist_h = np.hypot(d[:, 0], d[:, 1])
-        unit_h = d[:, :2] / np.maximum(dist_h, 1e-9)[:, None]
+    def _step_multirotor(self, m: np.ndarray | slice, dt_s: float) -> None:
+        mode = self.mode[m]
+        d = self.target[m] - self.pos[m]
+        dx, dy = d[:, 0], d[:, 1]
+        dist_h = np.sqrt(dx * dx + dy * dy)
+        accel = self.accel[m]
         speed = np.minimum(self.speed_cmd[m], self.max_speed[m])
-        stops = mode != Guidance.PASS
-        brake = np.minimum(np.sqrt(2.0 * self.accel[m] * dist_h), KP_POS * dist_h)
-        speed = np.where(stops, np.minimum(speed, brake), speed)
-        speed = np.where(mode == Guidance.CLIMB, 0.0, speed)
-        v_des = np.empty_like(d)
-        v_des[:, :2] = unit_h * speed[:, None]
+        brake = np.minimum(np.sqrt(2.0 * accel * dist_h), KP_POS * dist_h)
+        speed = np.where(mode == _PASS, speed, np.minimum(speed, brake))
+        speed[mode == _CLIMB] = 0.0
+        scale = speed / np.maximum(dist_h, 1e-9)
         vz = np.clip(KP_ALT * d[:, 2], -self.sink[m], self.climb[m])
-        landing = mode == Guidance.LAND
-        vz = np.where(landing, np.where(dist_h > self.accept_r[m], 0.0, -self.land_speed[m]), vz)
-        v_des[:, 2] = vz
-        dv = v_des - self.vel[m]
-        max_dv = self.accel[m] * dt_s
-        dv_h = np.hypot(dv[:, 0], dv[:, 1])
+        landing = mode == _LAND
+        if landing.any():
+            vz = np.where(landing, np.where(dist_h > self.accept_r[m], 0.0, -self.land_speed[m]), vz)
+        vel = self.vel[m]
+        dv = np.column_stack([dx * scale, dy * scale, vz]) - vel
+        max_dv = accel * dt_s
+        dv_h = np.sqrt(dv[:, 0] ** 2 + dv[:, 1] ** 2)
         dv[:, :2] *= np.minimum(1.0, max_dv / np.maximum(dv_h, 1e-9))[:, None]
-        dv[:, 2] = np.clip(dv[:, 2], -max_dv, max_dv)
-        vel = self.vel[m] + dv
-        v_h = np.hypot(vel[:, 0], vel[:, 1])
+        np.clip(dv[:, 2], -max_dv, max_dv, out=dv[:, 2])
+        vel = vel + dv
+        v_h = np.sqrt(vel[:, 0] ** 2 + vel[:, 1] ** 2)
         vel[:, :2] *= np.minimum(1.0, self.max_speed[m] / np.maximum(v_h, 1e-9))[:, None]
         self.vel[m] = vel
-        psi = np.where(v_h > 0.3, np.arctan2(vel[:, 1], vel[:, 0]), self.psi[m])
-        acc = dv / dt_s
-        fwd = acc[:, 0] * np.cos(psi) + acc[:, 1] * np.sin(psi)
-        left = -acc[:, 0] * np.sin(psi) + acc[:, 1] * np.cos(psi)
+        old_psi = self.psi[m]
+        psi = np.where(v_h > 0.3, np.arctan2(vel[:, 1], vel[:, 0]), old_psi)
+        c, s = np.cos(psi), np.sin(psi)
+        fwd = (dv[:, 0] * c + dv[:, 1] * s) / dt_s
+        left = (dv[:, 1] * c - dv[:, 0] * s) / dt_s
         self.pitch[m] = -np.arctan(fwd / G_MPS2)
         self.roll[m] = -np.arctan(left / G_MPS2)
-        self.turn_rate[m] = _wrap(psi - self.psi[m]) / dt_s
+        self.turn_rate[m] = _wrap(psi - old_psi) / dt_s
         self.psi[m] = psi
 
-    def _step_fixed_wing(self, m: np.ndarray, dt_s: float) -> None:
+    def _step_fixed_wing(self, m: np.ndarray | slice, dt_s: float) -> None:
         pos, tgt, mode = self.pos[m], self.target[m], self.mode[m]
         v = np.clip(self.speed_cmd[m], self.min_speed[m], self.max_speed[m])
-        d = tgt[:, :2] - pos[:, :2]
-        bearing = np.arctan2(d[:, 1], d[:, 0])
-        r = self.loiter_r[m]
-        radial = np.hypot(d[:, 0], d[:, 1])
-        out_angle = np.arctan2(-d[:, 1], -d[:, 0])  # direction centre -> vehicle
-        circle = out_angle - np.pi / 2 - np.arctan(K_CIRCLE * (radial - r) / r)
+        dx, dy = tgt[:, 0] - pos[:, 0], tgt[:, 1] - pos[:, 1]
         psi = self.psi[m]
-        circling = (mode == Guidance.HOLD) | (mode == Guidance.LAND)
-        psi_des = np.where(circling, circle, np.where(mode == Guidance.CLIMB, psi, bearing))
+        psi_des = np.arctan2(dy, dx)
+        circling = (mode == _HOLD) | (mode == _LAND)
+        if circling.any():
+            r = self.loiter_r[m]
+            radial = np.sqrt(dx * dx + dy * dy)
+            circle = psi_des + np.pi / 2 - np.arctan(K_CIRCLE * (radial - r) / r)  # clockwise orbit
+            psi_des = np.where(circling, circle, psi_des)
+        psi_des = np.where(mode == _CLIMB, psi, psi_des)
         max_rate = G_MPS2 * self.tan_bank[m] / v
-        rate = np.clip(KP_PSI * _wrap(psi_des - psi), -max_rate, max_rate)
-        psi = psi + rate * dt_s
-        target_z = np.where(mode == Guidance.LAND, self.ground_z[m], tgt[:, 2])
+        rate = KP_PSI * _wrap(psi_des - psi)
+        if circling.any():
+            rate = rate - circling * v / self.loiter_r[m]  # feed-forward of the clockwise orbit
+        rate = np.clip(rate, -max_rate, max_rate)
+        psi = _wrap(psi + rate * dt_s)
+        landing = mode == _LAND
+        target_z = np.where(landing, self.ground_z[m], tgt[:, 2])
         vz = np.clip(KP_ALT * (target_z - pos[:, 2]), -self.sink[m], self.climb[m])
-        vz = np.where(mode == Guidance.LAND, np.maximum(vz, -self.land_speed[m]), vz)
+        if landing.any():
+            vz = np.where(landing, np.maximum(vz, -self.land_speed[m]), vz)
         vz = np.clip(vz, -0.9 * v, 0.9 * v)
-        v_h = np.sqrt(v**2 - vz**2)
+        v_h = np.sqrt(v * v - vz * vz)
         self.vel[m] = np.column_stack([v_h * np.cos(psi), v_h * np.sin(psi), vz])
         self.turn_rate[m] = rate
         self.roll[m] = -np.arctan(rate * v / G_MPS2)
         self.pitch[m] = np.arcsin(vz / v)
-        self.psi[m] = _wrap(psi)
+        self.psi[m] = psi
+
+
+def _rows(mask: np.ndarray) -> np.ndarray | slice:
+    """Index for the rows in ``mask``: a slice (views, no copies) when it selects every row."""
+    return slice(None) if mask.all() else mask
 
 
 def _wrap(angle_rad: np.ndarray) -> np.ndarray:

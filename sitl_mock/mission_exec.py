@@ -172,9 +172,9 @@ class Navigator:
 
         def touchdown() -> None:
             self.idle()
-            self._landed()
             if done is not None:
                 done()
+            self._landed()
 
         self._wait(touchdown)
         kin.command(self.i, Guidance.LAND, target, Arrival.LANDED)

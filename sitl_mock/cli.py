@@ -1,0 +1,98 @@
+"""`sitl-mock`: run a fleet of mock autopilots on UDP until Ctrl-C.
+
+Vehicle i (system id i) listens on 127.0.0.1:base_port+i-1 (``--host`` to change) and streams to
+whoever sends it a packet first, like ArduPilot SITL's udpin. One log line per vehicle at start.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import sys
+
+from gcs_planner.geo import Origin
+from sitl_mock.faults import LinkFaults
+from sitl_mock.fleet import MockFleet
+from sitl_mock.flight import AIRFRAMES
+from sitl_mock.profiles import PROFILES
+from sitl_mock.vehicle import DEFAULT_HOME
+
+log = logging.getLogger("sitl_mock")
+
+
+def _home(text: str) -> Origin:
+    try:
+        parts = [float(p) for p in text.split(",")]
+        if len(parts) not in (2, 3):
+            raise ValueError("expected lat,lon[,alt]")
+        return Origin(*parts)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--home {text!r}: {exc}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="sitl-mock", description=__doc__.splitlines()[0])
+    p.add_argument("--vehicles", type=int, default=1, help="number of vehicles (system ids 1..N)")
+    p.add_argument("--base-port", type=int, default=14550, help="UDP port of vehicle 1 (0: ephemeral ports)")
+    p.add_argument("--host", default="127.0.0.1", help="address to bind (0.0.0.0 for other machines)")
+    p.add_argument("--profile", choices=sorted(PROFILES), default="ardupilot")
+    p.add_argument("--type", dest="vehicle_type", choices=sorted(AIRFRAMES), default="multirotor")
+    p.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second")
+    p.add_argument(
+        "--home", type=_home, default=DEFAULT_HOME, help="lat,lon[,alt AMSL] of every vehicle's home"
+    )
+    p.add_argument("--rate", type=float, default=10.0, help="position telemetry rate [Hz, wall clock]")
+    p.add_argument("--loss", type=float, default=0.0, help="datagram loss probability, each direction")
+    p.add_argument("--delay", type=float, default=0.0, help="one-way delay [s]")
+    p.add_argument("--jitter", type=float, default=0.0, help="extra uniform delay up to this [s]")
+    p.add_argument("--duplicate", type=float, default=0.0, help="duplication probability")
+    p.add_argument("--reorder", type=float, default=0.0, help="reordering probability")
+    p.add_argument("--seed", type=int, default=0, help="fault generator seed")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO, format="%(asctime)s %(name)s: %(message)s"
+    )
+    try:
+        faults = LinkFaults(args.loss, args.delay, args.jitter, args.duplicate, args.reorder, args.seed)
+        fleet = MockFleet(
+            count=args.vehicles, base_port=args.base_port, speedup=args.speedup, home=args.home,
+            profile=args.profile, vehicle_type=args.vehicle_type, host=args.host, faults=faults,
+            rate_hz=args.rate,
+        )  # fmt: skip
+    except ValueError as exc:
+        parser.error(str(exc))
+    try:
+        asyncio.run(_serve(fleet, args))
+    except OSError as exc:
+        print(f"sitl-mock: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        log.info("stopped")
+    return 0
+
+
+async def _serve(fleet: MockFleet, args: argparse.Namespace) -> None:
+    await fleet.start()
+    try:
+        for v in fleet.vehicles:
+            host, port = v.address
+            log.info(
+                "sysid %d: udp %s:%d %s %s home %.7f,%.7f,%.1f",
+                v.sysid, host, port, args.profile, args.vehicle_type,
+                v.home.lat_deg, v.home.lon_deg, v.home.alt_m,
+            )  # fmt: skip
+        log.info("%d vehicles, speed-up %g; Ctrl-C to stop", len(fleet.vehicles), fleet.speedup)
+        await asyncio.Event().wait()
+    finally:
+        await fleet.stop()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
