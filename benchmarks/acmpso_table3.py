@@ -1,0 +1,163 @@
+"""Reproduce Table 3 of seed 001 (ACMPSO): 100 independent runs each of BPSO, LPSO and ACMPSO.
+
+Prints, per variant (literal reading / documented tuned variant, see gcs_planner/planning/acmpso.py)
+and algorithm: mean wall time per run, mean fitness and fitness variance beside the paper's
+numbers, the best run's fitness and convergence iteration, and how many runs' best tracks violate
+a radar, an obstacle or terrain + h_safe on a dense resample (10 samples per km) of the 100-node
+track (the paper checks the nodes only). Optionally writes a convergence plot (PNG).
+
+    nice .venv/bin/python benchmarks/acmpso_table3.py --runs 100 --plot acmpso_convergence.png
+
+Variance is the sample variance (ddof = 1) of the runs' final fitness; times are one run on one
+core (BLAS threads pinned to 1; CPU time of the process, so other load on a shared machine does
+not inflate it), initialisation included.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import platform  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from gcs_planner.planning.acmpso import ALGORITHMS, VARIANTS, AcmpsoParams, problem_from_scenario, solve  # noqa: E402
+from gcs_planner.planning.threat_env import validate_path  # noqa: E402
+from gcs_planner.scenario import load_scenario  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+# paper Table 3 (MATLAB R2014a, i7-8750H): mean time [s], mean fitness, fitness variance;
+# best-run convergence iteration read from its Fig. 4
+PAPER = {
+    "bpso": (11.579, 41.347, 1.065, 55),
+    "lpso": (11.591, 38.659, 0.392, 60),
+    "acmpso": (11.726, 38.597, 0.318, 45),
+}
+ORDER = ("bpso", "lpso", "acmpso")
+
+
+def run_variant(problem, env_m, unit_m: float, variant: str, runs: int, seed: int) -> dict[str, dict]:
+    out = {}
+    for a_idx, algorithm in enumerate(ORDER):
+        fitness, seconds, histories, violations, evaluations = [], [], [], [], []
+        for r in range(runs):
+            rng = np.random.default_rng([seed, VARIANTS.index(variant), a_idx, r])
+            res = solve(problem, algorithm, rng, variant)
+            fitness.append(res.fitness)
+            seconds.append(res.cpu_seconds)
+            histories.append(res.pso.history)
+            evaluations.append(res.pso.evaluations)
+            report = validate_path(env_m, res.nodes * unit_m, spacing=100.0)
+            violations.append({v.kind for v in report.violations})
+        f = np.asarray(fitness)
+        best = int(np.argmin(f))
+        h = histories[best]
+        out[algorithm] = {
+            "fitness": f,
+            "seconds": np.asarray(seconds),
+            "histories": np.asarray(histories),
+            "best": best,
+            "conv_1pct": int(np.argmax(h <= h[-1] * 1.01)) + 1,
+            "last_improvement": int(np.flatnonzero(np.diff(h) < -1e-9).max(initial=-1)) + 2,
+            "evaluations": int(np.mean(evaluations)),
+            "viol": {k: sum(k in v for v in violations) for k in ("radar", "obstacle", "terrain")},
+        }
+    return out
+
+
+def print_table(results: dict[str, dict[str, dict]], runs: int) -> None:
+    head = (
+        f"{'variant':8} {'algo':6} | {'time s paper':>12} {'ours':>7} | {'mean F paper':>12} {'ours':>7}"
+        f" | {'var paper':>9} {'ours':>7} | {'best F':>7} {'it1%':>4} {'last':>4} {'paper':>5}"
+        f" | {'evals':>5} | dense-resample violations (runs of {runs}): radar/obst/terrain"
+    )
+    print(head)
+    print("-" * len(head))
+    for variant, per_alg in results.items():
+        for algorithm in ORDER:
+            s = per_alg[algorithm]
+            p = PAPER[algorithm]
+            f = s["fitness"]
+            v = s["viol"]
+            print(
+                f"{variant:8} {algorithm:6} | {p[0]:12.3f} {s['seconds'].mean():7.4f}"
+                f" | {p[1]:12.3f} {f.mean():7.3f} | {p[2]:9.3f} {f.var(ddof=1):7.3f}"
+                f" | {f.min():7.3f} {s['conv_1pct']:4d}"
+                f" {s['last_improvement']:4d} {p[3]:5d} | {s['evaluations']:5d} |"
+                f" {v['radar']}/{v['obstacle']}/{v['terrain']}"
+            )
+        acm, lp, bp = (per_alg[a]["fitness"] for a in ("acmpso", "lpso", "bpso"))
+        print(
+            f"  {variant}: ACMPSO mean <= 38.597: {acm.mean() <= 38.597};"
+            f" var <= 0.318: {acm.var(ddof=1) <= 0.318};"
+            f" ACMPSO < LPSO < BPSO: {acm.mean() < lp.mean() < bp.mean()}"
+        )
+
+
+def plot(results: dict[str, dict[str, dict]], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(results), figsize=(6 * len(results), 4.2), squeeze=False)
+    for ax, (variant, per_alg) in zip(axes[0], results.items(), strict=True):
+        for algorithm, colour in zip(ORDER, ("tab:gray", "tab:blue", "tab:red"), strict=True):
+            s = per_alg[algorithm]
+            it = np.arange(1, s["histories"].shape[1] + 1)
+            ax.plot(it, s["histories"][s["best"]], color=colour, label=f"{algorithm.upper()} best run")
+            ax.plot(
+                it,
+                s["histories"].mean(axis=0),
+                color=colour,
+                ls="--",
+                lw=1,
+                label=f"{algorithm.upper()} mean",
+            )
+        ax.axhline(37.339, color="k", lw=0.8, ls=":", label="straight-line bound 37.339")
+        ax.set(title=f"{variant} reading", xlabel="iteration", ylabel="best fitness F", ylim=(37.0, 48.0))
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: literal,tuned")
+    ap.add_argument("--collision", default="literal", choices=("literal", "depth"))
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--scenario", type=Path, default=ROOT / "missions" / "acmpso_paper.toml")
+    ap.add_argument("--plot", type=Path, help="write the convergence plot (PNG) here")
+    args = ap.parse_args()
+    scenario = load_scenario(args.scenario)
+    params = AcmpsoParams(collision=args.collision)
+    problem, env_m = problem_from_scenario(scenario, scenario.vehicles[0], params)
+    variants = [v.strip() for v in args.variants.split(",") if v.strip()]
+    for v in variants:
+        if v not in VARIANTS:
+            ap.error(f"--variants: {v!r} is not one of {VARIANTS}")
+    assert set(ORDER) == set(ALGORITHMS)
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, python"
+        f" {platform.python_version()}, numpy {np.__version__}; runs={args.runs},"
+        f" 50 particles x 100 iterations, collision={args.collision}, seed={args.seed}"
+    )
+    results = {
+        v: run_variant(problem, env_m, params.length_unit_m, v, args.runs, args.seed) for v in variants
+    }
+    print_table(results, args.runs)
+    if args.plot:
+        plot(results, args.plot)
+        print(f"convergence plot: {args.plot}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
