@@ -31,9 +31,17 @@ OnMessage = Callable[[mavlink.MAVLink_message, tuple], None]
 class VehicleLink(asyncio.DatagramProtocol):
     """UDP endpoint of one vehicle; `send(msg)` encodes once and sends to all known peers."""
 
-    def __init__(self, sysid: int, on_message: OnMessage, faults: LinkFaults, compid: int = 1) -> None:
+    def __init__(
+        self,
+        sysid: int,
+        on_message: OnMessage,
+        faults: LinkFaults,
+        compid: int = 1,
+        on_new_peer: Callable[[tuple], None] | None = None,
+    ) -> None:
         self.sysid = sysid
         self._on_message = on_message
+        self._on_new_peer = on_new_peer
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self._parsers: dict[tuple, mavlink.MAVLink] = {}
         self.peers: list[tuple] = []
@@ -94,6 +102,8 @@ class VehicleLink(asyncio.DatagramProtocol):
         parser = self._parsers.get(addr)
         if parser is None:
             parser = self._add_peer(addr)
+            if self._on_new_peer is not None:
+                self._on_new_peer(addr)
         try:
             msgs = parser.parse_buffer(data) or []
         except mavlink.MAVError as exc:

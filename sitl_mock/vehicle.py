@@ -121,7 +121,7 @@ class MockVehicle:
         )
         self.mission_server.on_change = self._on_list_change
         self.mission_server.on_current = self._on_server_current
-        self.link = VehicleLink(sysid, self._on_message, faults or LinkFaults())
+        self.link = VehicleLink(sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer)
         self._modes = self.profile.modes[vehicle_type]
         self._default_mode = next(m for m in ("STABILIZE", "MANUAL") if m in self._modes)
         self.mode = self._default_mode
@@ -270,6 +270,12 @@ class MockVehicle:
 
     def send_home(self) -> None:
         self.send(telemetry.home_position(self.home.lat_deg, self.home.lon_deg, self.home.alt_m))
+
+    def _on_new_peer(self, addr: tuple) -> None:
+        """Greet a new GCS at once (identity and home) instead of at the next 1 Hz / 0.2 Hz slot."""
+        if self.world is not None:
+            self.send_status()
+            self.send_home()
 
     def _mission_current(self) -> MissionCurrentMessage:
         nav, srv = self._nav, self.mission_server

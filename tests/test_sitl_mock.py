@@ -1,0 +1,216 @@
+"""The mock fleet over real UDP, with a pymavlink ``udpout`` connection as the GCS."""
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, MissionState, px4_custom_mode
+from gcs_planner.mavlink.types import MissionItem
+from gcs_planner.mavlink.wire import attach_extensions
+from sitl_mock import DEFAULT_HOME, MockFleet
+from sitl_mock.probe import Probe
+
+ARM, TAKEOFF, RTL, SET_MODE, MISSION_START, SET_CURRENT, REBOOT = 400, 22, 20, 176, 300, 224, 246
+ACCEPTED, DENIED, UNSUPPORTED, FAILED = 0, 2, 3, 4
+
+
+def _wp(seq: int, e: float, n: float, up: float, command: int = 16, frame: int = 6, **kw) -> MissionItem:
+    lat, lon, _ = enu_to_geodetic(e, n, 0.0, DEFAULT_HOME)
+    return MissionItem(
+        seq=seq, frame=frame, command=command, x=round(lat * 1e7), y=round(lon * 1e7), z=up, **kw
+    )
+
+
+def _mission(home_item: bool) -> tuple[list[MissionItem], np.ndarray]:
+    """Takeoff, two waypoints, a speed change, a waypoint with a hold, land there; last target [m ENU]."""
+    body = [
+        MissionItem(seq=0, frame=6, command=22, z=15.0),
+        _wp(0, 0.0, 120.0, 15.0),
+        _wp(0, 100.0, 120.0, 25.0),
+        MissionItem(seq=0, frame=2, command=178, param2=6.0),
+        _wp(0, 100.0, 0.0, 20.0, param1=1.0),
+        _wp(0, 100.0, 0.0, 0.0, command=21),
+    ]
+    items = ([_wp(0, 0.0, 0.0, 0.0, frame=0)] if home_item else []) + body
+    return [it.with_seq(k) for k, it in enumerate(items)], np.array([100.0, 0.0, 0.0])
+
+
+@pytest.fixture
+def fleet():
+    with MockFleet(count=1, speedup=25.0) as f:
+        yield f
+
+
+@pytest.fixture
+def gcs(fleet):
+    probe = Probe(fleet.addresses[0])
+    assert probe.recv("HEARTBEAT", 3.0) is not None
+    yield probe
+    probe.close()
+
+
+def test_stream_rates_and_telemetry_fields():
+    home = Origin(47.0, 8.0, 500.0)
+    with MockFleet(count=1, speedup=10.0, home=home) as fleet:
+        gcs = Probe(fleet.addresses[0])
+        t0 = time.monotonic()
+        msgs = gcs.collect(3.0)
+        span = time.monotonic() - t0
+        gcs.close()
+    by_type: dict[str, list] = {}
+    for m in msgs:
+        by_type.setdefault(m.get_type(), []).append(m)
+    hb = len(by_type["HEARTBEAT"])
+    assert 2 <= hb <= 4  # 1 Hz over ~3 s
+    gpi = by_type["GLOBAL_POSITION_INT"]
+    assert 0.8 * 10 * span <= len(gpi) <= 1.1 * 10 * span + 2  # 10 Hz (the first ~0.1 s may be missed)
+    for name in ("ATTITUDE", "VFR_HUD", "SYS_STATUS", "BATTERY_STATUS", "MISSION_CURRENT", "HOME_POSITION"):
+        assert name in by_type, name
+    last = gpi[-1]
+    assert abs(last.lat - 470000000) <= 1 and abs(last.lon - 80000000) <= 1
+    assert last.alt == 500000 + last.relative_alt and abs(last.relative_alt) < 100  # mm, AMSL = home + rel
+    assert {m.get_srcSystem() for m in msgs} == {1} and {m.get_srcComponent() for m in msgs} == {1}
+    # time_boot_ms runs on simulated time: 10x the wall clock
+    dt_ms = gpi[-1].time_boot_ms - gpi[0].time_boot_ms
+    assert 0.7 * 10_000 * (len(gpi) - 1) / 10 < dt_ms < 1.3 * 10_000 * (len(gpi) - 1) / 10
+    home_msg = by_type["HOME_POSITION"][-1]
+    assert (home_msg.latitude, home_msg.longitude, home_msg.altitude) == (470000000, 80000000, 500000)
+    assert by_type["MISSION_CURRENT"][-1].mission_state == MissionState.NO_MISSION
+
+
+def test_commands_are_acknowledged(fleet, gcs):
+    assert gcs.command(1, 183, 1, 1500) == UNSUPPORTED  # DO_SET_SERVO: not emulated
+    assert gcs.command(1, SET_MODE, 1, ARDUCOPTER_MODES["AUTO"]) == FAILED  # no mission
+    assert gcs.command(1, SET_CURRENT, 3) == FAILED  # out of range
+    assert gcs.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 12) == FAILED  # not armed
+    assert gcs.command(1, ARM, 1) == ACCEPTED
+    assert gcs.command(1, TAKEOFF, 0, 0, 0, 0, 0, 0, 12) == ACCEPTED
+    hb = gcs.recv("HEARTBEAT", 2.0)
+    assert hb.base_mode & 128 and hb.custom_mode == ARDUCOPTER_MODES["GUIDED"]
+    up = gcs.recv("GLOBAL_POSITION_INT", 5.0, lambda m: m.relative_alt > 11_500)
+    assert up is not None
+    assert gcs.command(1, ARM, 0) == FAILED  # disarm in flight refused
+    assert gcs.command(1, SET_MODE, 1, ARDUCOPTER_MODES["LOITER"]) == ACCEPTED
+    assert gcs.recv("HEARTBEAT", 2.0, lambda m: m.custom_mode == ARDUCOPTER_MODES["LOITER"]) is not None
+    assert gcs.command(1, RTL) == ACCEPTED
+    landed = gcs.recv("HEARTBEAT", 8.0, lambda m: not m.base_mode & 128)  # lands and disarms itself
+    assert landed is not None and landed.custom_mode == ARDUCOPTER_MODES["RTL"]
+    assert np.linalg.norm(fleet.vehicles[0].position_enu()) < 0.5
+
+
+def test_set_mode_message_and_px4_mode_numbers():
+    with MockFleet(count=1, profile="px4", speedup=10.0) as fleet:
+        gcs = Probe(fleet.addresses[0])
+        loiter = px4_custom_mode(4, 3)
+        assert gcs.command(1, SET_MODE, 1, 4, 3) == ACCEPTED  # PX4: main mode 4 (AUTO), sub 3 (LOITER)
+        assert gcs.recv("HEARTBEAT", 2.0, lambda m: m.custom_mode == loiter and m.autopilot == 12) is not None
+        gcs.mav.set_mode_send(1, 1, px4_custom_mode(3))  # POSCTL through the SET_MODE message
+        ack = gcs.recv("COMMAND_ACK", 2.0, lambda m: m.command == 11)
+        assert ack is not None and ack.result == ACCEPTED
+        assert fleet.vehicles[0].state.mode == "POSCTL"
+        gcs.close()
+
+
+@pytest.mark.parametrize(
+    ("profile", "vehicle_type"), [("ardupilot", "multirotor"), ("px4", "fixed_wing"), ("px4", "multirotor")]
+)
+def test_mission_flown_end_to_end(profile, vehicle_type):
+    items, last_target = _mission(home_item=profile == "ardupilot")
+    first = 1 if profile == "ardupilot" else 0
+    with MockFleet(count=1, speedup=40.0, profile=profile, vehicle_type=vehicle_type) as fleet:
+        gcs = Probe(fleet.addresses[0])
+        assert gcs.upload(1, items) == 0
+        ack_id = fleet.vehicles[0].mission_server.opaque_id(0)
+        assert gcs.command(1, ARM, 1) == ACCEPTED
+        assert gcs.command(1, MISSION_START, 0, 0) == ACCEPTED
+        reached, current = [], None
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline and len(reached) < len(items) - first:
+            msg = gcs.recv(["MISSION_ITEM_REACHED", "MISSION_CURRENT"], 1.0)
+            if msg is not None and msg.get_type() == "MISSION_ITEM_REACHED":
+                reached.append(msg.seq)
+        assert reached == list(range(first, len(items)))
+        current = gcs.recv("MISSION_CURRENT", 3.0, lambda m: m.mission_state == MissionState.COMPLETE)
+        assert current is not None
+        attach_extensions(current, current.get_msgbuf())
+        assert current.mission_id == ack_id != 0
+        assert current.total == len(items) - first and current.seq == len(items) - 1
+        gpi = gcs.recv("GLOBAL_POSITION_INT", 2.0)
+        e, n, u = geodetic_to_enu(gpi.lat / 1e7, gpi.lon / 1e7, gpi.alt / 1000, DEFAULT_HOME)
+        tolerance = 3.0 if vehicle_type == "multirotor" else 2 * fleet.vehicles[0].airframe.loiter_radius_m
+        assert np.hypot(e - last_target[0], n - last_target[1]) < tolerance
+        assert abs(gpi.relative_alt) < 200  # on the ground
+        assert not fleet.vehicles[0].state.armed  # disarmed after landing
+        gcs.close()
+
+
+def test_mission_start_range_and_set_current(fleet, gcs):
+    items, _ = _mission(home_item=True)
+    assert gcs.upload(1, items) == 0
+    assert gcs.command(1, MISSION_START, 9, 0) == DENIED  # first item past the end
+    assert gcs.command(1, SET_CURRENT, len(items)) == FAILED
+    assert gcs.command(1, SET_CURRENT, 2) == ACCEPTED
+    assert gcs.recv("MISSION_CURRENT", 2.0, lambda m: m.seq == 2) is not None
+    gcs.mav.mission_set_current_send(1, 1, 3)  # the legacy message
+    assert gcs.recv("MISSION_CURRENT", 2.0, lambda m: m.seq == 3) is not None
+    assert gcs.command(1, ARM, 1) == ACCEPTED
+    assert gcs.command(1, MISSION_START, 2, 3) == ACCEPTED  # run items 2..3 only
+    got = [gcs.recv("MISSION_ITEM_REACHED", 10.0) for _ in range(2)]
+    assert [m.seq for m in got] == [2, 3]
+    done = gcs.recv("MISSION_CURRENT", 3.0, lambda m: m.mission_state == MissionState.COMPLETE)
+    assert done is not None and done.seq == 3
+    assert fleet.vehicles[0].state.airborne  # ended at item 3: holds in the air
+
+
+def test_reboot_forgets_the_mission_unless_persisted():
+    items, _ = _mission(home_item=True)
+    with MockFleet(vehicles=[{"persist_mission": False}, {"persist_mission": True}], speedup=5.0) as fleet:
+        for sysid, address in ((1, fleet.addresses[0]), (2, fleet.addresses[1])):
+            gcs = Probe(address)
+            assert gcs.upload(sysid, items) == 0
+            assert gcs.recv("MISSION_CURRENT", 2.0, lambda m: m.total == len(items) - 1) is not None
+            assert gcs.command(sysid, REBOOT, 1) == ACCEPTED
+            time.sleep(0.1)
+            gcs.heartbeat()  # the rebooted vehicle forgot its peers: reconnect
+            state = gcs.recv("MISSION_CURRENT", 3.0)
+            if sysid == 1:
+                assert state.mission_state == MissionState.NO_MISSION and state.total == 65535
+                assert fleet.vehicles[0].mission_server.count() == 0
+            else:
+                assert state.mission_state == MissionState.NOT_STARTED and state.total == len(items) - 1
+            gcs.close()
+
+
+def test_sysid_routing_between_vehicles():
+    with MockFleet(count=3, speedup=5.0) as fleet:
+        assert len(set(fleet.addresses)) == 3
+        gcs = Probe(fleet.addresses[1])
+        msgs = gcs.collect(1.2)
+        assert msgs and {m.get_srcSystem() for m in msgs} == {2}
+        assert gcs.command(3, ARM, 1, timeout_s=0.7) is None  # vehicle 2 ignores commands for 3
+        assert not fleet.vehicle(3).state.armed and not fleet.vehicle(2).state.armed
+        assert gcs.command(2, ARM, 1) == ACCEPTED
+        assert fleet.vehicle(2).state.armed and not fleet.vehicle(1).state.armed
+        gcs.close()
+
+
+def test_cli_starts_vehicles_and_stops_on_interrupt():
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sitl_mock.cli", "--vehicles", "3", "--base-port", "0", "--speedup", "5"],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        lines = [proc.stderr.readline() for _ in range(4)]
+        assert [f"sysid {k}: udp 127.0.0.1:" in line for k, line in enumerate(lines[:3], 1)] == [True] * 3
+        port = int(lines[0].split("127.0.0.1:")[1].split()[0])
+        gcs = Probe(("127.0.0.1", port))
+        assert gcs.recv("HEARTBEAT", 3.0) is not None
+        gcs.close()
+    finally:
+        proc.send_signal(2)
+        assert proc.wait(timeout=10) == 0
