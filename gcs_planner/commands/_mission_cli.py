@@ -1,0 +1,125 @@
+"""Shared plumbing of the vehicle commands (upload, download, clear, start): arguments, connection, tables.
+
+Not a subcommand itself (it is not in gcs_planner.cli.COMMANDS).
+
+Autopilot conventions (home at seq 0 or not) follow the vehicle's HEARTBEAT.autopilot unless
+--autopilot says otherwise: MAV_AUTOPILOT_ARDUPILOTMEGA -> "ardupilot", anything else -> "px4"
+(PX4 and generic MAVLink autopilots such as MAVSDK's server expect no home item).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import logging
+from collections.abc import AsyncIterator, Sequence
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.types import MissionItem, MissionType
+
+log = logging.getLogger(__name__)
+
+MISSION_TYPES = {"mission": MissionType.MISSION, "fence": MissionType.FENCE, "rally": MissionType.RALLY}
+HEARTBEAT_TIMEOUT_S = 5.0
+
+
+def add_connection_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--connect",
+        required=True,
+        metavar="URL",
+        help="MAVLink endpoint, e.g. udpout:127.0.0.1:14550 (to a vehicle) or udpin:0.0.0.0:14550 (listen)",
+    )
+    p.add_argument("--sysid", required=True, type=_sysid, help="target vehicle's MAVLink system id (1..255)")
+    p.add_argument("--compid", type=int, default=1, help="target component id [1 = autopilot]")
+    p.add_argument(
+        "--autopilot",
+        choices=("auto", "ardupilot", "px4"),
+        default="auto",
+        help="mission conventions: auto = from the vehicle's HEARTBEAT [auto]",
+    )
+    p.add_argument(
+        "--heartbeat-timeout",
+        type=float,
+        default=HEARTBEAT_TIMEOUT_S,
+        metavar="S",
+        help=f"how long to wait for the vehicle's first HEARTBEAT [{HEARTBEAT_TIMEOUT_S:g} s]",
+    )
+
+
+def _sysid(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer 1..255, got {text!r}") from None
+    if not 1 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"must be an integer 1..255, got {value}")
+    return value
+
+
+def autopilot_of(heartbeat, choice: str) -> str:
+    """The item conventions to use for a vehicle (see module docstring)."""
+    if choice != "auto":
+        return choice
+    return "ardupilot" if heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA else "px4"
+
+
+@contextlib.asynccontextmanager
+async def vehicle_link(args: argparse.Namespace) -> AsyncIterator[tuple[MavlinkLink, object]]:
+    """Open the link, wait for the target's HEARTBEAT; yield (link, heartbeat); always close."""
+    try:
+        link = await MavlinkLink.open(args.connect)
+    except (OSError, ValueError) as exc:
+        raise UserError(f"cannot open --connect {args.connect!r}: {exc}") from None
+    try:
+        try:
+            heartbeat = await link.wait_for(
+                lambda msg: (
+                    msg.get_type() == "HEARTBEAT"
+                    and msg.get_srcSystem() == args.sysid
+                    and msg.get_srcComponent() == args.compid
+                ),
+                timeout_s=args.heartbeat_timeout,
+            )
+        except TimeoutError:
+            heartbeat = None
+        if heartbeat is None:
+            raise UserError(
+                f"no HEARTBEAT from system {args.sysid} component {args.compid} on {args.connect}"
+                f" within {args.heartbeat_timeout:g} s"
+            )
+        yield link, heartbeat
+    finally:
+        await link.close()
+
+
+def command_name(command: int) -> str:
+    entry = mavlink.enums["MAV_CMD"].get(command)
+    return entry.name.removeprefix("MAV_CMD_") if entry else str(command)
+
+
+def print_items(items: Sequence[MissionItem], title: str) -> None:
+    """One row per item: seq, current, frame, command, params, lat/lon [deg], alt [m]."""
+    print(title)
+    print(
+        f"{'seq':>5} {'cur':>3} {'frame':>5} {'command':<24} {'param1':>9} {'param2':>9} {'param3':>9}"
+        f" {'param4':>9} {'lat_deg':>12} {'lon_deg':>13} {'alt_m':>9}"
+    )
+    for it in items:
+        params = " ".join(f"{p:>9.6g}" for p in (it.param1, it.param2, it.param3, it.param4))
+        print(
+            f"{it.seq:>5} {it.current:>3} {it.frame:>5} {command_name(it.command):<24} {params}"
+            f" {it.x / 1e7:>12.7f} {it.y / 1e7:>13.7f} {it.z:>9.2f}"
+        )
+
+
+def print_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
+    """Right-aligned columns sized to their content; floats with 3 decimals."""
+    cells = [[f"{v:.3f}" if isinstance(v, float) else str(v) for v in row] for row in rows]
+    widths = [max([len(h)] + [len(r[i]) for r in cells]) for i, h in enumerate(headers)]
+    print("  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True)))
+    for r in cells:
+        print("  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)))

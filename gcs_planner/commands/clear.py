@@ -1,0 +1,43 @@
+"""Clear a vehicle's mission, fence or rally list (or all three) and confirm each was cleared.
+
+Uses MISSION_CLEAR_ALL; on ArduPilot-style vehicles that refuse to clear in AUTO the client uploads
+an empty list instead (see gcs_planner.mavlink.mission).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import time
+
+from gcs_planner.commands._mission_cli import MISSION_TYPES, add_connection_arguments, vehicle_link
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.types import MissionType
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_connection_arguments(p)
+    p.add_argument(
+        "--type", choices=[*MISSION_TYPES, "all"], default="mission", help="list to clear [mission]"
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    return asyncio.run(_clear(args))
+
+
+async def _clear(args: argparse.Namespace) -> int:
+    mission_type = MissionType.ALL if args.type == "all" else MISSION_TYPES[args.type]
+    async with vehicle_link(args) as (link, _heartbeat):
+        client = MissionClient(link, args.sysid, args.compid)
+        print(f"vehicle {args.sysid} on {args.connect}")
+        print(f"{'list':<8} {'result':<10} {'time_s':>7}")
+        t0 = time.monotonic()
+        try:
+            await client.clear(mission_type)
+        except UserError:
+            print(f"{args.type:<8} {'FAILED':<10} {time.monotonic() - t0:>7.2f}")
+            raise
+        print(f"{args.type:<8} {'CLEARED':<10} {time.monotonic() - t0:>7.2f}")
+    return 0

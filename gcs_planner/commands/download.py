@@ -1,0 +1,67 @@
+"""Download a vehicle's mission (and fence and rally points) and print it; optionally save it to FILE.
+
+FILE ending in .plan is written as QGroundControl JSON with all three lists; any other name as QGC
+WPL 110 (mission only). Without FILE, the items are printed only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from pathlib import Path
+
+from gcs_planner.commands._mission_cli import (
+    MISSION_TYPES,
+    add_connection_arguments,
+    autopilot_of,
+    print_items,
+    vehicle_link,
+)
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.files import MissionFile, save_mission_file
+from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.types import MissionType
+from gcs_planner.mavlink.wpl import dumps_wpl
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_connection_arguments(p)
+    p.add_argument("file", metavar="FILE", nargs="?", help="write the lists here (.plan, else WPL)")
+    p.add_argument(
+        "--type",
+        choices=[*MISSION_TYPES, "all"],
+        default=None,
+        help="which list(s) to download [all for a .plan FILE, else mission]",
+    )
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.type is None:
+        args.type = "all" if args.file and Path(args.file).suffix.lower() == ".plan" else "mission"
+    if args.file and args.type == "all" and Path(args.file).suffix.lower() != ".plan":
+        raise UserError(f"{args.file}: a WPL file holds one list; write a .plan or choose --type")
+    return asyncio.run(_download(args))
+
+
+async def _download(args: argparse.Namespace) -> int:
+    types = list(MISSION_TYPES.values()) if args.type == "all" else [MISSION_TYPES[args.type]]
+    async with vehicle_link(args) as (link, heartbeat):
+        autopilot = autopilot_of(heartbeat, args.autopilot)
+        client = MissionClient(link, args.sysid, args.compid)
+        lists = {}
+        for mission_type in types:
+            lists[mission_type] = await client.download(mission_type=mission_type)
+            print_items(lists[mission_type], f"{mission_type.name.lower()}: {len(lists[mission_type])} items")
+    if args.file and Path(args.file).suffix.lower() == ".plan":
+        mf = MissionFile.from_items(
+            lists.get(MissionType.MISSION, []),
+            autopilot,
+            fence=lists.get(MissionType.FENCE),
+            rally=lists.get(MissionType.RALLY),
+        )
+        save_mission_file(args.file, mf, autopilot=autopilot)
+    elif args.file:
+        Path(args.file).write_text(dumps_wpl(lists[MISSION_TYPES[args.type]]))
+    if args.file:
+        print(f"wrote {args.file}")
+    return 0
