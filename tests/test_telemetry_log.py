@@ -68,7 +68,7 @@ def test_raw_channel_keeps_every_frame_byte_for_byte(logged):
     path, frames = logged
     flight = read_flight(path)
     assert [f.data for f in flight.frames] == [raw for _, raw, _ in frames]
-    assert [f.t_ns for f in flight.frames] == [round(t * 1e9) for _, _, t in frames]
+    assert [f.t_ns for f in flight.frames] == [round(t * 1e6) * 1000 for _, _, t in frames]  # whole us
     assert flight.recovered_messages > len(frames)  # raw + JSON + LocationFix + GeoJSON + events
 
 
@@ -96,6 +96,12 @@ def test_standard_mcap_reader_sees_foxglove_channels_and_schemas(logged):
         assert {"/plan/routes", "/scenario/obstacles", "/events"} <= topics
         fixes = [json.loads(m.data) for _, _, m in reader.iter_messages(topics=["/vehicle/2/location"])]
         assert len(fixes) == 60 and fixes[0]["frame_id"] == "vehicle2"
+        track = read_flight(path).positions[2]
+        assert [f["latitude"] for f in fixes] == [round(v, 7) for v in track.lat_deg]
+        assert [f["altitude"] for f in fixes] == [round(v, 3) for v in track.alt_m]  # AMSL
+        assert [f["timestamp"]["sec"] * 10**9 + f["timestamp"]["nsec"] for f in fixes] == [
+            round(t * 1e6) * 1000 for t in track.t_s
+        ]
         assert set(json.loads(schemas["foxglove.LocationFix"].data)["required"]) <= set(fixes[0])
         routes = next(reader.iter_messages(topics=["/plan/routes"]))[2]
         collection = json.loads(json.loads(routes.data)["geojson"])
@@ -145,8 +151,13 @@ def test_every_mavlink_type_encodes_as_json_matching_its_schema(cls):
     raw = cls(*values).pack(mavlink.MAVLink(None, srcSystem=1, srcComponent=1))
     msg = mavlink.MAVLink(None).decode(bytearray(raw))
     doc = json.loads(message_json(msg))
-    expected = {k: v for k, v in msg.to_dict().items() if k != "mavpackettype"}
-    assert doc == json.loads(json.dumps(expected))
+    expected = json.loads(json.dumps({k: v for k, v in msg.to_dict().items() if k != "mavpackettype"}))
+    assert list(doc) == list(expected)
+    for name, ctype in zip(cls.fieldnames, cls.fieldtypes, strict=True):
+        if ctype == "float":  # printed with 9 significant digits: exact as float32
+            np.testing.assert_array_equal(np.float32(doc[name]), np.float32(expected[name]), err_msg=name)
+        else:
+            assert doc[name] == expected[name], name
     schema = mavlink_json_schema(cls)
     assert schema["title"] == f"mavlink.{cls.msgname}" and list(schema["properties"]) == list(doc)
     assert "$ref" not in json.dumps(schema)

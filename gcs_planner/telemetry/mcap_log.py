@@ -23,7 +23,9 @@ the pending list is unbounded in time but bounded in size by the synchronous dra
 Time base: ``t_s`` is the receive time [s]. Unix time is expected (``time.time()``); a clock
 that is clearly not Unix time (< 1e9 s, e.g. ``loop.time()`` or a test's fake clock) is shifted
 once by a constant offset so that its first value maps to the wall clock at that moment.
-MCAP log times are integer nanoseconds since the Unix epoch.
+MCAP log times are integer nanoseconds since the Unix epoch, rounded to whole microseconds: a
+float Unix time resolves only ~0.24 us, .tlog stores microseconds, and the sub-microsecond
+digits would be incompressible noise in every record header.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import struct
 import threading
 import time
 import tomllib
+from operator import itemgetter
 from pathlib import Path
 from typing import IO
 
@@ -98,6 +101,7 @@ class FlightLogger:
         self._raw_channels: dict[int, int] = {}
         self._json_channels: dict[tuple[int, type], int] = {}
         self._location_channels: dict[int, int] = {}
+        self._fix_template: dict[int, str] = {}
         self._schema_ids: dict[type, int] = {}
         self._frames_per_sysid: dict[int, int] = {}
         self._event_channel = 0
@@ -180,25 +184,26 @@ class FlightLogger:
             if self._clock_offset_s is None:
                 self._clock_offset_s = time.time() - t_s
             t_s += self._clock_offset_s
-        return round(t_s * 1e9)
+        return round(t_s * 1e6) * 1000
 
     def _encode(self, batch: list[tuple[float, object, bytes]]) -> None:
-        add = self._writer.add_message
+        """Encode a batch; rows are grouped by channel within the chunk (better compression)."""
         raw_channels = self._raw_channels
         json_channels = self._json_channels
         counts = self._frames_per_sysid
+        raw_rows, json_rows, fix_rows = [], [], []
         tlog_parts: list[bytes] = []
         for t_s, msg, raw in batch:
-            t_ns = self._to_ns(t_s)
+            t_ns = round(t_s * 1e6) * 1000 if t_s >= _UNIX_TIME_MIN_S else self._to_ns(t_s)
             raw = bytes(raw)
-            sysid = _frame_sysid(raw)
+            sysid = raw[5] if raw[0] == 0xFD and len(raw) > 5 else _frame_sysid(raw)
             channel = raw_channels.get(sysid)
             if channel is None:
                 channel = self._add_vehicle(sysid)
-            add(channel, t_ns, raw)
+            raw_rows.append((channel, t_ns, raw))
             counts[sysid] += 1
             if self._tlog is not None:
-                tlog_parts.append(_TLOG_TIME.pack(((t_ns + 500) // 1000) & ~3))
+                tlog_parts.append(_TLOG_TIME.pack((t_ns // 1000) & ~3))
                 tlog_parts.append(raw)
             if msg is None or not hasattr(msg, "fieldnames"):
                 continue
@@ -206,27 +211,34 @@ class FlightLogger:
             channel = json_channels.get(key)
             if channel is None:
                 channel = self._add_json_channel(sysid, type(msg))
-            add(channel, t_ns, message_json(msg))
+            json_rows.append((channel, t_ns, message_json(msg)))
             if msg.id == 33:  # GLOBAL_POSITION_INT
-                add(self._location_channels[sysid], t_ns, self._location_fix(sysid, msg, t_ns))
+                fix_rows.append((self._location_channels[sysid], t_ns, self._location_fix(sysid, msg, t_ns)))
+        by_channel = itemgetter(0)
+        for rows in (raw_rows, json_rows, fix_rows):
+            rows.sort(key=by_channel)  # stable: time order kept within a channel
+            self._writer.add_messages(rows)
         if tlog_parts:
             self._tlog.write(b"".join(tlog_parts))
 
     def _location_fix(self, sysid: int, msg, t_ns: int) -> bytes:
+        """foxglove.LocationFix JSON; degE7 and mm printed with 7 and 3 decimals (exact)."""
         sec, nsec = divmod(t_ns, 1_000_000_000)
-        r, g, b = vehicle_color(sysid)[:3]
-        return (
-            f'{{"timestamp":{{"sec":{sec},"nsec":{nsec}}},"frame_id":"vehicle{sysid}",'
-            f'"latitude":{msg.lat * 1e-7!r},"longitude":{msg.lon * 1e-7!r},"altitude":{msg.alt * 1e-3!r},'
-            f'"position_covariance":{_COVARIANCE_ZERO},"position_covariance_type":0,'
-            f'"color":{{"r":{r / 255:.3f},"g":{g / 255:.3f},"b":{b / 255:.3f},"a":1}}}}'
-        ).encode()
+        values = (sec, nsec, msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3)
+        return (self._fix_template[sysid] % values).encode()
 
     def _add_vehicle(self, sysid: int) -> int:
         w = self._writer
         channel = w.register_channel(f"/mavlink/{sysid}/raw", "mavlink", 0, {"sysid": str(sysid)})
         self._raw_channels[sysid] = channel
         self._frames_per_sysid[sysid] = 0
+        r, g, b = vehicle_color(sysid)[:3]
+        self._fix_template[sysid] = (
+            f'{{"timestamp":{{"sec":%d,"nsec":%d}},"frame_id":"vehicle{sysid}",'
+            f'"latitude":%.7f,"longitude":%.7f,"altitude":%.3f,'
+            f'"position_covariance":{_COVARIANCE_ZERO},"position_covariance_type":0,'
+            f'"color":{{"r":{r / 255:.3f},"g":{g / 255:.3f},"b":{b / 255:.3f},"a":1}}}}'
+        )
         self._location_channels[sysid] = w.register_channel(
             f"/vehicle/{sysid}/location",
             "json",

@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import struct
 import zlib
-from collections import defaultdict
+from collections import Counter, defaultdict
 from pathlib import Path
 from typing import IO
 
@@ -111,19 +111,31 @@ class ChunkedMcapWriter:
     # -- messages --------------------------------------------------------------------------------
     def add_message(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
         """Append one message to the open chunk (publish time = log time)."""
-        chunk = self._chunk
-        chunk += _MESSAGE_HEADER.pack(
-            Opcode.MESSAGE, _MESSAGE_FIXED_LEN + len(data), channel_id, 0, log_time_ns, log_time_ns
-        )
-        chunk += data
+        self.add_messages([(channel_id, log_time_ns, data)])
+
+    def add_messages(self, rows: list[tuple[int, int, bytes]]) -> None:
+        """Append (channel id, log time [ns], data) rows to the open chunk, in the given order."""
+        if not rows:
+            return
+        pack = _MESSAGE_HEADER.pack
+        opcode = int(Opcode.MESSAGE)
+        parts = []
+        append = parts.append
+        for channel_id, t_ns, data in rows:
+            append(pack(opcode, _MESSAGE_FIXED_LEN + len(data), channel_id, 0, t_ns, t_ns))
+            append(data)
+        self._chunk += b"".join(parts)
+        times = [row[1] for row in rows]
+        lo, hi = min(times), max(times)
         if self._chunk_messages == 0:
-            self._chunk_start_ns = self._chunk_end_ns = log_time_ns
-        elif log_time_ns < self._chunk_start_ns:
-            self._chunk_start_ns = log_time_ns
-        elif log_time_ns > self._chunk_end_ns:
-            self._chunk_end_ns = log_time_ns
-        self._chunk_messages += 1
-        self._counts[channel_id] += 1
+            self._chunk_start_ns, self._chunk_end_ns = lo, hi
+        else:
+            self._chunk_start_ns = min(self._chunk_start_ns, lo)
+            self._chunk_end_ns = max(self._chunk_end_ns, hi)
+        self._chunk_messages += len(rows)
+        counts = self._counts
+        for channel_id, n in Counter(row[0] for row in rows).items():
+            counts[channel_id] += n
 
     @property
     def chunk_bytes(self) -> int:
