@@ -27,7 +27,7 @@ J of a plan (eqs. 7-12), normalised so the weights are comparable:
 - J2 = mean over members of the range fraction left after the task,
 - J3 = sum_k |t_predicted_k - t_required_k| / (n_tasks * time_scale_s), t_predicted = fastest
   arrival (so J3 is the total stretching/waiting plus any lateness).
-Defaults (not in the paper): alpha 1, beta 2, q0 0.9, rho 0.1, tau0 1, 16 clusters, 30 iterations.
+Defaults (not in the paper): alpha 1, beta 2, q0 0.9, rho 0.1, tau0 1, 10 clusters, 15 iterations.
 """
 
 from __future__ import annotations
@@ -35,10 +35,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
 from gcs_planner.planning.coalition.model import ASSESS, STRIKE, CoalitionParams
 
-__all__ = ["CoalitionProblem", "Solution", "evaluate", "solve_aco"]
+__all__ = ["CoalitionProblem", "Solution", "coverable", "evaluate", "make_solution", "solve_aco"]
 
 EPS = 1e-3
 
@@ -104,6 +105,15 @@ def evaluate(assign: np.ndarray, prob: CoalitionProblem, params: CoalitionParams
     j3 = np.where(has, np.abs(start - eta), 0.0).sum(1) / (K * params.time_scale_s)
     J = params.w1 * j1 + params.w2 * j2 - params.w3 * j3
     return J, {"J1": j1, "J2": j2, "J3": j3}, t_req
+
+
+def coverable(prob: CoalitionProblem) -> bool:
+    """Can the candidates cover every task, one task each? (maximum bipartite matching)"""
+    cap = prob.capable
+    if cap.shape[0] < cap.shape[1]:
+        return False
+    rows, cols = linear_sum_assignment(np.where(cap, 0.0, 1.0))
+    return bool(cap[rows, cols].all())
 
 
 def _heuristic(prob: CoalitionProblem, params: CoalitionParams) -> np.ndarray:

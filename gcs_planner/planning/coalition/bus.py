@@ -17,11 +17,12 @@ __all__ = ["MessageBus"]
 
 
 class MessageBus:
-    """positions(t) -> (n, 2) array of every UAV's position [m] at time t [s]."""
+    """positions(t) -> (n, 2) every UAV's position [m] at time t [s]; position(i, t) -> (2,) one UAV's."""
 
     def __init__(
         self,
         positions: Callable[[float], np.ndarray],
+        position: Callable[[int, float], np.ndarray],
         range_m: float,
         delay_s: float,
         rng: np.random.Generator,
@@ -29,6 +30,7 @@ class MessageBus:
         extra_delay_s: np.ndarray | None = None,
     ) -> None:
         self.positions = positions
+        self.position = position
         self.range_m = range_m
         self.delay_s = delay_s
         self.jitter_s = jitter_s
@@ -59,7 +61,6 @@ class MessageBus:
             delay += float(self.extra_delay_s[src] + self.extra_delay_s[dst])
         t_arr = t_send_s + delay
         for t in (t_send_s, t_arr):
-            p = self.positions(t)
-            if np.hypot(*(p[src] - p[dst])) > self.range_m:
+            if np.hypot(*(self.position(src, t) - self.position(dst, t))) > self.range_m:
                 return None
         return t_arr

@@ -50,7 +50,7 @@ class Tender:
 
 @dataclass(frozen=True)
 class Bid:
-    """Eq. 22: who, for which target, speed, heading and position predicted at t_e^s, capability, range, ETA."""
+    """Eq. 22: who, which target, speed, heading and position predicted at t_e^s, capability, range, ETA."""
 
     uav: int
     tender_key: int

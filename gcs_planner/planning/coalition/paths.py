@@ -1,4 +1,4 @@
-"""Coalition paths (section 4.2): entry poses, timed Dubins arrivals, recon / assessment arcs, threat avoidance.
+"""Coalition paths (section 4.2): entry poses, timed Dubins arrivals, recon/assessment arcs, threat avoidance.
 
 Built on gcs_planner.geometry.dubins (``word_lengths``, ``DubinsPath``). Two thin, batched additions
 live here because the coalition planner calls them for every bidder and member inside the
@@ -19,10 +19,12 @@ Threat avoidance (eq. 17): threats are circles known at planning time. When the 
 enters one, the safe circle D (r_D = kappa r_T) gives two safe points, P1/P2 = centre +- r_D n,
 n normal to the start-goal chord; the one nearer the original path is used, heading along the
 chord (tangent to D there), and the path becomes start -> safe pose -> goal (two Dubins
-segments, recursively for further threats, depth <= 3; the other safe point and larger kappa are
-tried when the first choice still intersects). Stretching for timing is applied to the last
-segment, else the first; every returned leg is re-checked against the threats and the check's
-result is reported.
+segments, recursively for further threats, depth <= 2; the other safe point and 1.5 kappa are
+tried when the first choice still intersects). Timing (a required length) is met by, in order:
+radius stretching of the last link, else of another; pushing the safe points outwards; a detour
+through a via pose on rings about the goal with the last link stretched; loiter on a turning
+circle (after 0-3/4 of the first link). Every returned leg is re-checked against the threats and
+the result is reported.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs_planner.geometry.dubins import WORDS, DubinsPath, word_lengths
+from gcs_planner.geometry.dubins import WORDS, DubinsPath, stretch_to_length, word_lengths
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.planning.coalition.track import Leg
 
@@ -43,6 +45,7 @@ __all__ = [
     "entry_poses",
     "free_heading_lengths",
     "min_route",
+    "min_routes",
     "shortest_lengths",
     "stretch_batch",
     "timed_route",
@@ -115,21 +118,36 @@ def stretch_batch(
 ) -> list[DubinsPath | None]:
     """Dubins paths q0[i] -> q1[i] of exactly length_m[i] with radius k r_m[i] (k >= 1) plus loops.
 
-    None where length_m[i] is shorter than the shortest path (more than 1 mm).
+    Every sign change of (word length + loops - target) on a k grid is a candidate; all candidates
+    are bisected together and each problem keeps its smallest k that converges (a sign change
+    across a discontinuity does not). None where length_m[i] is below the shortest path.
     """
     q0, q1 = np.atleast_2d(q0).astype(float), np.atleast_2d(q1).astype(float)
-    length_m, r_m = np.atleast_1d(length_m).astype(float), np.broadcast_to(np.asarray(r_m, float), len(q0))
+    length_m = np.atleast_1d(length_m).astype(float)
+    r_m = np.broadcast_to(np.asarray(r_m, float), len(q0)).copy()
+    out = _stretch_search(q0, q1, length_m, r_m, np.geomspace(1.0, K_MAX, 60))
+    short = shortest_lengths(q0, q1, r_m)
+    miss = [i for i in range(len(q0)) if out[i] is None and length_m[i] >= short[i] - 1e-3]
+    if miss:  # CCC words valid on narrow k intervals: a denser grid for the misses only
+        dense = _stretch_search(q0[miss], q1[miss], length_m[miss], r_m[miss], np.geomspace(1.0, K_MAX, 300))
+        for i, path in zip(miss, dense):
+            out[i] = path
+    for i in range(len(q0)):
+        if out[i] is None and length_m[i] >= short[i] - 1e-3:
+            out[i] = stretch_to_length(tuple(q0[i]), tuple(q1[i]), float(length_m[i]), float(r_m[i]))
+    return out
+
+
+def _stretch_search(q0, q1, length_m, r_m, ks) -> list[DubinsPath | None]:
     n = len(q0)
-    ks = np.geomspace(1.0, K_MAX, 120)
     nk = len(ks)
     table = (
         word_lengths(np.repeat(q0, nk, 0), np.repeat(q1, nk, 0), np.tile(ks, n) * np.repeat(r_m, nk))
         .sum(2)
         .reshape(n, nk, 6)
-    )  # (n, k, word)
+    )
     out: list[DubinsPath | None] = [None] * n
-    lo_k, hi_k, word, loops = np.ones(n), np.ones(n), np.zeros(n, int), np.zeros(n)
-    solved = np.zeros(n, bool)
+    cands = []  # (problem, word, k_lo, k_hi, loops)
     for i in range(n):
         shortest = table[i, 0].min()
         if length_m[i] < shortest - 1e-3:
@@ -139,37 +157,44 @@ def stretch_batch(
             out[i] = _path(q0[i], w, word_lengths(q0[i], q1[i], r_m[i])[0, w], r_m[i], r_m[i])
             continue
         loop_len = TWO_PI * r_m[i] * ks
-        n_loops = 0
-        while True:
-            f = table[i] + n_loops * loop_len[:, None] - length_m[i]  # (k, word)
-            cross = np.isfinite(f[:-1]) & np.isfinite(f[1:]) & (f[:-1] < 0) & (f[1:] >= 0)
-            # reject jumps: an arc wrapping 0 <-> 2 pi changes the length by about 2 pi r
+        n0 = max(0, int((length_m[i] - table[i].max(initial=0, where=np.isfinite(table[i]))) // loop_len[-1]))
+        for loops in range(n0, n0 + 200):
+            f = table[i] + loops * loop_len[:, None] - length_m[i]
             with np.errstate(invalid="ignore"):
-                jump = np.abs(f[1:] - f[:-1]) > math.pi * r_m[i] * ks[1:, None]
-            cross &= ~jump
+                cross = np.isfinite(f[:-1]) & np.isfinite(f[1:]) & (np.sign(f[:-1]) != np.sign(f[1:]))
             if cross.any():
-                ki, w = np.argwhere(cross)[np.argmin(np.argwhere(cross)[:, 0])]
-                lo_k[i], hi_k[i], word[i], loops[i] = ks[ki], ks[ki + 1], w, n_loops
-                solved[i] = True
+                cands += [(i, w, ks[ki], ks[ki + 1], loops) for ki, w in np.argwhere(cross)]
                 break
-            n_loops += 1
-            if n_loops > 200:
-                break
-    idx = np.flatnonzero(solved)
-    if len(idx):
-        lo, hi = lo_k[idx], hi_k[idx]
-        for _ in range(50):  # batched bisection on k for all members at once
-            mid = 0.5 * (lo + hi)
-            seg = word_lengths(q0[idx], q1[idx], mid * r_m[idx])[np.arange(len(idx)), word[idx]]
-            f = seg.sum(1) + loops[idx] * TWO_PI * r_m[idx] * mid - length_m[idx]
-            below = f < 0
-            lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
-        k = hi
-        seg = word_lengths(q0[idx], q1[idx], k * r_m[idx])[np.arange(len(idx)), word[idx]].copy()
-        seg[:, 0] += loops[idx] * TWO_PI * r_m[idx] * k
-        for j, i in enumerate(idx):
-            out[i] = _path(q0[i], word[i], seg[j], k[j] * r_m[i], k[j] * r_m[i])
+    if cands:
+        c = np.array(cands, dtype=float)
+        pi, w, lo, hi, loops = c[:, 0].astype(int), c[:, 1].astype(int), c[:, 2], c[:, 3], c[:, 4]
+        rows = np.arange(len(c))
+
+        def resid(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            seg = word_lengths(q0[pi], q1[pi], k * r_m[pi])[rows, w]
+            return seg, seg.sum(1) + loops * TWO_PI * r_m[pi] * k - length_m[pi]
+
+        hi = _illinois(lambda k: resid(k)[1], lo, hi, 14)
+        seg, f = resid(hi)
+        seg = seg.copy()
+        seg[:, 0] += loops * TWO_PI * r_m[pi] * hi
+        for j in np.lexsort((hi, pi)):  # per problem, smallest converged k first
+            i = pi[j]
+            if out[i] is None and abs(f[j]) < 1e-3:
+                out[i] = _path(q0[i], w[j], seg[j], hi[j] * r_m[i], hi[j] * r_m[i])
     return out
+
+
+def _illinois(fun, lo: np.ndarray, hi: np.ndarray, iters: int) -> np.ndarray:
+    """Roots of fun (vectorised) in brackets [lo, hi] by the Illinois (modified regula falsi) method."""
+    f_lo, f_hi = fun(lo), fun(hi)
+    for _ in range(iters):
+        x = hi - f_hi * (hi - lo) / np.where(f_hi != f_lo, f_hi - f_lo, 1.0)  # inside the bracket
+        fx = fun(x)
+        flip = np.sign(fx) != np.sign(f_hi)
+        lo, f_lo = np.where(flip, hi, lo), np.where(flip, f_hi, 0.5 * f_lo)
+        hi, f_hi = x, fx
+    return hi
 
 
 def clearance_m(xy: np.ndarray, threats: list[Threat]) -> float:
@@ -187,11 +212,14 @@ def _samples(path: DubinsPath, ds_m: float) -> np.ndarray:
 
 
 def _first_violated(xy: np.ndarray, threats: list[Threat]) -> Threat | None:
-    for i in range(len(xy)):
-        for t in threats:
-            if math.hypot(xy[i, 0] - t.x, xy[i, 1] - t.y) < t.radius_m:
-                return t
-    return None
+    """The first threat (along the path) that a sample falls inside, or None."""
+    if not threats:
+        return None
+    c = np.array([[t.x, t.y] for t in threats])
+    r = np.array([t.radius_m for t in threats])
+    inside = np.hypot(xy[:, None, 0] - c[None, :, 0], xy[:, None, 1] - c[None, :, 1]) < r
+    hits = np.flatnonzero(inside.any(1))
+    return None if not len(hits) else threats[int(np.argmax(inside[hits[0]]))]
 
 
 def _shortest(q0, q1, r: float) -> DubinsPath:
@@ -210,10 +238,14 @@ class Route:
     clear: bool
     centres: list[np.ndarray | None] | None = None  # threat centre of each pose (None: start/goal)
 
+    def __post_init__(self) -> None:
+        if self.centres is None:
+            self.centres = [None] * len(self.poses)
+
     def pushed(self, sigma: float) -> list[np.ndarray]:
         """Poses with every safe point moved radially away from its threat by factor sigma."""
         out = []
-        for q, c in zip(self.poses, self.centres or [None] * len(self.poses)):
+        for q, c in zip(self.poses, self.centres):
             if c is None:
                 out.append(q)
             else:
@@ -221,41 +253,70 @@ class Route:
         return out
 
 
-def _route_length(poses, r) -> float:
-    return float(sum(_shortest(a, b, r).length for a, b in zip(poses[:-1], poses[1:])))
-
-
 def min_route(
-    q0, q1, r_m: float, threats: list[Threat], kappa: float, ds_m: float = 10.0, depth: int = 3
+    q0, q1, r_m: float, threats: list[Threat], kappa: float, ds_m: float = 10.0, depth: int = 2
 ) -> Route:
     """Shortest route start -> goal around the threats by safe-point two-segment Dubins paths."""
     q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
-    xy = _samples(_shortest(q0, q1, r_m), ds_m)[:, :2]
+    direct = _shortest(q0, q1, r_m)
+    xy = _samples(direct, ds_m)[:, :2]
     hit = _first_violated(xy, threats)
-    if hit is None:
-        return Route([q0, q1], r_m, _route_length([q0, q1], r_m), True, [None, None])
-    if depth == 0:
-        return Route([q0, q1], r_m, _route_length([q0, q1], r_m), False)
+    if hit is None or depth == 0:
+        return Route([q0, q1], r_m, direct.length, hit is None)
     chord = q1[:2] - q0[:2]
     d = chord / max(np.hypot(*chord), 1e-9)
     n = np.array([-d[1], d[0]])
     centre = np.array([hit.x, hit.y])
-    best: Route | None = None
-    for k in (kappa, kappa * 1.3, kappa * 1.7):
-        rd = k * hit.radius_m
-        cands = [centre + rd * n, centre - rd * n]
-        cands.sort(key=lambda p: float(np.min(np.hypot(*(xy - p).T))))  # nearer the original path first
-        for p in cands:
-            safe = np.array([p[0], p[1], math.atan2(d[1], d[0])])
-            a = min_route(q0, safe, r_m, threats, kappa, ds_m, depth - 1)
-            b = min_route(safe, q1, r_m, threats, kappa, ds_m, depth - 1)
+    safes = []
+    for k in (kappa, kappa * 1.5):  # safe points, nearer the original path first
+        cands = [centre + k * hit.radius_m * n, centre - k * hit.radius_m * n]
+        cands.sort(key=lambda p: float(np.min(np.hypot(*(xy - p).T))))
+        safes += [np.array([p[0], p[1], math.atan2(d[1], d[0])]) for p in cands]
+    m = len(safes)
+    # both links of every candidate in one batched Dubins call
+    lens = word_lengths(np.r_[np.tile(q0, (m, 1)), safes], np.r_[safes, np.tile(q1, (m, 1))], r_m)
+    for c, safe in enumerate(safes):  # the first candidate that clears is taken (the paper's rule)
+        links = []
+        for row, a in ((c, q0), (m + c, safe)):
+            w = int(lens[row].sum(1).argmin())
+            links.append(_path(a, w, lens[row, w], r_m, r_m))
+        ok = [_first_violated(_samples(p, ds_m)[:, :2], threats) is None for p in links]
+        if not any(ok) and depth < 2:
+            continue
+        parts = [
+            Route([a, b], r_m, p.length, True)
+            if good
+            else min_route(a, b, r_m, threats, kappa, ds_m, depth - 1)
+            for good, p, (a, b) in zip(ok, links, ((q0, safe), (safe, q1)))
+        ]
+        if all(part.clear for part in parts):
+            a, b = parts
             centres = [*a.centres[:-1], centre, *b.centres[1:]]
-            route = Route(a.poses + b.poses[1:], r_m, a.length_m + b.length_m, a.clear and b.clear, centres)
-            if route.clear and (best is None or route.length_m < best.length_m):
-                best = route
-        if best is not None:
-            return best
-    return Route([q0, q1], r_m, _route_length([q0, q1], r_m), False, [None, None])
+            return Route(a.poses + b.poses[1:], r_m, a.length_m + b.length_m, True, centres)
+    return Route([q0, q1], r_m, direct.length, False)
+
+
+def min_routes(
+    q0: np.ndarray, q1: np.ndarray, r_m: np.ndarray, threats: list[Threat], kappa: float, ds_m: float = 10.0
+) -> list[Route]:
+    """min_route for many pairs: one batched Dubins call; only paths that hit a threat are re-routed."""
+    lens = word_lengths(q0, q1, r_m, r_m)
+    out = []
+    for i in range(len(q0)):
+        w = int(lens[i].sum(1).argmin())
+        direct = _path(q0[i], w, lens[i, w], r_m[i], r_m[i])
+        if _first_violated(_samples(direct, ds_m)[:, :2], threats) is None:
+            out.append(Route([q0[i], q1[i]], float(r_m[i]), direct.length, True))
+        else:
+            out.append(min_route(q0[i], q1[i], float(r_m[i]), threats, kappa, ds_m))
+    return out
+
+
+def _links_lengths(poses_sets: list[list[np.ndarray]], r_m: float) -> np.ndarray:
+    """Total shortest length of each chain of poses (all chains the same size), one batched call."""
+    a = np.array([p[:-1] for p in poses_sets]).reshape(-1, 3)
+    b = np.array([p[1:] for p in poses_sets]).reshape(-1, 3)
+    return shortest_lengths(a, b, r_m).reshape(len(poses_sets), -1).sum(1)
 
 
 def timed_route(
@@ -277,15 +338,12 @@ def timed_route(
         if ok:
             return trial, route.clear
         fallback = fallback or trial
-    if len(route.poses) > 2:  # lengthen by pushing the safe points outwards (larger kappa), bisected
-        lo, hi = 1.0, 1.0
-        while hi < 8.0 and _route_length(route.pushed(hi), route.r_m) < length_m:
-            hi *= 1.5
-        if _route_length(route.pushed(hi), route.r_m) >= length_m:
-            for _ in range(40):
-                mid = 0.5 * (lo + hi)
-                lo, hi = (mid, hi) if _route_length(route.pushed(mid), route.r_m) < length_m else (lo, mid)
-            poses = route.pushed(lo)
+    if len(route.poses) > 2:  # lengthen by pushing the safe points outwards (larger kappa), on a grid
+        sig = np.geomspace(1.0, 8.0, 200)
+        total = _links_lengths([route.pushed(x) for x in sig], route.r_m)
+        below = np.flatnonzero(total <= length_m)
+        if len(below) and below[-1] < len(sig) - 1:
+            poses = route.pushed(sig[below[-1]])
             links = [_shortest(a, b, route.r_m) for a, b in zip(poses[:-1], poses[1:])]
             rest = length_m - sum(p.length for p in links)
             p = stretch_batch(
@@ -296,7 +354,104 @@ def timed_route(
                 xy = np.concatenate([_samples(q, ds_m)[:, :2] for q in trial])
                 if clearance_m(xy, threats) >= 0.0:
                     return trial, True
+    longer = _detour(route, length_m, threats, ds_m)
+    if longer is not None:
+        return longer, True
+    delayed = _delay_on_start_circle(route, length_m, threats, ds_m)
+    if delayed is not None:
+        return delayed, True
     return (fallback or links), False
+
+
+def _delay_on_start_circle(route: Route, length_m: float, threats: list[Threat], ds_m: float):
+    """Loiter fallback: fly s along the first link, an arc of length a on a turning circle there, then
+    the shortest route on, with s + a + L = length_m (scan of a over up to 3 loops, Illinois refine);
+    s in 0, 1/4, 1/2, 3/4 of the first link. None if nothing clears the threats."""
+    q1, r = route.poses[-1], route.r_m
+    first = _shortest(route.poses[0], route.poses[1], r)
+    a = np.linspace(0.0, 3 * TWO_PI * r, 600)
+    for frac in (0.0, 0.25, 0.5, 0.75):
+        lead = _truncate(first, frac * first.length)
+        q0 = np.asarray(lead.end) if lead.length > 0 else route.poses[0]
+        target = length_m - lead.length
+        for side in (1.0, -1.0):
+            arc_pose = _advance_arc(q0, side / r, a)
+            f = a + shortest_lengths(arc_pose, np.broadcast_to(q1, arc_pose.shape), r) - target
+            cross = np.flatnonzero((np.sign(f[:-1]) != np.sign(f[1:])) & (np.abs(f[1:] - f[:-1]) < np.pi * r))
+            for c in cross[:2]:
+                hi = _illinois(
+                    lambda x, q0=q0, side=side, target=target: (
+                        x + shortest_lengths(_advance_arc(q0, side / r, x), q1[None], r) - target
+                    ),
+                    a[c : c + 1],
+                    a[c + 1 : c + 2],
+                    12,
+                )[0]
+                arc = DubinsPath(
+                    tuple(float(v) for v in q0),
+                    "LSL" if side > 0 else "RSR",
+                    (hi, 0.0, 0.0),
+                    (r, math.inf, r),
+                )
+                tail = _shortest(np.asarray(arc.end), q1, r)
+                trial = [p for p in (lead, arc, tail) if p.length > 0]
+                if abs(sum(p.length for p in trial) - length_m) > 1e-2:
+                    continue
+                xy = np.concatenate([_samples(p, ds_m)[:, :2] for p in trial])
+                if clearance_m(xy, threats) >= 0.0:
+                    return trial
+    return None
+
+
+def _detour(route: Route, length_m: float, threats: list[Threat], ds_m: float):
+    """Lengthen through a via pose: via poses on rings about the goal (heading at the goal), the
+    longest totals below the need first, then the via -> goal link radius-stretched by the rest."""
+    prev, q1, r = route.poses[-2], route.poses[-1], route.r_m
+    head = [_shortest(a, b, r) for a, b in zip(route.poses[:-2], route.poses[1:-1])]
+    need = length_m - sum(p.length for p in head)
+    rho, th = np.meshgrid(
+        np.linspace(2 * r, max(need / 2, 3 * r), 12), np.linspace(0, TWO_PI, 36, endpoint=False)
+    )
+    vx, vy = q1[0] + rho.ravel() * np.cos(th.ravel()), q1[1] + rho.ravel() * np.sin(th.ravel())
+    via = np.column_stack([vx, vy, np.arctan2(q1[1] - vy, q1[0] - vx)])
+    a = shortest_lengths(np.broadcast_to(prev, via.shape), via, r)
+    b = shortest_lengths(via, np.broadcast_to(q1, via.shape), r)
+    ok = np.flatnonzero(a + b <= need)
+    order = []
+    for v in ok[np.argsort(-(a + b)[ok])]:
+        first = _shortest(prev, via[v], r)
+        if clearance_m(_samples(first, ds_m)[:, :2], threats) >= 0.0:
+            order.append(v)
+        if len(order) == 8:
+            break
+    if not order:
+        return None
+    tails = stretch_batch(
+        via[order], np.broadcast_to(q1, (len(order), 3)), need - a[order], np.full(len(order), r)
+    )
+    for v, tail in zip(order, tails):
+        if tail is None:
+            continue
+        trial = [*head, _shortest(prev, via[v], r), tail]
+        xy = np.concatenate([_samples(p, ds_m)[:, :2] for p in trial if p.length > 0])
+        if abs(sum(p.length for p in trial) - length_m) < 1e-2 and clearance_m(xy, threats) >= 0.0:
+            return [p for p in trial if p.length > 0]
+    return None
+
+
+def _truncate(path: DubinsPath, s_m: float) -> DubinsPath:
+    """The first s_m metres of a Dubins path."""
+    ends = np.cumsum(path.lengths)
+    lengths = np.clip(s_m - np.r_[0.0, ends[:2]], 0.0, np.asarray(path.lengths))
+    return DubinsPath(path.start, path.word, tuple(float(v) for v in lengths), path.radii)
+
+
+def _advance_arc(q0: np.ndarray, kappa: float, s: np.ndarray) -> np.ndarray:
+    """Poses (n, 3) after flying arc lengths s on the circle of signed curvature kappa from q0."""
+    h = q0[2] + kappa * s
+    return np.column_stack(
+        [q0[0] + (np.sin(h) - np.sin(q0[2])) / kappa, q0[1] - (np.cos(h) - np.cos(q0[2])) / kappa, h]
+    )
 
 
 def sample_segments(

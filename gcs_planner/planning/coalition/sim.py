@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gcs_planner.planning.coalition import paths
-from gcs_planner.planning.coalition.aco import CoalitionProblem, make_solution, solve_aco
+from gcs_planner.planning.coalition.aco import CoalitionProblem, coverable, make_solution, solve_aco
 from gcs_planner.planning.coalition.baselines import GLOBAL_SCALE, solve_polynomial
 from gcs_planner.planning.coalition.bus import MessageBus
 from gcs_planner.planning.coalition.contract_net import Award, Bid, Tender, bid_for, tender_times
@@ -113,6 +113,7 @@ class CoalitionSim:
         extra = np.array([world.extra_delay_s.get(u.id, 0.0) for u in self.uavs])
         self.bus = MessageBus(
             self.positions,
+            self.position,
             self.p.link_range_m,
             self.p.delay_s,
             rng,
@@ -123,6 +124,9 @@ class CoalitionSim:
     # ---- plumbing
     def positions(self, t_s: float) -> np.ndarray:
         return np.array([s.track.state_at(t_s)[0, :2] for s in self.st])
+
+    def position(self, i: int, t_s: float) -> np.ndarray:
+        return self.st[i].track.state_at(t_s)[0, :2]
 
     def at(self, t_s: float, kind: str, **data) -> None:
         heapq.heappush(self.heap, (t_s, self.seq, kind, data))
@@ -172,8 +176,18 @@ class CoalitionSim:
         c = np.array([t.approx_xy for t in open_])
         d = np.hypot(*(c - q0[:2]).T)
         tgt = c[int(np.argmin(d))]
-        away = (q0[:2] - tgt) / max(float(d.min()), 1e-9)
-        station = tgt + self.p.station_radius_m * away
+        bearing = math.atan2(q0[1] - tgt[1], q0[0] - tgt[0])
+        for turn in np.radians([0, 20, -20, 40, -40, 60, -60, 90, -90, 135, -135, 180]):
+            b = bearing + turn  # rotate along the ring until the loiter circle clears the threats by kappa
+            station = tgt + self.p.station_radius_m * np.array([math.cos(b), math.sin(b)])
+            margin = [
+                math.hypot(station[0] - t.x, station[1] - t.y)
+                - self.p.loiter_radius_m
+                - self.p.kappa * t.radius_m
+                for t in self.known
+            ]
+            if min(margin, default=1.0) > 0:
+                break
         a = math.atan2(q0[1] - station[1], q0[0] - station[0])
         goal = paths.arc_start_pose(station, a, self.p.loiter_radius_m)[0]
         if math.hypot(*(goal[:2] - q0[:2])) < 2 * self.p.loiter_radius_m:
@@ -422,6 +436,8 @@ class CoalitionSim:
             t0_s=self.outcomes[target.id].t_revealed_s,
             t_start_s=tender.t_es_s,
         )
+        if not coverable(prob):
+            return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
         if p.method == "polynomial":
             sol = solve_polynomial(prob, p, np.array(etas))
         else:
@@ -429,21 +445,43 @@ class CoalitionSim:
         if not sol.covered:
             return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
         # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
-        routes = [
-            paths.min_route(poses_a[sol.assign[k]], goals[k], rmin[sol.assign[k]], self.known, p.kappa)
-            for k in range(K)
-        ]
+        routes = paths.min_routes(poses_a[sol.assign], goals, rmin[sol.assign], self.known, p.kappa)
         exact = L.copy()
         for k in range(K):
             exact[sol.assign[k], k] = routes[k].length_m
         prob.length_m = exact
         sol = make_solution(sol.assign, prob, p)
+        want = np.array(
+            [
+                max(routes[k].length_m, speed[sol.assign[k]] * (sol.t_required_s[k] - tender.t_es_s))
+                if kind[k] == STRIKE
+                else routes[k].length_m
+                for k in range(K)
+            ]
+        )
+        direct = [k for k in range(K) if len(routes[k].poses) == 2 and routes[k].clear]
+        batch = dict(
+            zip(
+                direct,
+                paths.stretch_batch(
+                    np.array([routes[k].poses[0] for k in direct]).reshape(-1, 3),
+                    goals[direct],
+                    want[direct],
+                    rmin[sol.assign[direct]],
+                ),
+            )
+        )
         legs = []
         for k in range(K):
             i = sol.assign[k]
-            t_arrive = sol.t_required_s[k] if kind[k] == STRIKE else None
-            length = routes[k].length_m if t_arrive is None else speed[i] * (t_arrive - tender.t_es_s)
-            segs, clear = paths.timed_route(routes[k], max(length, routes[k].length_m), self.known)
+            got = batch.get(k)
+            if (
+                got is not None
+                and paths.clearance_m(got.sample_step(p.sample_ds_m)[1][:, :2], self.known) >= 0
+            ):
+                segs, clear = [got], True
+            else:
+                segs, clear = paths.timed_route(routes[k], want[k], self.known)
             leg = paths.sample_segments(
                 segs,
                 tender.t_es_s,
@@ -640,6 +678,7 @@ class CoalitionSim:
         if out.pending == 0:
             out.t_done_s = self.now
             self.log("target_done", target=award.target_id, J=round(out.J, 4))
+            self.at(self.now, "restation")
         self.st[uav].state = IDLE
         self._resume_stored(uav)
         if self.st[uav].state == IDLE:
