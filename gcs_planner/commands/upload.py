@@ -40,20 +40,29 @@ def lists_to_upload(mf: MissionFile, autopilot: str) -> list[tuple[MissionType, 
     return lists
 
 
-def run(args: argparse.Namespace) -> int:
-    guess = args.autopilot if args.autopilot != "auto" else "px4"
-    mf = mission_input(args.file, autopilot=guess, vehicle=args.vehicle, sysid=args.sysid)
+def prepare(args: argparse.Namespace, autopilot: str) -> list[tuple[MissionType, list]]:
+    """Read FILE (+ --scenario) for ``autopilot`` and validate every list.
+
+    Called once before any network I/O (with --autopilot, or "px4" when it is auto) so bad input
+    never reaches the vehicle, and again with the vehicle's autopilot: a WPL file is uploaded
+    row for row either way; .plan and plan.json get ArduPilot's home item only for ArduPilot.
+    """
+    mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=args.sysid)
     if args.scenario:
         scenario = load_scenario(args.scenario)
         mf.fence, mf.rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
-    lists_to_upload(mf, guess)  # fail on bad input before touching the network
-    return asyncio.run(_upload(args, mf))
+    return lists_to_upload(mf, autopilot)
 
 
-async def _upload(args: argparse.Namespace, mf: MissionFile) -> int:
+def run(args: argparse.Namespace) -> int:
+    prepare(args, args.autopilot if args.autopilot != "auto" else "px4")
+    return asyncio.run(_upload(args))
+
+
+async def _upload(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
         autopilot = autopilot_of(heartbeat, args.autopilot)
-        lists = lists_to_upload(mf, autopilot)
+        lists = prepare(args, autopilot)
         client = MissionClient(link, args.sysid, args.compid)
         print(f"vehicle {args.sysid} ({autopilot}) on {args.connect}")
         print(f"{'list':<8} {'items':>6} {'result':<10} {'opaque_id':>10} {'time_s':>7}")
