@@ -178,14 +178,14 @@ class MissionServer:
         """Re-request overdue items and cancel stalled uploads; call often (every <= 50 ms)."""
         out: list[mavlink.MAVLink_message] = []
         for mission_type, up in list(self._uploads.items()):
-            if now_s - up.last_receive_s > self.profile.timeout_s:
+            if now_s >= up.last_receive_s + self.profile.timeout_s:
                 log.info(
                     "sysid %d: upload of type %d timed out at seq %d", self.sysid, mission_type, up.next_seq
                 )
                 del self._uploads[mission_type]
                 ack = MissionAckMessage(*up.partner, MissionResult.OPERATION_CANCELLED, mission_type)
                 out.append(ack)
-            elif not up.silent and now_s - up.last_request_s >= self.profile.rerequest_s:
+            elif not up.silent and now_s >= up.last_request_s + self.profile.rerequest_s:
                 out.append(self._request(up, mission_type, up.next_seq, now_s))
         return out
 

@@ -1,0 +1,523 @@
+"""GCS side of the mission protocol as I/O-free state machines (upload, download, clear, set-current).
+
+Each transfer is driven by three calls that return the messages to send: ``start(now_s)``,
+``on_message(msg, now_s)`` for messages that pass ``accepts(msg)``, and ``on_timeout(now_s)`` once
+``now_s >= deadline_s``. A transfer ends exactly once, in ``_finish``: ``done`` becomes True and
+``outcome`` holds the items / opaque id or the typed error. The async client (mission.py) and the
+fake-time tests wrap the same cores, so retry counts are tested exactly.
+
+Choices (where the spec leaves room):
+- MISSION_COUNT is resent every COUNT_RETRY_S = 1.5 s up to COUNT_RETRIES = 5 times until the first
+  request (Skybrush); after that the vehicle drives the upload with its own re-requests.
+- Each request is answered once, always with MISSION_ITEM_INT (also legacy MISSION_REQUEST, as
+  ArduPilot sends). A request for an item sent less than DUPLICATE_WINDOW_S ago is a duplicate
+  (link duplication, reordering) and is ignored instead of answered again: this is what keeps slow
+  links from flooding (PX4 #11078). Genuine re-requests come after the vehicle's retry time
+  (>= 250 ms), so they pass.
+- Only the last item is resent on our own timer, until MISSION_ACK (lost final ACK, devguide #171);
+  its timeout adapts to the measured round trip (4 x smoothed RTT within 0.3..1.5 s).
+- MISSION_ACK(INVALID_SEQUENCE) mid-upload is ignored: ArduPilot sends it for an out-of-order item
+  and then re-requests the expected one (QGC PR #6718). Success only on MISSION_ACK(ACCEPTED) after
+  the last item was sent; an ACCEPTED before that is stale and ignored.
+- After the final-item retries the outcome is a timeout with ``ack_lost=True``: the vehicle may hold
+  the new mission (ArduPilot never repeats a final ACK). mission.py then verifies by download.
+- Inactivity timeout INACTIVITY_TIMEOUT_S = 10 s (> ArduPilot's 8 s, so the vehicle's own
+  OPERATION_CANCELLED normally arrives first and is reported as such). On any timeout we send
+  MISSION_ACK(OPERATION_CANCELLED) so the vehicle drops its half of the session.
+- Downloads re-request the next item after an adaptive timeout (4 x RTT within 0.25..1.5 s),
+  DOWNLOAD_RETRIES = 8 times per item (the spec's 5 fails ~4 % of 20-item downloads at 20 % loss
+  each way); legacy float MISSION_ITEM answers are accepted and converted.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import Enum, auto
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.mavlink.enums import MissionResult
+from gcs_planner.mavlink.errors import (
+    MissionError,
+    MissionInputError,
+    MissionTimeoutError,
+    OperationCancelledError,
+    error_for_result,
+    mission_type_name,
+)
+from gcs_planner.mavlink.types import MissionItem, MissionType
+
+__all__ = [
+    "COUNT_RETRIES",
+    "COUNT_RETRY_S",
+    "DOWNLOAD_RETRIES",
+    "DUPLICATE_WINDOW_S",
+    "FINAL_ITEM_RETRIES",
+    "INACTIVITY_TIMEOUT_S",
+    "ClearTransfer",
+    "DownloadTransfer",
+    "Outcome",
+    "SetCurrentTransfer",
+    "Timing",
+    "Transfer",
+    "UploadTransfer",
+]
+
+log = logging.getLogger(__name__)
+
+COUNT_RETRY_S = 1.5  # MISSION_COUNT / REQUEST_LIST / CLEAR_ALL resend period until the first answer [s]
+COUNT_RETRIES = 5  # resends of those before giving up
+DUPLICATE_WINDOW_S = 0.15  # a request for an item sent more recently than this is a duplicate [s]
+FINAL_ITEM_RETRIES = 5  # resends of the last item while waiting for MISSION_ACK
+INACTIVITY_TIMEOUT_S = 10.0  # no message from the vehicle for this long ends the transfer [s]
+DOWNLOAD_RETRIES = 8  # re-requests of one item during a download
+INITIAL_RTT_S = 0.1  # round-trip guess before the first measurement [s]
+_GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})
+_REQUESTS = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST"})
+_ITEMS = frozenset({"MISSION_ITEM_INT", "MISSION_ITEM"})
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Timeouts and retries of one transfer; defaults follow the module docstring [s]."""
+
+    count_retry_s: float = COUNT_RETRY_S
+    count_retries: int = COUNT_RETRIES
+    duplicate_window_s: float = DUPLICATE_WINDOW_S
+    final_item_retries: int = FINAL_ITEM_RETRIES
+    inactivity_timeout_s: float = INACTIVITY_TIMEOUT_S
+    download_retries: int = DOWNLOAD_RETRIES
+    initial_rtt_s: float = INITIAL_RTT_S
+    ack_timeout_min_s: float = 0.3
+    ack_timeout_max_s: float = 1.5
+    item_timeout_min_s: float = 0.25
+    item_timeout_max_s: float = 1.5
+
+
+@dataclass
+class Stats:
+    """What a transfer sent and ignored; tests count retries with it."""
+
+    sent: dict[str, int] = field(default_factory=dict)
+    duplicates_ignored: int = 0
+    invalid_sequence_acks: int = 0
+    rtt_s: float = 0.0
+
+    def count(self, msgs: list[mavlink.MAVLink_message]) -> list[mavlink.MAVLink_message]:
+        for m in msgs:
+            name = m.get_type()
+            self.sent[name] = self.sent.get(name, 0) + 1
+        return msgs
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How a transfer ended: ``error`` is None on success."""
+
+    error: MissionError | None
+    items: list[MissionItem] | None = None  # download result
+    opaque_id: int = 0  # from the final MISSION_ACK (upload) or MISSION_COUNT (download)
+    ack_lost: bool = False  # upload: every item sent, no MISSION_ACK came back
+
+
+class Phase(Enum):
+    START = auto()
+    COUNT = auto()  # waiting for the first answer to COUNT / REQUEST_LIST / CLEAR_ALL / SET_CURRENT
+    ITEMS = auto()
+    FINAL_ACK = auto()  # upload: last item sent, waiting for MISSION_ACK
+    DONE = auto()
+
+
+class Transfer:
+    """Shared machinery: target filter, deadline, RTT estimate, the single exit."""
+
+    operation = "transfer"
+    _accepted_types: frozenset[str] = frozenset()
+
+    def __init__(
+        self,
+        sysid: int,
+        compid: int = 1,
+        mission_type: int = MissionType.MISSION,
+        *,
+        gcs_sysid: int = 255,
+        gcs_compid: int = 190,
+        timing: Timing | None = None,
+    ) -> None:
+        self.sysid = sysid
+        self.compid = compid
+        self.mission_type = int(mission_type)
+        self.gcs = (gcs_sysid, gcs_compid)
+        self.timing = timing or Timing()
+        self.phase = Phase.START
+        self.deadline_s: float | None = None
+        self.outcome: Outcome | None = None
+        self.stats = Stats()
+        self._srtt_s = self.timing.initial_rtt_s
+        self._retries = 0
+
+    @property
+    def done(self) -> bool:
+        return self.phase is Phase.DONE
+
+    def accepts(self, msg: mavlink.MAVLink_message) -> bool:
+        """True for messages of this transfer: from the target, to us (or broadcast), same mission type."""
+        if msg.get_type() not in self._accepted_types:
+            return False
+        if msg.get_srcSystem() != self.sysid or msg.get_srcComponent() != self.compid:
+            return False
+        if getattr(msg, "target_system", 0) not in (0, self.gcs[0]):
+            return False
+        return getattr(msg, "mission_type", self.mission_type) == self.mission_type
+
+    def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        raise NotImplementedError
+
+    def on_message(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        if self.done or not self.accepts(msg):
+            return []
+        return self.stats.count(self._handle(msg, now_s))
+
+    def on_timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        if self.done or self.deadline_s is None or now_s < self.deadline_s:
+            return []
+        return self.stats.count(self._timeout(now_s))
+
+    def cancel(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        """Abort on the user's request: tell the vehicle, end with OperationCancelledError."""
+        if self.done:
+            return []
+        what = mission_type_name(self.mission_type)
+        msg = f"{self.operation} of the {what} on vehicle {self.sysid} cancelled"
+        self._finish(OperationCancelledError(msg, sysid=self.sysid, mission_type=self.mission_type))
+        return self.stats.count([self._ack(MissionResult.OPERATION_CANCELLED)])
+
+    # ----------------------------------------------------------------- for subclasses
+    def _handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        raise NotImplementedError
+
+    def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        raise NotImplementedError
+
+    def _finish(self, error: MissionError | None = None, **kwargs: object) -> None:
+        """The one exit: runs once, later calls are ignored."""
+        if self.done:
+            return
+        self.phase = Phase.DONE
+        self.deadline_s = None
+        self.outcome = Outcome(error, **kwargs)  # type: ignore[arg-type]
+        self.stats.rtt_s = self._srtt_s
+
+    def _fail_timeout(self, what: str) -> list[mavlink.MAVLink_message]:
+        kind = mission_type_name(self.mission_type)
+        msg = f"vehicle {self.sysid}: {kind} {self.operation} timed out ({what})"
+        self._finish(MissionTimeoutError(msg, sysid=self.sysid, mission_type=self.mission_type))
+        return [self._ack(MissionResult.OPERATION_CANCELLED)]
+
+    def _fail_result(self, result: int) -> None:
+        self._finish(
+            error_for_result(
+                result, sysid=self.sysid, mission_type=self.mission_type, operation=self.operation
+            )
+        )
+
+    def _ack(self, result: MissionResult) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_mission_ack_message(self.sysid, self.compid, result, self.mission_type)
+
+    def _rtt_sample(self, sample_s: float) -> None:
+        self._srtt_s = 0.875 * self._srtt_s + 0.125 * max(sample_s, 0.0)
+
+    def _adaptive(self, low_s: float, high_s: float) -> float:
+        return min(high_s, max(low_s, 4.0 * self._srtt_s))
+
+
+class UploadTransfer(Transfer):
+    """MISSION_COUNT -> answer requests with MISSION_ITEM_INT -> MISSION_ACK(ACCEPTED)."""
+
+    operation = "upload"
+    _accepted_types = frozenset({*_REQUESTS, "MISSION_ACK"})
+
+    def __init__(
+        self,
+        sysid: int,
+        items: Sequence[MissionItem],
+        compid: int = 1,
+        mission_type: int = MissionType.MISSION,
+        **kwargs,
+    ) -> None:
+        super().__init__(sysid, compid, mission_type, **kwargs)
+        self.items = tuple(items)
+        for index, item in enumerate(self.items):
+            if item.seq != index:
+                raise MissionInputError(f"item {index}: seq is {item.seq}, expected {index}", sysid=sysid)
+            if item.mission_type != self.mission_type:
+                raise MissionInputError(
+                    f"item {index}: mission_type is {item.mission_type}, transfer is for {self.mission_type}",
+                    sysid=sysid,
+                )
+        if len(self.items) > 65535:
+            raise MissionInputError(
+                f"{len(self.items)} items: MISSION_COUNT holds at most 65535", sysid=sysid
+            )
+        self._sent_at = [math.nan] * len(self.items)
+        self._last_request_s = 0.0
+
+    def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        self.phase = Phase.COUNT
+        self._retries = 0
+        self.deadline_s = now_s + self.timing.count_retry_s
+        return self.stats.count([self._count()])
+
+    def _count(self) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_mission_count_message(
+            self.sysid, self.compid, len(self.items), self.mission_type
+        )
+
+    def _handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        if msg.get_type() == "MISSION_ACK":
+            return self._on_ack(msg)
+        seq = msg.seq
+        if not 0 <= seq < len(self.items):
+            log.warning("vehicle %d requested item %d of %d: ignored", self.sysid, seq, len(self.items))
+            return []
+        self._last_request_s = now_s
+        sent = self._sent_at[seq]
+        if now_s - sent < self.timing.duplicate_window_s:
+            self.stats.duplicates_ignored += 1
+            return []
+        if seq > 0 and not math.isnan(self._sent_at[seq - 1]) and math.isnan(sent):
+            self._rtt_sample(now_s - self._sent_at[seq - 1])
+        self._sent_at[seq] = now_s
+        if seq == len(self.items) - 1:
+            self.phase = Phase.FINAL_ACK
+            self._retries = 0
+            self.deadline_s = now_s + self._adaptive(
+                self.timing.ack_timeout_min_s, self.timing.ack_timeout_max_s
+            )
+        else:
+            self.phase = Phase.ITEMS
+            self.deadline_s = now_s + self.timing.inactivity_timeout_s
+        return [self._item(seq)]
+
+    def _on_ack(self, msg: mavlink.MAVLink_message) -> list[mavlink.MAVLink_message]:
+        result = msg.type
+        if result == MissionResult.ACCEPTED:
+            if self.phase is Phase.FINAL_ACK or (not self.items and self.phase is Phase.COUNT):
+                self._finish(None, opaque_id=getattr(msg, "opaque_id", 0))
+            return []  # stale ACCEPTED (e.g. a re-ack of an earlier upload)
+        if result == MissionResult.INVALID_SEQUENCE and self.phase in (Phase.ITEMS, Phase.FINAL_ACK):
+            self.stats.invalid_sequence_acks += 1
+            return []
+        self._fail_result(result)
+        return []
+
+    def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        if self.phase is Phase.COUNT:
+            if self._retries >= self.timing.count_retries:
+                return self._fail_timeout(f"no answer to MISSION_COUNT sent {self._retries + 1} times")
+            self._retries += 1
+            self.deadline_s = now_s + self.timing.count_retry_s
+            return [self._count()]
+        if self.phase is Phase.FINAL_ACK:
+            if self._retries >= self.timing.final_item_retries:
+                sends = self._retries + 1
+                msg = f"vehicle {self.sysid}: no MISSION_ACK after the last item (sent {sends} times)"
+                self._finish(
+                    MissionTimeoutError(msg, sysid=self.sysid, mission_type=self.mission_type), ack_lost=True
+                )
+                return []
+            self._retries += 1
+            last = len(self.items) - 1
+            self._sent_at[last] = now_s
+            self.deadline_s = now_s + self._adaptive(
+                self.timing.ack_timeout_min_s, self.timing.ack_timeout_max_s
+            )
+            return [self._item(last)]
+        idle = now_s - self._last_request_s
+        return self._fail_timeout(f"no request for {idle:.1f} s")
+
+    def _item(self, seq: int) -> mavlink.MAVLink_message:
+        it = self.items[seq]
+        return mavlink.MAVLink_mission_item_int_message(
+            self.sysid,
+            self.compid,
+            seq,
+            it.frame,
+            it.command,
+            it.current,
+            it.autocontinue,
+            it.param1,
+            it.param2,
+            it.param3,
+            it.param4,
+            it.x,
+            it.y,
+            it.z,
+            self.mission_type,
+        )
+
+
+class DownloadTransfer(Transfer):
+    """MISSION_REQUEST_LIST -> MISSION_COUNT -> MISSION_REQUEST_INT per item -> MISSION_ACK(ACCEPTED)."""
+
+    operation = "download"
+    _accepted_types = frozenset({"MISSION_COUNT", *_ITEMS, "MISSION_ACK"})
+
+    def __init__(
+        self, sysid: int, compid: int = 1, mission_type: int = MissionType.MISSION, **kwargs
+    ) -> None:
+        super().__init__(sysid, compid, mission_type, **kwargs)
+        self._count = 0
+        self._opaque_id = 0
+        self._items: list[MissionItem] = []
+        self._requested_at = 0.0
+
+    def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        self.phase = Phase.COUNT
+        self.deadline_s = now_s + self.timing.count_retry_s
+        self._requested_at = now_s
+        return self.stats.count([self._request_list()])
+
+    def _request_list(self) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_mission_request_list_message(self.sysid, self.compid, self.mission_type)
+
+    def _handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        kind = msg.get_type()
+        if kind == "MISSION_ACK":
+            if msg.type != MissionResult.ACCEPTED:
+                self._fail_result(msg.type)
+            return []
+        if kind == "MISSION_COUNT":
+            if self.phase is not Phase.COUNT:
+                return []  # duplicate COUNT
+            self._rtt_sample(now_s - self._requested_at)
+            self._count, self._opaque_id = msg.count, getattr(msg, "opaque_id", 0)
+            if self._count == 0:
+                self._finish(None, items=[], opaque_id=self._opaque_id)
+                return [self._ack(MissionResult.ACCEPTED)]
+            self.phase = Phase.ITEMS
+            return [self._request_next(now_s)]
+        if self.phase is not Phase.ITEMS or msg.seq != len(self._items):
+            return []  # duplicate, stale or a seq we did not ask for: the timer re-requests
+        if self._retries == 0:
+            self._rtt_sample(now_s - self._requested_at)
+        self._items.append(_item_from_message(msg, self.mission_type))
+        if len(self._items) == self._count:
+            self._finish(None, items=list(self._items), opaque_id=self._opaque_id)
+            return [self._ack(MissionResult.ACCEPTED)]
+        return [self._request_next(now_s)]
+
+    def _request_next(self, now_s: float) -> mavlink.MAVLink_message:
+        self._retries = 0
+        self._requested_at = now_s
+        self.deadline_s = now_s + self._adaptive(
+            self.timing.item_timeout_min_s, self.timing.item_timeout_max_s
+        )
+        return self._request(len(self._items))
+
+    def _request(self, seq: int) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_mission_request_int_message(self.sysid, self.compid, seq, self.mission_type)
+
+    def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        if self.phase is Phase.COUNT:
+            if self._retries >= self.timing.count_retries:
+                return self._fail_timeout(f"no MISSION_COUNT after {self._retries + 1} requests")
+            self._retries += 1
+            self.deadline_s = now_s + self.timing.count_retry_s
+            return [self._request_list()]
+        if self._retries >= self.timing.download_retries:
+            return self._fail_timeout(
+                f"item {len(self._items)} not received after {self._retries + 1} requests"
+            )
+        self._retries += 1
+        self.deadline_s = now_s + self._adaptive(
+            self.timing.item_timeout_min_s, self.timing.item_timeout_max_s
+        )
+        return [self._request(len(self._items))]
+
+
+class ClearTransfer(Transfer):
+    """MISSION_CLEAR_ALL -> MISSION_ACK; mission_type ALL (255) clears the three lists."""
+
+    operation = "clear"
+    _accepted_types = frozenset({"MISSION_ACK"})
+
+    def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        self.phase = Phase.COUNT
+        self.deadline_s = now_s + self.timing.count_retry_s
+        return self.stats.count([self._clear()])
+
+    def _clear(self) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_mission_clear_all_message(self.sysid, self.compid, self.mission_type)
+
+    def _handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        if msg.type == MissionResult.ACCEPTED:
+            self._finish(None)
+        else:
+            self._fail_result(msg.type)
+        return []
+
+    def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        if self._retries >= self.timing.count_retries:
+            return self._fail_timeout(f"no MISSION_ACK to MISSION_CLEAR_ALL sent {self._retries + 1} times")
+        self._retries += 1
+        self.deadline_s = now_s + self.timing.count_retry_s
+        return [self._clear()]
+
+
+class SetCurrentTransfer(Transfer):
+    """Legacy MISSION_SET_CURRENT, confirmed by a MISSION_CURRENT carrying the new seq."""
+
+    operation = "set-current"
+    _accepted_types = frozenset({"MISSION_CURRENT"})
+
+    def __init__(self, sysid: int, seq: int, compid: int = 1, **kwargs) -> None:
+        super().__init__(sysid, compid, MissionType.MISSION, **kwargs)
+        self.seq = seq
+
+    def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        self.phase = Phase.COUNT
+        self.deadline_s = now_s + self.timing.count_retry_s
+        return self.stats.count([self._set()])
+
+    def _set(self) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_mission_set_current_message(self.sysid, self.compid, self.seq)
+
+    def _handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        if msg.seq == self.seq:
+            self._finish(None)
+        return []
+
+    def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        if self._retries >= self.timing.count_retries:
+            self._fail_timeout(f"MISSION_CURRENT never showed seq {self.seq}")
+            return []
+        self._retries += 1
+        self.deadline_s = now_s + self.timing.count_retry_s
+        return [self._set()]
+
+
+def _item_from_message(msg: mavlink.MAVLink_message, mission_type: int) -> MissionItem:
+    """MISSION_ITEM_INT (or legacy float MISSION_ITEM, degrees -> degE7) -> MissionItem."""
+    x, y = msg.x, msg.y
+    if msg.get_type() == "MISSION_ITEM":
+        scale = 1e7 if msg.frame in _GLOBAL_FRAMES else 1e4
+        x, y = round(x * scale), round(y * scale)
+    return MissionItem(
+        seq=msg.seq,
+        frame=msg.frame,
+        command=msg.command,
+        current=msg.current,
+        autocontinue=msg.autocontinue,
+        param1=msg.param1,
+        param2=msg.param2,
+        param3=msg.param3,
+        param4=msg.param4,
+        x=int(x),
+        y=int(y),
+        z=msg.z,
+        mission_type=mission_type,
+    )

@@ -1,0 +1,466 @@
+"""Client core (transfer.py) against server core (mission_server.py) on fake time, real MAVLink bytes.
+
+A tiny discrete-event channel carries packed frames between the two cores with seeded loss,
+duplication, reordering and delay, so every retry count and timeout is exact and the runs are fast.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.mavlink import errors
+from gcs_planner.mavlink.enums import MissionResult
+from gcs_planner.mavlink.transfer import (
+    COUNT_RETRIES,
+    COUNT_RETRY_S,
+    ClearTransfer,
+    DownloadTransfer,
+    SetCurrentTransfer,
+    Timing,
+    Transfer,
+    UploadTransfer,
+)
+from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.wire import attach_extensions
+from sitl_mock.mission_server import Failure, MissionServer
+from sitl_mock.profiles import PROFILES
+
+GCS = (255, 190)
+
+
+@dataclass
+class Channel:
+    """Both directions of one link: one-way delay, loss, duplication, reordering (extra delay)."""
+
+    loss: float = 0.0
+    duplicate: float = 0.0
+    reorder: float = 0.0
+    delay_s: float = 0.002
+    seed: int = 0
+    rng: np.random.Generator = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+
+    def arrivals(self, now_s: float) -> list[float]:
+        if self.rng.random() < self.loss:
+            return []
+        copies = 2 if self.rng.random() < self.duplicate else 1
+        out = []
+        for _ in range(copies):
+            extra = self.rng.uniform(0.0, 0.05) if self.rng.random() < self.reorder else 0.0
+            out.append(now_s + self.delay_s + extra)
+        return out
+
+
+class Sim:
+    """Runs one client transfer against a server (and optionally a second GCS) until both are quiet."""
+
+    def __init__(self, server: MissionServer, channel: Channel | None = None) -> None:
+        self.server = server
+        self.channel = channel or Channel()
+        self.now = 0.0
+        self._queue: list[tuple[float, int, str, bytes]] = []
+        self._tie = itertools.count()
+        self._mav = {
+            "gcs": mavlink.MAVLink(None, srcSystem=GCS[0], srcComponent=GCS[1]),
+            "veh": mavlink.MAVLink(None, srcSystem=server.sysid, srcComponent=server.compid),
+        }
+        self._parser = {"gcs": mavlink.MAVLink(None), "veh": mavlink.MAVLink(None)}
+        self.to_vehicle: list[mavlink.MAVLink_message] = []  # what the GCS sent (before loss)
+        self.to_gcs: list[mavlink.MAVLink_message] = []
+
+    def _send(self, side: str, msgs: list, now: float) -> None:
+        dest = "veh" if side == "gcs" else "gcs"
+        for m in msgs:
+            (self.to_vehicle if side == "gcs" else self.to_gcs).append(m)
+            raw = m.pack(self._mav[side])
+            for t in self.channel.arrivals(now):
+                heapq.heappush(self._queue, (t, next(self._tie), dest, bytes(raw)))
+
+    def run(self, transfer: Transfer, until_s: float = 120.0) -> Transfer:
+        self._send("gcs", transfer.start(self.now), self.now)
+        while not transfer.done and self.now < until_s:
+            candidates = [t for t in (transfer.deadline_s, self.server.next_deadline_s()) if t is not None]
+            if self._queue:
+                candidates.append(self._queue[0][0])
+            if not candidates:
+                break
+            self.now = max(self.now, min(candidates))
+            while self._queue and self._queue[0][0] <= self.now:
+                _, _, dest, raw = heapq.heappop(self._queue)
+                msg = self._parser[dest].parse_char(bytearray(raw))
+                attach_extensions(msg, raw)
+                if dest == "veh":
+                    self._send("veh", self.server.handle(msg, self.now), self.now)
+                else:
+                    self._send("gcs", transfer.on_message(msg, self.now), self.now)
+            self._send("gcs", transfer.on_timeout(self.now), self.now)
+            self._send("veh", self.server.poll(self.now), self.now)
+        return transfer
+
+    def sent(self, name: str, seq: int | None = None) -> int:
+        return sum(1 for m in self.to_vehicle if m.get_type() == name and (seq is None or m.seq == seq))
+
+
+def mission(
+    n: int, mission_type: int = MissionType.MISSION, base_lat: int = 473_977_000
+) -> list[MissionItem]:
+    """Items whose values survive ArduPilot's storage rounding (cm altitude, integer hold)."""
+    return [
+        MissionItem(
+            seq=i,
+            frame=3 if i == 0 else 3,
+            command=16,
+            current=int(i == 0),
+            param1=float(i % 3),
+            x=base_lat + 37 * i,
+            y=85_455_000 - 11 * i,
+            z=round(10.0 + 0.25 * i, 2),
+            mission_type=mission_type,
+        )
+        for i in range(n)
+    ]
+
+
+def server(profile: str = "ardupilot", **kwargs) -> MissionServer:
+    return MissionServer(1, 1, PROFILES[profile], **kwargs)
+
+
+def upload(sim: Sim, items: list[MissionItem], **kwargs) -> UploadTransfer:
+    return sim.run(UploadTransfer(1, items, mission_type=items[0].mission_type if items else 0, **kwargs))
+
+
+def preload(srv: MissionServer, items: list[MissionItem]) -> None:
+    assert upload(Sim(srv), items).outcome.error is None
+
+
+PROFILE_NAMES = ["ardupilot", "px4"]
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+@pytest.mark.parametrize("mission_type", [MissionType.MISSION, MissionType.FENCE, MissionType.RALLY])
+def test_clean_round_trip_sends_each_item_once(profile, mission_type):
+    srv = server(profile)
+    items = mission(8, mission_type)
+    sim = Sim(srv)
+    up = upload(sim, items)
+    assert up.outcome.error is None
+    assert up.outcome.opaque_id == srv.opaque_id(mission_type) != 0
+    assert sim.sent("MISSION_COUNT") == 1 and sim.sent("MISSION_ITEM_INT") == len(items)
+    down = Sim(srv).run(DownloadTransfer(1, mission_type=mission_type))
+    assert down.outcome.error is None and down.outcome.opaque_id == up.outcome.opaque_id
+    expected_frame = 3 if profile == "ardupilot" else items[0].frame
+    assert [(i.x, i.y, i.z, i.param1) for i in down.outcome.items] == [
+        (i.x, i.y, i.z, i.param1) for i in items
+    ]
+    assert all(i.frame == expected_frame for i in down.outcome.items)
+
+
+def test_ardupilot_rounds_stored_values_px4_does_not():
+    item = MissionItem(
+        seq=0, frame=6, command=16, param1=2.7, param2=3.6, x=473_977_000, y=85_455_000, z=12.3456
+    )
+    for profile, frame, p1, z in (("ardupilot", 3, 2.0, 12.35), ("px4", 6, 2.7, 12.3456)):
+        srv = server(profile)
+        preload(srv, [item])
+        got = Sim(srv).run(DownloadTransfer(1)).outcome.items[0]
+        assert (
+            got.frame == frame
+            and got.param1 == pytest.approx(p1, abs=1e-6)
+            and got.z == pytest.approx(z, 1e-6)
+        )
+
+
+def test_count_no_response_resends_count_then_times_out_and_keeps_previous():
+    srv = server()
+    old = mission(3)
+    preload(srv, old)
+    srv.failure = Failure.WRITE_COUNT_NO_RESPONSE
+    sim = Sim(srv)
+    up = upload(sim, mission(5, base_lat=400_000_000))
+    assert isinstance(up.outcome.error, errors.MissionTimeoutError)
+    assert sim.sent("MISSION_COUNT") == 1 + COUNT_RETRIES
+    assert sim.now == pytest.approx((1 + COUNT_RETRIES) * COUNT_RETRY_S)
+    assert srv.items() == _stored(srv, old)
+
+
+def _stored(srv: MissionServer, items: list[MissionItem]) -> list[MissionItem]:
+    """The items as the server stores them (ArduPilot normalises frames)."""
+    return srv.items()[: len(items)] if len(srv.items()) == len(items) else []
+
+
+def test_count_first_response_recovers_with_one_resend():
+    srv = server("px4")
+    srv.failure = Failure.WRITE_COUNT_FIRST_RESPONSE
+    sim = Sim(srv)
+    items = mission(4)
+    assert upload(sim, items).outcome.error is None
+    assert sim.sent("MISSION_COUNT") == 2 and srv.items() == items
+
+
+@pytest.mark.parametrize(("profile", "cancel_at_s"), [("ardupilot", 8.0), ("px4", 5.0)])
+def test_request1_no_response_vehicle_cancels_previous_intact(profile, cancel_at_s):
+    srv = server(profile)
+    old = mission(3)
+    preload(srv, old)
+    before = srv.items()
+    srv.failure = Failure.WRITE_REQUEST1_NO_RESPONSE
+    sim = Sim(srv)
+    up = upload(sim, mission(6, base_lat=400_000_000))
+    assert isinstance(up.outcome.error, errors.OperationCancelledError)
+    assert sim.now == pytest.approx(cancel_at_s, abs=0.1)
+    assert srv.items() == before and not srv.busy()
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+@pytest.mark.parametrize(
+    "failure", [Failure.WRITE_REQUEST0_INCORRECT_SEQUENCE, Failure.WRITE_REQUEST1_INCORRECT_SEQUENCE]
+)
+def test_incorrect_sequence_requests_are_recovered(profile, failure):
+    srv = server(profile)
+    srv.failure = failure
+    sim = Sim(srv)
+    items = mission(5)
+    up = upload(sim, items)
+    assert up.outcome.error is None
+    assert len(srv.items()) == 5
+    if profile == "ardupilot":  # ArduPilot answers the skipped item with INVALID_SEQUENCE, which we survive
+        assert up.stats.invalid_sequence_acks == 1
+
+
+@pytest.mark.parametrize(
+    ("failure", "result", "error"),
+    [
+        (Failure.WRITE_REQUEST0_ERROR_ACK, MissionResult.ERROR, errors.GenericMissionError),
+        (Failure.WRITE_REQUEST1_ERROR_ACK, MissionResult.UNSUPPORTED_FRAME, errors.UnsupportedFrameError),
+        (Failure.WRITE_FINAL_ACK_ERROR_ACK, MissionResult.INVALID_PARAM5_X, errors.InvalidParam5XError),
+    ],
+)
+def test_error_acks_become_typed_errors_and_keep_previous(failure, result, error):
+    srv = server()
+    preload(srv, mission(3))
+    before, before_id = srv.items(), srv.opaque_id()
+    srv.failure, srv.failure_result = failure, result
+    up = upload(Sim(srv), mission(4, base_lat=400_000_000))
+    assert type(up.outcome.error) is error and up.outcome.error.result == result
+    assert srv.items() == before and srv.opaque_id() == before_id
+
+
+def test_non_atomic_final_error_leaves_a_mix_but_is_reported():
+    srv = server(non_atomic=True)
+    preload(srv, mission(6))
+    srv.failure = Failure.WRITE_FINAL_ACK_ERROR_ACK
+    new = mission(4, base_lat=400_000_000)
+    up = upload(Sim(srv), new)
+    assert isinstance(up.outcome.error, errors.GenericMissionError)
+    assert [i.x for i in srv.items()] == [i.x for i in new]  # ArduPilot wrote the items anyway
+    assert srv.opaque_id() == 0  # ... and the list is no known plan
+
+
+@pytest.mark.parametrize(("profile", "acked"), [("ardupilot", False), ("px4", False)])
+def test_final_ack_no_response_resends_only_last_item(profile, acked):
+    srv = server(profile)
+    srv.failure = Failure.WRITE_FINAL_ACK_NO_RESPONSE
+    sim = Sim(srv)
+    items = mission(5)
+    up = upload(sim, items)
+    assert isinstance(up.outcome.error, errors.MissionTimeoutError) and up.outcome.ack_lost
+    timing = Timing()
+    assert sim.sent("MISSION_ITEM_INT", 4) == 1 + timing.final_item_retries
+    assert all(sim.sent("MISSION_ITEM_INT", s) == 1 for s in range(4))
+    assert len(srv.items()) == 5  # the vehicle took it: mission.py verifies by download in this case
+
+
+def test_px4_reacks_repeated_final_item_when_ack_lost():
+    srv = server("px4")
+    items = mission(3)
+
+    class DropFirstFinalAck(Channel):
+        dropped = False
+
+    sim = Sim(srv)
+    orig = srv.handle
+
+    def handle(msg, now):
+        out = orig(msg, now)
+        if out and out[0].get_type() == "MISSION_ACK" and not DropFirstFinalAck.dropped:
+            DropFirstFinalAck.dropped = True
+            return []
+        return out
+
+    srv.handle = handle
+    up = upload(sim, items)
+    assert up.outcome.error is None and up.outcome.opaque_id == srv.opaque_id()
+    assert sim.sent("MISSION_ITEM_INT", 2) == 2
+
+
+def test_duplicated_link_does_not_flood():
+    srv = server("px4")
+    sim = Sim(srv, Channel(duplicate=1.0))
+    items = mission(20)
+    up = upload(sim, items)
+    assert up.outcome.error is None and srv.items() == items
+    assert sim.sent("MISSION_ITEM_INT") == len(items) and up.stats.duplicates_ignored >= len(items) - 1
+
+
+def test_stale_accepted_before_last_item_is_ignored():
+    up = UploadTransfer(1, mission(3))
+    up.start(0.0)
+    stale = mavlink.MAVLink_mission_ack_message(255, 190, MissionResult.ACCEPTED, 0)
+    stale._header = mavlink.MAVLink_header(stale.id, srcSystem=1, srcComponent=1)
+    assert up.on_message(stale, 0.1) == [] and not up.done
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+@pytest.mark.parametrize("seed", range(6))
+def test_lossy_link_gives_equal_mission_or_reported_failure(profile, seed):
+    srv = server(profile)
+    old = mission(4)
+    preload(srv, old)
+    before = srv.items()
+    new = mission(25, base_lat=400_000_000)
+    sim = Sim(srv, Channel(loss=0.2, duplicate=0.1, reorder=0.2, delay_s=0.01, seed=seed))
+    up = upload(sim, new)
+    if up.outcome.error is None:
+        got = Sim(srv, Channel(loss=0.2, duplicate=0.1, reorder=0.2, seed=seed + 100)).run(
+            DownloadTransfer(1)
+        )
+        assert got.outcome.error is None
+        assert [(i.x, i.y, i.z) for i in got.outcome.items] == [(i.x, i.y, i.z) for i in new]
+    elif up.outcome.ack_lost:
+        assert srv.items() in (before, srv.items()) and len(srv.items()) in (len(old), len(new))
+    else:
+        assert srv.items() == before
+
+
+def test_lossy_link_mostly_succeeds():
+    ok = 0
+    for seed in range(10):
+        srv = server("ardupilot")
+        sim = Sim(srv, Channel(loss=0.2, seed=seed))
+        items = mission(30)
+        outcome = upload(sim, items).outcome
+        if outcome.ack_lost:  # ArduPilot never repeats a lost final ACK: the vehicle holds the mission
+            assert [i.x for i in srv.items()] == [i.x for i in items]
+        ok += outcome.error is None or outcome.ack_lost
+    assert ok >= 9
+
+
+def test_second_uploader_and_foreign_items_are_denied():
+    srv = server()
+    first = UploadTransfer(1, mission(3))
+    mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    other = mavlink.MAVLink(None, srcSystem=254, srcComponent=190)
+    parser = mavlink.MAVLink(None)
+
+    def deliver(msg, mav_):
+        raw = msg.pack(mav_)
+        return srv.handle(parser.parse_char(bytearray(raw)), 0.0)
+
+    request = deliver(first.start(0.0)[0], mav)
+    assert request[0].get_type() == "MISSION_REQUEST"
+    second = deliver(mavlink.MAVLink_mission_count_message(1, 1, 2, 0), other)
+    assert second[0].get_type() == "MISSION_ACK" and second[0].type == MissionResult.DENIED
+    foreign = deliver(UploadTransfer(1, mission(3))._item(0), other)
+    assert foreign[0].type == MissionResult.DENIED
+    download = deliver(mavlink.MAVLink_mission_request_list_message(1, 1, 0), other)
+    assert download[0].type == MissionResult.DENIED
+
+
+def test_over_capacity_is_no_space_with_statustext():
+    srv = server(capacity=10)
+    sim = Sim(srv)
+    up = upload(sim, mission(11))
+    assert isinstance(up.outcome.error, errors.NoSpaceError)
+    assert any(m.get_type() == "STATUSTEXT" and b"10" in m.text.encode() for m in sim.to_gcs)
+
+
+def test_clear_refused_in_auto_on_ardupilot_but_empty_upload_works():
+    srv = server()
+    preload(srv, mission(3))
+    srv.mission_running = True
+    clear = Sim(srv).run(ClearTransfer(1))
+    assert isinstance(clear.outcome.error, errors.GenericMissionError) and srv.count() == 3
+    assert upload(Sim(srv), []).outcome.error is None and srv.count() == 0
+    srv2 = server("px4")
+    preload(srv2, mission(3))
+    srv2.mission_running = True
+    assert Sim(srv2).run(ClearTransfer(1, mission_type=MissionType.ALL)).outcome.error is None
+    assert srv2.count() == 0
+
+
+def test_set_current_legacy_confirmed_by_mission_current():
+    srv = server()
+    preload(srv, mission(5))
+    assert Sim(srv).run(SetCurrentTransfer(1, 3)).outcome.error is None and srv.current_seq == 3
+    bad = Sim(srv).run(SetCurrentTransfer(1, 9))
+    assert isinstance(bad.outcome.error, errors.MissionTimeoutError) and srv.current_seq == 3
+
+
+@pytest.mark.parametrize(
+    ("failure", "ok", "error"),
+    [
+        (Failure.READ_REQUEST_LIST_NO_RESPONSE, False, errors.MissionTimeoutError),
+        (Failure.READ_REQUEST_LIST_FIRST_RESPONSE, True, None),
+        (Failure.READ_REQUEST0_NO_RESPONSE, False, errors.MissionTimeoutError),
+        (Failure.READ_REQUEST1_NO_RESPONSE, False, errors.MissionTimeoutError),
+        (Failure.READ_REQUEST0_FIRST_RESPONSE, True, None),
+        (Failure.READ_REQUEST1_FIRST_RESPONSE, True, None),
+        (Failure.READ_REQUEST0_INCORRECT_SEQUENCE, False, errors.MissionTimeoutError),
+        (Failure.READ_REQUEST1_INCORRECT_SEQUENCE, False, errors.MissionTimeoutError),
+        (Failure.READ_REQUEST0_ERROR_ACK, False, errors.GenericMissionError),
+        (Failure.READ_REQUEST1_ERROR_ACK, False, errors.GenericMissionError),
+    ],
+)
+def test_download_failure_matrix(failure, ok, error):
+    srv = server("px4")
+    items = mission(4)
+    preload(srv, items)
+    srv.failure = failure
+    sim = Sim(srv)
+    down = sim.run(DownloadTransfer(1))
+    if ok:
+        assert down.outcome.error is None and down.outcome.items == items
+    else:
+        assert type(down.outcome.error) is error and down.outcome.items is None
+    if failure == Failure.READ_REQUEST1_NO_RESPONSE:
+        assert sim.sent("MISSION_REQUEST_INT", 1) == 1 + Timing().download_retries
+    if failure == Failure.READ_REQUEST_LIST_NO_RESPONSE:
+        assert sim.sent("MISSION_REQUEST_LIST") == 1 + COUNT_RETRIES
+
+
+def test_cancel_mid_upload_releases_px4_session():
+    srv = server("px4")
+    up = UploadTransfer(1, mission(5))
+    sim = Sim(srv)
+    sim._send("gcs", up.start(0.0), 0.0)
+    sim.run(up, until_s=0.003)  # COUNT delivered, first request on its way
+    assert srv.busy()
+    sim._send("gcs", up.cancel(sim.now), sim.now)
+    sim.run(DownloadTransfer(1))  # delivers the cancel first, then downloads
+    assert isinstance(up.outcome.error, errors.OperationCancelledError) and not srv.busy()
+
+
+def test_bad_items_rejected_before_anything_is_sent():
+    items = mission(3)
+    with pytest.raises(errors.MissionInputError, match="item 1: seq is 2"):
+        UploadTransfer(1, [items[0], items[2]])
+    with pytest.raises(errors.MissionInputError, match="mission_type"):
+        UploadTransfer(1, items, mission_type=MissionType.FENCE)
+
+
+def test_server_rejects_unknown_command_and_bad_latitude():
+    for item, error in (
+        (MissionItem(seq=0, frame=3, command=60000, x=1, y=1), errors.UnsupportedCommandError),
+        (MissionItem(seq=0, frame=3, command=16, x=910_000_000, y=1), errors.InvalidParam5XError),
+    ):
+        srv = server()
+        up = upload(Sim(srv), [item])
+        assert type(up.outcome.error) is error and srv.count() == 0
