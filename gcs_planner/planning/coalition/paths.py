@@ -22,7 +22,7 @@ chord (tangent to D there), and the path becomes start -> safe pose -> goal (two
 segments, recursively for further threats, depth <= 2; the other safe point and 1.5 kappa are
 tried when the first choice still intersects). Timing (a required length) is met by, in order:
 radius stretching of the last link, else of another; pushing the safe points outwards; a detour
-through a via pose on rings about the goal with the last link stretched; loiter on a turning
+through a via pose (distance to the goal solved per bearing); loiter on a turning
 circle (after 0-3/4 of the first link). Every returned leg is re-checked against the threats and
 the result is reported.
 """
@@ -404,37 +404,43 @@ def _delay_on_start_circle(route: Route, length_m: float, threats: list[Threat],
 
 
 def _detour(route: Route, length_m: float, threats: list[Threat], ds_m: float):
-    """Lengthen through a via pose: via poses on rings about the goal (heading at the goal), the
-    longest totals below the need first, then the via -> goal link radius-stretched by the rest."""
+    """Lengthen through a via pose at distance rho and bearing theta from the goal, heading at it:
+    for each of 72 bearings, solve L(prev -> via(rho)) + L(via(rho) -> goal) = need over rho
+    (scan, Illinois refine); the first solution whose two links clear the threats is taken."""
     prev, q1, r = route.poses[-2], route.poses[-1], route.r_m
     head = [_shortest(a, b, r) for a, b in zip(route.poses[:-2], route.poses[1:-1])]
     need = length_m - sum(p.length for p in head)
-    rho, th = np.meshgrid(
-        np.linspace(2 * r, max(need / 2, 3 * r), 12), np.linspace(0, TWO_PI, 36, endpoint=False)
-    )
-    vx, vy = q1[0] + rho.ravel() * np.cos(th.ravel()), q1[1] + rho.ravel() * np.sin(th.ravel())
-    via = np.column_stack([vx, vy, np.arctan2(q1[1] - vy, q1[0] - vx)])
-    a = shortest_lengths(np.broadcast_to(prev, via.shape), via, r)
-    b = shortest_lengths(via, np.broadcast_to(q1, via.shape), r)
-    ok = np.flatnonzero(a + b <= need)
-    order = []
-    for v in ok[np.argsort(-(a + b)[ok])]:
-        first = _shortest(prev, via[v], r)
-        if clearance_m(_samples(first, ds_m)[:, :2], threats) >= 0.0:
-            order.append(v)
-        if len(order) == 8:
-            break
-    if not order:
+    theta = np.linspace(0, TWO_PI, 72, endpoint=False)
+
+    def via(rho: np.ndarray, th: np.ndarray) -> np.ndarray:
+        vx, vy = q1[0] + rho * np.cos(th), q1[1] + rho * np.sin(th)
+        return np.column_stack([vx, vy, np.arctan2(q1[1] - vy, q1[0] - vx)])
+
+    def f(rho: np.ndarray, th: np.ndarray) -> np.ndarray:
+        v = via(rho, th)
+        n = len(v)
+        return (
+            shortest_lengths(np.broadcast_to(prev, (n, 3)), v, r)
+            + shortest_lengths(v, np.broadcast_to(q1, (n, 3)), r)
+            - need
+        )
+
+    rho = np.linspace(r, max(need, 2 * r), 100)
+    R, T = np.meshgrid(rho, theta)  # (36, 60)
+    F = f(R.ravel(), T.ravel()).reshape(R.shape)
+    cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r)
+    ti, ri = np.nonzero(cross)
+    if not len(ti):
         return None
-    tails = stretch_batch(
-        via[order], np.broadcast_to(q1, (len(order), 3)), need - a[order], np.full(len(order), r)
-    )
-    for v, tail in zip(order, tails):
-        if tail is None:
+    th = theta[ti]
+    sol = _illinois(lambda x: f(x, th), rho[ri], rho[ri + 1], 12)
+    for k in np.argsort(np.abs(sol - sol.min())):
+        v = via(sol[k : k + 1], th[k : k + 1])[0]
+        trial = [*head, _shortest(prev, v, r), _shortest(v, q1, r)]
+        if abs(sum(p.length for p in trial) - length_m) > 1e-2:
             continue
-        trial = [*head, _shortest(prev, via[v], r), tail]
         xy = np.concatenate([_samples(p, ds_m)[:, :2] for p in trial if p.length > 0])
-        if abs(sum(p.length for p in trial) - length_m) < 1e-2 and clearance_m(xy, threats) >= 0.0:
+        if clearance_m(xy, threats) >= 0.0:
             return [p for p in trial if p.length > 0]
     return None
 

@@ -438,59 +438,75 @@ class CoalitionSim:
         )
         if not coverable(prob):
             return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
-        if p.method == "polynomial":
-            sol = solve_polynomial(prob, p, np.array(etas))
-        else:
-            sol = solve_aco(prob, p, self.rng, scale=GLOBAL_SCALE if p.method == "global" else 1)
-        if not sol.covered:
-            return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
-        # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
-        routes = paths.min_routes(poses_a[sol.assign], goals, rmin[sol.assign], self.known, p.kappa)
-        exact = L.copy()
-        for k in range(K):
-            exact[sol.assign[k], k] = routes[k].length_m
-        prob.length_m = exact
-        sol = make_solution(sol.assign, prob, p)
-        want = np.array(
-            [
-                max(routes[k].length_m, speed[sol.assign[k]] * (sol.t_required_s[k] - tender.t_es_s))
-                if kind[k] == STRIKE
-                else routes[k].length_m
-                for k in range(K)
-            ]
-        )
-        direct = [k for k in range(K) if len(routes[k].poses) == 2 and routes[k].clear]
-        batch = dict(
-            zip(
-                direct,
-                paths.stretch_batch(
-                    np.array([routes[k].poses[0] for k in direct]).reshape(-1, 3),
-                    goals[direct],
-                    want[direct],
-                    rmin[sol.assign[direct]],
-                ),
-            )
-        )
-        legs = []
-        for k in range(K):
-            i = sol.assign[k]
-            got = batch.get(k)
-            if (
-                got is not None
-                and paths.clearance_m(got.sample_step(p.sample_ds_m)[1][:, :2], self.known) >= 0
-            ):
-                segs, clear = [got], True
+        base = L.copy()
+        for _attempt in range(3):  # members whose timed leg cannot clear the threats are excluded
+            prob.length_m = base.copy()
+            if not coverable(prob):
+                return self._fail(tender, f"needs not covered by {n} candidates clear of threats", t_wall)
+            if p.method == "polynomial":
+                sol = solve_polynomial(prob, p, np.array(etas))
             else:
-                segs, clear = paths.timed_route(routes[k], want[k], self.known)
-            leg = paths.sample_segments(
-                segs,
-                tender.t_es_s,
-                speed[i],
-                p.sample_ds_m,
-                "strike" if kind[k] == STRIKE else "transit",
-                {"target": target.id, "clear": clear},
+                sol = solve_aco(prob, p, self.rng, scale=GLOBAL_SCALE if p.method == "global" else 1)
+            if not sol.covered:
+                return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
+            # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
+            routes = paths.min_routes(poses_a[sol.assign], goals, rmin[sol.assign], self.known, p.kappa)
+            exact = L.copy()
+            for k in range(K):
+                exact[sol.assign[k], k] = routes[k].length_m
+            prob.length_m = exact
+            sol = make_solution(sol.assign, prob, p)
+            want = np.array(
+                [
+                    max(routes[k].length_m, speed[sol.assign[k]] * (sol.t_required_s[k] - tender.t_es_s))
+                    if kind[k] == STRIKE
+                    else routes[k].length_m
+                    for k in range(K)
+                ]
             )
-            legs.append(leg)
+            direct = [k for k in range(K) if len(routes[k].poses) == 2 and routes[k].clear]
+            batch = dict(
+                zip(
+                    direct,
+                    paths.stretch_batch(
+                        np.array([routes[k].poses[0] for k in direct]).reshape(-1, 3),
+                        goals[direct],
+                        want[direct],
+                        rmin[sol.assign[direct]],
+                    ),
+                )
+            )
+            legs = []
+            for k in range(K):
+                i = sol.assign[k]
+                got = batch.get(k)
+                if (
+                    got is not None
+                    and paths.clearance_m(got.sample_step(p.sample_ds_m)[1][:, :2], self.known) >= 0
+                ):
+                    segs, clear = [got], True
+                else:
+                    segs, clear = paths.timed_route(routes[k], want[k], self.known)
+                leg = paths.sample_segments(
+                    segs,
+                    tender.t_es_s,
+                    speed[i],
+                    p.sample_ds_m,
+                    "strike" if kind[k] == STRIKE else "transit",
+                    {"target": target.id, "clear": clear},
+                )
+                legs.append(leg)
+            bad = [k for k in range(K) if not legs[k].info["clear"]]
+            if not bad:
+                break
+            for k in bad:
+                base[sol.assign[k], k] = np.inf
+                self.log(
+                    "member_excluded",
+                    uav=self.uavs[cands[sol.assign[k]]].id,
+                    target=target.id,
+                    reason="timed path cannot clear the threats",
+                )
         dt = time.perf_counter() - t_wall
         self.compute_s.append(dt)
         members = tuple(int(cands[i]) for i in sol.assign)
