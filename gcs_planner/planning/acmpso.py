@@ -173,15 +173,19 @@ class TrackProblem:
         f_r = np.zeros(len(nx))
         delta4 = self.radar_strength**4
         for (cx, cy, cz), r in zip(env.radar_xyz, env.radar_r, strict=True):
-            d2 = (nx - cx) ** 2 + (ny - cy) ** 2 + (nz - cz) ** 2
+            d2 = _sq_dist(nx, cx) + _sq_dist(ny, cy)
+            d2 += _sq_dist(nz, cz)
             inside = d2 <= r * r
             if inside.any():
-                f_r += np.where(inside, delta4 / np.maximum(d2 * d2, 1e-300), 0.0).sum(axis=1)
+                np.maximum(d2, 1e-300, out=d2)
+                f_r += np.where(inside, delta4 / (d2 * d2), 0.0).sum(axis=1)
         f_c = np.zeros(len(nx))
         for (cx, cy), r, z0, z1 in zip(env.cyl_xy, env.cyl_r, env.cyl_zmin, env.cyl_zmax, strict=True):
-            d = np.sqrt((nx - cx) ** 2 + (ny - cy) ** 2)
-            inside = (d < r) & (nz <= z1) & (nz >= z0)
+            d2 = _sq_dist(nx, cx) + _sq_dist(ny, cy)
+            inside = d2 < r * r
             if inside.any():
+                inside &= (nz <= z1) & (nz >= z0)
+                d = np.sqrt(d2)
                 f_c += np.where(inside, d if self.collision == "literal" else r - d, 0.0).sum(axis=1)
         f_h = nz.std(axis=1)
         return {"length": f_l, "radar": f_r, "collision": f_c, "height": f_h}
@@ -196,6 +200,12 @@ class TrackProblem:
             + w.collision * t["collision"]
             + w.height * t["height"]
         )
+
+
+def _sq_dist(a: np.ndarray, c: float) -> np.ndarray:
+    d = a - c
+    d *= d
+    return d
 
 
 def algorithm_config(

@@ -196,6 +196,7 @@ def minimize(
     stopped = False
     n_elite = int(round(cfg.elite_fraction * n_p))
     r_shape = (n_p, dim) if cfg.per_dimension_random else (n_p, 1)
+    neg_v_max = -v_max
 
     for rnd in range(rounds):
         if rnd > 0:  # restart: keep elites' bests, re-draw the rest, velocities reset
@@ -212,7 +213,8 @@ def minimize(
             c = np.asarray(cost(x), dtype=float).reshape(-1)
             if c.shape != (n_p,):
                 raise ValueError(f"cost returned shape {c.shape}, expected ({n_p},)")
-            c = np.where(np.isnan(c), np.inf, c)
+            if np.isnan(c).any():
+                c = np.where(np.isnan(c), np.inf, c)
             evaluations += n_p
             better = c < pbest_c
             pbest_x[better] = x[better]
@@ -237,12 +239,17 @@ def minimize(
             w = inertia_weight(cfg, t, cfg.iterations)
             r1 = rng.random(r_shape)
             r2 = rng.random(r_shape)
-            v = w * v + cfg.c1 * r1 * (pbest_x - x) + cfg.c2 * r2 * (gbest_x - x)
-            np.clip(v, -v_max, v_max, out=v)
+            # v <- w v + c1 r1 (pbest - x) + c2 r2 (gbest - x), in place (this loop is the hot path)
+            v *= w
+            v += (cfg.c1 * r1) * (pbest_x - x)
+            v += (cfg.c2 * r2) * (gbest_x - x)
+            np.minimum(v, v_max, out=v)
+            np.maximum(v, neg_v_max, out=v)
             x = x + v
             if cfg.mutation is not None and cfg.mutation_stage == "after_move":
                 x = cfg.mutation(x, t + 1, cfg.iterations, rng)
-            np.clip(x, lower, upper, out=x)
+            np.minimum(x, upper, out=x)
+            np.maximum(x, lower, out=x)
         if stopped:
             break
 
