@@ -45,19 +45,13 @@ def _cpa(d0: np.ndarray, dv: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, 
 
 
 def closest_approach(
-    pa: np.ndarray,
-    ta: np.ndarray,
-    pb: np.ndarray,
-    tb: np.ndarray,
-    rot_b: np.ndarray | None = None,
-    scale_b: np.ndarray | None = None,
+    pa: np.ndarray, ta: np.ndarray, pb: np.ndarray, tb: np.ndarray, scale_b: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Minimum distance between two timed polylines over their common time, and when.
 
     pa (..., Wa, 3), ta (..., Wa); pb (..., Wb, 3), tb (..., Wb); leading axes broadcast.
-    Optional metric per leg of b: ``rot_b`` (..., Wb-1, 3, 3) whose rows are the ellipsoid axes
-    and ``scale_b`` (..., Wb-1, 3) the semi-axes; the distance is then measured as
-    ``|diag(1/scale) rot d|`` (1 = on the ellipsoid surface).
+    Optional ``scale_b`` (..., Wb-1, 3): per leg of b, divide the relative position by it axis by
+    axis (ellipsoid semi-axes in a frame where the ellipsoid is axis-aligned; 1 = on its surface).
     Returns (d_min (...), t_min (...)); d_min is +inf when the time spans never overlap.
     """
     ta0, ta1 = ta[..., :-1, None], ta[..., 1:, None]
@@ -70,13 +64,9 @@ def closest_approach(
     pos_a = pa[..., :-1, None, :] + va * (lo - ta0)[..., None]
     pos_b = pb[..., None, :-1, :] + vb * (lo - tb0)[..., None]
     d0, dv = pos_a - pos_b, va - vb
-    if rot_b is not None:
-        rot = rot_b[..., None, :, :, :]
-        d0 = np.einsum("...ij,...j->...i", rot, d0)
-        dv = np.einsum("...ij,...j->...i", rot, dv)
     if scale_b is not None:
-        d0 = d0 / scale_b[..., None, :, :]
-        dv = dv / scale_b[..., None, :, :]
+        inv = 1.0 / scale_b[..., None, :, :]
+        d0, dv = d0 * inv, dv * inv
     dist, s = _cpa(d0, dv, np.where(valid, hi - lo, 0.0))
     dist = np.where(valid, dist, np.inf)
     flat = dist.reshape(*dist.shape[:-2], -1)
@@ -132,7 +122,7 @@ def zone_closest_approach(
     """Whitened closest approach of every UAV to every moving ellipsoid zone.
 
     points (B, U, W, 3), times (B, U, W); zones Z with centre polylines zone_points (Z, H, 3),
-    zone_times (Z, H), axes rotation per leg zone_rot (Z, H-1, 3, 3) and semi-axes
+    zone_times (Z, H), ellipsoid axes as rows of zone_rot (Z, 3, 3) and per leg semi-axes
     zone_axes (Z, H-1, 3) [m]; margin_m (B, U) is added to every semi-axis of the zone when
     checking that UAV. Returns (d (B, U, Z) with < 1 meaning inside, t (B, U, Z)).
     """
@@ -140,10 +130,21 @@ def zone_closest_approach(
     n_z = len(zone_points)
     d_out = np.full((n_b, n_u, n_z), np.inf)
     t_out = np.zeros((n_b, n_u, n_z))
+    t_lo, t_hi = times.min(), times.max()
     for z in range(n_z):  # few zones (manned aircraft x motion modes); vectorised inside
-        scale = zone_axes[z][None, None] + margin_m[..., None, None]
+        # only the zone legs that overlap the UAVs' time span matter
+        legs = np.nonzero((zone_times[z, 1:] > t_lo) & (zone_times[z, :-1] < t_hi))[0]
+        if not len(legs):
+            continue
+        sl = slice(legs[0], legs[-1] + 2)
+        rot = zone_rot[z]
+        scale = zone_axes[z, legs[0] : legs[-1] + 1][None, None] + margin_m[..., None, None]
         d_out[..., z], t_out[..., z] = closest_approach(
-            points, times, zone_points[z][None, None], zone_times[z][None, None], zone_rot[z], scale
+            points @ rot.T,
+            times,
+            (zone_points[z, sl] @ rot.T)[None, None],
+            zone_times[z, sl][None, None],
+            scale,
         )
     return d_out, t_out
 

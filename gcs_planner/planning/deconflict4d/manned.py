@@ -31,7 +31,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 __all__ = [
     "MannedTrack",
@@ -86,8 +86,9 @@ class MannedTrack:
 
 @dataclass(frozen=True)
 class Zone:
-    """One mode's moving no-fly region: centres (H, 3) at times (H,) [s]; per step (H-1) the
-    ellipsoid axes as rows of ``rot`` (H-1, 3, 3) and inflated semi-axes ``axes`` (H-1, 3) [m]."""
+    """One mode's moving no-fly region: centres (H, 3) at times (H,) [s]; the ellipsoid axes as
+    rows of ``rot`` (3, 3) (the same at every horizon) and per step (H-1) the inflated semi-axes
+    ``axes_m`` (H-1, 3) [m]."""
 
     owner: int
     name: str
@@ -180,7 +181,7 @@ def region_threshold(dof: float, confidence: float) -> float:
     """Mahalanobis-squared bound of the ``confidence`` region of a 3-D Student-t."""
     if not 0 < confidence < 1:
         raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
-    return float(DIM * stats.f.ppf(confidence, DIM, dof))
+    return float(DIM * special.fdtri(DIM, dof, confidence))
 
 
 def mode_weights(track: MannedTrack) -> np.ndarray:
@@ -221,7 +222,7 @@ def predict_zones(
                 weight=float(weight),
                 times_s=t_last + steps * track.dt_s,
                 centres_m=track.positions_m[-1] + mean,
-                rot=np.broadcast_to(eigvec.T, (n_steps, DIM, DIM)).copy(),
+                rot=eigvec.T.copy(),
                 axes_m=semi[1:] + safety_m,
             )
         )

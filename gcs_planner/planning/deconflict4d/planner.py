@@ -272,7 +272,7 @@ def _stack_zones(zones: list[Zone]) -> tuple[np.ndarray, ...]:
         return (
             np.zeros((0, 2, 3)),
             np.zeros((0, 2)),
-            np.zeros((0, 1, 3, 3)),
+            np.zeros((0, 3, 3)),
             np.zeros((0, 1, 3)),
             np.zeros(0, int),
         )
@@ -284,7 +284,7 @@ def _stack_zones(zones: list[Zone]) -> tuple[np.ndarray, ...]:
     return (
         np.stack([pad(z.centres_m, h) for z in zones]),
         np.stack([pad(z.times_s, h) for z in zones]),
-        np.stack([pad(z.rot, h - 1) for z in zones]),
+        np.stack([z.rot for z in zones]),
         np.stack([pad(z.axes_m, h - 1) for z in zones]),
         np.array([z.owner for z in zones], dtype=int),
     )
