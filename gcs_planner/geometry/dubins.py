@@ -49,6 +49,8 @@ from scipy.optimize import brentq, minimize_scalar
 __all__ = [
     "WORDS",
     "DubinsPath",
+    "advance",
+    "segment_starts",
     "LiftedPath",
     "lift",
     "min_length_for_climb",
@@ -109,7 +111,7 @@ class DubinsPath:
         bounds = np.cumsum(self.lengths)
         seg = np.minimum(np.searchsorted(bounds, s, side="left"), 2)
         seg_start_s = np.concatenate([[0.0], bounds[:2]])[seg]
-        out = _advance_many(poses[seg], self.curvatures()[seg], s - seg_start_s)
+        out = advance(poses[seg], self.curvatures()[seg], s - seg_start_s)
         out[:, 2] = _wrap(out[:, 2])
         return out
 
@@ -219,21 +221,28 @@ def sample_batch(
     q0 (N, 3) start poses, word (N,) indices into WORDS, lengths (N, 3), radii (N, 3) as returned by
     shortest_batch. Headings are not wrapped.
     """
-    q0 = np.asarray(q0, dtype=float)
-    signs = _WORD_SIGNS[np.asarray(word)]  # (N, 3)
-    kappa = np.where(signs != 0, signs / np.where(np.isfinite(radii), radii, 1.0), 0.0)
-    starts = [q0]
-    for k in range(2):
-        starts.append(_advance_many(starts[-1], kappa[:, k], lengths[:, k]))
-    starts = np.stack(starts, axis=1)  # (N, 3 segments, 3)
+    starts, kappa = segment_starts(q0, word, lengths, radii)
     bounds = np.cumsum(lengths, axis=1)
     s = np.clip(np.asarray(s_m, dtype=float), 0.0, bounds[:, 2:3])
     seg = (s > bounds[:, 0:1]).astype(int) + (s > bounds[:, 1:2])
-    seg_start = np.concatenate([np.zeros((len(q0), 1)), bounds[:, :2]], axis=1)
-    rows = np.broadcast_to(np.arange(len(q0))[:, None], s.shape)
+    seg_start = np.concatenate([np.zeros((len(starts), 1)), bounds[:, :2]], axis=1)
+    rows = np.broadcast_to(np.arange(len(starts))[:, None], s.shape)
     ds = s - seg_start[rows, seg]
-    out = _advance_many(starts[rows, seg].reshape(-1, 3), kappa[rows, seg].ravel(), ds.ravel())
+    out = advance(starts[rows, seg].reshape(-1, 3), kappa[rows, seg].ravel(), ds.ravel())
     return out.reshape(*s.shape, 3)
+
+
+def segment_starts(
+    q0: np.ndarray, word: np.ndarray, lengths: np.ndarray, radii: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Start pose of each segment (N, 3, 3) and signed curvature per segment (N, 3) [1/m]."""
+    q0 = np.asarray(q0, dtype=float)
+    signs = _WORD_SIGNS[np.asarray(word)]
+    kappa = np.where(signs != 0, signs / np.where(np.isfinite(radii), radii, 1.0), 0.0)
+    starts = [q0]
+    for k in range(2):
+        starts.append(advance(starts[-1], kappa[:, k], lengths[:, k]))
+    return np.stack(starts, axis=1), kappa
 
 
 def shortest_path(
@@ -447,10 +456,10 @@ def _ccc(h0, h1, c0, c1, r0, r1, rm, s: float, side: float) -> np.ndarray:
 
 
 def _advance(pose: np.ndarray, kappa: float, ds: float) -> np.ndarray:
-    return _advance_many(pose[None, :], np.array([kappa]), np.array([ds]))[0]
+    return advance(pose[None, :], np.array([kappa]), np.array([ds]))[0]
 
 
-def _advance_many(poses: np.ndarray, kappa: np.ndarray, ds: np.ndarray) -> np.ndarray:
+def advance(poses: np.ndarray, kappa: np.ndarray, ds: np.ndarray) -> np.ndarray:
     """Integrate constant-curvature motion exactly: poses (n, 3), signed curvature (n,), distance (n,)."""
     x, y, h = poses[:, 0], poses[:, 1], poses[:, 2]
     turning = kappa != 0.0

@@ -27,15 +27,16 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
   the vehicle's band get a vertical take-off/landing column (clamped into the band).
 - F1 length = flown 3-D length / straight start-goal distance. F2 threat (eqs. 5-6) on the path
   sampled every ``dt_s`` (point-to-axis distance, obstacles inflated by ``obstacle_margin_m``, which
-  covers the chord between samples): soft part = depth into the buffer / buffer width, integrated
-  along the path and divided by the straight distance; inside radius = HARD + depth. F3 altitude
-  (eqs. 7-8, the digest's reading): mean |z - band middle| / half band, HARD outside. F4 (eqs. 9-11)
-  = a1 sum(turn angles) + a2 sum(|climb-angle changes|) of the polyline, each divided by
-  pi (W - 2); climb angle above ``max_climb_deg`` = HARD + excess. F5 (eqs. 12-13): on the shared
-  0.5 s time grid a 4-D cKDTree (x, y, z, big * slice) finds higher-priority samples near each
-  particle sample; the closest approach of the two linear motions over the slice must exceed
-  max(separation_i, separation_j) + ``separation_margin_m``, else HARD + shortfall. HARD = 1e4
-  replaces the paper's infinity (violations still rank by size).
+  covers the chord between samples; a cKDTree over the cylinder axes keeps the 4 nearest in reach
+  per sample, enough when at most 4 buffers overlap): soft part = depth into the buffer / buffer
+  width, integrated along the path and divided by the straight distance; inside radius = HARD +
+  depth. F3 altitude (eqs. 7-8, the digest's reading): mean |z - band middle| / half band, HARD
+  outside. F4 (eqs. 9-11) = a1 sum(turn angles) + a2 sum(|climb-angle changes|) of the polyline,
+  each divided by pi (W - 2); climb angle above ``max_climb_deg`` = HARD + excess. F5 (eqs. 12-13):
+  on the shared 0.5 s time grid a 4-D cKDTree (x, y, z, big * slice) finds higher-priority samples
+  near each particle sample; the closest approach of the two linear motions over the slice must
+  exceed max(separation_i, separation_j) + ``separation_margin_m``, else HARD + shortfall. HARD =
+  1e4 replaces the paper's infinity (violations still rank by size).
 - Weights b1..b4 = 1, 1, 0.1, 0.2 and a1 = a2 = 0.5 (the paper gives none).
 - PSO: the shared engine (gcs_planner.planning.pso), linear inertia 0.9 -> 0.4, c1 = c2 = 1.5,
   v_max = 0.2 of the bound span. Initial swarm: the RRT* path resampled to W points by arc length,
@@ -64,7 +65,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from gcs_planner.errors import UserError
-from gcs_planner.geometry.dubins import sample_batch, shortest_batch
+from gcs_planner.geometry.dubins import advance, segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.geometry.separation import check_plan
 from gcs_planner.plan import Plan, VehiclePlan
@@ -98,8 +99,9 @@ class SwarmConfig:
     b4: float = 0.2
     a1: float = 0.5
     pad_m: float = 100.0
-    rrt_step_m: float = 40.0
-    rrt_iterations: int = 1500
+    rrt_step_m: float = 60.0
+    rrt_iterations: int = 500
+    rrt_extra_iterations: int = 150
     delay_step_s: float = 5.0
     repairs: int = 4
     waypoint_tol_m: float = 1.0
@@ -184,6 +186,8 @@ class Decoded:
     lh: np.ndarray  # (P, W-1) horizontal leg lengths
     l3: np.ndarray  # (P, W-1) 3-D leg lengths
     cum: np.ndarray  # (P, W)
+    starts: np.ndarray  # (P*(W-1), 3, 3) start pose of each Dubins segment
+    kappa: np.ndarray  # (P*(W-1), 3) signed curvature of each segment
 
     @property
     def total(self) -> np.ndarray:
@@ -212,7 +216,8 @@ def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
     lh = seg.sum(axis=1).reshape(p, -1)
     l3 = np.hypot(lh, d[..., 2])
     cum = np.concatenate([np.zeros((p, 1)), np.cumsum(l3, axis=1)], axis=1)
-    return Decoded(pts, q0, word, seg, radii, lh, l3, cum)
+    starts, kappa = segment_starts(q0, word, seg, radii)
+    return Decoded(pts, q0, word, seg, radii, lh, l3, cum, starts, kappa)
 
 
 def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
@@ -227,9 +232,12 @@ def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
     z0 = dec.pts[rows, leg, 2]
     z = z0 + f * (dec.pts[rows, leg + 1, 2] - z0)
     flat = (rows * n_leg + leg).ravel()
-    xy = sample_batch(
-        dec.q0[flat], dec.word[flat], dec.seg[flat], dec.radii[flat], (f * dec.lh[rows, leg]).reshape(-1, 1)
-    )[:, 0, :2]
+    sh = (f * dec.lh[rows, leg]).ravel()
+    bounds = np.cumsum(dec.seg[flat], axis=1)
+    sh = np.minimum(sh, bounds[:, 2])
+    si = (sh > bounds[:, 0]).astype(int) + (sh > bounds[:, 1])
+    seg_start = np.where(si == 0, 0.0, bounds[np.arange(len(flat)), np.maximum(si - 1, 0)])
+    xy = advance(dec.starts[flat, si], dec.kappa[flat, si], sh - seg_start)[:, :2]
     return np.concatenate([xy.reshape(p, k, 2), z[..., None]], axis=2)
 
 
@@ -319,6 +327,32 @@ class CostModel:
     ) -> None:
         self.prob, self.obs, self.traffic, self.cfg = prob, obstacles, traffic, cfg
         self.evaluations = 0
+        self._obs_tree = cKDTree(np.column_stack([obstacles.cx, obstacles.cy])) if len(obstacles.cx) else None
+        self._reach = (
+            float(np.max(obstacles.radius_m + obstacles.buffer_m, initial=0.0)) + cfg.obstacle_margin_m
+        )
+
+    def _cylinder_terms(self, mid: np.ndarray, ds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Soft buffer integral and hard term per particle; only the <= 4 nearest cylinders in reach count."""
+        p, k, _ = mid.shape
+        flat = mid.reshape(-1, 3)
+        n_nb = min(4, len(self.obs.cx))
+        dxy, j = self._obs_tree.query(flat[:, :2], k=n_nb, distance_upper_bound=self._reach)
+        dxy, j = dxy.reshape(len(flat), n_nb), j.reshape(len(flat), n_nb)
+        row, col = np.nonzero(np.isfinite(dxy))
+        if not len(row):
+            return np.zeros(p), np.zeros(p)
+        jj, d = j[row, col], dxy[row, col]
+        z = flat[row, 2]
+        band = (z >= self.obs.z_min_m[jj]) & (z <= self.obs.z_max_m[jj])
+        r = self.obs.radius_m[jj] + self.cfg.obstacle_margin_m
+        buf = self.obs.buffer_m[jj]
+        depth_hard = np.where(band, np.maximum(0.0, r - d), 0.0)
+        depth_soft = np.where(band, np.clip((r + buf - d) / np.maximum(buf, 1e-9), 0.0, 1.0), 0.0)
+        part = row // k
+        soft = np.bincount(part, weights=depth_soft * ds.ravel()[row], minlength=p)
+        hard = np.bincount(part, weights=(depth_hard > 0) * HARD_PENALTY + depth_hard, minlength=p)
+        return soft, hard
 
     def grid(self, dec: Decoded) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Samples of every particle on the shared time grid: slices (K,), pos (P, K, 3), valid (P, K), s."""
@@ -344,15 +378,9 @@ class CostModel:
         mid = 0.5 * (pos[:, 1:] + pos[:, :-1])
         soft = np.zeros(len(f1))
         hard = np.zeros(len(f1))
-        if len(self.obs.radius_m):
-            dxy = np.hypot(mid[..., 0, None] - self.obs.cx, mid[..., 1, None] - self.obs.cy)
-            band = (mid[..., 2, None] >= self.obs.z_min_m) & (mid[..., 2, None] <= self.obs.z_max_m)
-            r = self.obs.radius_m + cfg.obstacle_margin_m
-            depth_hard = np.where(band, np.maximum(0.0, r - dxy), 0.0)
-            buf = np.maximum(self.obs.buffer_m, 1e-9)
-            depth_soft = np.where(band, np.clip((r + self.obs.buffer_m - dxy) / buf, 0.0, 1.0), 0.0)
-            soft = np.sum(depth_soft.sum(axis=-1) * ds, axis=1) / ref
-            hard = np.sum((depth_hard > 0).sum(axis=-1), axis=1) * HARD_PENALTY + depth_hard.sum(axis=(1, 2))
+        if self._obs_tree is not None:
+            soft, hard = self._cylinder_terms(mid, ds)
+            soft = soft / ref
         if len(self.obs.dome_radius_m):
             dd = np.linalg.norm(mid[..., None, :] - self.obs.dome_centre, axis=-1)
             depth = np.maximum(0.0, self.obs.dome_radius_m + cfg.obstacle_margin_m - dd)
