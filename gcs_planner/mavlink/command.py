@@ -1,0 +1,163 @@
+"""COMMAND_LONG client with retries and COMMAND_ACK matching: arm, mode, mission start, takeoff, RTL.
+
+Choices:
+- COMMAND_LONG is resent every COMMAND_RETRY_S = 1.5 s (COMMAND_RETRIES = 3 times), with
+  ``confirmation`` counting the resends as the spec asks; the matcher (COMMAND_ACK from the target
+  for this command, addressed to us or broadcast) is subscribed before the first send.
+  IN_PROGRESS acks extend the wait; any other result ends it.
+- Mode names are turned into numbers with the autopilot's own table (enums.py), picked from the
+  vehicle's HEARTBEAT (autopilot, and MAV_TYPE for ArduPlane vs ArduCopter). DO_SET_MODE carries
+  MAV_MODE_FLAG_CUSTOM_MODE_ENABLED in param1 and, for ArduPilot, custom_mode in param2; for PX4
+  main mode in param2 and sub mode in param3.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.enums import (
+    ARDUCOPTER_MODES,
+    ARDUPLANE_MODES,
+    PX4_MODES,
+    Autopilot,
+    CommandResult,
+)
+from gcs_planner.mavlink.errors import CommandTimeoutError, command_error
+from gcs_planner.mavlink.link import MavlinkLink
+
+__all__ = ["COMMAND_RETRIES", "COMMAND_RETRY_S", "CommandClient", "mode_table"]
+
+COMMAND_RETRY_S = 1.5  # wait for COMMAND_ACK before resending [s]
+COMMAND_RETRIES = 3  # resends after the first COMMAND_LONG
+FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM param2 that forces (ArduPilot, PX4)
+_FIXED_WING_TYPES = frozenset({mavlink.MAV_TYPE_FIXED_WING})
+
+
+def mode_table(autopilot: int | None, mav_type: int | None) -> dict[str, int]:
+    """Mode name -> custom_mode for a vehicle, from its HEARTBEAT fields."""
+    if autopilot == Autopilot.PX4:
+        return PX4_MODES
+    if autopilot == Autopilot.ARDUPILOTMEGA:
+        return ARDUPLANE_MODES if mav_type in _FIXED_WING_TYPES else ARDUCOPTER_MODES
+    raise UserError(f"cannot set modes by name on autopilot type {autopilot} (only ArduPilot and PX4)")
+
+
+class CommandClient:
+    """Commands to one vehicle (``sysid``/``compid``) over ``link``."""
+
+    def __init__(
+        self,
+        link: MavlinkLink,
+        sysid: int,
+        compid: int = 1,
+        *,
+        retry_s: float = COMMAND_RETRY_S,
+        retries: int = COMMAND_RETRIES,
+    ) -> None:
+        self.link = link
+        self.sysid = sysid
+        self.compid = compid
+        self.retry_s = retry_s
+        self.retries = retries
+
+    async def command_long(self, command: int, *params: float) -> CommandResult:
+        """Send COMMAND_LONG until COMMAND_ACK: ACCEPTED, or CommandError / CommandTimeoutError."""
+        if len(params) > 7:
+            raise ValueError(f"COMMAND_LONG takes 7 params, got {len(params)}")
+        values = [float(p) for p in params] + [0.0] * (7 - len(params))
+        name = _command_name(command)
+        self.link.check_target(self.sysid)
+        loop = asyncio.get_running_loop()
+        acks: asyncio.Queue = asyncio.Queue()
+
+        def on_frame(msg, raw: bytes, t_s: float) -> None:
+            if (
+                msg.get_type() == "COMMAND_ACK"
+                and msg.command == command
+                and msg.get_srcSystem() == self.sysid
+                and msg.get_srcComponent() == self.compid
+                and msg.target_system in (0, self.link.sysid)
+            ):
+                acks.put_nowait(msg)
+
+        unsubscribe = self.link.subscribe(on_frame)
+        try:
+            for confirmation in range(self.retries + 1):
+                self.link.send(
+                    mavlink.MAVLink_command_long_message(
+                        self.sysid, self.compid, command, confirmation, *values
+                    )
+                )
+                deadline = loop.time() + self.retry_s
+                while (remaining := deadline - loop.time()) > 0:
+                    try:
+                        ack = await asyncio.wait_for(acks.get(), remaining)
+                    except TimeoutError:
+                        break
+                    if ack.result == CommandResult.IN_PROGRESS:
+                        deadline = loop.time() + self.retry_s
+                        continue
+                    if ack.result == CommandResult.ACCEPTED:
+                        return CommandResult.ACCEPTED
+                    raise command_error(self.sysid, command, ack.result, name)
+        finally:
+            unsubscribe()
+        raise CommandTimeoutError(
+            f"vehicle {self.sysid}: no COMMAND_ACK to {name} after {self.retries + 1} tries"
+        )
+
+    async def arm(self) -> None:
+        await self.command_long(mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 1.0)
+
+    async def disarm(self, force: bool = False) -> None:
+        await self.command_long(
+            mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0.0, FORCE_DISARM_MAGIC if force else 0.0
+        )
+
+    async def set_mode(self, name: str) -> None:
+        """Switch to mode ``name`` (AUTO, GUIDED, LOITER, RTL, LAND, ...) using the vehicle's mode table."""
+        info = self.link.vehicles.get(self.sysid)
+        if info is None:
+            raise UserError(f"vehicle {self.sysid}: no HEARTBEAT yet, its mode numbers are unknown")
+        table = mode_table(info.autopilot, info.mav_type)
+        try:
+            custom = table[name.upper()]
+        except KeyError:
+            known = ", ".join(table)
+            raise UserError(f"mode {name!r} does not exist on vehicle {self.sysid}; known: {known}") from None
+        flag = float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+        if info.autopilot == Autopilot.PX4:
+            await self.command_long(
+                mavlink.MAV_CMD_DO_SET_MODE, flag, (custom >> 16) & 0xFF, (custom >> 24) & 0xFF
+            )
+        else:
+            await self.command_long(mavlink.MAV_CMD_DO_SET_MODE, flag, float(custom))
+
+    async def mission_start(self, first_seq: int = 0, last_seq: int = 0) -> None:
+        """MAV_CMD_MISSION_START (0, 0 = the whole mission)."""
+        await self.command_long(mavlink.MAV_CMD_MISSION_START, first_seq, last_seq)
+
+    async def set_mission_current(self, seq: int) -> None:
+        """MAV_CMD_DO_SET_MISSION_CURRENT (MissionClient.set_current adds the legacy fallback)."""
+        await self.command_long(mavlink.MAV_CMD_DO_SET_MISSION_CURRENT, seq)
+
+    async def takeoff(self, alt_m: float) -> None:
+        """MAV_CMD_NAV_TAKEOFF to ``alt_m`` above home [m] (vehicle armed, in a mode that allows it)."""
+        if not math.isfinite(alt_m) or alt_m <= 0:
+            raise UserError(f"takeoff altitude must be a positive number of metres, got {alt_m!r}")
+        await self.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, alt_m)
+
+    async def rtl(self) -> None:
+        await self.command_long(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+
+    async def land(self) -> None:
+        await self.command_long(mavlink.MAV_CMD_NAV_LAND)
+
+
+def _command_name(command: int) -> str:
+    entry = mavlink.enums["MAV_CMD"].get(command)
+    return entry.name if entry else f"MAV_CMD {command}"

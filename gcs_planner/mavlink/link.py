@@ -1,0 +1,285 @@
+"""An asyncio MAVLink 2 link over UDP: one socket, many vehicles, routed by system id.
+
+``await MavlinkLink.open("udpout:127.0.0.1:14550")`` talks to a vehicle that listens (ArduPilot SITL
+``udpin``, our sitl-mock); several ``udpout`` URLs share one socket, so one link reaches a whole mock
+fleet (one port per vehicle). ``udpin:0.0.0.0:14550`` listens and answers every peer heard from.
+
+Choices:
+- One pymavlink parser per remote address, so interleaved datagrams of different vehicles never
+  corrupt each other's parser state; robust parsing drops bad frames instead of raising.
+- Frames are dispatched synchronously in ``datagram_received``: a transfer's reply goes out in the
+  same callback that received the request (no task hop, no sleep) - the hot path of an upload.
+- Routing: a message with ``target_system`` goes to the address that system was last heard from;
+  broadcasts (target 0, HEARTBEAT) go to every peer. A system id heard from two addresses within
+  DUPLICATE_WINDOW_S is ambiguous: ``vehicles`` reports it and sending to it raises
+  DuplicateSysidError (QGC merges such vehicles silently, #14812; we refuse).
+- Subscribers get ``(msg, raw, t_s)``: the exact received frame and the receive time as Unix
+  seconds (telemetry logging); MISSION_COUNT/ACK/CURRENT carry their opaque ids (wire.py).
+- The GCS sends HEARTBEAT (MAV_TYPE_GCS) at 1 Hz from open until close: autopilots use it for
+  GCS failsafe and udpin-style endpoints only talk to peers they have heard from.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
+from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
+
+__all__ = ["DUPLICATE_WINDOW_S", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo", "parse_url"]
+
+log = logging.getLogger(__name__)
+
+GCS_SYSID = 255
+GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
+DUPLICATE_WINDOW_S = 5.0  # two addresses heard within this time with one sysid = duplicate [s]
+HEARTBEAT_PERIOD_S = 1.0
+
+Address = tuple[str, int]
+Callback = Callable[[mavlink.MAVLink_message, bytes, float], None]
+
+
+@dataclass
+class VehicleInfo:
+    """What the link knows about one system id (from any of its messages; type fields from HEARTBEAT)."""
+
+    sysid: int
+    address: Address
+    addresses: dict[Address, float] = field(default_factory=dict)  # address -> last heard [monotonic s]
+    autopilot: int | None = None  # HEARTBEAT.autopilot (MAV_AUTOPILOT)
+    mav_type: int | None = None  # HEARTBEAT.type (MAV_TYPE)
+    custom_mode: int | None = None
+    base_mode: int | None = None
+
+    def live_addresses(self, now_s: float) -> list[Address]:
+        return sorted(a for a, t in self.addresses.items() if now_s - t <= DUPLICATE_WINDOW_S)
+
+    @property
+    def duplicate(self) -> bool:
+        """True when the system id answers from more than one address (ambiguous target)."""
+        return len(self.live_addresses(time.monotonic())) > 1
+
+
+def parse_url(url: str) -> tuple[str, Address]:
+    """'udpout:host:port' / 'udpin:host:port' (also 'udp:' = udpin) -> (kind, (host, port))."""
+    try:
+        kind, host, port_text = url.split(":")
+        port = int(port_text)
+    except ValueError:
+        raise ValueError(f"connection URL {url!r}: expected udpin:HOST:PORT or udpout:HOST:PORT") from None
+    kind = {"udp": "udpin"}.get(kind, kind)
+    if kind not in ("udpin", "udpout"):
+        raise ValueError(f"connection URL {url!r}: scheme {kind!r} not supported (udpin, udpout)")
+    if not 0 <= port <= 65535:
+        raise ValueError(f"connection URL {url!r}: port {port} out of range")
+    return kind, (host, port)
+
+
+class _Protocol(asyncio.DatagramProtocol):
+    def __init__(self, link: MavlinkLink) -> None:
+        self.link = link
+
+    def datagram_received(self, data: bytes, addr: Address) -> None:
+        self.link._on_datagram(data, addr[:2])
+
+    def error_received(self, exc: Exception) -> None:
+        log.debug("UDP error: %s", exc)  # ICMP port unreachable while a vehicle is down
+
+
+class MavlinkLink:
+    """See module docstring. Create with :meth:`open`; close with :meth:`close`."""
+
+    def __init__(self, sysid: int = GCS_SYSID, compid: int = GCS_COMPID) -> None:
+        self.sysid = sysid
+        self.compid = compid
+        self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self._parsers: dict[Address, mavlink.MAVLink] = {}
+        self._peers: dict[Address, None] = {}  # ordered set of addresses we send broadcasts to
+        self._subscribers: list[Callback] = []
+        self.vehicles: dict[int, VehicleInfo] = {}
+        self._transport: asyncio.DatagramTransport | None = None
+        self._heartbeat_task: asyncio.Task | None = None
+        self.frames_received = 0
+        self.frames_sent = 0
+
+    @classmethod
+    async def open(
+        cls,
+        url: str,
+        *more_urls: str,
+        sysid: int = GCS_SYSID,
+        compid: int = GCS_COMPID,
+        heartbeat_period_s: float = HEARTBEAT_PERIOD_S,
+    ) -> MavlinkLink:
+        """Bind one UDP socket: at most one udpin URL (the bind address), any number of udpout remotes."""
+        parsed = [parse_url(u) for u in (url, *more_urls)]
+        binds = [addr for kind, addr in parsed if kind == "udpin"]
+        if len(binds) > 1:
+            raise ValueError(f"only one udpin URL per link, got {len(binds)}")
+        remotes = [addr for kind, addr in parsed if kind == "udpout"]
+        local = binds[0] if binds else ("0.0.0.0", 0)
+        link = cls(sysid, compid)
+        loop = asyncio.get_running_loop()
+        link._transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(link), local_addr=local)
+        for remote in remotes:
+            link._peers[(_resolve(remote[0]), remote[1])] = None
+        if heartbeat_period_s > 0:
+            link._heartbeat_task = asyncio.create_task(link._heartbeat_loop(heartbeat_period_s))
+        return link
+
+    @property
+    def local_address(self) -> Address:
+        assert self._transport is not None
+        return self._transport.get_extra_info("sockname")[:2]
+
+    def add_peer(self, url_or_address: str | Address) -> None:
+        """Start talking to one more udpout remote (heartbeats included)."""
+        if isinstance(url_or_address, str):
+            kind, addr = parse_url(url_or_address)
+            if kind != "udpout":
+                raise ValueError(f"add_peer needs a udpout URL, got {url_or_address!r}")
+        else:
+            addr = url_or_address
+        self._peers[(_resolve(addr[0]), addr[1])] = None
+
+    # ----------------------------------------------------------------- sending
+    def send(self, msg: mavlink.MAVLink_message) -> None:
+        """Pack and send now; to the target system's address, or to every peer for broadcasts."""
+        if self._transport is None or self._transport.is_closing():
+            raise ConnectionError("MAVLink link is closed")
+        target = getattr(msg, "target_system", 0)
+        raw = msg.pack(self._mav)
+        info = self.vehicles.get(target) if target else None
+        if info is None:
+            destinations = list(self._peers)
+        else:
+            live = info.live_addresses(time.monotonic())
+            if len(live) > 1:
+                raise DuplicateSysidError(target, live)
+            destinations = [info.address]
+        for addr in destinations:
+            self._transport.sendto(raw, addr)
+        self.frames_sent += 1
+
+    def check_target(self, sysid: int) -> None:
+        """Raise DuplicateSysidError if ``sysid`` answers from more than one address."""
+        info = self.vehicles.get(sysid)
+        if info is not None:
+            live = info.live_addresses(time.monotonic())
+            if len(live) > 1:
+                raise DuplicateSysidError(sysid, live)
+
+    def duplicates(self) -> dict[int, list[Address]]:
+        """System ids currently heard from more than one address."""
+        now = time.monotonic()
+        return {s: v.live_addresses(now) for s, v in self.vehicles.items() if len(v.live_addresses(now)) > 1}
+
+    # ----------------------------------------------------------------- receiving
+    def subscribe(self, callback: Callback) -> Callable[[], None]:
+        """Call ``callback(msg, raw, t_s)`` for every received frame; returns the unsubscribe function."""
+        self._subscribers = [*self._subscribers, callback]
+
+        def unsubscribe() -> None:
+            self._subscribers = [c for c in self._subscribers if c is not callback]
+
+        return unsubscribe
+
+    async def wait_for(
+        self, predicate: Callable[[mavlink.MAVLink_message], bool], timeout_s: float
+    ) -> mavlink.MAVLink_message:
+        """The first message for which ``predicate`` is true; TimeoutError after ``timeout_s``."""
+        future: asyncio.Future = asyncio.get_running_loop().create_future()
+
+        def on_frame(msg: mavlink.MAVLink_message, raw: bytes, t_s: float) -> None:
+            if not future.done() and predicate(msg):
+                future.set_result(msg)
+
+        unsubscribe = self.subscribe(on_frame)
+        try:
+            return await asyncio.wait_for(future, timeout_s)
+        finally:
+            unsubscribe()
+
+    def _on_datagram(self, data: bytes, addr: Address) -> None:
+        parser = self._parsers.get(addr)
+        if parser is None:
+            parser = self._parsers[addr] = mavlink.MAVLink(None)
+            parser.robust_parsing = True
+            if addr not in self._peers:
+                self._peers[addr] = None  # udpin: answer whoever talks to us
+        try:
+            msgs = parser.parse_buffer(data) or []
+        except mavlink.MAVError as exc:  # pragma: no cover - robust_parsing makes this rare
+            log.debug("bad frame from %s: %s", addr, exc)
+            return
+        t_s = time.time()
+        now = time.monotonic()
+        for msg in msgs:
+            if isinstance(msg, mavlink.MAVLink_bad_data):
+                continue
+            raw = bytes(msg.get_msgbuf())
+            self._note_source(msg, addr, now)
+            attach_extensions(msg, raw)
+            self.frames_received += 1
+            for callback in self._subscribers:
+                try:
+                    callback(msg, raw, t_s)
+                except Exception:
+                    log.exception("MAVLink subscriber %r failed", callback)
+
+    def _note_source(self, msg: mavlink.MAVLink_message, addr: Address, now: float) -> None:
+        sysid = msg.get_srcSystem()
+        info = self.vehicles.get(sysid)
+        if info is None:
+            info = self.vehicles[sysid] = VehicleInfo(sysid, addr)
+        else:
+            live = info.live_addresses(now)
+            if not live:
+                info.address = addr  # the old address went quiet: the vehicle moved (e.g. rebooted)
+            elif addr not in live and addr not in info.addresses:
+                log.warning("system id %d heard from %s and %s: ambiguous", sysid, info.address, addr)
+        info.addresses[addr] = now
+        if msg.get_type() == "HEARTBEAT" and addr == info.address:
+            info.autopilot, info.mav_type = msg.autopilot, msg.type
+            info.custom_mode, info.base_mode = msg.custom_mode, msg.base_mode
+
+    # ----------------------------------------------------------------- lifecycle
+    async def _heartbeat_loop(self, period_s: float) -> None:
+        beat = mavlink.MAVLink_heartbeat_message(
+            mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, mavlink.MAV_STATE_ACTIVE, 3
+        )
+        while True:
+            with contextlib.suppress(ConnectionError):
+                self.send(beat)
+            await asyncio.sleep(period_s)
+
+    async def close(self) -> None:
+        """Stop heartbeats and close the socket (idempotent)."""
+        if self._heartbeat_task is not None:
+            self._heartbeat_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._heartbeat_task
+            self._heartbeat_task = None
+        if self._transport is not None:
+            self._transport.close()
+
+    async def __aenter__(self) -> MavlinkLink:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+
+def _resolve(host: str) -> str:
+    """UDP sendto needs an address the socket family understands; 'localhost' -> 127.0.0.1."""
+    return "127.0.0.1" if host in ("localhost", "0.0.0.0", "") else host

@@ -1,0 +1,283 @@
+"""Async mission client: upload, download, clear and set-current for one vehicle over a MavlinkLink.
+
+A thin wrapper around the I/O-free state machines in transfer.py: the response matcher is
+subscribed before the first message is sent, replies are sent from inside the link's receive
+callback (no task hop), and the only awaits are on the transfer's next deadline. One transfer per
+(link, vehicle, mission type) at a time; a second one raises BusyError instead of interleaving.
+
+Choices:
+- Lost final ACK: when every item went out but no MISSION_ACK came back (ArduPilot never repeats
+  it), the client downloads the list and reports success only if it matches what was sent
+  (``UploadResult.ack_lost``); otherwise the timeout is raised.
+- Verify-by-download compares with :class:`Tolerance` for autopilot rounding (ArduPilot keeps the
+  altitude in cm and hold time / radii in whole units, and reports non-_INT frame numbers); on
+  ArduPilot-style vehicles (HEARTBEAT autopilot ARDUPILOTMEGA) seq 0 is the vehicle's home and is
+  not compared.
+- clear(): MISSION_CLEAR_ALL; when the vehicle answers ERROR or DENIED (ArduPilot in AUTO cannot
+  clear) an empty list is uploaded instead, which ArduPilot accepts.
+- set_current(): MAV_CMD_DO_SET_MISSION_CURRENT first; if the vehicle does not support it (or never
+  answers) the legacy MISSION_SET_CURRENT, confirmed by MISSION_CURRENT.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import time
+import weakref
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from gcs_planner.mavlink.enums import Autopilot, CommandResult, MissionResult
+from gcs_planner.mavlink.errors import (
+    BusyError,
+    CommandError,
+    CommandTimeoutError,
+    MissionError,
+    VerifyError,
+    mission_type_name,
+)
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.transfer import (
+    ClearTransfer,
+    DownloadTransfer,
+    Outcome,
+    SetCurrentTransfer,
+    Stats,
+    Timing,
+    Transfer,
+    UploadTransfer,
+)
+from gcs_planner.mavlink.types import MissionItem, MissionType
+
+__all__ = ["MissionClient", "Tolerance", "UploadResult", "compare_items"]
+
+_FRAME_ALIASES = {5: 0, 6: 3, 11: 10}  # *_INT frame numbers -> the plain ones (same meaning in ITEM_INT)
+_active: weakref.WeakKeyDictionary[MavlinkLink, set[tuple[int, int]]] = weakref.WeakKeyDictionary()
+
+
+@dataclass(frozen=True)
+class Tolerance:
+    """Largest differences a read-back may show and still equal the upload."""
+
+    z_m: float = 0.011  # ArduPilot stores altitude in cm
+    param: float = 1.0  # ArduPilot stores hold time / radii as integers
+
+
+@dataclass(frozen=True)
+class UploadResult:
+    """A successful upload: the vehicle's plan id and how it went."""
+
+    opaque_id: int  # 0 when the vehicle does not support plan ids
+    count: int
+    mission_type: int
+    elapsed_s: float
+    verified: bool = False  # read back and compared equal
+    ack_lost: bool = False  # no MISSION_ACK came, the read-back proved the upload
+    stats: Stats = field(default_factory=Stats)
+
+
+class MissionClient:
+    """Mission protocol with one vehicle (``sysid``/``compid``) over ``link``."""
+
+    def __init__(
+        self,
+        link: MavlinkLink,
+        sysid: int,
+        compid: int = 1,
+        *,
+        timing: Timing | None = None,
+        tolerance: Tolerance | None = None,
+    ) -> None:
+        self.link = link
+        self.sysid = sysid
+        self.compid = compid
+        self.timing = timing or Timing()
+        self.tolerance = tolerance or Tolerance()
+
+    # ----------------------------------------------------------------- operations
+    async def upload(
+        self, items: Sequence[MissionItem], mission_type: int = MissionType.MISSION, *, verify: bool = False
+    ) -> UploadResult:
+        """Send ``items`` as the vehicle's list of ``mission_type``; returns once it said ACCEPTED.
+
+        Raises a MissionError subclass naming the vehicle's MAV_MISSION_RESULT, MissionTimeoutError,
+        MissionInputError (malformed items, nothing sent), VerifyError (``verify`` and the read-back
+        differs) or DuplicateSysidError.
+        """
+        items = list(items)
+        t0 = time.monotonic()
+        transfer = self._transfer(UploadTransfer, items=items, mission_type=mission_type)
+        outcome = await self._run(transfer)
+        opaque_id, ack_lost, verified = outcome.opaque_id, False, False
+        if outcome.error is not None:
+            if not outcome.ack_lost:
+                raise outcome.error
+            back, opaque_id = await self._read_back(mission_type, outcome.error)
+            if self._difference(items, back) is not None:
+                raise outcome.error
+            ack_lost = verified = True
+        if verify and not verified:
+            back, _ = await self._read_back(mission_type, None)
+            problem = self._difference(items, back)
+            if problem is not None:
+                raise VerifyError(
+                    f"vehicle {self.sysid}: read-back differs: {problem}",
+                    sysid=self.sysid,
+                    mission_type=mission_type,
+                )
+            verified = True
+        return UploadResult(
+            opaque_id,
+            len(items),
+            int(mission_type),
+            time.monotonic() - t0,
+            verified,
+            ack_lost,
+            transfer.stats,
+        )
+
+    async def download(self, mission_type: int = MissionType.MISSION) -> list[MissionItem]:
+        """The vehicle's list of ``mission_type`` (as it stores it: rounded, home at seq 0 on ArduPilot)."""
+        items, _ = await self.download_with_id(mission_type)
+        return items
+
+    async def download_with_id(
+        self, mission_type: int = MissionType.MISSION
+    ) -> tuple[list[MissionItem], int]:
+        """(items, opaque_id from MISSION_COUNT; 0 if unsupported)."""
+        outcome = await self._run(self._transfer(DownloadTransfer, mission_type=mission_type))
+        if outcome.error is not None:
+            raise outcome.error
+        return list(outcome.items or []), outcome.opaque_id
+
+    async def clear(self, mission_type: int = MissionType.MISSION) -> None:
+        """Empty the list (MissionType.ALL: all three); falls back to an empty upload if refused."""
+        outcome = await self._run(self._transfer(ClearTransfer, mission_type=mission_type))
+        error = outcome.error
+        if error is None:
+            return
+        if getattr(error, "result", None) not in (MissionResult.ERROR, MissionResult.DENIED):
+            raise error
+        types = (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
+        for t in types if mission_type == MissionType.ALL else (mission_type,):
+            await self.upload([], mission_type=t)
+
+    async def set_current(self, seq: int) -> None:
+        """Make mission item ``seq`` current (DO_SET_MISSION_CURRENT, else MISSION_SET_CURRENT)."""
+        from gcs_planner.mavlink.command import CommandClient  # command.py imports this module
+
+        try:
+            await CommandClient(self.link, self.sysid, self.compid).set_mission_current(seq)
+            return
+        except CommandError as exc:
+            if exc.result not in (CommandResult.UNSUPPORTED, CommandResult.COMMAND_INT_ONLY):
+                raise
+        except CommandTimeoutError:
+            pass
+        outcome = await self._run(self._transfer(SetCurrentTransfer, seq=seq))
+        if outcome.error is not None:
+            raise outcome.error
+
+    # ----------------------------------------------------------------- machinery
+    def _transfer(self, cls: type[Transfer], **kwargs) -> Transfer:
+        return cls(
+            self.sysid,
+            compid=self.compid,
+            gcs_sysid=self.link.sysid,
+            gcs_compid=self.link.compid,
+            timing=self.timing,
+            **kwargs,
+        )
+
+    async def _run(self, transfer: Transfer) -> Outcome:
+        """Drive one transfer to its end on the link; cancelling the task cancels the transfer."""
+        self.link.check_target(self.sysid)
+        key = (self.sysid, transfer.mission_type)
+        active = _active.setdefault(self.link, set())
+        if key in active:
+            raise BusyError(
+                f"vehicle {self.sysid}: a {mission_type_name(transfer.mission_type)} transfer is running",
+                sysid=self.sysid,
+                mission_type=transfer.mission_type,
+            )
+        loop = asyncio.get_running_loop()
+        finished = loop.create_future()
+        send = self.link.send
+
+        def on_frame(msg, raw: bytes, t_s: float) -> None:
+            if not transfer.accepts(msg):
+                return
+            for out in transfer.on_message(msg, loop.time()):
+                send(out)
+            if transfer.done and not finished.done():
+                finished.set_result(None)
+
+        active.add(key)
+        unsubscribe = self.link.subscribe(on_frame)  # the matcher exists before the first send
+        try:
+            for out in transfer.start(loop.time()):
+                send(out)
+            while not transfer.done:
+                delay = transfer.deadline_s - loop.time() if transfer.deadline_s is not None else math.inf
+                if delay > 0:
+                    await asyncio.wait([finished], timeout=delay)
+                    continue
+                for out in transfer.on_timeout(loop.time()):
+                    send(out)
+        except asyncio.CancelledError:
+            for out in transfer.cancel(loop.time()):
+                send(out)
+            raise
+        finally:
+            unsubscribe()
+            active.discard(key)
+        assert transfer.outcome is not None
+        return transfer.outcome
+
+    async def _read_back(
+        self, mission_type: int, original: MissionError | None
+    ) -> tuple[list[MissionItem], int]:
+        try:
+            return await self.download_with_id(mission_type)
+        except MissionError:
+            if original is not None:
+                raise original from None
+            raise
+
+    def _difference(self, sent: Sequence[MissionItem], got: Sequence[MissionItem]) -> str | None:
+        info = self.link.vehicles.get(self.sysid)
+        skip_home = info is not None and info.autopilot == Autopilot.ARDUPILOTMEGA
+        return compare_items(sent, got, self.tolerance, skip_home=skip_home)
+
+
+def compare_items(
+    sent: Sequence[MissionItem],
+    got: Sequence[MissionItem],
+    tolerance: Tolerance = Tolerance(),
+    skip_home: bool = False,
+) -> str | None:
+    """None if ``got`` equals ``sent`` within ``tolerance``, else the first difference in words."""
+    home_only = skip_home and not sent and len(got) == 1  # ArduPilot keeps home after an empty upload
+    if len(sent) != len(got) and not home_only:
+        return f"{len(got)} items, expected {len(sent)}"
+    for a, b in zip(sent, got, strict=False):
+        if skip_home and a.seq == 0:
+            continue
+        for name in ("seq", "command", "x", "y", "autocontinue"):
+            if getattr(a, name) != getattr(b, name):
+                return f"item {a.seq}: {name} is {getattr(b, name)}, sent {getattr(a, name)}"
+        if _FRAME_ALIASES.get(a.frame, a.frame) != _FRAME_ALIASES.get(b.frame, b.frame):
+            return f"item {a.seq}: frame is {b.frame}, sent {a.frame}"
+        if not _close(a.z, b.z, tolerance.z_m):
+            return f"item {a.seq}: z is {b.z:g}, sent {a.z:g}"
+        for name in ("param1", "param2", "param3", "param4"):
+            if not _close(getattr(a, name), getattr(b, name), tolerance.param):
+                return f"item {a.seq}: {name} is {getattr(b, name):g}, sent {getattr(a, name):g}"
+    return None
+
+
+def _close(a: float, b: float, tol: float) -> bool:
+    if math.isnan(a):
+        return True  # NaN means "use the default": the autopilot may store any value
+    return abs(a - b) <= tol + 1e-6 * max(abs(a), abs(b))
