@@ -68,6 +68,7 @@ def flight_frames(sysids: list[int], samples: int, rate_hz: float = 10.0, t0_s: 
 
     def add(sysid: int, msg, t_s: float) -> None:
         raw = bytes(msg.pack(encoders[sysid]))
+        encoders[sysid].seq = (encoders[sysid].seq + 1) % 256  # pack() does not advance it; send() would
         out.append((parser.decode(bytearray(raw)), raw, t_s))  # as a receiving link sees it
 
     for s in sysids:

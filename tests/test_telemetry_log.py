@@ -167,3 +167,18 @@ def test_non_finite_floats_become_null():
     msg = mavlink.MAVLink_attitude_message(1, float("nan"), float("inf"), 0.5, 0.0, 0.0, 0.0)
     doc = json.loads(message_json(msg))
     assert doc["roll"] is None and doc["pitch"] is None and doc["yaw"] == 0.5
+
+
+def test_link_loss_counts_sequence_gaps(tmp_path):
+    frames = flight_frames([1, 2], samples=80)
+    v1 = [f for f in frames if f[0].get_srcSystem() == 1]
+    dropped = {id(f) for f in v1[1::4]}  # every 4th frame of vehicle 1 lost on the link
+    kept = [f for f in frames if id(f) not in dropped]
+    with FlightLogger(tmp_path / "lossy.mcap", ORIGIN) as logger:
+        for msg, raw, t_s in kept:
+            logger.on_frame(msg, raw, t_s)
+    flight = read_flight(tmp_path / "lossy.mcap")
+    t1, loss1 = flight.link_loss(1)
+    t2, loss2 = flight.link_loss(2)
+    assert len(t1) == 8 and np.all(loss2 == 0.0)
+    assert 0.2 < float(np.mean(loss1)) < 0.3

@@ -83,6 +83,7 @@ class Flight:
     truncated: bool = False
     error: str | None = None
     _json: dict[tuple[int, str], list[tuple[int, bytes]]] = field(default_factory=dict, repr=False)
+    _by_sysid: dict[int, list[RawFrame]] | None = field(default=None, repr=False)
 
     @property
     def origin(self) -> Origin | None:
@@ -94,7 +95,8 @@ class Flight:
     @property
     def sysids(self) -> list[int]:
         """Vehicles seen in the log (any frame), ascending."""
-        return sorted({f.sysid for f in self.frames})
+        self.frames_of(0)
+        return sorted(self._by_sysid)
 
     @property
     def start_time_s(self) -> float:
@@ -114,6 +116,14 @@ class Flight:
         out.sort(key=lambda r: r[0])
         return out
 
+    def frames_of(self, sysid: int) -> list[RawFrame]:
+        """One vehicle's raw frames in receive order (indexed once, on first use)."""
+        if self._by_sysid is None:
+            self._by_sysid = defaultdict(list)
+            for f in self.frames:
+                self._by_sysid[f.sysid].append(f)
+        return self._by_sysid.get(sysid, [])
+
     def message_types(self) -> set[str]:
         return {name for _, name in self._json}
 
@@ -124,9 +134,9 @@ class Flight:
         reordering count as received (sequence wraps at 256).
         """
         last_seq: dict[int, int] = {}
-        times, received, expected = [], [], []
-        for f in self.frames:
-            if f.sysid != sysid or len(f.data) < 7:
+        times, expected = [], []
+        for f in self.frames_of(sysid):
+            if len(f.data) < 7:
                 continue
             v2 = f.data[0] == 0xFD
             seq, compid = (f.data[4], f.data[6]) if v2 else (f.data[2], f.data[4])
@@ -136,8 +146,8 @@ class Flight:
                 gap = gap if 0 < gap < 128 else 1
             last_seq[compid] = seq
             times.append(f.t_ns * 1e-9)
-            received.append(1)
             expected.append(gap)
+        received = np.ones(len(times))
         if not times:
             return np.zeros(0), np.zeros(0)
         t = np.asarray(times)
