@@ -90,6 +90,7 @@ class Settings:
     w_max: float = 0.9
     w_min: float = 0.4
     init_spread_m: float = 3.0
+    insert_spread_m: float = 2.0
     early_stop: bool = True
     w_conflict: float = 1000.0
     w_accel: float = 100.0
@@ -353,6 +354,7 @@ def evaluate(
 
     act = np.arange(n_u) if active is None else np.asarray(active, dtype=int)
     sep = np.array([u.separation_m for u in uavs])
+    pts, times = with_rest_ends(pts, times, tau)
     pairs = candidate_pairs(pts, times, sep[None, :] / 2 + margin)
     if active is not None and len(pairs):
         is_act = np.zeros(n_u, dtype=bool)
@@ -401,6 +403,21 @@ def evaluate(
     )
 
 
+def with_rest_ends(pts: np.ndarray, times: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Polylines extended by the half blends from / to rest at both ends (..., W + 2).
+
+    The blend from rest at the first point starts ``tau_0 / 2`` before its time (the vehicle
+    sits there until then) and the stop at the last point ends ``tau_last / 2`` after it, so
+    the conflict checks cover the whole time the vehicle moves.
+    """
+    t_first = (times - tau / 2).min(axis=-1, keepdims=True)
+    t_last = (times + tau / 2).max(axis=-1, keepdims=True)
+    return (
+        np.concatenate([pts[..., :1, :], pts, pts[..., -1:, :]], axis=-2),
+        np.concatenate([t_first, times, t_last], axis=-1),
+    )
+
+
 def _fleet_state(problem: Problem, tracks: list[Track]) -> tuple[_Layout, _Eval]:
     layout = _Layout(problem, tracks, {})
     pts, tms = layout.decode(np.zeros((1, 0)))
@@ -441,9 +458,8 @@ def _pso(
     """Run the shared engine; returns (best x, best cost, iterations run, first feasible iteration)."""
     s = problem.settings
     dim = layout.x0.size
-    spread = np.concatenate(
-        [np.full(3 * layout.n_pos, s.init_spread_m), 0.15 * layout.x0[3 * layout.n_pos :]]
-    )
+    spread_m = s.init_spread_m if active is None else s.insert_spread_m
+    spread = np.concatenate([np.full(3 * layout.n_pos, spread_m), 0.15 * layout.x0[3 * layout.n_pos :]])
     init = layout.x0 + rng.normal(size=(particles, dim)) * spread
     init[0] = layout.x0
     init = np.clip(init, layout.lower, layout.upper)
