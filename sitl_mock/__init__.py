@@ -6,10 +6,13 @@ Public API: `MockFleet` (many vehicles, one loop), `MockVehicle` (one autopilot)
 
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet, VehicleSnapshot
+from sitl_mock.flight import AIRFRAMES, Airframe
 from sitl_mock.mission_server import Failure
 from sitl_mock.vehicle import DEFAULT_HOME, MockVehicle, VehicleState
 
 __all__ = [
+    "AIRFRAMES",
+    "Airframe",
     "DEFAULT_HOME",
     "Failure",
     "LinkFaults",

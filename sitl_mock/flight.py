@@ -13,7 +13,9 @@ Models (choices where the brief leaves them open):
   ``sqrt(2 a d)`` when it must stop at the target (so it brakes within the acceleration limit),
   and by ``KP_POS * d`` near it; velocity changes limited to ``accel_mps2`` per second,
   horizontal speed to ``max_speed_mps``, climb/sink to their limits. Yaw follows the velocity.
-  Pass-through waypoints keep cruise speed and round the corner under the acceleration limit.
+  Pass-through waypoints: the vehicle slows to a corner speed ``sqrt(a r / tan(theta / 2))``
+  (theta = turn to the next leg, r = acceptance radius; the navigator computes it), so the turn
+  under the acceleration limit stays close to the corner, like ArduCopter's corner speed limit.
 - Fixed wing: constant airspeed (the commanded speed, clamped to [min, max]); heading rate
   limited to ``g tan(max_bank) / v``, which bounds the turn radius below by ``v^2 / (g tan
   max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Loiter is a
@@ -151,6 +153,7 @@ class Kinematics:
         self.target = self.pos.copy()
         self.leg_from = self.pos.copy()
         self.accept_r = np.array([a.accept_radius_m for a in airframes])
+        self.corner_speed = np.full(n, np.inf)  # PASS: speed to slow to by the target [m/s]
         self.loiter_r = np.array([max(a.loiter_radius_m, 1.0) for a in airframes])
         self.arrival = np.zeros(n, dtype=np.int8)
         self.wind = np.zeros((n, 3))
@@ -165,12 +168,18 @@ class Kinematics:
         target_m: np.ndarray | None = None,
         arrival: Arrival = Arrival.NONE,
         accept_radius_m: float | None = None,
+        corner_speed_mps: float = np.inf,
     ) -> None:
-        """Set vehicle i's guidance; the leg starts at its current position."""
+        """Set vehicle i's guidance; the leg starts at its current position.
+
+        corner_speed_mps: in PASS mode a multirotor slows to this speed by the target, so it can
+        round the corner to the next leg within its acceleration limit.
+        """
         self.mode[i] = mode
         self.leg_from[i] = self.pos[i]
         self.target[i] = self.pos[i] if target_m is None else target_m
         self.arrival[i] = arrival
+        self.corner_speed[i] = corner_speed_mps
         if accept_radius_m is not None:
             self.accept_r[i] = accept_radius_m
 
@@ -245,7 +254,8 @@ class Kinematics:
         accel = self.accel[m]
         speed = np.minimum(self.speed_cmd[m], self.max_speed[m])
         brake = np.minimum(np.sqrt(2.0 * accel * dist_h), KP_POS * dist_h)
-        speed = np.where(mode == _PASS, speed, np.minimum(speed, brake))
+        corner = np.sqrt(self.corner_speed[m] ** 2 + 2.0 * accel * np.maximum(dist_h - self.accept_r[m], 0.0))
+        speed = np.where(mode == _PASS, np.minimum(speed, corner), np.minimum(speed, brake))
         speed[mode == _CLIMB] = 0.0
         scale = speed / np.maximum(dist_h, 1e-9)
         vz = np.clip(KP_ALT * d[:, 2], -self.sink[m], self.climb[m])

@@ -6,8 +6,10 @@ calls `on_arrived`) or a simulated-time timer (`on_timer`). Continuations are st
 next callable, so each action reads top to bottom.
 
 Supported items: NAV_WAYPOINT (param1 hold [s], param2 acceptance radius [m], 0 = airframe
-default), NAV_TAKEOFF, DO_CHANGE_SPEED (param2 [m/s]), NAV_LOITER_TIME (param1 [s], param3
-radius [m]), NAV_LOITER_UNLIM, NAV_LAND (lat/lon 0 = here), NAV_RETURN_TO_LAUNCH. Others are
+default), NAV_TAKEOFF (climbs vertically where it is, like ArduCopter), DO_CHANGE_SPEED (param2
+[m/s], clamped to the airframe's limits), NAV_LOITER_TIME (param1 [s], param3 radius [m]),
+NAV_LOITER_UNLIM, NAV_LAND (lat/lon 0 = here), NAV_RETURN_TO_LAUNCH, NAV_DELAY (param1 [s]; waits
+on the ground or holds in the air; the UTC time-of-day form counts as no delay). Others are
 skipped with a STATUSTEXT, as ArduPilot skips commands it cannot run.
 
 Choices where the spec or the autopilots differ:
@@ -42,9 +44,11 @@ __all__ = ["RTL_ALT_M", "Navigator"]
 log = logging.getLogger(__name__)
 
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME = 16, 17, 19
-NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF = 20, 21, 22
+NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_DELAY = 20, 21, 22, 93
 DO_CHANGE_SPEED = 178
-NAV_COMMANDS = {NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF}
+NAV_COMMANDS = {
+    NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_DELAY,
+}  # fmt: skip
 AMSL_FRAMES = {0, 5}  # MAV_FRAME_GLOBAL, GLOBAL_INT
 RTL_ALT_M = 15.0
 
@@ -232,8 +236,12 @@ class Navigator:
             hold_s = max(item.param1, 0.0)
             passing = af.kind == "fixed_wing" or (hold_s == 0 and self._next_nav_is_waypoint(seq))
             arrival = Arrival.RADIUS_2D if af.kind == "fixed_wing" else Arrival.RADIUS_3D
+            corner = self._corner_speed(seq, target, radius) if passing else np.inf
             self._wait(lambda: self._reached_then(seq, hold_s))
-            kin.command(i, Guidance.PASS if passing else Guidance.GOTO, target, arrival, radius)
+            kin.command(i, Guidance.PASS if passing else Guidance.GOTO, target, arrival, radius, corner)
+        elif cmd == NAV_DELAY:
+            self.hold()
+            self._after(max(item.param1, 0.0), lambda: self._item_done(seq))
         elif cmd == NAV_TAKEOFF:
             self.takeoff(item.z if item.frame not in AMSL_FRAMES else target[2] - self.home_enu_m[2],
                          done=lambda: self._reached_then(seq, 0.0))  # fmt: skip
@@ -298,6 +306,23 @@ class Navigator:
             if item.command in NAV_COMMANDS:
                 return item.command == NAV_WAYPOINT
         return False
+
+    def _corner_speed(self, seq: int, target: np.ndarray, radius_m: float) -> float:
+        """Multirotor speed [m/s] at which the turn onto the next leg fits inside the acceptance radius."""
+        nxt = next(
+            (k for k in range(seq + 1, self.last_seq + 1) if self.items[k].command in NAV_COMMANDS), None
+        )
+        if nxt is None or self.airframe.kind == "fixed_wing":
+            return np.inf
+        here = self.world.kin.pos[self.i, :2]
+        a, b = target[:2] - here, self._target(nxt)[:2] - target[:2]
+        na, nb = np.hypot(*a), np.hypot(*b)
+        if na < 1e-6 or nb < 1e-6:
+            return np.inf
+        theta = np.arccos(np.clip(np.dot(a, b) / (na * nb), -1.0, 1.0))  # turn angle [rad]
+        if theta < 1e-3:
+            return np.inf
+        return float(np.sqrt(self.airframe.accel_mps2 * max(radius_m, 1.0) / np.tan(theta / 2)))
 
     def _target(self, seq: int) -> np.ndarray:
         """Item ``seq``'s target [m ENU]; lat/lon 0 means the vehicle's current position."""

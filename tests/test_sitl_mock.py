@@ -9,8 +9,10 @@ import pytest
 
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, MissionState, px4_custom_mode
+from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.types import MissionItem
 from gcs_planner.mavlink.wire import attach_extensions
+from gcs_planner.plan import VehiclePlan
 from sitl_mock import DEFAULT_HOME, MockFleet
 from sitl_mock.probe import Probe
 
@@ -146,6 +148,43 @@ def test_mission_flown_end_to_end(profile, vehicle_type):
         assert abs(gpi.relative_alt) < 200  # on the ground
         assert not fleet.vehicles[0].state.armed  # disarmed after landing
         gcs.close()
+
+
+def _cross_track_m(points: np.ndarray, polyline: np.ndarray) -> np.ndarray:
+    """Horizontal distance of each point to the nearest segment of ``polyline`` [m]."""
+    out = np.full(len(points), np.inf)
+    for a, b in zip(polyline[:-1, :2], polyline[1:, :2], strict=True):
+        ab = b - a
+        t = np.clip((points - a) @ ab / (ab @ ab), 0.0, 1.0)
+        out = np.minimum(out, np.linalg.norm(points - (a + t[:, None] * ab), axis=1))
+    return out
+
+
+def test_planner_items_with_delay_fly_close_to_the_plan():
+    """plan_to_items output (home, NAV_DELAY, takeoff, speed changes, corners, land) flown by the mock."""
+    wps = np.array([[0, 0, 20], [100, 0, 20], [100, 100, 25], [0, 100, 20], [0, 0, 20]], dtype=float)
+    times = np.array([0.0, 13.0, 26.0, 39.0, 56.0])
+    vp = VehiclePlan("a", 1, wps, times, np.array([0, 8, 8, 8, 6.0]), wps, times, takeoff_delay_s=5.0)
+    items = plan_to_items(vp, DEFAULT_HOME, "ardupilot")
+    with MockFleet(count=1, speedup=30.0) as fleet:
+        gcs = Probe(fleet.addresses[0])
+        assert gcs.upload(1, items) == 0 and gcs.command(1, ARM, 1) == ACCEPTED
+        t_before = fleet.sim_time_s
+        assert gcs.command(1, MISSION_START) == ACCEPTED
+        t_after = fleet.sim_time_s  # the start happened between t_before and t_after
+        track = []
+        deadline = time.monotonic() + 15.0
+        while fleet.vehicles[0].state.mission_state != MissionState.COMPLETE and time.monotonic() < deadline:
+            time.sleep(0.01)
+            track.append(fleet.positions_enu()[0])
+        gcs.close()
+        reached = fleet.vehicles[0].nav.reached
+    assert [seq for seq, _ in reached] == list(range(1, len(items)))
+    assert t_before + 5.0 <= reached[0][1] <= t_after + 5.0 + 0.1  # NAV_DELAY held the take-off 5 s
+    track = np.array(track)
+    airborne = track[track[:, 2] > 19.0]  # at cruise altitude, after the take-off climb
+    assert len(airborne) > 100 and _cross_track_m(airborne[:, :2], wps).max() < 3.0  # corners slowed for
+    assert np.linalg.norm(track[-1, :2]) < 1.0  # landed at the last waypoint
 
 
 def test_mission_start_range_and_set_current(fleet, gcs):
