@@ -40,6 +40,7 @@ PAPER = {
     "acmpso": (11.726, 38.597, 0.318, 45),
 }
 ORDER = ("bpso", "lpso", "acmpso")
+KINDS = ("radar", "obstacle", "terrain")
 
 
 def run_variant(problem, env_m, unit_m: float, variant: str, runs: int, seed: int) -> dict[str, dict]:
@@ -54,7 +55,7 @@ def run_variant(problem, env_m, unit_m: float, variant: str, runs: int, seed: in
             histories.append(res.pso.history)
             evaluations.append(res.pso.evaluations)
             report = validate_path(env_m, res.nodes * unit_m, spacing=100.0)
-            violations.append({v.kind for v in report.violations})
+            violations.append(report.violations)
         f = np.asarray(fitness)
         best = int(np.argmin(f))
         h = histories[best]
@@ -66,7 +67,10 @@ def run_variant(problem, env_m, unit_m: float, variant: str, runs: int, seed: in
             "conv_1pct": int(np.argmax(h <= h[-1] * 1.01)) + 1,
             "last_improvement": int(np.flatnonzero(np.diff(h) < -1e-9).max(initial=-1)) + 2,
             "evaluations": int(np.mean(evaluations)),
-            "viol": {k: sum(k in v for v in violations) for k in ("radar", "obstacle", "terrain")},
+            "viol": {k: sum(any(v.kind == k for v in vs) for vs in violations) for k in KINDS},
+            "depth": {
+                k: max((v.depth for vs in violations for v in vs if v.kind == k), default=0.0) for k in KINDS
+            },
         }
     return out
 
@@ -85,18 +89,27 @@ def print_table(results: dict[str, dict[str, dict]], runs: int) -> None:
             p = PAPER[algorithm]
             f = s["fitness"]
             v = s["viol"]
+            worst = "/".join(f"{s['depth'][k]:.0f}" for k in KINDS)
             print(
                 f"{variant:8} {algorithm:6} | {p[0]:12.3f} {s['seconds'].mean():7.4f}"
                 f" | {p[1]:12.3f} {f.mean():7.3f} | {p[2]:9.3f} {f.var(ddof=1):7.3f}"
                 f" | {f.min():7.3f} {s['conv_1pct']:4d}"
                 f" {s['last_improvement']:4d} {p[3]:5d} | {s['evaluations']:5d} |"
                 f" {v['radar']}/{v['obstacle']}/{v['terrain']}"
+                f" (worst {worst} m)"
             )
         acm, lp, bp = (per_alg[a]["fitness"] for a in ("acmpso", "lpso", "bpso"))
         print(
             f"  {variant}: ACMPSO mean <= 38.597: {acm.mean() <= 38.597};"
             f" var <= 0.318: {acm.var(ddof=1) <= 0.318};"
             f" ACMPSO < LPSO < BPSO: {acm.mean() < lp.mean() < bp.mean()}"
+        )
+        n = len(acm)
+        se = np.sqrt(acm.var(ddof=1) / n + lp.var(ddof=1) / n)
+        se_paper = np.sqrt((PAPER["acmpso"][2] + PAPER["lpso"][2]) / 100)
+        print(
+            f"  {variant}: mean(ACMPSO) - mean(LPSO) = {acm.mean() - lp.mean():+.4f} +- {se:.4f} (1 s.e.);"
+            f" paper {PAPER['acmpso'][1] - PAPER['lpso'][1]:+.3f} +- {se_paper:.3f}"
         )
 
 

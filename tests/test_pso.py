@@ -176,3 +176,25 @@ def test_progress_called_every_iteration_and_config_errors():
         minimize(
             lambda x: np.zeros(2), lo, hi, PSOConfig(particles=3, iterations=1), np.random.default_rng(0)
         )
+
+
+def test_gbest_greedy_mutation_counts_one_extra_row_and_only_improves():
+    lo, hi = np.full(3, -5.0), np.full(3, 5.0)
+    sizes = []
+
+    def cost(x):
+        sizes.append(len(x))
+        return sphere(x)
+
+    cfg = PSOConfig(
+        particles=6,
+        iterations=30,
+        mutation=CauchyMutation(beta=0.1, relative=False, scale=0.5),
+        mutation_stage="gbest_greedy",
+    )
+    res = minimize(cost, lo, hi, cfg, np.random.default_rng(9))
+    assert sizes == [6] + [7] * 29  # the trial rides along with the next swarm evaluation
+    assert res.evaluations == 6 * 30 + 29
+    assert np.all(np.diff(res.history) <= 0)
+    # the engine's own gbest equals the best row it ever evaluated (trials included)
+    assert res.best_cost == pytest.approx(float(sphere(res.best_x[None, :])[0]))

@@ -38,8 +38,9 @@ Mutation hook: any callable ``mutation(x, t, t_max, rng) -> x'`` (x is (P, D), t
 ``mutation_stage`` says where it runs: ``"before_velocity"`` (ACMPSO's step order: steps 4-5
 mutate the evaluated positions, then step 7 moves from the mutated positions; mutated points are
 not evaluated themselves) or ``"after_move"`` (mutate the new positions before they are
-evaluated) or ``"gbest_greedy"`` (after the bests are updated, mutate a copy of the global best,
-evaluate it - one extra cost row per iteration, counted - and keep it only if strictly better).
+evaluated) or ``"gbest_greedy"`` (after the bests are updated, mutate a copy of the global best;
+it is evaluated as one extra row of the next swarm evaluation - one call, one extra counted cost
+row per iteration - and replaces gbest only if strictly better, so acceptance lags one iteration).
 :class:`CauchyMutation` implements eqs. 20-21.
 
 Choices where PSO papers are open (documented so runs are reproducible):
@@ -206,16 +207,20 @@ def minimize(
             pbest_x = x.copy()
             pbest_c = np.concatenate([pbest_c[keep], np.full(n_p - keep.size, np.inf)])
         v = (rng.random((n_p, dim)) * 2.0 - 1.0) * v_max * cfg.init_velocity
+        trial = None  # mutated copy of gbest, evaluated with the next swarm (gbest_greedy)
         for t in range(1, cfg.iterations + 1):
             if cfg.max_evaluations is not None and evaluations + n_p > cfg.max_evaluations:
                 stopped = True
                 break
-            c = np.asarray(cost(x), dtype=float).reshape(-1)
-            if c.shape != (n_p,):
-                raise ValueError(f"cost returned shape {c.shape}, expected ({n_p},)")
+            rows = x if trial is None else np.vstack([x, trial])
+            c = np.asarray(cost(rows), dtype=float).reshape(-1)
+            if c.shape != (len(rows),):
+                raise ValueError(f"cost returned shape {c.shape}, expected ({len(rows)},)")
             if np.isnan(c).any():
                 c = np.where(np.isnan(c), np.inf, c)
-            evaluations += n_p
+            evaluations += len(rows)
+            if trial is not None:
+                c, trial_c = c[:n_p], float(c[n_p])
             better = c < pbest_c
             pbest_x[better] = x[better]
             pbest_c[better] = c[better]
@@ -223,6 +228,9 @@ def minimize(
             if pbest_c[i_best] < gbest_c:
                 gbest_c = float(pbest_c[i_best])
                 gbest_x = pbest_x[i_best].copy()
+            if trial is not None and trial_c < gbest_c:
+                gbest_c, gbest_x = trial_c, trial[0]
+            trial = None
             history.append(gbest_c)
             if progress is not None:
                 progress(len(history) / total_iters, f"round {rnd + 1} iteration {t} best {gbest_c:.6g}")
@@ -230,10 +238,6 @@ def minimize(
                 break
             if cfg.mutation is not None and cfg.mutation_stage == "gbest_greedy":
                 trial = np.clip(cfg.mutation(gbest_x[None, :], t, cfg.iterations, rng), lower, upper)
-                tc = float(np.asarray(cost(trial), dtype=float).reshape(-1)[0])
-                evaluations += 1
-                if tc < gbest_c:  # NaN compares False: rejected
-                    gbest_c, gbest_x = tc, trial[0]
             if cfg.mutation is not None and cfg.mutation_stage == "before_velocity":
                 x = np.clip(cfg.mutation(x, t, cfg.iterations, rng), lower, upper)
             w = inertia_weight(cfg, t, cfg.iterations)
