@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.plan import Plan
 from gcs_planner.planning import plan_scenario
 from gcs_planner.planning.acmpso import (
@@ -232,6 +233,10 @@ def test_plan_is_registered_flies_clean_and_round_trips(scenario, tmp_path):
     assert v.cost["fitness"] >= 37.339 and v.cost["flown_radar_violations"] == 0.0
     again = plan_scenario(small, seed=3)
     np.testing.assert_array_equal(again.vehicles[0].waypoints, v.waypoints)
+    # the terrain-following waypoints become a valid mission (altitudes relative to home = origin)
+    items = plan_to_items(v, result.origin, "ardupilot")
+    nav = [it for it in items if it.command == 16]  # MAV_CMD_NAV_WAYPOINT (item 0 is home)
+    np.testing.assert_allclose([it.z for it in nav[1:]], v.waypoints[1:, 2], atol=1e-3)
     path = tmp_path / "plan.json"
     path.write_text(json.dumps(result.to_dict()))
     assert Plan.from_dict(json.loads(path.read_text())).vehicles[0].waypoints.shape == v.waypoints.shape
