@@ -1,0 +1,159 @@
+"""Upload missions to many vehicles at once: bounded worker pool, per-vehicle results, retries.
+
+Choices:
+- ``workers`` concurrent transfers (default 8, as Skybrush Live): enough to hide round trips, few
+  enough not to flood a shared radio. Vehicles are served in the order given; a failed attempt
+  goes to the back of the queue, so one bad vehicle never blocks the others.
+- Retried (up to ``retries`` more attempts): timeouts, cancellations, generic ERROR, DENIED (another
+  GCS was uploading), INVALID_SEQUENCE, BUSY and read-back mismatches. Not retried: answers that
+  would repeat (NO_SPACE, UNSUPPORTED*, INVALID*), malformed input and duplicate system ids.
+- A system id heard from two addresses is refused before anything is sent to it (reported in its
+  result, never merged).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+from gcs_planner.mavlink.command import CommandClient
+from gcs_planner.mavlink.enums import Autopilot
+from gcs_planner.mavlink.errors import (
+    BusyError,
+    DeniedError,
+    GenericMissionError,
+    InvalidSequenceError,
+    MavlinkError,
+    MissionTimeoutError,
+    OperationCancelledError,
+    VerifyError,
+)
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.transfer import Timing
+from gcs_planner.mavlink.types import MissionItem, MissionType
+
+__all__ = ["DEFAULT_WORKERS", "RETRYABLE", "VehicleResult", "start_fleet", "upload_fleet"]
+
+DEFAULT_WORKERS = 8
+RETRYABLE: tuple[type[MavlinkError], ...] = (
+    MissionTimeoutError,
+    OperationCancelledError,
+    GenericMissionError,
+    DeniedError,
+    InvalidSequenceError,
+    BusyError,
+    VerifyError,
+)
+
+
+@dataclass(frozen=True)
+class VehicleResult:
+    """Outcome for one vehicle; ``error`` is the last attempt's error (None on success)."""
+
+    sysid: int
+    ok: bool
+    attempts: int
+    elapsed_s: float  # from the first attempt's start to the final result [s]
+    opaque_id: int = 0
+    error: MavlinkError | None = None
+
+
+Progress = Callable[[int, int, VehicleResult], None]
+
+
+async def upload_fleet(
+    link: MavlinkLink,
+    missions: Mapping[int, Sequence[MissionItem]],
+    workers: int = DEFAULT_WORKERS,
+    retries: int = 2,
+    progress: Progress | None = None,
+    *,
+    mission_type: int = MissionType.MISSION,
+    compid: int = 1,
+    timing: Timing | None = None,
+    verify: bool = False,
+) -> dict[int, VehicleResult]:
+    """Upload ``missions[sysid]`` to each vehicle; returns a result per sysid (never raises per vehicle).
+
+    ``progress(done, total, result)`` is called once per vehicle when its final result is known.
+    """
+    if workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    if retries < 0:
+        raise ValueError(f"retries must be >= 0, got {retries}")
+    total = len(missions)
+    results: dict[int, VehicleResult] = {}
+    started: dict[int, float] = {}
+    queue: asyncio.Queue[tuple[int, int]] = asyncio.Queue()
+    for sysid in missions:
+        queue.put_nowait((sysid, 1))
+
+    def finish(result: VehicleResult) -> None:
+        results[result.sysid] = result
+        if progress is not None:
+            progress(len(results), total, result)
+
+    async def worker() -> None:
+        while True:
+            sysid, attempt = await queue.get()
+            try:
+                t0 = started.setdefault(sysid, time.monotonic())
+                client = MissionClient(link, sysid, compid, timing=timing)
+                try:
+                    up = await client.upload(missions[sysid], mission_type=mission_type, verify=verify)
+                except MavlinkError as exc:
+                    if isinstance(exc, RETRYABLE) and attempt <= retries:
+                        queue.put_nowait((sysid, attempt + 1))
+                    else:
+                        finish(VehicleResult(sysid, False, attempt, time.monotonic() - t0, error=exc))
+                else:
+                    finish(VehicleResult(sysid, True, attempt, time.monotonic() - t0, up.opaque_id))
+            finally:
+                queue.task_done()
+
+    tasks = [asyncio.create_task(worker()) for _ in range(min(workers, max(total, 1)))]
+    try:
+        await queue.join()
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+    return {sysid: results[sysid] for sysid in missions}
+
+
+async def start_fleet(
+    link: MavlinkLink,
+    sysids: Sequence[int],
+    *,
+    arm: bool = True,
+    compid: int = 1,
+    workers: int = DEFAULT_WORKERS,
+) -> dict[int, VehicleResult]:
+    """Arm (optional) and MAV_CMD_MISSION_START every vehicle, ``workers`` at a time.
+
+    ArduPilot-style vehicles are put in GUIDED before arming (ArduCopter refuses to arm in AUTO);
+    MISSION_START then switches them to AUTO. Each command has CommandClient's retries.
+    """
+    gate = asyncio.Semaphore(workers)
+
+    async def one(sysid: int) -> VehicleResult:
+        async with gate:
+            t0 = time.monotonic()
+            command = CommandClient(link, sysid, compid)
+            try:
+                link.check_target(sysid)
+                if arm:
+                    info = link.vehicles.get(sysid)
+                    if info is not None and info.autopilot == Autopilot.ARDUPILOTMEGA:
+                        await command.set_mode("GUIDED")
+                    await command.arm()
+                await command.mission_start()
+            except MavlinkError as exc:
+                return VehicleResult(sysid, False, 1, time.monotonic() - t0, error=exc)
+            return VehicleResult(sysid, True, 1, time.monotonic() - t0)
+
+    done = await asyncio.gather(*(one(s) for s in sysids))
+    return {r.sysid: r for r in done}
