@@ -36,7 +36,9 @@ def leg_vehicle_plan(
     """A VehiclePlan for one leg: waypoints every waypoint_dt_s of flight (and the leg's end),
     times relative to t_offset_s (e.g. the upload's mission start), constant speed, then loiter."""
     t = leg.t - t_offset_s
-    keep = np.unique(np.r_[np.searchsorted(t, np.arange(t[0], t[-1], waypoint_dt_s)), len(t) - 1])
+    keep = np.unique(
+        np.r_[np.searchsorted(t, np.arange(t[0], t[-1], waypoint_dt_s), side="right") - 1, len(t) - 1]
+    )
     z = np.full(len(t), uav.altitude_m)
     path = np.column_stack([leg.xy, z])
     return VehiclePlan(

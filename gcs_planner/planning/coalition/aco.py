@@ -118,7 +118,9 @@ def coverable(prob: CoalitionProblem) -> bool:
 
 def _heuristic(prob: CoalitionProblem, params: CoalitionParams) -> np.ndarray:
     """eta (n, K) of eqs. 28-31."""
-    L = prob.length_m
+    fin = np.isfinite(prob.length_m)
+    big = prob.length_m[fin].max() if fin.any() else 1.0
+    L = np.where(fin, prob.length_m, big)  # excluded pairs are masked by `capable` anyway
     cd = (L - L.min()) / max(L.max() - L.min(), 1e-9)
     t_v = prob.t_start_s + L / prob.speed_mps[:, None]
     t_s = np.where(prob.capable, t_v, np.inf).min(0)

@@ -108,7 +108,7 @@ class CoalitionSim:
         self.award_legs: dict[tuple[str, str], Leg] = {}
         self.st: list[UavState] = []
         for u in self.uavs:
-            lo = Loiter.through(u.xy0[0], u.xy0[1], u.heading0_rad, 0.0, self.p.loiter_radius_m, u.speed_mps)
+            lo = self._clear_loiter(u.xy0[0], u.xy0[1], u.heading0_rad, 0.0, u)
             self.st.append(UavState(IDLE, u.munitions, Track([], lo)))
         extra = np.array([world.extra_delay_s.get(u.id, 0.0) for u in self.uavs])
         self.bus = MessageBus(
@@ -644,15 +644,17 @@ class CoalitionSim:
             self.at(float(arc.t[-1]), "task_done", uav=i, award=award)
 
     def _safe_loiter(self, leg: Leg, u) -> Loiter:
-        """Break-off loiter after a strike: turn left or right, whichever circle clears the known threats."""
-        x, y = leg.xy[-1]
-        h = leg.heading[-1]
+        """Break-off loiter after a strike (see _clear_loiter)."""
+        return self._clear_loiter(leg.xy[-1, 0], leg.xy[-1, 1], leg.heading[-1], float(leg.t[-1]), u)
+
+    def _clear_loiter(self, x: float, y: float, h: float, t_s: float, u) -> Loiter:
+        """Loiter through a pose: turn left or right, whichever circle clears the known threats."""
         for direction in (1.0, -1.0):
-            lo = Loiter.through(x, y, h, float(leg.t[-1]), self.p.loiter_radius_m, u.speed_mps, direction)
+            lo = Loiter.through(x, y, h, t_s, self.p.loiter_radius_m, u.speed_mps, direction)
             ring = lo.state(np.linspace(lo.t0_s, lo.t0_s + 2 * math.pi * lo.radius_m / u.speed_mps, 64))
             if paths.clearance_m(ring[:, :2], self.known) >= 0:
                 return lo
-        return Loiter.through(x, y, h, float(leg.t[-1]), self.p.loiter_radius_m, u.speed_mps, 1.0)
+        return Loiter.through(x, y, h, t_s, self.p.loiter_radius_m, u.speed_mps, 1.0)
 
     def _on_strike(self, uav: int, award: Award) -> None:
         s = self.st[uav]

@@ -1,0 +1,103 @@
+"""The seed-003 experiment (missions/coalition_paper.toml) through the event simulation and plan()."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs_planner.plan import Plan
+from gcs_planner.planning import plan_scenario
+from gcs_planner.planning.coalition import leg_vehicle_plan, load_world, simulate
+from gcs_planner.scenario import load_scenario
+
+MISSION = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
+
+
+@pytest.fixture(scope="module")
+def world():
+    return load_world(load_scenario(MISSION))
+
+
+@pytest.fixture(scope="module")
+def result(world):
+    return simulate(world, np.random.default_rng(3))
+
+
+def _events(result, kind):
+    return [e for e in result.events if e["event"] == kind]
+
+
+def test_paper_model_is_loaded(world):
+    assert len(world.uavs) == 32 and [t.id for t in world.targets] == ["T1", "T3", "T2"]
+    assert world.params.delta_max_s == pytest.approx(1.4)
+    assert sum(u.munitions for u in world.uavs) == 6 * 2 + 5 * 1 + 11 * 4
+
+
+def test_all_targets_served_and_T2_first_tender_fails(result):
+    assert all(o.t_done_s is not None for o in result.outcomes.values())
+    t2 = [
+        e for e in result.events if e.get("target") == "T2" and e["event"] in ("formation_failed", "formed")
+    ]
+    assert t2[0]["event"] == "formation_failed" and t2[-1]["event"] == "formed"
+
+
+def test_strict_resources(world, result):
+    for u, st in zip(world.uavs, result.states):
+        assert st.munitions >= 0 and st.strikes <= u.munitions and st.munitions == u.munitions - st.strikes
+    by_id = {u.id: u for u in world.uavs}
+    for e in _events(result, "award"):
+        assert by_id[e["uav"]].strike if e["task"] == "strike" else by_id[e["uav"]].assess
+    assert len(_events(result, "strike")) == sum(len(t.strike_angles_rad) for t in world.targets)
+
+
+def test_synchronised_arrival_error_below_half_a_second(world, result):
+    by_id = {u.id: u for u in world.uavs}
+    awards = {(e["target"], e["uav"]): e for e in _events(result, "award")}
+    strikes = _events(result, "strike")
+    assert strikes
+    for s in strikes:
+        award = awards[(s["target"], s["uav"])]
+        leg = result.award_legs[(s["target"], s["uav"])]
+        # arrival from the sampled geometry: flown polyline length at the UAV's speed
+        flown_s = np.hypot(*np.diff(leg.xy, axis=0).T).sum() / by_id[s["uav"]].speed_mps
+        assert abs(leg.t[0] + flown_s - award["time_s"]) < 0.5
+        assert np.hypot(*(leg.xy[-1] - award["entry_xy"])) < 1.0
+        heading_err = (math.radians(s["heading_deg"] - award["angle_deg"] - 180.0) + math.pi) % (2 * math.pi)
+        assert abs(heading_err - math.pi) < math.radians(1.0)
+    t1 = {s["t_s"] for s in strikes if s["target"] == "T1"}
+    assert max(t1) - min(t1) < 0.5  # simultaneous
+    t3 = sorted(s["t_s"] for s in strikes if s["target"] == "T3")
+    assert np.allclose(np.diff(t3), 5.0, atol=0.5)  # staggered by the 5 s interval
+
+
+def test_threat_clearance_on_all_paths(world, result):
+    for track in result.tracks:
+        _, _, legs = track.history(result.t_end_s)
+        for leg in legs:
+            for th in world.threats:
+                known = leg.t >= th.appear_s
+                d = np.hypot(leg.xy[known, 0] - th.x, leg.xy[known, 1] - th.y)
+                assert d.size == 0 or d.min() >= th.radius_m, (leg.kind, th)
+
+
+def test_award_leg_becomes_an_uploadable_vehicle_plan(world, result):
+    (tid, uid), leg = next(iter(result.award_legs.items()))
+    uav = next(u for u in world.uavs if u.id == uid)
+    vp = leg_vehicle_plan(leg, uav, waypoint_dt_s=2.0, t_offset_s=float(leg.t[0]))
+    assert vp.sysid == uav.sysid and vp.times_s[0] == pytest.approx(0.0)
+    assert np.allclose(vp.waypoints[-1, :2], leg.xy[-1]) and np.all(vp.waypoints[:, 2] == uav.altitude_m)
+    assert np.all(np.diff(vp.times_s) <= 2.0 + 1e-6)
+
+
+def test_plan_round_trip(tmp_path):
+    scenario = load_scenario(MISSION)
+    scenario.raw["coalition"] = {**scenario.raw["coalition"], "t_end_s": 90.0}  # T1 and T3 phases only
+    plan = plan_scenario(scenario)
+    assert plan.planner == "coalition" and len(plan.vehicles) == 32 and plan.feasible
+    assert {"tender", "bid", "award", "strike"} <= {e["event"] for e in plan.events}
+    plan.save(tmp_path / "plan.json")
+    again = Plan.load(tmp_path / "plan.json")
+    assert again.events == plan.events and len(again.vehicles) == 32
