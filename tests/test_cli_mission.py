@@ -3,8 +3,10 @@ vehicle over UDP on 127.0.0.1; user mistakes are one line on stderr with exit co
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +16,8 @@ from gcs_planner.cli import main
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.files import load_mission_file
 from gcs_planner.mavlink.items import plan_to_items
+from gcs_planner.mavlink.mission import compare_items
+from gcs_planner.mavlink.wpl import dumps_wpl
 from gcs_planner.plan import Plan, VehiclePlan
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
@@ -89,13 +93,116 @@ def test_export_errors_are_one_line(tmp_path, capsys, argv, message):
     assert message in err and err.count("\n") == 1 and "Traceback" not in err
 
 
-def test_cli_error_in_a_real_process_has_no_traceback(tmp_path):
+# ----------------------------------------------------------------- against a mock vehicle over UDP
+
+
+@pytest.fixture(scope="module")
+def fleet():
+    sitl_mock = pytest.importorskip("sitl_mock")
+    vehicles = [{"profile": "ardupilot"}, {"profile": "px4"}, {"profile": "ardupilot", "capacity": 4}]
+    with sitl_mock.MockFleet(vehicles=vehicles, home=ORIGIN, speedup=20.0) as f:
+        yield f
+
+
+def url(fleet, sysid: int) -> str:
+    host, port = fleet.vehicle(sysid).address
+    return f"udpout:{host}:{port}"
+
+
+def held(fleet, sysid: int, mission_type: int = 0):
+    return fleet.call(lambda: fleet.vehicle(sysid).mission_server.items(mission_type))
+
+
+def test_upload_download_start_clear_ardupilot(fleet, tmp_path, capsys):
+    plan_path = make_plan(tmp_path, sysids=(1,))
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(SCENARIO)
+    argv = ["--connect", url(fleet, 1), "--sysid", "1"]
+    assert main(["upload", *argv, str(plan_path), "--scenario", str(scenario), "--verify"]) == 0
+    out = capsys.readouterr().out
+    assert "(ardupilot)" in out and out.count("ACCEPTED") == 3 and out.count(" yes") == 3
+    sent = plan_to_items(Plan.load(plan_path).vehicles[0], ORIGIN, "ardupilot")
+    assert compare_items(sent, held(fleet, 1)) is None
+    assert len(held(fleet, 1, 1)) == 5 and len(held(fleet, 1, 2)) == 1
+
+    assert main(["download", *argv, str(tmp_path / "back.plan")]) == 0
+    out = capsys.readouterr().out
+    assert "NAV_TAKEOFF" in out and "fence: 5 items" in out and "rally: 1 items" in out
+    back = load_mission_file(tmp_path / "back.plan")
+    assert compare_items(sent, back.items("ardupilot")) is None and len(back.fence) == 5
+
+    assert main(["start", *argv]) == 0
+    assert "mission start" in capsys.readouterr().out
+    state = fleet.call(lambda: fleet.vehicle(1).state)
+    assert state.armed and state.mode == "AUTO"
+
+    assert main(["clear", *argv, "--type", "all"]) == 0
+    assert "CLEARED" in capsys.readouterr().out
+    assert held(fleet, 1, 1) == [] and held(fleet, 1, 2) == [] and len(held(fleet, 1)) <= 1  # home may stay
+
+
+def test_wpl_file_is_uploaded_row_for_row_to_px4(fleet, tmp_path, capsys):
+    plan = Plan.load(make_plan(tmp_path, sysids=(2,)))
+    items = plan_to_items(plan.vehicles[0], ORIGIN, "px4")
+    (tmp_path / "m.waypoints").write_text(dumps_wpl(items))
+    argv = ["--connect", url(fleet, 2), "--sysid", "2"]
+    assert main(["upload", *argv, str(tmp_path / "m.waypoints")]) == 0
+    assert "(px4)" in capsys.readouterr().out
+    assert held(fleet, 2) == items
+    assert main(["download", *argv, str(tmp_path / "back.txt")]) == 0
+    assert (tmp_path / "back.txt").read_text() == dumps_wpl(items)
+
+
+def test_vehicle_refusal_is_one_line_and_keeps_the_old_mission(fleet, tmp_path, capsys):
+    before = held(fleet, 3)
+    plan_path = make_plan(tmp_path, sysids=(3,))
+    assert main(["upload", "--connect", url(fleet, 3), "--sysid", "3", str(plan_path)]) == 2
+    captured = capsys.readouterr()
+    assert "FAILED" in captured.out and "Traceback" not in captured.err
+    assert captured.err.count("\n") == 1 and "space" in captured.err.lower()
+    assert held(fleet, 3) == before
+
+
+def bad_file(tmp_path: Path) -> Path:
+    items = plan_to_items(Plan.load(make_plan(tmp_path, sysids=(2,))).vehicles[0], ORIGIN, "px4")
     bad = tmp_path / "bad.waypoints"
-    bad.write_text("QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t91.0\t8.5\t10\n")
-    proc = subprocess.run(
-        [sys.executable, "-m", "gcs_planner.cli", "export", str(bad)],
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert proc.returncode == 2 and "Traceback" not in proc.stderr and proc.stderr.count("\n") == 1
+    bad.write_text(dumps_wpl([*items[:2], replace(items[2], x=910_000_000), *items[3:]]))  # latitude 91
+    return bad
+
+
+@pytest.mark.parametrize("in_process", [True, False])
+def test_bad_input_sends_nothing(tmp_path, capsys, in_process):
+    """One line on stderr, exit 2, and not a single datagram (not even a heartbeat) reaches the vehicle."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as vehicle:
+        vehicle.bind(("127.0.0.1", 0))
+        argv = ["upload", "--connect", f"udpout:127.0.0.1:{vehicle.getsockname()[1]}", "--sysid", "2"]
+        argv.append(str(bad_file(tmp_path)))
+        if in_process:
+            code, err = main(argv), capsys.readouterr().err
+        else:  # a real process: no traceback on stderr
+            proc = subprocess.run(
+                [sys.executable, "-m", "gcs_planner.cli", *argv], capture_output=True, text=True, timeout=60
+            )
+            code, err = proc.returncode, proc.stderr
+        vehicle.settimeout(0.2)
+        with pytest.raises(TimeoutError):
+            vehicle.recv(2048)
+    assert code == 2 and "Traceback" not in err and err.count("\n") == 1
+    assert "item 2: field x" in err and "latitude 91" in err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ["--connect", "udpout:127.0.0.1:{port}", "--sysid", "9", "--heartbeat-timeout", "0.5"],
+            "no HEARTBEAT",
+        ),
+        (["--connect", "tcp:nowhere", "--sysid", "1"], "cannot open --connect"),
+    ],
+)
+def test_connection_errors_are_one_line(fleet, capsys, argv, message):
+    port = fleet.vehicle(1).address[1]
+    assert main(["download", *[a.format(port=port) for a in argv]]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1

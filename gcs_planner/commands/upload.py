@@ -27,6 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", metavar="FILE", help="mission: .plan, .waypoints/.txt (QGC WPL 110) or plan.json")
     p.add_argument("--vehicle", help="vehicle id in plan.json [the one with --sysid]")
     p.add_argument("--scenario", help="scenario file whose fence and rally points to upload too")
+    p.add_argument("--verify", action="store_true", help="download each list again and compare")
 
 
 def lists_to_upload(mf: MissionFile, autopilot: str) -> list[tuple[MissionType, list]]:
@@ -65,15 +66,18 @@ async def _upload(args: argparse.Namespace) -> int:
         lists = prepare(args, autopilot)
         client = MissionClient(link, args.sysid, args.compid)
         print(f"vehicle {args.sysid} ({autopilot}) on {args.connect}")
-        print(f"{'list':<8} {'items':>6} {'result':<10} {'opaque_id':>10} {'time_s':>7}")
+        print(f"{'list':<8} {'items':>6} {'result':<10} {'opaque_id':>10} {'time_s':>7} verified")
         for mission_type, items in lists:
             t0 = time.monotonic()
             name = mission_type.name.lower()
             try:
-                result = await client.upload(items, mission_type=mission_type)
+                result = await client.upload(items, mission_type=mission_type, verify=args.verify)
             except UserError:
                 print(f"{name:<8} {len(items):>6} {'FAILED':<10} {'-':>10} {time.monotonic() - t0:>7.2f}")
                 raise
             elapsed_s = time.monotonic() - t0
-            print(f"{name:<8} {len(items):>6} {'ACCEPTED':<10} {result.opaque_id:>10} {elapsed_s:>7.2f}")
+            print(
+                f"{name:<8} {len(items):>6} {'ACCEPTED':<10} {result.opaque_id:>10} {elapsed_s:>7.2f}"
+                f" {'yes' if result.verified else 'no'}"
+            )
     return 0
