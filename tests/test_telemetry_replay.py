@@ -101,3 +101,27 @@ def test_replay_command_writes_a_non_empty_rrd_with_all_views(flight_path, tmp_p
 def test_replay_command_needs_a_target(flight_path, capsys):
     assert main(["replay", str(flight_path)]) == 2
     assert "nothing to do" in capsys.readouterr().err
+
+
+def test_replay_to_live_rerun_uses_the_live_views(flight_path, tmp_path):
+    import rerun as rr
+    from rerun.chunk import RrdReader
+
+    from gcs_planner.telemetry.replay import replay_to_rerun_live
+
+    flight = read_flight(flight_path)
+    rrd = tmp_path / "live.rrd"
+    rec = rr.RecordingStream("gcs-planner", recording_id="live-replay-test")
+    rec.save(str(rrd))
+    assert replay_to_rerun_live(flight, rec, speed=0) == len(flight.frames)
+    rec.flush()
+    rec.disconnect()
+    entities = {c.entity_path for c in RrdReader(rrd).stream()}
+    assert {
+        "/map/plan/1",
+        "/map/vehicle/3",
+        "/series/mission_item/2",
+        "/world/obstacles/cylinders",
+    } <= entities
+    rows = sum(c.num_rows for c in RrdReader(rrd).stream() if c.entity_path == "/world/vehicle/2")
+    assert rows == 20

@@ -2,7 +2,7 @@
 
     gcs-planner replay FLIGHT.mcap --rrd out.rrd
     gcs-planner replay FLIGHT.mcap --to udpout:127.0.0.1:14550 --speed 4
-    gcs-planner replay FLIGHT.mcap --viewer        (spawns the Rerun viewer if installed)
+    gcs-planner replay FLIGHT.mcap --viewer --speed 4   (spawns the Rerun viewer, paced)
 
 MAVLink replay re-emits every recorded frame byte for byte with its original timing divided by
 --speed, so QGroundControl or MAVProxy listening on that port sees the flight again. Truncated
@@ -17,7 +17,7 @@ import time
 from gcs_planner.errors import UserError
 from gcs_planner.progress import progress_bar
 from gcs_planner.telemetry.reader import read_flight
-from gcs_planner.telemetry.replay import parse_udp_url, replay_to_mavlink
+from gcs_planner.telemetry.replay import parse_udp_url, replay_to_mavlink, replay_to_rerun_live
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,7 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rrd", help="write Rerun views to this .rrd file (headless)")
     p.add_argument("--viewer", action="store_true", help="show the views in a spawned Rerun viewer")
     p.add_argument("--to", metavar="udpout:HOST:PORT", help="re-emit the raw MAVLink frames to this address")
-    p.add_argument("--speed", type=float, default=1.0, help="MAVLink replay speed factor (0 = max) [1]")
+    p.add_argument(
+        "--speed", type=float, default=1.0, help="replay speed factor for --to / --viewer (0 = max) [1]"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     note = f" (truncated log: recovered {flight.recovered_messages} messages)" if flight.truncated else ""
     print(f"{args.flight}: {len(flight.frames)} frames from vehicles {flight.sysids}{note}")
     if args.rrd or args.viewer:
-        _to_rerun(flight, args.rrd, args.viewer)
+        _to_rerun(flight, args.rrd, args.viewer, args.speed)
     if args.to:
         with progress_bar(len(flight.frames), f"replaying to {args.to}") as bar:
 
@@ -56,19 +58,27 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _to_rerun(flight, rrd_path: str | None, viewer: bool) -> None:
+def _to_rerun(flight, rrd_path: str | None, viewer: bool, speed: float) -> None:
     import rerun as rr
 
     from gcs_planner.telemetry.rerun_views import APPLICATION_ID, flight_blueprint, log_flight_to_rerun
 
     start = time.monotonic()
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=str(flight.path))
-    if viewer:
-        rec.spawn(default_blueprint=flight_blueprint())
     if rrd_path:
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=str(flight.path))
         rec.save(rrd_path, default_blueprint=flight_blueprint())
-    log_flight_to_rerun(flight, rec=rec)
-    rec.flush()
-    rec.disconnect()
-    if rrd_path:
+        log_flight_to_rerun(flight, rec=rec)
+        rec.flush()
+        rec.disconnect()
         print(f"wrote {rrd_path} in {time.monotonic() - start:.1f} s; open it with: rerun {rrd_path}")
+    if viewer:
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{flight.path} replay")
+        try:
+            rec.spawn(default_blueprint=flight_blueprint())
+        except Exception as exc:  # noqa: BLE001 - no viewer binary / no display
+            raise UserError(f"cannot start the Rerun viewer ({exc}); use --rrd FILE instead") from None
+        if speed > 0:
+            replay_to_rerun_live(flight, rec, speed)
+        else:
+            log_flight_to_rerun(flight, rec=rec)
+        rec.flush()

@@ -11,14 +11,19 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 from gcs_planner.errors import UserError
-from gcs_planner.telemetry.reader import Flight
+from gcs_planner.geo import Origin
+from gcs_planner.telemetry.reader import Flight, RawFrame
 
-__all__ = ["parse_udp_url", "replay_to_mavlink"]
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+__all__ = ["parse_udp_url", "paced", "replay_to_mavlink", "replay_to_rerun_live"]
 
 
 def parse_udp_url(url: str) -> tuple[str, int]:
@@ -44,18 +49,9 @@ def replay_to_mavlink(
     """
     host, port = parse_udp_url(url)
     frames = flight.frames
-    if not frames:
-        return 0
-    realtime = speed > 0 and math.isfinite(speed)
-    t0_ns = frames[0].t_ns
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.connect((host, port))
-        start = clock()
-        for k, frame in enumerate(frames):
-            if realtime:
-                delay = start + (frame.t_ns - t0_ns) * 1e-9 / speed - clock()
-                if delay > 0:
-                    sleep(delay)
+        for k, frame in enumerate(paced(flight, speed, sleep, clock)):
             with contextlib.suppress(ConnectionRefusedError):  # nobody listening yet: keep going
                 sock.send(frame.data)
             if progress is not None and k % 100 == 0:
@@ -63,3 +59,46 @@ def replay_to_mavlink(
     if progress is not None:
         progress(len(frames), len(frames))
     return len(frames)
+
+
+def paced(
+    flight: Flight,
+    speed: float,
+    sleep: Callable[[float], None] = time.sleep,
+    clock: Callable[[], float] = time.monotonic,
+) -> Iterator[RawFrame]:
+    """The flight's frames, each yielded at start + (t_k - t_0) / speed (no pacing if speed is 0/inf)."""
+    frames = flight.frames
+    if not frames:
+        return
+    realtime = speed > 0 and math.isfinite(speed)
+    t0_ns = frames[0].t_ns
+    start = clock()
+    for frame in frames:
+        if realtime:
+            delay = start + (frame.t_ns - t0_ns) * 1e-9 / speed - clock()
+            if delay > 0:
+                sleep(delay)
+        yield frame
+
+
+def replay_to_rerun_live(flight: Flight, rec, speed: float = 1.0) -> int:
+    """Re-play a log into a live Rerun recording (e.g. a spawned viewer) with timing scaled by speed.
+
+    Frames go through LiveRerunLogger exactly as they did while flying; returns frames shown.
+    """
+    from gcs_planner.telemetry.rerun_views import LiveRerunLogger, scenario_from_text
+
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    live = LiveRerunLogger(rec, flight.origin or Origin(0.0, 0.0, 0.0), flight.start_time_s)
+    live.start(flight.plan, scenario_from_text(flight.scenario_text))
+    shown = 0
+    for frame in paced(flight, speed):
+        try:
+            msg = parser.decode(bytearray(frame.data))
+        except mavlink.MAVError:
+            continue
+        live.on_frame(msg, frame.data, frame.t_ns * 1e-9)
+        shown += 1
+    return shown

@@ -249,7 +249,7 @@ def log_flight_to_rerun(
         rec.save(str(rrd_path), default_blueprint=flight_blueprint())
     origin = flight.origin or _origin_from_flight(flight)
     views = FlightViews(rec, origin, flight.start_time_s)
-    views.log_scene(flight.plan, _scenario_from_text(flight.scenario_text), terrain)
+    views.log_scene(flight.plan, scenario_from_text(flight.scenario_text), terrain)
     for sysid, track in flight.positions.items():
         views.log_positions(
             sysid,
@@ -347,7 +347,8 @@ def _hemisphere_mesh(center, radius_m: float, n: int = 16) -> tuple[np.ndarray, 
     return vertices, triangles
 
 
-def _scenario_from_text(text: str | None) -> Scenario | None:
+def scenario_from_text(text: str | None) -> Scenario | None:
+    """Parse a scenario attachment for drawing; None (with a warning) if absent or invalid."""
     if not text:
         return None
     try:
