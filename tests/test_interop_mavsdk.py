@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import socket
 import threading
 from dataclasses import replace
@@ -182,3 +183,36 @@ def test_mavsdk_mission_raw_client_uploads_to_and_downloads_from_mock(mock_fleet
             assert [to_ours(it) for it in raw.download_rallypoints()] == rally
     finally:
         client.destroy()
+
+
+@pytest.mark.parametrize("mission_type", [0, 2])
+def test_our_client_uploads_to_mavsdk_mission_raw_server(mavsdk_pair, mission_type):
+    """MAVSDK's autopilot side receives exactly our items (mission, rally points) and returns them."""
+    from gcs_planner.mavlink.items import rally_items
+    from gcs_planner.mavlink.link import MavlinkLink
+    from gcs_planner.mavlink.mission import MissionClient
+
+    server, _ = mavsdk_pair
+    if mission_type == 0:
+        items = plan_to_items(vehicle_plan(n=15, takeoff_delay_s=4.0, final_action="rtl"), ORIGIN, "px4")
+    else:
+        items = rally_items([(0.0, 0.0, 30.0), (120.0, -40.0, 35.0), (-60.0, 80.0, 40.0)], ORIGIN)
+    server.received.clear()
+    server.event.clear()
+
+    async def upload():
+        link = await MavlinkLink.open(f"udpout:127.0.0.1:{server.port}")
+        try:
+            await link.wait_for(
+                lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, timeout_s=5.0
+            )
+            client = MissionClient(link, 1)
+            return await client.upload(items, mission_type=mission_type), await client.download(mission_type)
+        finally:
+            await link.close()
+
+    result, downloaded = asyncio.run(upload())
+    assert result.count == len(items)
+    assert downloaded == items  # MAVSDK's server also answers our download with the same items
+    assert server.event.wait(5.0), "MissionRawServer reported no incoming mission"
+    assert server.received[-1] == items
