@@ -125,3 +125,16 @@ def test_replay_to_live_rerun_uses_the_live_views(flight_path, tmp_path):
     } <= entities
     rows = sum(c.num_rows for c in RrdReader(rrd).stream() if c.entity_path == "/world/vehicle/2")
     assert rows == 20
+
+
+def test_log_flight_to_rerun_file_is_complete_and_reopenable(flight_path, tmp_path):
+    from rerun.chunk import RrdReader
+
+    from gcs_planner.telemetry import log_flight_to_rerun
+
+    rrd = tmp_path / "f.rrd"
+    log_flight_to_rerun(read_flight(flight_path), rrd)
+    reader = RrdReader(rrd)
+    assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1  # default blueprint saved
+    store = reader.store()  # needs the footer/manifest: the file was finished
+    assert "/map/track/1" in store.summary()

@@ -241,7 +241,12 @@ def log_flight_to_rerun(
     rec: rr.RecordingStream | None = None,
     terrain: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
 ) -> rr.RecordingStream:
-    """Render a whole flight log: into ``rrd_path`` (headless), or into ``rec`` (e.g. a spawned viewer)."""
+    """Render a whole flight log into ``rrd_path`` (headless) or into ``rec`` (e.g. a spawned viewer).
+
+    With ``rrd_path`` the file is complete when this returns (the recording is flushed and
+    disconnected); with ``rec`` the caller owns the recording.
+    """
+    own = rec is None
     if rec is None:
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=str(flight.path))
         if rrd_path is None:
@@ -270,6 +275,8 @@ def log_flight_to_rerun(
     for t_s, event in flight.events:
         views.log_event(t_s, event)
     rec.flush()
+    if own:
+        rec.disconnect()
     return rec
 
 
