@@ -253,3 +253,40 @@ def test_cli_starts_vehicles_and_stops_on_interrupt():
     finally:
         proc.send_signal(2)
         assert proc.wait(timeout=10) == 0
+
+
+def test_fleet_in_the_callers_loop_with_the_gcs_stack():
+    """`async with MockFleet` beside MavlinkLink: upload_fleet + start_fleet fly three vehicles to the end."""
+    import asyncio
+
+    from gcs_planner.mavlink.fleet import start_fleet, upload_fleet
+    from gcs_planner.mavlink.link import MavlinkLink
+
+    async def main() -> list:
+        specs = [
+            {"profile": "ardupilot"},
+            {"profile": "px4"},
+            {"profile": "px4", "vehicle_type": "fixed_wing"},
+        ]
+        async with MockFleet(vehicles=specs, speedup=60.0) as fleet:
+            link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
+            try:
+                await link.wait_for(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 3, 3.0)
+                missions = {v.sysid: _mission(home_item=v.profile.home_at_seq0)[0] for v in fleet.vehicles}
+                uploaded = await upload_fleet(link, missions)
+                assert all(r.ok for r in uploaded.values()), uploaded
+                started = await start_fleet(link, list(missions))
+                assert all(r.ok for r in started.values()), started
+                done: set[int] = set()
+                deadline = asyncio.get_running_loop().time() + 20.0
+                while len(done) < 3 and asyncio.get_running_loop().time() < deadline:
+                    msg = await link.wait_for(lambda m: m.get_type() == "MISSION_CURRENT", 5.0)
+                    if msg.mission_state == MissionState.COMPLETE:
+                        done.add(msg.get_srcSystem())
+            finally:
+                await link.close()
+            return [v.state for v in fleet.vehicles]
+
+    states = asyncio.run(main())
+    assert [s.mission_state for s in states] == [MissionState.COMPLETE] * 3
+    assert [s.reached[-1] for s in states] == [6, 5, 5]  # the land item of each list
