@@ -151,6 +151,12 @@ def test_wpl_file_is_uploaded_row_for_row_to_px4(fleet, tmp_path, capsys):
     assert held(fleet, 2) == items
     assert main(["download", *argv, str(tmp_path / "back.txt")]) == 0
     assert (tmp_path / "back.txt").read_text() == dumps_wpl(items)
+    assert main(["download", *argv, str(tmp_path / "back.plan")]) == 0
+    back = load_mission_file(tmp_path / "back.plan")
+    assert back.items("px4") == items
+    assert back.home == pytest.approx(
+        (ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3
+    )  # HOME_POSITION
 
 
 def test_vehicle_refusal_is_one_line_and_keeps_the_old_mission(fleet, tmp_path, capsys):

@@ -10,6 +10,7 @@ Autopilot conventions (home at seq 0 or not) follow the vehicle's HEARTBEAT.auto
 from __future__ import annotations
 
 import argparse
+import asyncio
 import contextlib
 import logging
 from collections.abc import AsyncIterator, Sequence
@@ -17,6 +18,7 @@ from collections.abc import AsyncIterator, Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
+from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
@@ -123,3 +125,22 @@ def print_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> Non
     print("  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True)))
     for r in cells:
         print("  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)))
+
+
+async def home_position(link: MavlinkLink, sysid: int, compid: int, timeout_s: float = 2.0):
+    """The vehicle's home (lat [deg], lon [deg], alt [m AMSL]) via REQUEST_MESSAGE(HOME_POSITION), or None."""
+    waiting = asyncio.ensure_future(
+        link.wait_for(
+            lambda m: m.get_type() == "HOME_POSITION" and m.get_srcSystem() == sysid, timeout_s=timeout_s
+        )
+    )
+    try:
+        await CommandClient(link, sysid, compid).command_long(
+            mavlink.MAV_CMD_REQUEST_MESSAGE, mavlink.MAVLINK_MSG_ID_HOME_POSITION
+        )
+        msg = await waiting
+    except (TimeoutError, UserError) as exc:
+        log.warning("vehicle %d: no HOME_POSITION (%s); the file gets no planned home", sysid, exc)
+        waiting.cancel()
+        return None
+    return msg.latitude / 1e7, msg.longitude / 1e7, msg.altitude / 1000.0

@@ -14,6 +14,7 @@ from gcs_planner.commands._mission_cli import (
     MISSION_TYPES,
     add_connection_arguments,
     autopilot_of,
+    home_position,
     print_items,
     vehicle_link,
 )
@@ -52,10 +53,14 @@ async def _download(args: argparse.Namespace) -> int:
         for mission_type in types:
             lists[mission_type] = await client.download(mission_type=mission_type)
             print_items(lists[mission_type], f"{mission_type.name.lower()}: {len(lists[mission_type])} items")
+        home = None
+        if args.file and Path(args.file).suffix.lower() == ".plan" and autopilot != "ardupilot":
+            home = await home_position(link, args.sysid, args.compid)  # ArduPilot's is item 0
     if args.file and Path(args.file).suffix.lower() == ".plan":
         mf = MissionFile.from_items(
             lists.get(MissionType.MISSION, []),
             autopilot,
+            home=home,
             fence=lists.get(MissionType.FENCE),
             rally=lists.get(MissionType.RALLY),
         )
