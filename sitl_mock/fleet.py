@@ -264,12 +264,14 @@ class MockFleet:
         """Navigation drift [m/s]: the reported track walks away from the navigated one at this rate."""
         self.call(self._set_rows, self.world.kin.drift, sysid, (east_mps, north_mps, up_mps))
 
-    def reboot(self, sysid: int) -> None:
-        self.call(lambda: self.vehicle(sysid).reboot())
+    def reboot(self, sysid: int | None) -> None:
+        """Reboot vehicle(s) ``sysid`` (None: all)."""
+        self.call(lambda: [v.reboot() for v in self._select(sysid)])
 
-    def set_mission_failure(self, sysid: int, failure: Failure | str) -> None:
-        """Scripted mission-protocol failure (QGC MockLink style) on vehicle ``sysid``."""
-        self.call(lambda: setattr(self.vehicle(sysid).mission_server, "failure", Failure(failure)))
+    def set_mission_failure(self, sysid: int | None, failure: Failure | str) -> None:
+        """Scripted mission-protocol failure (QGC MockLink style) on vehicle(s) ``sysid`` (None: all)."""
+        mode = Failure(failure)
+        self.call(lambda: [setattr(v.mission_server, "failure", mode) for v in self._select(sysid)])
 
     def at(self, sim_time_s: float, action: Callable[[MockFleet], None]) -> None:
         """Run ``action(fleet)`` in the loop when simulated time reaches ``sim_time_s`` (fault scripts)."""
@@ -292,11 +294,10 @@ class MockFleet:
         return asyncio.run_coroutine_threadsafe(call_in_loop(), loop).result(timeout=10.0)
 
     def _select(self, sysid: int | None) -> list[MockVehicle]:
-        return (
-            list(self.vehicles)
-            if sysid is None
-            else [v for v in self.vehicles if v.sysid == sysid] or [self.vehicle(sysid)]
-        )
+        """Every vehicle with ``sysid`` (duplicates included), all for None; KeyError if none."""
+        if sysid is None:
+            return list(self.vehicles)
+        return [v for v in self.vehicles if v.sysid == sysid] or [self.vehicle(sysid)]
 
     def _set_rows(self, array: np.ndarray, sysid: int | None, value: tuple[float, float, float]) -> None:
         vec = np.asarray(value, dtype=float)

@@ -13,7 +13,7 @@ from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.types import MissionItem
 from gcs_planner.mavlink.wire import attach_extensions
 from gcs_planner.plan import VehiclePlan
-from sitl_mock import DEFAULT_HOME, MockFleet
+from sitl_mock import DEFAULT_HOME, Failure, MockFleet
 from sitl_mock.probe import Probe
 
 ARM, TAKEOFF, RTL, SET_MODE, MISSION_START, SET_CURRENT, REBOOT = 400, 22, 20, 176, 300, 224, 246
@@ -290,3 +290,19 @@ def test_fleet_in_the_callers_loop_with_the_gcs_stack():
     states = asyncio.run(main())
     assert [s.mission_state for s in states] == [MissionState.COMPLETE] * 3
     assert [s.reached[-1] for s in states] == [6, 5, 5]  # the land item of each list
+
+
+def test_scripted_mission_failure_and_duplicate_sysids():
+    items, _ = _mission(home_item=True)
+    with MockFleet(vehicles=[{"sysid": 7}, {"sysid": 7}], speedup=5.0) as fleet:
+        a, b = Probe(fleet.addresses[0]), Probe(fleet.addresses[1])
+        assert {a.recv("HEARTBEAT").get_srcSystem(), b.recv("HEARTBEAT").get_srcSystem()} == {7}
+        fleet.set_mission_failure(7, "write_count_no_response")  # both vehicles with sysid 7
+        assert a.upload(7, items, timeout_s=1.0) is None  # MISSION_COUNT ignored
+        fleet.call(lambda: setattr(fleet.vehicles[0].mission_server, "failure", Failure.NONE))
+        assert a.upload(7, items) == 0
+        assert fleet.vehicles[0].mission_server.count() == len(items)
+        assert fleet.vehicles[1].mission_server.count() == 0  # same sysid, separate vehicle
+        assert b.upload(7, items, timeout_s=1.0) is None  # the failure was set on both
+        a.close()
+        b.close()
