@@ -161,14 +161,14 @@ class MavlinkLink:
         raw = msg.pack(self._mav)
         info = self.vehicles.get(target) if target else None
         if info is None:
-            destinations = list(self._peers)
+            for addr in self._peers:
+                self._transport.sendto(raw, addr)
         else:
-            live = info.live_addresses(time.monotonic())
-            if len(live) > 1:
-                raise DuplicateSysidError(target, live)
-            destinations = [info.address]
-        for addr in destinations:
-            self._transport.sendto(raw, addr)
+            if len(info.addresses) > 1:  # fast path: one address can never be ambiguous
+                live = info.live_addresses(time.monotonic())
+                if len(live) > 1:
+                    raise DuplicateSysidError(target, live)
+            self._transport.sendto(raw, info.address)
         self.frames_sent += 1
 
     def check_target(self, sysid: int) -> None:
@@ -242,10 +242,10 @@ class MavlinkLink:
         info = self.vehicles.get(sysid)
         if info is None:
             info = self.vehicles[sysid] = VehicleInfo(sysid, addr)
-        else:
+        elif addr != info.address or len(info.addresses) > 1:
             live = info.live_addresses(now)
-            if not live:
-                info.address = addr  # the old address went quiet: the vehicle moved (e.g. rebooted)
+            if not live:  # the old address went quiet: the vehicle moved (e.g. rebooted)
+                info.address, info.addresses = addr, {}
             elif addr not in live and addr not in info.addresses:
                 log.warning("system id %d heard from %s and %s: ambiguous", sysid, info.address, addr)
         info.addresses[addr] = now

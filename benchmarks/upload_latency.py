@@ -1,0 +1,307 @@
+"""Mission upload latency: our MissionClient vs a plain pymavlink loop vs MAVSDK's MissionRaw client.
+
+The mock fleet runs in a child process (its own interpreter and GIL), so every client sees the
+same vehicle. Sections (all on 127.0.0.1):
+  loopback  10/100/1000 items, each client, median of --reps uploads; ratio ours / MAVSDK.
+  delay     20 ms one-way (40 ms RTT) link: time / (items x RTT), target <= 1.2.
+  loss      10 % loss each way (+ 20 ms delay): success over --loss-uploads uploads, slowdown vs no loss.
+  fleet     100 vehicles at once (upload_fleet, workers=100 and the default 8) vs one vehicle.
+
+    nice .venv/bin/python benchmarks/upload_latency.py [--profile px4|ardupilot] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import multiprocessing as mp
+import os
+import statistics
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("MAVLINK20", "1")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from pymavlink import mavutil  # noqa: E402
+
+from gcs_planner.mavlink.fleet import upload_fleet  # noqa: E402
+from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
+from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
+from gcs_planner.mavlink.types import MissionItem  # noqa: E402
+
+CAPACITY = 5000
+
+
+def items(n: int, shift: int = 0) -> list[MissionItem]:
+    return [
+        MissionItem(
+            seq=i,
+            frame=3,
+            command=16,
+            current=int(i == 0),
+            x=473_977_000 + 41 * i + shift,
+            y=85_455_000 + 13 * i,
+            z=round(20.0 + 0.5 * (i % 40), 2),
+        )
+        for i in range(n)
+    ]
+
+
+# ----------------------------------------------------------------------------- mock in a child process
+def _serve(conn, count: int, profile: str, faults: dict) -> None:
+    from sitl_mock.faults import LinkFaults
+    from sitl_mock.fleet import MockFleet
+
+    vehicles = [{"sysid": s, "capacity": CAPACITY} for s in range(1, count + 1)]
+    with MockFleet(vehicles=vehicles, profile=profile, faults=LinkFaults(**faults), rate_hz=2.0) as fleet:
+        conn.send(fleet.addresses)
+        conn.recv()
+
+
+class Mock:
+    """Context manager: a MockFleet of ``count`` vehicles in a child process; ``.addresses``."""
+
+    def __init__(self, count: int = 1, profile: str = "px4", **faults: float) -> None:
+        self.args = (count, profile, faults)
+
+    def __enter__(self) -> Mock:
+        ctx = mp.get_context("spawn")
+        self.conn, child = ctx.Pipe()
+        self.proc = ctx.Process(target=_serve, args=(child, *self.args), daemon=True)
+        self.proc.start()
+        self.addresses = self.conn.recv()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.conn.send("stop")
+        self.proc.join(10)
+
+
+# ----------------------------------------------------------------------------- the three clients
+async def _connect(addresses) -> MavlinkLink:
+    link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in addresses))
+    want, seen = len(addresses), set()
+    await link.wait_for(
+        lambda m: m.get_type() == "HEARTBEAT" and (seen.add(m.get_srcSystem()) or len(seen) >= want), 30
+    )
+    return link
+
+
+def ours(address, sizes: list[int], reps: int) -> dict[int, list[float]]:
+    async def main():
+        link = await _connect([address])
+        client = MissionClient(link, 1)
+        out = {}
+        for n in sizes:
+            times = []
+            for r in range(reps):
+                mission = items(n, r)
+                t0 = time.perf_counter()
+                await client.upload(mission)
+                times.append(time.perf_counter() - t0)
+            out[n] = times
+        await link.close()
+        return out
+
+    return asyncio.run(main())
+
+
+def pymavlink_loop(address, sizes: list[int], reps: int) -> dict[int, list[float]]:
+    """The loop most scripts write: COUNT, answer each request, stop at MISSION_ACK (no retries)."""
+    conn = mavutil.mavlink_connection(
+        f"udpout:{address[0]}:{address[1]}", source_system=254, source_component=190
+    )
+    conn.mav.heartbeat_send(6, 8, 0, 0, 4)
+    conn.wait_heartbeat(timeout=10)
+    out = {}
+    for n in sizes:
+        times = []
+        for r in range(reps):
+            mission = items(n, r)
+            t0 = time.perf_counter()
+            conn.mav.mission_count_send(1, 1, n, 0)
+            while True:
+                m = conn.recv_match(
+                    type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"], blocking=True, timeout=10
+                )
+                if m is None or m.get_type() == "MISSION_ACK":
+                    break
+                it = mission[m.seq]
+                conn.mav.mission_item_int_send(
+                    1,
+                    1,
+                    it.seq,
+                    it.frame,
+                    it.command,
+                    it.current,
+                    it.autocontinue,
+                    it.param1,
+                    it.param2,
+                    it.param3,
+                    it.param4,
+                    it.x,
+                    it.y,
+                    it.z,
+                    0,
+                )
+            if m is None or m.type != 0:
+                raise RuntimeError(f"pymavlink loop upload of {n} items failed: {m}")
+            times.append(time.perf_counter() - t0)
+        out[n] = times
+    conn.close()
+    return out
+
+
+def mavsdk_client(address, sizes: list[int], reps: int) -> dict[int, list[float]] | None:
+    try:
+        from mavsdk import Configuration, Mavsdk, log_subscribe
+        from mavsdk.plugins.mission_raw import MissionItem as RawItem
+        from mavsdk.plugins.mission_raw import MissionRaw
+    except ImportError:
+        return None
+    log_subscribe(lambda *args: True)
+    sdk = Mavsdk(Configuration.create_manual(253, 190, True))
+    sdk.add_any_connection(f"udpout://{address[0]}:{address[1]}")
+    raw = MissionRaw(sdk.first_autopilot(10.0))
+    out = {}
+    for n in sizes:
+        times = []
+        for r in range(reps):
+            mission = [
+                RawItem(
+                    i.seq,
+                    i.frame,
+                    i.command,
+                    i.current,
+                    i.autocontinue,
+                    i.param1,
+                    i.param2,
+                    i.param3,
+                    i.param4,
+                    i.x,
+                    i.y,
+                    i.z,
+                    0,
+                )
+                for i in items(n, r)
+            ]
+            t0 = time.perf_counter()
+            raw.upload_mission(mission)
+            times.append(time.perf_counter() - t0)
+        out[n] = times
+    sdk.destroy()
+    return out
+
+
+# ----------------------------------------------------------------------------- sections
+def med(values: list[float]) -> float:
+    return statistics.median(values)
+
+
+def loopback(profile: str, sizes: list[int], reps: int) -> None:
+    print(f"\n## loopback, profile {profile}: median upload time [ms] over {reps} uploads")
+    with Mock(1, profile) as mock:
+        address = mock.addresses[0]
+        ours_t = ours(address, sizes, reps)
+        loop_t = pymavlink_loop(address, sizes, reps)
+        sdk_t = mavsdk_client(address, sizes, reps)
+    print(f"{'items':>6} {'ours_ms':>9} {'pymavlink_ms':>13} {'mavsdk_ms':>10} {'ours/mavsdk':>12}")
+    for n in sizes:
+        sdk = f"{1e3 * med(sdk_t[n]):>10.1f}" if sdk_t else f"{'n/a':>10}"
+        ratio = f"{med(ours_t[n]) / med(sdk_t[n]):>12.2f}" if sdk_t else f"{'n/a':>12}"
+        print(f"{n:>6} {1e3 * med(ours_t[n]):>9.1f} {1e3 * med(loop_t[n]):>13.1f} {sdk} {ratio}")
+
+
+def delayed(profile: str, n: int, reps: int) -> None:
+    rtt = 0.04
+    print(f"\n## 20 ms one-way delay, profile {profile}, {n} items: time / (items x RTT), target <= 1.2")
+    with Mock(1, profile, delay_s=0.02) as mock:
+        t = med(ours(mock.addresses[0], [n], reps)[n])
+    print(f"{'items':>6} {'time_s':>8} {'ratio':>6}")
+    print(f"{n:>6} {t:>8.3f} {t / (n * rtt):>6.2f}")
+
+
+def lossy(profile: str, n: int, uploads: int) -> None:
+    print(f"\n## 10 % loss each way + 20 ms delay, profile {profile}, {n} items, {uploads} uploads")
+
+    async def run(addresses, count):
+        link = await _connect(addresses)
+        client = MissionClient(link, 1)
+        ok, times, lost_ack = 0, [], 0
+        for r in range(count):
+            t0 = time.perf_counter()
+            try:
+                res = await client.upload(items(n, r))
+            except Exception as exc:  # noqa: BLE001 - counted as a failure and shown
+                print(f"  upload {r} failed: {exc}")
+                continue
+            ok += 1
+            lost_ack += res.ack_lost
+            times.append(time.perf_counter() - t0)
+        await link.close()
+        return ok, times, lost_ack
+
+    with Mock(1, profile, delay_s=0.02) as mock:
+        _, base, _ = asyncio.run(run(mock.addresses, 5))
+    with Mock(1, profile, delay_s=0.02, loss=0.1, seed=3) as mock:
+        ok, times, lost_ack = asyncio.run(run(mock.addresses, uploads))
+    print(
+        f"{'success':>8} {'rate_%':>7} {'base_s':>7} {'lossy_median_s':>15} {'slowdown':>9} {'ack_lost':>9}"
+    )
+    print(
+        f"{ok:>4}/{uploads:<3} {100 * ok / uploads:>7.1f} {med(base):>7.3f} {med(times):>15.3f} "
+        f"{med(times) / med(base):>9.2f} {lost_ack:>9}"
+    )
+
+
+def fleet(profile: str, count: int, n: int, delay_s: float) -> None:
+    print(
+        f"\n## {count} vehicles vs one, profile {profile}, {n} items, delay {delay_s * 1e3:.0f} ms"
+    )
+
+    async def run(addresses, workers):
+        link = await _connect(addresses)
+        missions = {s: items(n, s) for s in range(1, len(addresses) + 1)}
+        t0 = time.perf_counter()
+        results = await upload_fleet(link, missions, workers=workers)
+        elapsed = time.perf_counter() - t0
+        await link.close()
+        return elapsed, sum(r.ok for r in results.values())
+
+    with Mock(count, profile, delay_s=delay_s) as mock:
+        one, _ = asyncio.run(run(mock.addresses[:1], 1))
+        rows = [(w, *asyncio.run(run(mock.addresses, w))) for w in (count, 8)]
+    print(f"{'workers':>8} {'ok':>5} {'time_s':>8} {'one_vehicle_s':>14} {'ratio':>6}")
+    for workers, elapsed, ok in rows:
+        print(f"{workers:>8} {ok:>5} {elapsed:>8.3f} {one:>14.3f} {elapsed / one:>6.2f}")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--profile", choices=("px4", "ardupilot"), default="px4")
+    p.add_argument("--reps", type=int, default=5)
+    p.add_argument("--loss-uploads", type=int, default=50)
+    p.add_argument("--sections", default="loopback,delay,loss,fleet")
+    p.add_argument("--quick", action="store_true", help="small sizes (smoke run)")
+    args = p.parse_args()
+    sections = args.sections.split(",")
+    sizes = [10, 100] if args.quick else [10, 100, 1000]
+    print(
+        f"# upload_latency: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f},"
+        f" python {sys.version.split()[0]}"
+    )
+    if "loopback" in sections:
+        loopback(args.profile, sizes, args.reps)
+    if "delay" in sections:
+        delayed(args.profile, 20 if args.quick else 100, 3)
+    if "loss" in sections:
+        lossy(args.profile, 20, 5 if args.quick else args.loss_uploads)
+    if "fleet" in sections:
+        for delay_s in (0.0, 0.02):
+            fleet(args.profile, 10 if args.quick else 100, 20, delay_s)
+
+
+if __name__ == "__main__":
+    main()
