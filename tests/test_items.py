@@ -13,6 +13,8 @@ from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin, geodetic_to_enu
 from gcs_planner.mavlink.items import (
     deg_to_e7,
+    e7,
+    half_away,
     plan_to_items,
     rally_items,
     round_half_away,
@@ -59,6 +61,9 @@ def test_round_half_away_from_zero_not_truncation_or_bankers():
     assert deg_to_e7(47.39774189) == 473977419
     assert deg_to_e7(-47.39774189) == -473977419
     assert deg_to_e7(-122.08404009) == -1220840401
+    values = np.random.default_rng(3).uniform(-180, 180, 2000).round(8)
+    assert [e7(v) for v in values] == deg_to_e7(values).tolist()  # scalar fast path agrees
+    assert [half_away(v) for v in halves] == round_half_away(halves).tolist()
 
 
 def test_ardupilot_mission_structure_and_coordinates():

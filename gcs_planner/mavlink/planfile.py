@@ -29,7 +29,7 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.files import MissionFile, MissionFileError, file_frame, item_frame
-from gcs_planner.mavlink.items import deg_to_e7
+from gcs_planner.mavlink.items import e7
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
 __all__ = ["dumps_plan", "loads_plan"]
@@ -228,8 +228,8 @@ def _parse_simple(raw: Any, where: str, path: str) -> MissionItem:
         param2=p[1],
         param3=p[2],
         param4=p[3],
-        x=int(deg_to_e7(p[4])),
-        y=int(deg_to_e7(p[5])),
+        x=e7(p[4]),
+        y=e7(p[5]),
         z=p[6],
     )
 
@@ -242,8 +242,8 @@ def _fence_item(command: int, lat: float, lon: float, param1: float = 0.0, z: fl
         0,
         1,
         param1,
-        x=int(deg_to_e7(lat)),
-        y=int(deg_to_e7(lon)),
+        x=e7(lat),
+        y=e7(lon),
         z=z,
         mission_type=MissionType.FENCE,
     )
@@ -285,8 +285,8 @@ def _parse_rally(rally: Any, where: str) -> list[MissionItem]:
                 mavlink.MAV_CMD_NAV_RALLY_POINT,
                 0,
                 1,
-                x=int(deg_to_e7(lat)),
-                y=int(deg_to_e7(lon)),
+                x=e7(lat),
+                y=e7(lon),
                 z=alt,
                 mission_type=MissionType.RALLY,
             )

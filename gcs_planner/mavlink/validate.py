@@ -130,16 +130,25 @@ def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
             raise fail(field, "must be 0 or 1")
     for field in ("param1", "param2", "param3", "param4"):
         value = getattr(item, field)
-        if isinstance(value, bool) or not isinstance(value, Real) or math.isinf(value):
+        if not _is_real(value) or math.isinf(value):
             raise fail(field, "must be a finite number (or NaN for 'default')")
-    if isinstance(item.z, bool) or not isinstance(item.z, Real) or not math.isfinite(item.z):
+    if not _is_real(item.z) or not math.isfinite(item.z):
         raise fail("z", "must be a finite altitude [m]")
     for field in ("x", "y"):
         value = getattr(item, field)
-        if isinstance(value, bool) or not isinstance(value, Integral) or not INT32_MIN <= value <= INT32_MAX:
+        if not _is_integer(value) or not INT32_MIN <= value <= INT32_MAX:
             raise fail(field, "must be an int32 (degE7 in global frames)")
     if item.frame in GLOBAL_FRAMES and item.command not in POSITIONLESS_COMMANDS:
         if not -900_000_000 <= item.x <= 900_000_000:
             raise fail("x", f"(latitude {item.x / 1e7:.7f} deg) is outside [-90, 90] deg")
         if not -1_800_000_000 <= item.y <= 1_800_000_000:
             raise fail("y", f"(longitude {item.y / 1e7:.7f} deg) is outside [-180, 180] deg")
+
+
+def _is_real(value: object) -> bool:
+    """int or float (numpy scalars too), not bool; the plain types first because abc checks are slow."""
+    return type(value) in (float, int) or (not isinstance(value, bool) and isinstance(value, Real))
+
+
+def _is_integer(value: object) -> bool:
+    return type(value) is int or (not isinstance(value, bool) and isinstance(value, Integral))

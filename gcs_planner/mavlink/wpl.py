@@ -23,7 +23,7 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.files import MissionFile, MissionFileError, file_frame, item_frame, mission_type_of
-from gcs_planner.mavlink.items import round_half_away
+from gcs_planner.mavlink.items import half_away
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
 __all__ = ["HEADER", "dumps_wpl", "loads_wpl", "loads_wpl_items"]
@@ -116,8 +116,8 @@ def loads_wpl_items(text: str, where: str = "WPL file") -> list[MissionItem]:
                 param2=_float(f[5], "param2", lineno, where),
                 param3=_float(f[6], "param3", lineno, where),
                 param4=_float(f[7], "param4", lineno, where),
-                x=int(round_half_away(x * scale)),
-                y=int(round_half_away(y * scale)),
+                x=half_away(x * scale),
+                y=half_away(y * scale),
                 z=_float(f[10], "z", lineno, where),
                 mission_type=mission_type,
             )
