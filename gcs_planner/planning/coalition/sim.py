@@ -104,7 +104,8 @@ class CoalitionSim:
         self.known: list[Threat] = [t for t in world.threats if t.appear_s <= 0]
         self.tenders: dict[int, Tender] = {}
         self.outcomes = {t.id: TargetOutcome(t.id) for t in world.targets}
-        self.compute_s: list[float] = []
+        self.compute_s: list[float] = []  # wall time of every formation (optimiser + paths), failed ones too
+        self.optimiser_s: list[float] = []  # ACO / polynomial / global optimiser only, formed coalitions
         self.award_legs: dict[tuple[str, str], Leg] = {}
         self.st: list[UavState] = []
         for u in self.uavs:
@@ -443,10 +444,12 @@ class CoalitionSim:
             prob.length_m = base.copy()
             if not coverable(prob):
                 return self._fail(tender, f"needs not covered by {n} candidates clear of threats", t_wall)
+            t_opt = time.perf_counter()
             if p.method == "polynomial":
                 sol = solve_polynomial(prob, p, np.array(etas))
             else:
                 sol = solve_aco(prob, p, self.rng, scale=GLOBAL_SCALE if p.method == "global" else 1)
+            opt_s = time.perf_counter() - t_opt
             if not sol.covered:
                 return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
             # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
@@ -509,6 +512,7 @@ class CoalitionSim:
                 )
         dt = time.perf_counter() - t_wall
         self.compute_s.append(dt)
+        self.optimiser_s.append(opt_s)
         members = tuple(int(cands[i]) for i in sol.assign)
         out = self.outcomes[target.id]
         out.t_formed_s, out.J, out.parts = self.now, sol.J, sol.parts
@@ -522,6 +526,7 @@ class CoalitionSim:
             members=list(out.members),
             J=round(sol.J, 4),
             compute_s=round(dt, 4),
+            optimiser_s=round(opt_s, 4),
         )
         t_send = tender.t_es_s - p.delay_s
         for k in range(K):
