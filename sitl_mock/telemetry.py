@@ -51,11 +51,14 @@ class StreamSchedule:
         )
 
     def due(self, now_s: float) -> np.ndarray:
-        """Indices of vehicles due now; their next due time moves one period on (no catch-up bursts)."""
-        mask = self.next_due <= now_s
-        idx = np.flatnonzero(mask)
+        """Indices of vehicles due now; each due time moves one period on.
+
+        A late tick is made up for at the following ticks (one message per tick), but never more
+        than one period's worth, so a stalled loop does not burst afterwards.
+        """
+        idx = np.flatnonzero(self.next_due <= now_s)
         if idx.size:
-            self.next_due[idx] = np.maximum(self.next_due[idx] + self.period_s, now_s)
+            self.next_due[idx] = np.maximum(self.next_due[idx] + self.period_s, now_s - self.period_s)
         return idx
 
 
