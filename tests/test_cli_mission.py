@@ -212,3 +212,39 @@ def test_connection_errors_are_one_line(fleet, capsys, argv, message):
     assert main(["download", *[a.format(port=port) for a in argv]]) == 2
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
+
+
+def test_fleet_upload_from_plan_json(fleet, tmp_path, capsys):
+    plan_path = make_plan(tmp_path, sysids=(1, 2, 3))
+    plan = Plan.load(plan_path)
+    connects = [a for s in (1, 2, 3) for a in ("--connect", url(fleet, s))]
+    before = held(fleet, 3)
+    assert (
+        main(["upload", *connects, "--sysid", "all", str(plan_path)]) == 2
+    )  # vehicle 3 has room for 4 items
+    captured = capsys.readouterr()
+    rows = [line.split() for line in captured.out.splitlines()[1:]]
+    assert [(r[0], r[1], r[3]) for r in rows] == [
+        ("1", "mission", "ACCEPTED"),
+        ("2", "mission", "ACCEPTED"),
+        ("3", "mission", "FAILED"),
+    ]
+    assert "1 of 3 uploads failed; vehicle 3 mission" in captured.err and captured.err.count("\n") == 1
+    assert compare_items(plan_to_items(plan.vehicles[0], ORIGIN, "ardupilot"), held(fleet, 1)) is None
+    assert held(fleet, 2) == plan_to_items(plan.vehicles[1], ORIGIN, "px4")
+    assert held(fleet, 3) == before
+    assert main(["upload", *connects[:4], "--sysid", "1,2", str(plan_path)]) == 0
+    assert capsys.readouterr().out.count("ACCEPTED") == 2
+
+
+def test_fleet_arguments_are_checked(tmp_path, capsys):
+    plan_path = make_plan(tmp_path)
+    wpl = tmp_path / "m.waypoints"
+    wpl.write_text(dumps_wpl(plan_to_items(Plan.load(plan_path).vehicles[0], ORIGIN, "px4")))
+    for argv, message in [
+        (["--sysid", "all", str(wpl)], "needs a plan.json"),
+        (["--sysid", "1,2", "--vehicle", "uav1", str(plan_path)], "single --sysid"),
+        (["--sysid", "1,9", str(plan_path)], "no vehicle with sysid 9"),
+    ]:
+        assert main(["upload", "--connect", "udpout:127.0.0.1:9", *argv]) == 2
+        assert message in capsys.readouterr().err

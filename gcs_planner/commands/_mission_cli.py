@@ -28,14 +28,30 @@ MISSION_TYPES = {"mission": MissionType.MISSION, "fence": MissionType.FENCE, "ra
 HEARTBEAT_TIMEOUT_S = 5.0
 
 
-def add_connection_arguments(p: argparse.ArgumentParser) -> None:
+def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) -> None:
+    """--connect (repeatable), --sysid, --compid, --autopilot, --heartbeat-timeout.
+
+    fleet: --sysid also takes a list "1,2,5" or "all" (every vehicle of plan.json).
+    """
     p.add_argument(
         "--connect",
         required=True,
+        action="append",
         metavar="URL",
-        help="MAVLink endpoint, e.g. udpout:127.0.0.1:14550 (to a vehicle) or udpin:0.0.0.0:14550 (listen)",
+        help="MAVLink endpoint, e.g. udpout:127.0.0.1:14550 (to a vehicle) or udpin:0.0.0.0:14550 (listen);"
+        " repeat for vehicles on several ports",
     )
-    p.add_argument("--sysid", required=True, type=_sysid, help="target vehicle's MAVLink system id (1..255)")
+    if fleet:
+        p.add_argument(
+            "--sysid",
+            required=True,
+            type=_sysids,
+            help="target system id (1..255), a list 1,2,5, or 'all' (every vehicle in plan.json)",
+        )
+    else:
+        p.add_argument(
+            "--sysid", required=True, type=_sysid, help="target vehicle's MAVLink system id (1..255)"
+        )
     p.add_argument("--compid", type=int, default=1, help="target component id [1 = autopilot]")
     p.add_argument(
         "--autopilot",
@@ -62,6 +78,44 @@ def _sysid(text: str) -> int:
     return value
 
 
+def _sysids(text: str) -> list[int] | None:
+    """'3' -> [3]; '1,2,5' -> [1, 2, 5]; 'all' -> None."""
+    if text.strip().lower() == "all":
+        return None
+    ids = [_sysid(part.strip()) for part in text.split(",")]
+    if len(set(ids)) != len(ids):
+        raise argparse.ArgumentTypeError(f"system ids repeat in {text!r}")
+    return ids
+
+
+async def open_link(args: argparse.Namespace) -> MavlinkLink:
+    try:
+        return await MavlinkLink.open(*args.connect)
+    except (OSError, ValueError) as exc:
+        raise UserError(f"cannot open --connect {' '.join(args.connect)!r}: {exc}") from None
+
+
+@contextlib.asynccontextmanager
+async def fleet_link(args: argparse.Namespace, sysids: Sequence[int]) -> AsyncIterator[MavlinkLink]:
+    """Open the link and wait until every vehicle in ``sysids`` sent a HEARTBEAT; always close."""
+    link = await open_link(args)
+    try:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + args.heartbeat_timeout
+        missing = list(sysids)
+        while missing and loop.time() < deadline:
+            await asyncio.sleep(0.05)
+            missing = [s for s in sysids if getattr(link.vehicles.get(s), "autopilot", None) is None]
+        if missing:
+            raise UserError(
+                f"no HEARTBEAT from system(s) {missing} on {' '.join(args.connect)}"
+                f" within {args.heartbeat_timeout:g} s"
+            )
+        yield link
+    finally:
+        await link.close()
+
+
 def autopilot_of(heartbeat, choice: str) -> str:
     """The item conventions to use for a vehicle (see module docstring)."""
     if choice != "auto":
@@ -72,10 +126,7 @@ def autopilot_of(heartbeat, choice: str) -> str:
 @contextlib.asynccontextmanager
 async def vehicle_link(args: argparse.Namespace) -> AsyncIterator[tuple[MavlinkLink, object]]:
     """Open the link, wait for the target's HEARTBEAT; yield (link, heartbeat); always close."""
-    try:
-        link = await MavlinkLink.open(args.connect)
-    except (OSError, ValueError) as exc:
-        raise UserError(f"cannot open --connect {args.connect!r}: {exc}") from None
+    link = await open_link(args)
     try:
         try:
             heartbeat = await link.wait_for(
@@ -90,7 +141,7 @@ async def vehicle_link(args: argparse.Namespace) -> AsyncIterator[tuple[MavlinkL
             heartbeat = None
         if heartbeat is None:
             raise UserError(
-                f"no HEARTBEAT from system {args.sysid} component {args.compid} on {args.connect}"
+                f"no HEARTBEAT from system {args.sysid} component {args.compid} on {' '.join(args.connect)}"
                 f" within {args.heartbeat_timeout:g} s"
             )
         yield link, heartbeat

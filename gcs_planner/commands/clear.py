@@ -31,7 +31,7 @@ async def _clear(args: argparse.Namespace) -> int:
     mission_type = MissionType.ALL if args.type == "all" else MISSION_TYPES[args.type]
     async with vehicle_link(args) as (link, _heartbeat):
         client = MissionClient(link, args.sysid, args.compid)
-        print(f"vehicle {args.sysid} on {args.connect}")
+        print(f"vehicle {args.sysid}")
         print(f"{'list':<8} {'result':<10} {'time_s':>7}")
         t0 = time.monotonic()
         try:

@@ -30,19 +30,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.file:
-        prepare(args, args.autopilot if args.autopilot != "auto" else "px4")
+        prepare(args, args.autopilot if args.autopilot != "auto" else "px4", args.sysid)
     return asyncio.run(_start(args))
 
 
 async def _start(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
         autopilot = autopilot_of(heartbeat, args.autopilot)
-        print(f"vehicle {args.sysid} ({autopilot}) on {args.connect}")
+        print(f"vehicle {args.sysid} ({autopilot})")
         print(f"{'step':<16} {'result':<10} {'time_s':>7}")
         steps = []
         if args.file:
             mission = MissionClient(link, args.sysid, args.compid)
-            for mission_type, items in prepare(args, autopilot):
+            for mission_type, items in prepare(args, autopilot, args.sysid):
                 steps.append(
                     (f"upload {mission_type.name.lower()}", _bound(mission.upload, items, mission_type))
                 )

@@ -1,9 +1,13 @@
-"""Upload a mission (plus fence and rally points) to one vehicle and print what it accepted.
+"""Upload a mission (plus fence and rally points) to one vehicle or many, and print what each accepted.
 
 FILE is a QGroundControl .plan (mission, geofence, rally points), a QGC WPL 110 file
 (.waypoints / .txt), or plan.json from `gcs-planner plan` (the vehicle named by --vehicle, else the
 one whose sysid is --sysid; --scenario adds that scenario's fence and rally points). Every list is
-validated before anything is sent; the upload succeeds only on the vehicle's MISSION_ACK(ACCEPTED).
+validated before anything is sent; an upload succeeds only on the vehicle's MISSION_ACK(ACCEPTED).
+
+Many vehicles: --sysid 1,2,3 or --sysid all (every vehicle of plan.json), with one --connect per
+vehicle port if they are on several; uploads run concurrently (--workers, default 8) with
+automatic retries (gcs_planner.mavlink.fleet) and one table row per vehicle and list.
 """
 
 from __future__ import annotations
@@ -12,25 +16,36 @@ import argparse
 import asyncio
 import time
 
-from gcs_planner.commands._mission_cli import add_connection_arguments, autopilot_of, vehicle_link
+from gcs_planner.commands._mission_cli import (
+    add_connection_arguments,
+    autopilot_of,
+    fleet_link,
+    vehicle_link,
+)
 from gcs_planner.errors import UserError
-from gcs_planner.mavlink.files import MissionFile, mission_input
+from gcs_planner.mavlink.files import MissionFile, load_plan_json, mission_input
+from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
 from gcs_planner.mavlink.items import scenario_fence_items, scenario_rally_items
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.types import MissionType
+from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import validate_items
+from gcs_planner.progress import progress_bar
 from gcs_planner.scenario import load_scenario
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    add_connection_arguments(p)
+    add_connection_arguments(p, fleet=True)
     p.add_argument("file", metavar="FILE", help="mission: .plan, .waypoints/.txt (QGC WPL 110) or plan.json")
     p.add_argument("--vehicle", help="vehicle id in plan.json [the one with --sysid]")
     p.add_argument("--scenario", help="scenario file whose fence and rally points to upload too")
     p.add_argument("--verify", action="store_true", help="download each list again and compare")
+    p.add_argument(
+        "--workers", type=int, default=DEFAULT_WORKERS, help="concurrent uploads for many vehicles"
+    )
+    p.add_argument("--retries", type=int, default=2, help="extra attempts per failed vehicle [2]")
 
 
-def lists_to_upload(mf: MissionFile, autopilot: str) -> list[tuple[MissionType, list]]:
+def lists_to_upload(mf: MissionFile, autopilot: str) -> list[tuple[MissionType, list[MissionItem]]]:
     """(mission_type, items) to send, validated: the mission always, fence and rally when present."""
     lists = [(MissionType.MISSION, mf.items(autopilot))]
     lists += [
@@ -41,31 +56,51 @@ def lists_to_upload(mf: MissionFile, autopilot: str) -> list[tuple[MissionType, 
     return lists
 
 
-def prepare(args: argparse.Namespace, autopilot: str) -> list[tuple[MissionType, list]]:
-    """Read FILE (+ --scenario) for ``autopilot`` and validate every list.
+def prepare(
+    args: argparse.Namespace, autopilot: str, sysid: int
+) -> list[tuple[MissionType, list[MissionItem]]]:
+    """Read FILE (+ --scenario) for vehicle ``sysid`` with ``autopilot``'s conventions; validate every list.
 
     Called once before any network I/O (with --autopilot, or "px4" when it is auto) so bad input
-    never reaches the vehicle, and again with the vehicle's autopilot: a WPL file is uploaded
-    row for row either way; .plan and plan.json get ArduPilot's home item only for ArduPilot.
+    never reaches a vehicle, and again with the vehicle's autopilot: a WPL file is uploaded row
+    for row either way; .plan and plan.json get ArduPilot's home item only for ArduPilot.
     """
-    mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=args.sysid)
+    mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=sysid)
     if args.scenario:
         scenario = load_scenario(args.scenario)
         mf.fence, mf.rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
     return lists_to_upload(mf, autopilot)
 
 
+def target_sysids(args: argparse.Namespace) -> list[int]:
+    """--sysid as a list; 'all' means every vehicle of plan.json."""
+    if args.sysid is not None:
+        sysids = args.sysid
+    elif args.file.lower().endswith(".json"):
+        sysids = [v.sysid for v in load_plan_json(args.file).vehicles]
+    else:
+        raise UserError("--sysid all needs a plan.json FILE (a .plan or WPL file has no vehicles)")
+    if len(sysids) > 1 and args.vehicle:
+        raise UserError("--vehicle picks one vehicle of plan.json; give a single --sysid with it")
+    return sysids
+
+
 def run(args: argparse.Namespace) -> int:
-    prepare(args, args.autopilot if args.autopilot != "auto" else "px4")
-    return asyncio.run(_upload(args))
+    sysids = target_sysids(args)
+    for sysid in sysids:  # fail on bad input before touching the network
+        prepare(args, args.autopilot if args.autopilot != "auto" else "px4", sysid)
+    if len(sysids) == 1:
+        args.sysid = sysids[0]
+        return asyncio.run(_upload_one(args))
+    return asyncio.run(_upload_many(args, sysids))
 
 
-async def _upload(args: argparse.Namespace) -> int:
+async def _upload_one(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
         autopilot = autopilot_of(heartbeat, args.autopilot)
-        lists = prepare(args, autopilot)
+        lists = prepare(args, autopilot, args.sysid)
         client = MissionClient(link, args.sysid, args.compid)
-        print(f"vehicle {args.sysid} ({autopilot}) on {args.connect}")
+        print(f"vehicle {args.sysid} ({autopilot})")
         print(f"{'list':<8} {'items':>6} {'result':<10} {'opaque_id':>10} {'time_s':>7} verified")
         for mission_type, items in lists:
             t0 = time.monotonic()
@@ -80,4 +115,45 @@ async def _upload(args: argparse.Namespace) -> int:
                 f"{name:<8} {len(items):>6} {'ACCEPTED':<10} {result.opaque_id:>10} {elapsed_s:>7.2f}"
                 f" {'yes' if result.verified else 'no'}"
             )
+    return 0
+
+
+async def _upload_many(args: argparse.Namespace, sysids: list[int]) -> int:
+    async with fleet_link(args, sysids) as link:
+        by_type: dict[MissionType, dict[int, list[MissionItem]]] = {}
+        for sysid in sysids:
+            autopilot = autopilot_of(link.vehicles[sysid], args.autopilot)
+            for mission_type, items in prepare(args, autopilot, sysid):
+                by_type.setdefault(mission_type, {})[sysid] = items
+        results = {}
+        with progress_bar(sum(len(m) for m in by_type.values()), "uploading", unit="list") as bar:
+            for mission_type, missions in by_type.items():
+                results[mission_type] = await upload_fleet(
+                    link,
+                    missions,
+                    workers=args.workers,
+                    retries=args.retries,
+                    progress=lambda done, total, result: bar.update(1),
+                    mission_type=mission_type,
+                    compid=args.compid,
+                    verify=args.verify,
+                )
+    print(
+        f"{'sysid':>5} {'list':<8} {'items':>6} {'result':<10} {'tries':>5} {'opaque_id':>10} {'time_s':>7}"
+    )
+    failures = []
+    for sysid in sysids:
+        for mission_type, per_vehicle in results.items():
+            r = per_vehicle[sysid]
+            name = mission_type.name.lower()
+            count = len(by_type[mission_type][sysid])
+            verdict = "ACCEPTED" if r.ok else "FAILED"
+            row = f"{sysid:>5} {name:<8} {count:>6} {verdict:<10} {r.attempts:>5} {r.opaque_id:>10}"
+            print(f"{row} {r.elapsed_s:>7.2f}")
+            if not r.ok:
+                failures.append(f"vehicle {sysid} {name}: {r.error}")
+    if failures:
+        raise UserError(
+            f"{len(failures)} of {sum(len(m) for m in results.values())} uploads failed; {failures[0]}"
+        )
     return 0
