@@ -43,6 +43,7 @@ def test_every_vehicle_position_plan_and_metadata_read_back(logged):
         np.testing.assert_allclose(track.alt_m, [m.alt * 1e-3 for m in sent])
         np.testing.assert_allclose(track.rel_alt_m, 30.0)
         np.testing.assert_allclose(track.ground_speed_mps, 10.0)
+        np.testing.assert_allclose(track.heading_deg, 90.0)
         np.testing.assert_allclose(np.diff(track.t_s), 0.1, atol=2e-6)  # us-rounded
         t, seq = flight.mission_current[s]
         assert list(seq) == list(range(6))

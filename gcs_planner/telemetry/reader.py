@@ -7,8 +7,8 @@ at the first incomplete or corrupt record, ``Flight.truncated`` is set and
 result as an indexed read.
 
 Positions, ground speed and mission progress are decoded from the raw frames (the lossless
-channel) with pymavlink, so they do not depend on the JSON channels; the JSON channels are kept
-as bytes and decoded on demand by ``Flight.messages``.
+channel) with pymavlink's own payload structs, so they do not depend on the JSON channels; the
+JSON channels are kept as bytes and decoded on demand by ``Flight.messages``.
 """
 
 from __future__ import annotations
@@ -16,13 +16,16 @@ from __future__ import annotations
 import json
 import logging
 import os
+import struct
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from mcap.records import Attachment, Channel, Footer, Message, Metadata
-from mcap.stream_reader import StreamReader
+import zstandard
+from mcap.opcode import Opcode
+from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata
+from mcap.stream_reader import StreamReader, breakup_chunk
 
 from gcs_planner.geo import Origin
 from gcs_planner.plan import Plan
@@ -33,8 +36,6 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 __all__ = ["Flight", "RawFrame", "Track", "frame_msgid", "read_flight"]
 
 log = logging.getLogger(__name__)
-
-_POSITION_MSGIDS = {33, 42, 74}  # GLOBAL_POSITION_INT, MISSION_CURRENT, VFR_HUD
 
 
 @dataclass(frozen=True)
@@ -169,52 +170,30 @@ def frame_msgid(raw: bytes) -> int:
 def read_flight(path: str | Path) -> Flight:
     """Read a flight log; never raises on a truncated or corrupt tail (see module docstring)."""
     path = Path(path)
-    flight = Flight(path=path)
-    channels: dict[int, Channel] = {}
-    raw_channels: dict[int, int] = {}
-    json_channels: dict[int, tuple[int, str]] = {}
-    event_channel = -1
-    json_rows: dict[tuple[int, str], list[tuple[int, bytes]]] = defaultdict(list)
-    complete = False
+    collector = _Collector(Flight(path=path))
+    flight = collector.flight
     with open(path, "rb") as stream:
         try:
-            for record in StreamReader(stream, record_size_limit=1 << 31).records:
-                if isinstance(record, Message):
-                    flight.recovered_messages += 1
-                    cid = record.channel_id
-                    if cid in raw_channels:
-                        flight.frames.append(RawFrame(record.log_time, raw_channels[cid], record.data))
-                    elif cid in json_channels:
-                        json_rows[json_channels[cid]].append((record.log_time, record.data))
-                    elif cid == event_channel:
-                        flight.events.append((record.log_time * 1e-9, json.loads(record.data)))
-                elif isinstance(record, Channel):
-                    if record.id in channels:
-                        continue
-                    channels[record.id] = record
-                    parts = record.topic.split("/")
-                    if len(parts) == 4 and parts[1] == "mavlink":
-                        if parts[3] == "raw":
-                            raw_channels[record.id] = int(parts[2])
-                        else:
-                            json_channels[record.id] = (int(parts[2]), parts[3])
-                    elif record.topic == "/events":
-                        event_channel = record.id
-                elif isinstance(record, Attachment):
-                    flight.attachments[record.name] = record.data
-                elif isinstance(record, Metadata):
-                    flight.metadata.setdefault(record.name, {}).update(record.metadata)
-                elif isinstance(record, Footer):
-                    complete = True
+            for record in StreamReader(stream, emit_chunks=True, record_size_limit=1 << 31).records:
+                if not isinstance(record, Chunk):
+                    collector.record(record)
+                    continue
+                rows = _chunk_messages(record)
+                if rows is None:  # not only messages inside (another writer): the generic path
+                    for inner in breakup_chunk(record):
+                        collector.record(inner)
+                else:
+                    for channel_id, log_time, data in rows:
+                        collector.message(channel_id, log_time, data)
         except Exception as exc:  # noqa: BLE001 - a cut tail raises EndOfFile, struct, zstd or CRC errors
             flight.error = f"{type(exc).__name__}: {exc}"
-    flight.truncated = not complete
+    flight.truncated = not collector.complete
     if flight.truncated:
         log.info(
             "%s: truncated log; recovered %d messages (%s)", path, flight.recovered_messages, flight.error
         )
     flight.frames.sort(key=lambda f: f.t_ns)
-    flight._json = dict(json_rows)
+    flight._json = dict(collector.json_rows)
     if "plan.json" in flight.attachments:
         flight.plan = Plan.from_dict(json.loads(flight.attachments["plan.json"]))
     if "scenario.toml" in flight.attachments:
@@ -223,38 +202,129 @@ def read_flight(path: str | Path) -> Flight:
     return flight
 
 
+class _Collector:
+    """Sorts records of a flight log into a Flight as they are read."""
+
+    def __init__(self, flight: Flight) -> None:
+        self.flight = flight
+        self.channels: dict[int, Channel] = {}
+        self.raw_channels: dict[int, int] = {}
+        self.json_channels: dict[int, tuple[int, str]] = {}
+        self.event_channel = -1
+        self.json_rows: dict[tuple[int, str], list[tuple[int, bytes]]] = defaultdict(list)
+        self.complete = False
+
+    def message(self, channel_id: int, log_time: int, data: bytes) -> None:
+        flight = self.flight
+        flight.recovered_messages += 1
+        sysid = self.raw_channels.get(channel_id)
+        if sysid is not None:
+            flight.frames.append(RawFrame(log_time, sysid, data))
+        elif channel_id in self.json_channels:
+            self.json_rows[self.json_channels[channel_id]].append((log_time, data))
+        elif channel_id == self.event_channel:
+            flight.events.append((log_time * 1e-9, json.loads(data)))
+
+    def record(self, record) -> None:
+        if isinstance(record, Message):
+            self.message(record.channel_id, record.log_time, record.data)
+        elif isinstance(record, Channel):
+            if record.id in self.channels:
+                return
+            self.channels[record.id] = record
+            parts = record.topic.split("/")
+            if len(parts) == 4 and parts[1] == "mavlink":
+                if parts[3] == "raw":
+                    self.raw_channels[record.id] = int(parts[2])
+                else:
+                    self.json_channels[record.id] = (int(parts[2]), parts[3])
+            elif record.topic == "/events":
+                self.event_channel = record.id
+        elif isinstance(record, Attachment):
+            self.flight.attachments[record.name] = record.data
+        elif isinstance(record, Metadata):
+            self.flight.metadata.setdefault(record.name, {}).update(record.metadata)
+        elif isinstance(record, Footer):
+            self.complete = True
+
+
+_RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
+_MESSAGE_HEAD = struct.Struct("<HIQ")  # channel id, sequence, log time (publish time follows)
+
+
+def _chunk_messages(chunk: Chunk) -> list[tuple[int, int, bytes]] | None:
+    """(channel id, log time, data) of a zstd/uncompressed chunk holding only messages, else None.
+
+    The fast path for our own logs: ~3x faster than building an mcap Message object per record.
+    """
+    if chunk.compression == "zstd":
+        data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+    elif chunk.compression == "":
+        data = chunk.data
+    else:
+        return None
+    rows = []
+    append = rows.append
+    record_head, message_head = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from
+    pos, end = 0, len(data)
+    while pos < end:
+        opcode, length = record_head(data, pos)
+        if opcode != Opcode.MESSAGE:
+            return None
+        channel_id, _, log_time = message_head(data, pos + 9)
+        append((channel_id, log_time, data[pos + 9 + 22 : pos + 9 + length]))
+        pos += 9 + length
+    return rows
+
+
+def _payload(raw: bytes, size: int) -> bytes | None:
+    """A frame's payload padded to ``size`` (MAVLink 2 trims trailing zero bytes), or None if short.
+
+    The CRC is not checked again: the raw channel holds frames the link already accepted.
+    """
+    start = 10 if raw[0] == 0xFD else 6
+    payload = raw[start : start + raw[1]]
+    if len(raw) < start + raw[1] + 2:
+        return None
+    return payload + bytes(size - len(payload)) if len(payload) < size else payload[:size]
+
+
+_GPI = mavlink.MAVLink_global_position_int_message
+_MISSION_CURRENT = mavlink.MAVLink_mission_current_message
+_MISSION_SEQ = _MISSION_CURRENT.ordered_fieldnames.index("seq")
+
+
 def _decode_positions(flight: Flight) -> None:
-    parser = mavlink.MAVLink(None)
-    parser.robust_parsing = True
+    """GLOBAL_POSITION_INT and MISSION_CURRENT from the raw frames, unpacked with pymavlink's structs."""
+    gpi_unpack, gpi_size = _GPI.unpacker.unpack, _GPI.unpacker.size
+    mc_unpack, mc_size = _MISSION_CURRENT.unpacker.unpack, _MISSION_CURRENT.unpacker.size
+    gpi_index = [_GPI.ordered_fieldnames.index(n) for n in _GPI.fieldnames]
     rows: dict[int, list[tuple]] = defaultdict(list)
     mission: dict[int, list[tuple[float, int]]] = defaultdict(list)
     for f in flight.frames:
         msgid = frame_msgid(f.data)
-        if msgid not in _POSITION_MSGIDS:
-            continue
-        try:
-            msg = parser.decode(bytearray(f.data))
-        except mavlink.MAVError:
-            continue
-        t_s = f.t_ns * 1e-9
         if msgid == 33:
-            heading = msg.hdg / 100.0 if msg.hdg != 65535 else np.nan
-            rows[f.sysid].append(
-                (
-                    t_s,
-                    msg.lat * 1e-7,
-                    msg.lon * 1e-7,
-                    msg.alt * 1e-3,
-                    msg.relative_alt * 1e-3,
-                    float(np.hypot(msg.vx, msg.vy)) * 1e-2,
-                    heading,
-                )
-            )
+            payload = _payload(f.data, gpi_size)
+            if payload is not None:
+                values = gpi_unpack(payload)
+                rows[f.sysid].append((f.t_ns, *(values[i] for i in gpi_index)))
         elif msgid == 42:
-            mission[f.sysid].append((t_s, msg.seq))
+            payload = _payload(f.data, mc_size)
+            if payload is not None:
+                mission[f.sysid].append((f.t_ns * 1e-9, mc_unpack(payload)[_MISSION_SEQ]))
     for sysid, r in rows.items():
-        a = np.asarray(r, dtype=float)
-        flight.positions[sysid] = Track(*(a[:, i] for i in range(7)))
+        # columns: t_ns, time_boot_ms, lat, lon, alt, relative_alt, vx, vy, vz, hdg
+        a = np.asarray(r, dtype=np.int64)
+        hdg = a[:, 9].astype(float)
+        flight.positions[sysid] = Track(
+            t_s=a[:, 0] * 1e-9,
+            lat_deg=a[:, 2] * 1e-7,
+            lon_deg=a[:, 3] * 1e-7,
+            alt_m=a[:, 4] * 1e-3,
+            rel_alt_m=a[:, 5] * 1e-3,
+            ground_speed_mps=np.hypot(a[:, 6], a[:, 7]) * 1e-2,
+            heading_deg=np.where(hdg == 65535, np.nan, hdg / 100.0),
+        )
     for sysid, m in mission.items():
         a = np.asarray(m, dtype=float)
         flight.mission_current[sysid] = (a[:, 0], a[:, 1].astype(int))
