@@ -431,11 +431,13 @@ class MockVehicle:
         return CommandResult.ACCEPTED
 
     def _send_version(self) -> None:
-        self.send(
-            mavlink.MAVLink_autopilot_version_message(
-                _CAPABILITIES, 0, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, self.sysid
-            )
-        )  # fmt: skip  uid = sysid: two mocks with one sysid stay distinguishable by port only
+        """AUTOPILOT_VERSION; uid = UDP port, so two mocks given one sysid report different uids."""
+        uid = self.address[1]
+        version = [0] * 8
+        msg = mavlink.MAVLink_autopilot_version_message(
+            _CAPABILITIES, 0, 0, 0, 0, version, version, version, 0, 0, uid
+        )
+        self.send(msg)
 
     # --- modes -------------------------------------------------------------------------------
     def _set_mode_name(self, name: str, start: bool = True) -> bool:

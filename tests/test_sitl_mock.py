@@ -297,6 +297,11 @@ def test_scripted_mission_failure_and_duplicate_sysids():
     with MockFleet(vehicles=[{"sysid": 7}, {"sysid": 7}], speedup=5.0) as fleet:
         a, b = Probe(fleet.addresses[0]), Probe(fleet.addresses[1])
         assert {a.recv("HEARTBEAT").get_srcSystem(), b.recv("HEARTBEAT").get_srcSystem()} == {7}
+        uids = []
+        for probe in (a, b):
+            assert probe.command(7, 512, 148) == ACCEPTED  # REQUEST_MESSAGE(AUTOPILOT_VERSION)
+            uids.append(probe.recv("AUTOPILOT_VERSION").uid)
+        assert uids[0] != uids[1]  # a GCS can tell the two apart
         fleet.set_mission_failure(7, "write_count_no_response")  # both vehicles with sysid 7
         assert a.upload(7, items, timeout_s=1.0) is None  # MISSION_COUNT ignored
         fleet.call(lambda: setattr(fleet.vehicles[0].mission_server, "failure", Failure.NONE))
