@@ -229,7 +229,7 @@ def test_plan_is_registered_flies_clean_and_round_trips(scenario, tmp_path):
     np.testing.assert_allclose(v.waypoints[0], [3e3, 3e3, 1e3])
     np.testing.assert_allclose(v.waypoints[-1], [90e3, 92e3, 2e3], atol=1.0)
     assert v.feasible and validate_path(ThreatEnv.from_scenario(small, 500.0), v.waypoints, 100.0).ok
-    assert np.all(np.diff(v.times_s) > 0) and v.times_s[-1] == pytest.approx(v.cost["length_m"] / 60.0)
+    assert np.all(np.diff(v.times_s) > 0) and v.times_s[-1] == pytest.approx(v.cost["length_m"] / 25.0)
     assert v.cost["fitness"] >= 37.339 and v.cost["flown_radar_violations"] == 0.0
     again = plan_scenario(small, seed=3)
     np.testing.assert_array_equal(again.vehicles[0].waypoints, v.waypoints)
