@@ -117,6 +117,7 @@ def test_logger_writes_to_a_stream_and_a_tlog(tmp_path):
     with FlightLogger(stream, ORIGIN, tlog_path=tmp_path / "f.tlog") as logger:
         for msg, raw, t_s in frames:
             logger.on_frame(msg, raw, t_s)
+    logger.on_frame(*frames[0])  # a subscription outliving the logger: ignored, no error
     assert not stream.closed and stream.getvalue().endswith(b"\x89MCAP0\r\n")
     data = (tmp_path / "f.tlog").read_bytes()
     assert data == b"".join(int.to_bytes((round(t * 1e6)) & ~3, 8, "big") + raw for _, raw, t in frames)

@@ -120,7 +120,13 @@ class FlightLogger:
         self.close()
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
-        """Record one received frame; matches MavlinkLink.subscribe's callback (msg, raw, t_s)."""
+        """Record one received frame; matches MavlinkLink.subscribe's callback (msg, raw, t_s).
+
+        Thread-safe and cheap (queues only). Frames arriving after close() are ignored, so a link
+        subscription may outlive the logger.
+        """
+        if self._closed:
+            return
         with self._lock:
             self._pending.append((t_s, msg, raw))
             drain = len(self._pending) >= self.max_pending
