@@ -104,6 +104,11 @@ def print_table(results: dict[str, dict[str, dict]], runs: int) -> None:
             f" var <= 0.318: {acm.var(ddof=1) <= 0.318};"
             f" ACMPSO < LPSO < BPSO: {acm.mean() < lp.mean() < bp.mean()}"
         )
+        times = "; ".join(
+            f"{a} median {np.median(per_alg[a]['seconds']):.4f} min {per_alg[a]['seconds'].min():.4f}"
+            for a in ORDER
+        )
+        print(f"  {variant}: CPU s per run: {times}")
         n = len(acm)
         se = np.sqrt(acm.var(ddof=1) / n + lp.var(ddof=1) / n)
         se_paper = np.sqrt((PAPER["acmpso"][2] + PAPER["lpso"][2]) / 100)
