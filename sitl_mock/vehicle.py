@@ -417,17 +417,18 @@ class MockVehicle:
         return CommandResult.ACCEPTED
 
     def _cmd_request_message(self, p1: float, *_: float) -> CommandResult:
+        """The requested message follows the ACK (so a GCS waiting for the ACK does not skip it)."""
         msg_id = int(p1)
         if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
-            self._send_version()
+            self._after_ack = self._send_version
         elif msg_id == mavlink.MAVLINK_MSG_ID_HOME_POSITION:
-            self.send_home()
+            self._after_ack = self.send_home
         else:
             return CommandResult.UNSUPPORTED
         return CommandResult.ACCEPTED
 
     def _cmd_capabilities(self, *_: float) -> CommandResult:
-        self._send_version()
+        self._after_ack = self._send_version
         return CommandResult.ACCEPTED
 
     def _send_version(self) -> None:
