@@ -110,8 +110,48 @@ def test_determinism_for_a_seed():
     a = simulate(_small_world({}), np.random.default_rng(7))
     b = simulate(_small_world({}), np.random.default_rng(7))
 
-    def strip(events):  # wall-clock compute time is the only non-deterministic field
-        return [{k: v for k, v in e.items() if k != "compute_s"} for e in events]
+    def strip(events):  # wall-clock compute times are the only non-deterministic fields
+        return [{k: v for k, v in e.items() if k not in ("compute_s", "optimiser_s")} for e in events]
 
     assert strip(a.events) == strip(b.events)
     assert len(a.events) > 10
+
+
+def test_conflicting_tenders_lower_reward_leader_postpones_and_retenders():
+    """Leaders LA (target A, 2 strikes) and LB (target B, 2 strikes + 1 assessment) tender at the
+    same time; LA receives the richer B tender while its own is open, postpones A, bids on B, and
+    re-tenders A when it is released."""
+    strikers = [
+        (-900.0, 300.0),
+        (-200.0, 900.0),
+        (300.0, 900.0),
+        (900.0, 400.0),
+        (0.0, -1200.0),
+        (-700.0, -900.0),
+    ]
+    uavs = [
+        UavSpec(0, "LA", 1, (-400.0, -900.0), math.pi / 2, 300.0, 50.0, 150.0, 18000.0, 0, True, False, True),
+        UavSpec(1, "LB", 2, (400.0, -900.0), math.pi / 2, 300.0, 50.0, 150.0, 18000.0, 0, True, False, False),
+    ]
+    for k, xy in enumerate(strikers, start=2):
+        uavs.append(
+            UavSpec(k, f"S{k}", k + 1, xy, 0.3 * k, 500.0, 60.0, 200.0, 26000.0, 2, False, True, False)
+        )
+    common = dict(recon_s=5.0, recon_angle_rad=-math.pi / 2, strike_angles_rad=(0.0, math.pi))
+    a = _target(id="A", approx_xy=(-400.0, 0.0), xy=(-400.0, 0.0), recon_uav="LA", **common)
+    b = _target(
+        id="B", approx_xy=(400.0, 0.0), xy=(400.0, 0.0), recon_uav="LB", assess_angles_rad=(0.0,), **common
+    )
+    params = CoalitionParams(t_end_s=400.0, margin_s=2.0, station_radius_m=700.0)
+    res = simulate(World(uavs=uavs, targets=[a, b], threats=[], params=params), np.random.default_rng(0))
+    ev = res.events
+    tenders = [e for e in ev if e["event"] == "tender"]
+    assert tenders[0]["t_s"] == pytest.approx(tenders[1]["t_s"], abs=1e-6)  # simultaneous by symmetry
+    postponed = [e for e in ev if e["event"] == "tender_postponed"]
+    assert [(e["uav"], e["target"], e["for_target"]) for e in postponed] == [("LA", "A", "B")]
+    # LA stays locked to B until B's formation fails (or its B task ends), then re-tenders A at once
+    b_fail = next(e["t_s"] for e in ev if e["event"] == "formation_failed" and e["target"] == "B")
+    retender_a = [e for e in tenders if e["target"] == "A" and e["t_s"] > tenders[0]["t_s"]]
+    assert retender_a and retender_a[0]["t_s"] == pytest.approx(b_fail)
+    assert not [e for e in ev if e["event"] == "formed" and e["target"] == "A" and e["t_s"] < b_fail]
+    assert res.outcomes["A"].t_done_s is not None and res.outcomes["B"].t_done_s is not None
