@@ -200,18 +200,29 @@ def med(values: list[float]) -> float:
     return statistics.median(values)
 
 
-def loopback(profile: str, sizes: list[int], reps: int) -> None:
-    print(f"\n## loopback, profile {profile}: median upload time [ms] over {reps} uploads")
-    with Mock(1, profile) as mock:
-        address = mock.addresses[0]
-        ours_t = ours(address, sizes, reps)
-        loop_t = pymavlink_loop(address, sizes, reps)
-        sdk_t = mavsdk_client(address, sizes, reps)
+def loopback(profile: str, sizes: list[int], reps: int, rounds: int = 3) -> None:
+    """Each client gets a fresh mock (one peer, nothing stale) per round; client order rotates per round,
+    so drifting machine load hits all three alike. Medians over rounds x reps uploads."""
+    print(f"\n## loopback, profile {profile}: median upload time [ms] over {rounds} x {reps} uploads")
+    clients = {"ours": ours, "pymavlink": pymavlink_loop, "mavsdk": mavsdk_client}
+    samples: dict[str, dict[int, list[float]]] = {name: {n: [] for n in sizes} for name in clients}
+    for r in range(rounds):
+        names = list(clients)[r % 3 :] + list(clients)[: r % 3]
+        for name in names:
+            with Mock(1, profile) as mock:
+                got = clients[name](mock.addresses[0], sizes, reps)
+            if got is None:
+                samples.pop(name, None)
+                continue
+            for n in sizes:
+                samples[name][n] += got[n]
+    sdk = samples.get("mavsdk")
     print(f"{'items':>6} {'ours_ms':>9} {'pymavlink_ms':>13} {'mavsdk_ms':>10} {'ours/mavsdk':>12}")
     for n in sizes:
-        sdk = f"{1e3 * med(sdk_t[n]):>10.1f}" if sdk_t else f"{'n/a':>10}"
-        ratio = f"{med(ours_t[n]) / med(sdk_t[n]):>12.2f}" if sdk_t else f"{'n/a':>12}"
-        print(f"{n:>6} {1e3 * med(ours_t[n]):>9.1f} {1e3 * med(loop_t[n]):>13.1f} {sdk} {ratio}")
+        o, p = med(samples["ours"][n]), med(samples["pymavlink"][n])
+        sdk_ms = f"{1e3 * med(sdk[n]):>10.1f}" if sdk else f"{'n/a':>10}"
+        ratio = f"{o / med(sdk[n]):>12.2f}" if sdk else f"{'n/a':>12}"
+        print(f"{n:>6} {1e3 * o:>9.1f} {1e3 * p:>13.1f} {sdk_ms} {ratio}")
 
 
 def delayed(profile: str, n: int, reps: int) -> None:
@@ -257,9 +268,7 @@ def lossy(profile: str, n: int, uploads: int) -> None:
 
 
 def fleet(profile: str, count: int, n: int, delay_s: float) -> None:
-    print(
-        f"\n## {count} vehicles vs one, profile {profile}, {n} items, delay {delay_s * 1e3:.0f} ms"
-    )
+    print(f"\n## {count} vehicles vs one, profile {profile}, {n} items, delay {delay_s * 1e3:.0f} ms")
 
     async def run(addresses, workers):
         link = await _connect(addresses)
