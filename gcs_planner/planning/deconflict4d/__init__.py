@@ -178,7 +178,13 @@ def build_problem(scenario: Scenario) -> Problem:
     for j, d in enumerate(scenario.raw.get("manned", [])):
         track = _manned_track(d, f"{scenario.name}: manned[{j}]")
         zones += predict_zones(
-            track, j, horizon, zone_cfg["safety_m"], zone_cfg["confidence"], zone_cfg["min_mode_weight"]
+            track,
+            j,
+            horizon,
+            zone_cfg["safety_m"],
+            zone_cfg["confidence"],
+            zone_cfg["min_mode_weight"],
+            settings.zone_step_s,
         )
     return Problem(uavs=uavs, zones=zones, settings=settings, lower_m=lower, upper_m=upper)
 
@@ -231,7 +237,7 @@ def _manned_summary(scenario: Scenario, problem: Problem) -> list[dict]:
         track = _manned_track(d, f"manned[{j}]")
         zones = [z for z in problem.zones if z.owner == j]
         best = max(zones, key=lambda z: z.weight)
-        vel = (best.centres_m[1] - best.centres_m[0]) / track.dt_s
+        vel = (best.centres_m[1] - best.centres_m[0]) / (best.times_s[1] - best.times_s[0])
         out.append(
             {
                 "id": track.id,

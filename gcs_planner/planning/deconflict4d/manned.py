@@ -200,11 +200,18 @@ def predict_zones(
     safety_m: float,
     confidence: float = 0.95,
     min_mode_weight: float = 0.01,
+    step_s: float | None = None,
 ) -> list[Zone]:
-    """Moving no-fly zones (one per plausible mode) from the last observation to ``t_end_s``."""
+    """Moving no-fly zones (one per plausible mode) from the last observation to ``t_end_s``.
+
+    ``step_s`` (a multiple of the track's dt_s; default dt_s) is the spacing of the zone's
+    polyline: between steps the centre moves linearly and the step-end ellipsoid is used, so a
+    coarser step is cheaper to check and more conservative.
+    """
     t_last = float(track.times_s[-1])
-    n_steps = max(1, math.ceil((t_end_s - t_last) / track.dt_s))
-    steps = np.arange(n_steps + 1, dtype=float)
+    every = max(1, round((step_s or track.dt_s) / track.dt_s))
+    n_steps = max(1, math.ceil((t_end_s - t_last) / (track.dt_s * every))) * every
+    steps = np.arange(0, n_steps + 1, every, dtype=float)
     zones = []
     for (name, prior, _), weight in zip(track.modes, mode_weights(track), strict=True):
         if weight < min_mode_weight:

@@ -91,6 +91,8 @@ class Settings:
     w_min: float = 0.4
     init_spread_m: float = 3.0
     insert_spread_m: float = 2.0
+    insert_radius_m: float = 10.0
+    zone_step_s: float = 5.0
     early_stop: bool = True
     w_conflict: float = 1000.0
     w_accel: float = 100.0
@@ -126,13 +128,11 @@ class Problem:
     settings: Settings
     lower_m: np.ndarray  # (3,) box for waypoints
     upper_m: np.ndarray
+    zone_arrays: tuple[np.ndarray, ...] | None = None  # stacked zones (computed when None)
 
     def __post_init__(self) -> None:
-        self._zone_arrays = _stack_zones(self.zones)
-
-    @property
-    def zone_arrays(self) -> tuple[np.ndarray, ...]:
-        return self._zone_arrays
+        if self.zone_arrays is None:
+            self.zone_arrays = _stack_zones(self.zones)
 
 
 @dataclass
@@ -513,8 +513,17 @@ def _stage_delay(problem: Problem, tracks: list[Track], events: list[dict]) -> t
         if not counts.any():
             break
         order = np.lexsort((np.arange(len(counts)), -counts))
+        # a delay may not push the arrival past the time-error limit (nor past max_delay_s)
+        slack = np.array([u.dyn.max_time_error_s for u in problem.uavs]) - ev.terms["time_error_s"][0]
         pick = next(
-            (int(u) for u in order if counts[u] and tracks[u].delay_s + s.delay_step_s <= s.max_delay_s), None
+            (
+                int(u)
+                for u in order
+                if counts[u]
+                and tracks[u].delay_s + s.delay_step_s <= s.max_delay_s
+                and slack[u] >= s.delay_step_s
+            ),
+            None,
         )
         if pick is None:
             break
@@ -548,6 +557,38 @@ def _insert_waypoint(problem: Problem, track: Track, u: int, t_c: float) -> tupl
     return Track(waypoints, legs, track.delay_s), k + 1
 
 
+def _local_problem(
+    problem: Problem, tracks: list[Track], u: int, new_wp: np.ndarray, ev: _Eval
+) -> tuple[Problem, list[int]]:
+    """The waypoint-insertion sub-problem: UAV u (index 0) and the UAVs it could meet.
+
+    The new waypoint may move within ``insert_radius_m`` of where it was inserted, so u stays in
+    the box of its current polyline grown by that radius; only UAVs whose flown polylines come
+    within separation + margins of that box matter (the others are constant in the cost).
+    """
+    s = problem.settings
+    layout = _Layout(problem, tracks, {})
+    pts, tms = layout.decode(np.zeros((1, 0)))
+    radius = s.insert_radius_m
+    lo = np.minimum(pts[0, u].min(axis=0), new_wp - radius)
+    hi = np.maximum(pts[0, u].max(axis=0), new_wp + radius)
+    reach = max(v.separation_m for v in problem.uavs) + 2 * float(s.insert_radius_m)
+    near = np.all((pts[0].min(axis=1) <= hi + reach) & (pts[0].max(axis=1) >= lo - reach), axis=1)
+    near[u] = False
+    members = [u] + [int(i) for i in np.nonzero(near)[0]]
+    box_lo = np.maximum(problem.lower_m, new_wp - radius)
+    box_hi = np.minimum(problem.upper_m, new_wp + radius)
+    sub = Problem(
+        uavs=[problem.uavs[m] for m in members],
+        zones=problem.zones,
+        settings=s,
+        lower_m=box_lo,
+        upper_m=box_hi,
+        zone_arrays=problem.zone_arrays,
+    )
+    return sub, members
+
+
 def _stage_waypoints(
     problem: Problem, tracks: list[Track], rng: np.random.Generator, events: list[dict]
 ) -> tuple[list[Track], dict]:
@@ -562,11 +603,13 @@ def _stage_waypoints(
         pick = next((int(u) for u in order if counts[u] and len(tracks[u].waypoints) < s.max_waypoints), None)
         if pick is None:
             break
-        trial = list(tracks)
-        trial[pick], new_idx = _insert_waypoint(problem, tracks[pick], pick, _earliest_conflict(ev, pick))
-        layout = _Layout(problem, trial, {pick: [new_idx]})
-        x, _, n_it, _ = _pso(problem, layout, np.array([pick]), s.insert_particles, s.insert_iterations, rng)
-        tracks = layout.tracks(x, trial)
+        new_track, new_idx = _insert_waypoint(problem, tracks[pick], pick, _earliest_conflict(ev, pick))
+        sub, members = _local_problem(problem, tracks, pick, new_track.waypoints[new_idx], ev)
+        sub_tracks = [new_track] + [tracks[m] for m in members[1:]]
+        layout = _Layout(sub, sub_tracks, {0: [new_idx]})
+        x, _, n_it, _ = _pso(sub, layout, np.array([0]), s.insert_particles, s.insert_iterations, rng)
+        tracks = list(tracks)
+        tracks[pick] = layout.tracks(x, sub_tracks)[0]
         iters += n_it
         added += 1
         events.append(

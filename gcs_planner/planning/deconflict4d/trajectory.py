@@ -129,7 +129,8 @@ def limit_violations(
     """Constraint excesses per trajectory (...,), all >= 0 and 0 when the limit holds.
 
     speed: sum over legs of the speed excess [m/s]; blend_overlap: sum over legs of
-    ``tau_k/2 + tau_{k+1}/2 - dt_k`` when positive [s] (the acceleration constraint of the model);
+    ``tau_k/2 + tau_{k+1}/2 - dt_k`` when positive [s] (the acceleration constraint of the model;
+    zero-duration padding legs excluded);
     turn: sum over blends of ``R_min - R`` when positive [m]. ``inflight`` (..., W) bool marks the
     points whose blends count for the turn radius (default: all). Limits broadcast like
     :func:`blend_times`.
@@ -140,7 +141,7 @@ def limit_violations(
     total = np.maximum(np.linalg.norm(v, axis=-1) - v_max, 0.0)
     speed = np.where(norm, total, per_axis).sum(axis=-1)
     dt = np.diff(times, axis=-1)
-    overlap = np.maximum(0.5 * (tau[..., :-1] + tau[..., 1:]) - dt, 0.0).sum(axis=-1)
+    overlap = np.where(dt > 0, np.maximum(0.5 * (tau[..., :-1] + tau[..., 1:]) - dt, 0.0), 0.0).sum(axis=-1)
     r_min = np.asarray(min_turn_radius_m, dtype=float)
     if np.any(r_min > 0):
         v_in, v_out = _corner_dv(points, times)
