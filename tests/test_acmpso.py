@@ -259,3 +259,23 @@ def test_bad_parameters_name_the_field(scenario):
     bad = parse_scenario(raw, "nobounds")
     with pytest.raises(ScenarioError, match="bounds.z"):
         problem_from_scenario(bad, bad.vehicles[0], AcmpsoParams())
+
+
+def test_plan_over_a_gridded_elevation_model(scenario, tmp_path):
+    # the paper's peaks sampled on a 1 km DEM: the planner works the same behind the Terrain interface
+    xs = np.arange(500.0, 100e3, 1000.0)
+    peaks = ThreatEnv.from_scenario(scenario, 500.0).terrain
+    grid = peaks.elevation(xs[None, :], xs[:, None])  # row r at y = xs[r]: geotransform dy > 0
+    np.savez(tmp_path / "dem.npz", elevation_m=grid, geotransform=[0.0, 1000.0, 0.0, 0.0, 0.0, 1000.0])
+    raw = copy.deepcopy(scenario.raw)
+    raw["terrain"] = {"type": "grid", "file": str(tmp_path / "dem.npz")}
+    raw["acmpso"].update(particles=15, iterations=20)
+    dem = parse_scenario(raw, "dem")
+    env = ThreatEnv.from_scenario(dem, 500.0)
+    assert isinstance(env.terrain, GridTerrain)
+    assert float(env.terrain.elevation(70e3, 40e3)) == pytest.approx(
+        float(peaks.elevation(70e3, 40e3)), abs=30.0
+    )
+    v = plan_scenario(dem, seed=2).vehicles[0]
+    assert v.feasible and validate_path(env, v.waypoints, 100.0).ok
+    assert np.all(v.waypoints[:, 2] >= env.floor(v.waypoints[:, 0], v.waypoints[:, 1]) - 1e-6)
