@@ -15,7 +15,7 @@ from importlib import import_module
 from gcs_planner import __version__
 from gcs_planner.errors import UserError
 
-COMMANDS = ["plan", "replay", "import-tlog", "export", "upload", "download", "clear", "start"]
+COMMANDS = ["plan", "fly", "demo", "replay", "import-tlog", "export", "upload", "download", "clear", "start"]
 
 
 def build_parser() -> argparse.ArgumentParser:

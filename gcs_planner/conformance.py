@@ -8,6 +8,7 @@ Choices:
   path polyline. It is measured only while the vehicle flies its route: from the first sample
   within ``acceptance_m`` of the first planned point to the last sample within ``acceptance_m``
   of the final planned point (take-off climb and landing are not part of the planned path).
+  ``acceptance_m`` defaults to the plan's waypoint acceptance radius + 1 m.
 - Separation is checked on a common time grid (``step_s``, default 0.1 s) after linear
   interpolation of each airborne track; exact to the distance flown in one step.
 - Obstacle clearance is the distance outside the obstacle's surface (cylinder radius without its
@@ -127,7 +128,7 @@ def conformance_report(
     cylinders: list[Cylinder] = (),
     hemispheres: list[Hemisphere] = (),
     max_cross_track_m: float = 15.0,
-    acceptance_m: float = 10.0,
+    acceptance_m: float | None = None,
     min_airborne_alt_m: float = 1.0,
     step_s: float = 0.1,
 ) -> list[VehicleReport]:
@@ -158,7 +159,8 @@ def conformance_report(
                 )
             )
             continue
-        window = _route_window(tr, vp.path, acceptance_m)
+        accept = vp.acceptance_radius_m + 1.0 if acceptance_m is None else acceptance_m
+        window = _route_window(tr, vp.path, accept)
         xt = point_to_polyline_m(tr.positions[window], vp.path)
         xt_max = float(xt.max()) if len(xt) else np.inf
         xt_mean = float(xt.mean()) if len(xt) else np.inf

@@ -12,7 +12,7 @@ MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
 
 def test_demo_scenario_plans_and_round_trips_through_json(tmp_path):
-    scenario = load_scenario(MISSIONS / "demo.toml")
+    scenario = load_scenario(MISSIONS / "straight_4uav.toml")
     plan = plan_scenario(scenario)
     plan.save(tmp_path / "plan.json")
     back = Plan.load(tmp_path / "plan.json")

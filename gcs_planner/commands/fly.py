@@ -1,0 +1,131 @@
+"""Plan a scenario and fly it: upload to every vehicle, arm, start, record, check conformance.
+
+Starts mock vehicles (sitl_mock) unless --connect names real ones or SITL. Writes
+OUT/flight.mcap (open in Foxglove), OUT/flight.rrd (open with `rerun OUT/flight.rrd`) and
+OUT/plan.json, and prints one conformance row per vehicle. Exits 1 when a vehicle fails its
+mission or breaks a separation, obstacle or cross-track bound.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+from pathlib import Path
+
+from gcs_planner.conformance import format_report
+from gcs_planner.errors import UserError
+from gcs_planner.fly import FlyOptions, fly
+from gcs_planner.plan import Plan
+from gcs_planner.planning import plan_scenario
+from gcs_planner.progress import progress_bar
+from gcs_planner.scenario import load_scenario
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scenario", help="scenario file (missions/*.toml)")
+    p.add_argument("--plan", help="fly this plan.json instead of planning the scenario")
+    p.add_argument("-o", "--out", default="out", help="output folder [out]")
+    p.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="URL",
+        help="real vehicles / SITL (udpout:HOST:PORT or udpin:HOST:PORT; repeatable)",
+    )
+    p.add_argument("--speedup", type=float, default=10.0, help="mock simulation speed-up [10]")
+    p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
+    p.add_argument("--workers", type=int, default=8, help="concurrent uploads [8]")
+    p.add_argument("--seed", type=int, default=None, help="planner seed (default: the file's)")
+    p.add_argument("--tlog", action="store_true", help="also write OUT/flight.tlog")
+    p.add_argument("--no-rrd", action="store_true", help="skip the Rerun .rrd")
+    p.add_argument(
+        "--max-cross-track",
+        type=float,
+        default=15.0,
+        metavar="M",
+        help="cross-track bound for the conformance report [15 m]",
+    )
+    p.add_argument(
+        "--drift",
+        action="append",
+        default=[],
+        metavar="SYSID:EAST:NORTH",
+        help="mock fault: navigation drift [m/s] of one vehicle (repeatable)",
+    )
+
+
+def build_parser_defaults(scenario: Path, out: str, speedup: float) -> argparse.Namespace:
+    """The fly arguments with every default, for commands that fly a fixed scenario (demo)."""
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    return parser.parse_args([str(scenario), "--out", out, "--speedup", str(speedup)])
+
+
+def _drift(values: list[str]) -> dict[int, tuple[float, float]]:
+    out = {}
+    for value in values:
+        try:
+            sysid, east, north = value.split(":")
+            out[int(sysid)] = (float(east), float(north))
+        except ValueError:
+            raise UserError(f"--drift must be SYSID:EAST:NORTH, got {value!r}") from None
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.speedup <= 0:
+        raise UserError(f"--speedup must be > 0, got {args.speedup}")
+    scenario = load_scenario(args.scenario)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if args.plan:
+        plan = Plan.load(args.plan)
+    else:
+        with progress_bar(1.0, f"planning {scenario.name}") as bar:
+            plan = plan_scenario(
+                scenario,
+                seed=args.seed,
+                progress=lambda f, m: (setattr(bar, "n", round(f, 3)), bar.refresh()),
+            )
+    plan.save(out / "plan.json")
+    if not plan.feasible:
+        bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]
+        print(f"warning: the planner reports infeasible paths for {bad}; flying anyway")
+    options = FlyOptions(
+        out_dir=out,
+        connect=args.connect,
+        speedup=args.speedup,
+        autopilot=args.autopilot,
+        workers=args.workers,
+        tlog=args.tlog,
+        rrd=not args.no_rrd,
+        max_cross_track_m=args.max_cross_track,
+        drift_mps=_drift(args.drift),
+    )
+    bars: dict[str, object] = {}
+
+    def progress(stage: str, done: float, total: float) -> None:
+        if stage not in bars:
+            bars[stage] = progress_bar(total, {"upload": "uploading", "fly": "flying"}[stage], "vehicle")
+        bars[stage].n = done
+        bars[stage].refresh()
+
+    try:
+        result = asyncio.run(fly(scenario, plan, options, progress))
+    finally:
+        for bar in bars.values():
+            bar.close()
+    print(format_report(result.reports))
+    print(
+        f"log: {result.mcap_path}  (open in Foxglove, or `gcs-planner replay {result.mcap_path} --rrd x.rrd`)"
+    )
+    if result.rrd_path:
+        print(f"rerun: {result.rrd_path}  (open with `rerun {result.rrd_path}`)")
+    if result.tlog_path:
+        print(f"tlog: {result.tlog_path}  (mavlogdump.py, MAVExplorer, QGroundControl)")
+    verdict = "PASS" if result.passed else "FAIL"
+    print(
+        f"{verdict}: {sum(r.passed for r in result.reports)}/{len(result.reports)} vehicles conform"
+        f" ({result.wall_time_s:.1f} s wall)"
+    )
+    return 0 if result.passed else 1

@@ -1,0 +1,244 @@
+"""The hardware-in-the-loop run: plan -> missions -> vehicles -> telemetry log -> conformance.
+
+Mirrors the seed papers' HIL setup (planner -> datalink -> flight controller -> telemetry ->
+display): the plan's missions are uploaded to every vehicle concurrently over MAVLink, the fleet
+is armed and started, every received frame is logged to MCAP (and .tlog on request), and the
+flown tracks are checked against the plan (gcs_planner.conformance). The vehicles are mock
+autopilots (sitl_mock) started here, or real ones / SITL reached with ``connect`` URLs.
+
+Choices:
+- Each mock vehicle's home is the plan's first waypoint projected to the ground, so mission
+  altitudes (relative to home) equal plan ``z`` on the flat mock world.
+- Track time is the vehicle's ``time_boot_ms`` for mocks (one simulated clock for the whole fleet,
+  so separations are compared at the same instant whatever the speed-up) and the receive time
+  for real vehicles, whose boot clocks differ.
+- A mission is complete when MISSION_CURRENT reports mission_state COMPLETE or the last item's
+  MISSION_ITEM_REACHED arrives.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gcs_planner.conformance import Track, VehicleReport, conformance_report
+from gcs_planner.errors import UserError
+from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.mavlink.enums import MissionState
+from gcs_planner.mavlink.fleet import VehicleResult, start_fleet, upload_fleet
+from gcs_planner.mavlink.items import plan_to_items
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.plan import Plan
+from gcs_planner.scenario import Scenario
+from gcs_planner.telemetry import FlightLogger
+
+__all__ = ["FlyOptions", "FlyResult", "fly"]
+
+log = logging.getLogger(__name__)
+
+HEARTBEAT_WAIT_S = 10.0
+TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
+
+
+@dataclass
+class FlyOptions:
+    out_dir: Path = Path("out")
+    connect: list[str] = field(default_factory=list)  # empty: start mock vehicles
+    speedup: float = 10.0
+    autopilot: str = "ardupilot"
+    workers: int = 8
+    tlog: bool = False
+    rrd: bool = True
+    max_cross_track_m: float = 15.0
+    drift_mps: dict[int, tuple[float, float]] = field(default_factory=dict)  # mock fault injection
+    timeout_factor: float = 2.0
+
+
+@dataclass
+class FlyResult:
+    reports: list[VehicleReport]
+    uploads: dict[int, VehicleResult]
+    mcap_path: Path
+    rrd_path: Path | None
+    tlog_path: Path | None
+    wall_time_s: float
+
+    @property
+    def passed(self) -> bool:
+        return all(r.passed for r in self.reports) and all(u.ok for u in self.uploads.values())
+
+
+class _TrackRecorder:
+    """Collects each vehicle's positions and mission progress from the link's frames."""
+
+    def __init__(self, origin: Origin, sim_clock: bool, last_seq: dict[int, int]) -> None:
+        self.origin = origin
+        self.sim_clock = sim_clock
+        self.last_seq = last_seq
+        self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in last_seq}
+        self.completed: set[int] = set()
+        self.started: set[int] = set()
+
+    def on_frame(self, msg, raw: bytes, t_s: float) -> None:
+        sysid = msg.get_srcSystem()
+        if sysid not in self.samples:
+            return
+        kind = msg.get_type()
+        if kind == "GLOBAL_POSITION_INT":
+            t = msg.time_boot_ms / 1000.0 if self.sim_clock else t_s
+            alt_amsl = msg.alt / 1000.0
+            self.samples[sysid].append((t, msg.lat / 1e7, msg.lon / 1e7, alt_amsl))
+        elif kind == "MISSION_CURRENT":
+            state = getattr(msg, "mission_state", MissionState.UNKNOWN)
+            if state == MissionState.ACTIVE:
+                self.started.add(sysid)
+            elif state == MissionState.COMPLETE and sysid in self.started:
+                self.completed.add(sysid)
+        elif kind == "MISSION_ITEM_REACHED" and msg.seq == self.last_seq[sysid]:
+            self.completed.add(sysid)
+
+    def tracks(self) -> dict[int, Track]:
+        out = {}
+        for sysid, rows in self.samples.items():
+            if not rows:
+                continue
+            arr = np.asarray(rows, dtype=float)
+            e, n, u = geodetic_to_enu(arr[:, 1], arr[:, 2], arr[:, 3], self.origin)
+            order = np.argsort(arr[:, 0], kind="stable")
+            out[sysid] = Track(arr[order, 0], np.column_stack([e, n, u])[order], sysid in self.completed)
+        return out
+
+
+def _mock_fleet(plan: Plan, options: FlyOptions):
+    from sitl_mock import MockFleet
+
+    specs = []
+    for vp in plan.vehicles:
+        x, y = vp.waypoints[0, :2]
+        lat, lon, alt = enu_to_geodetic(x, y, 0.0, plan.origin)
+        specs.append(
+            dict(
+                sysid=vp.sysid,
+                home=Origin(lat, lon, alt),
+                vehicle_type=vp.vehicle_type,
+                profile=options.autopilot,
+            )
+        )
+    return MockFleet(vehicles=specs, speedup=options.speedup, home=plan.origin)
+
+
+async def _wait_for_vehicles(link: MavlinkLink, sysids: list[int], timeout_s: float) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if all(s in link.vehicles for s in sysids):
+            break
+        await asyncio.sleep(0.05)
+    missing = [s for s in sysids if s not in link.vehicles]
+    if missing:
+        raise UserError(f"no heartbeat from sysid {missing} within {timeout_s:.0f} s")
+    duplicates = link.duplicates()
+    if duplicates:
+        raise UserError(f"system ids answer from several addresses (refusing to merge): {duplicates}")
+
+
+async def fly(
+    scenario: Scenario,
+    plan: Plan,
+    options: FlyOptions,
+    progress: Callable[[str, float, float], None] | None = None,
+) -> FlyResult:
+    """Upload, start and record the whole fleet; return the per-vehicle conformance report.
+
+    ``progress(stage, done, total)`` reports "upload" (vehicles) and "fly" (completed vehicles).
+    """
+    t_wall = time.monotonic()
+    # validate every mission before anything is sent
+    missions = {vp.sysid: plan_to_items(vp, plan.origin, options.autopilot) for vp in plan.vehicles}
+    options.out_dir.mkdir(parents=True, exist_ok=True)
+    mcap_path = options.out_dir / "flight.mcap"
+    tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
+    sysids = list(missions)
+    fleet = None if options.connect else _mock_fleet(plan, options)
+    speedup = 1.0 if fleet is None else options.speedup
+    scenario_text = scenario.path.read_text() if scenario.path else None
+    if fleet is not None:
+        fleet.__enter__()
+    try:
+        urls = options.connect or [f"udpout:{h}:{p}" for h, p in fleet.addresses]
+        link = await MavlinkLink.open(*urls)
+        recorder = _TrackRecorder(
+            plan.origin, fleet is not None, {s: len(m) - 1 for s, m in missions.items()}
+        )
+        with FlightLogger(mcap_path, plan.origin, plan, scenario_text, tlog_path) as logger:
+            link.subscribe(logger.on_frame)
+            link.subscribe(recorder.on_frame)
+            try:
+                await _wait_for_vehicles(link, sysids, HEARTBEAT_WAIT_S)
+                uploads = await upload_fleet(
+                    link,
+                    missions,
+                    workers=options.workers,
+                    progress=lambda done, total, r: progress and progress("upload", done, total),
+                )
+                for sysid, r in uploads.items():
+                    logger.log_event(
+                        {"event": "upload", "sysid": sysid, "ok": r.ok, "error": str(r.error or "")}
+                    )
+                failed = [s for s, r in uploads.items() if not r.ok]
+                if failed:
+                    log.error("upload failed for sysid %s; not starting the fleet", failed)
+                else:
+                    for sysid, drift in options.drift_mps.items():
+                        if fleet is not None:
+                            fleet.set_drift(sysid, *drift)
+                    started = await start_fleet(link, sysids, workers=options.workers)
+                    bad = {s: str(r.error) for s, r in started.items() if not r.ok}
+                    if bad:
+                        raise UserError(f"could not start vehicles: {bad}")
+                    logger.log_event({"event": "start", "sysids": sysids})
+                    await _wait_until_done(recorder, plan, speedup, options, progress)
+            finally:
+                await link.close()
+    finally:
+        if fleet is not None:
+            fleet.__exit__(None, None, None)
+    reports = conformance_report(
+        plan,
+        recorder.tracks(),
+        {v.sysid: v.separation_m for v in scenario.vehicles},
+        scenario.cylinders,
+        scenario.hemispheres,
+        max_cross_track_m=options.max_cross_track_m,
+    )
+    for r in reports:
+        if not uploads[r.sysid].ok:
+            r.failures.insert(0, f"upload failed: {uploads[r.sysid].error}")
+    rrd_path = None
+    if options.rrd:
+        from gcs_planner.telemetry import log_flight_to_rerun, read_flight
+
+        rrd_path = options.out_dir / "flight.rrd"
+        log_flight_to_rerun(read_flight(mcap_path), rrd_path)
+    return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, time.monotonic() - t_wall)
+
+
+async def _wait_until_done(recorder, plan: Plan, speedup: float, options: FlyOptions, progress) -> None:
+    climb_s = max(float(v.waypoints[0, 2]) for v in plan.vehicles) / TAKEOFF_CLIMB_MPS
+    planned_s = max(float(v.path_times_s[-1] - v.path_times_s[0]) + v.takeoff_delay_s for v in plan.vehicles)
+    budget_s = (planned_s + 2 * climb_s) * options.timeout_factor / speedup + 10.0
+    deadline = time.monotonic() + budget_s
+    total = len(plan.vehicles)
+    while time.monotonic() < deadline and len(recorder.completed) < total:
+        if progress:
+            progress("fly", len(recorder.completed), total)
+        await asyncio.sleep(0.1)
+    if progress:
+        progress("fly", len(recorder.completed), total)
+    # a little more telemetry after the last item (landing) for the log
+    await asyncio.sleep(min(1.0, 5.0 / speedup))

@@ -1,0 +1,46 @@
+"""The whole chain: plan -> upload over UDP -> mock fleet flies -> MCAP/.rrd -> conformance."""
+
+import asyncio
+from pathlib import Path
+
+import pytest
+
+from gcs_planner.fly import FlyOptions, fly
+from gcs_planner.planning import plan_scenario
+from gcs_planner.scenario import load_scenario
+from gcs_planner.telemetry import read_flight
+
+SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "straight_4uav.toml"
+
+
+@pytest.fixture(scope="module")
+def scenario_and_plan():
+    scenario = load_scenario(SCENARIO)
+    return scenario, plan_scenario(scenario)
+
+
+def _fly(scenario, plan, out, **kw):
+    return asyncio.run(fly(scenario, plan, FlyOptions(out_dir=out, speedup=20.0, **kw)))
+
+
+def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_plan, tmp_path):
+    scenario, plan = scenario_and_plan
+    result = _fly(scenario, plan, tmp_path, tlog=True)
+    assert result.passed, [r.failures for r in result.reports]
+    assert all(r.completed and r.cross_track_max_m < 5.0 for r in result.reports)
+    flight = read_flight(result.mcap_path)
+    assert set(flight.positions) == {v.sysid for v in plan.vehicles}
+    assert all(len(t) > 20 for t in flight.positions.values())
+    assert flight.plan is not None and [v.sysid for v in flight.plan.vehicles] == [1, 2, 3, 4]
+    assert flight.origin == plan.origin and flight.scenario_text == SCENARIO.read_text()
+    assert any(e.get("event") == "start" for _, e in flight.events)
+    assert result.rrd_path.stat().st_size > 1000 and result.tlog_path.stat().st_size > 1000
+
+
+def test_fly_fails_when_a_vehicle_drifts(scenario_and_plan, tmp_path):
+    scenario, plan = scenario_and_plan
+    result = _fly(scenario, plan, tmp_path, rrd=False, drift_mps={2: (0.0, 1.5)}, max_cross_track_m=10.0)
+    assert not result.passed
+    by_sysid = {r.sysid: r for r in result.reports}
+    assert any("cross-track" in f for f in by_sysid[2].failures)
+    assert all(by_sysid[s].passed for s in (1, 3, 4))
