@@ -181,7 +181,7 @@ class Navigator:
             self._landed()
 
         self._wait(touchdown)
-        kin.command(self.i, Guidance.LAND, target, Arrival.LANDED)
+        kin.command(self.i, Guidance.LAND, target, Arrival.LANDED, max(self.airframe.accept_radius_m, 1.0))
 
     def rtl(self, done: Callable[[], None] | None = None) -> None:
         """Return home at RTL altitude; a multirotor lands there, a fixed wing circles it."""
