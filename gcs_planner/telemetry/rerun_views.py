@@ -228,11 +228,11 @@ class FlightViews:
         )
 
     def log_event(self, t_s: float, event: dict) -> None:
+        """An event as one text line, named by its "type" (or "event") key."""
         self.rec.set_time(TIMELINE, duration=t_s - self.t0_s)
-        text = (
-            event.get("type", "event") + ": " + ", ".join(f"{k}={v}" for k, v in event.items() if k != "type")
-        )
-        self.rec.log("events", rr.TextLog(text))
+        key = "type" if "type" in event else "event"
+        details = ", ".join(f"{k}={v}" for k, v in event.items() if k != key)
+        self.rec.log("events", rr.TextLog(f"{event.get(key, 'event')}: {details}"))
 
 
 def log_flight_to_rerun(

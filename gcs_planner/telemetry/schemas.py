@@ -163,9 +163,9 @@ GEOJSON_SCHEMA = {
 
 EVENT_SCHEMA = {
     "title": "gcs_planner.Event",
-    "description": "A planner or flight event: free-form JSON object with at least a 'type' string",
+    "description": "A planner or flight event: free-form JSON object named by a 'type' or 'event' string",
     "type": "object",
-    "properties": {"type": {"type": "string"}},
+    "properties": {"type": {"type": "string"}, "event": {"type": "string"}},
 }
 
 
