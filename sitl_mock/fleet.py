@@ -273,6 +273,18 @@ class MockFleet:
         mode = Failure(failure)
         self.call(lambda: [setattr(v.mission_server, "failure", mode) for v in self._select(sysid)])
 
+    def set_speedup(self, speedup: float) -> None:
+        """Change the speed-up factor while running (simulated time continues from where it is)."""
+        if not (isinstance(speedup, int | float) and math.isfinite(speedup) and speedup > 0):
+            raise ValueError(f"MockFleet speedup must be a finite number > 0, got {speedup!r}")
+
+        def rebase() -> None:
+            if self._loop is not None and self._task is not None:
+                self._wall_base, self._sim_base = self._loop.time(), self.world.sim_time_s
+            self.speedup = float(speedup)
+
+        self.call(rebase)
+
     def at(self, sim_time_s: float, action: Callable[[MockFleet], None]) -> None:
         """Run ``action(fleet)`` in the loop when simulated time reaches ``sim_time_s`` (fault scripts)."""
         self.call(lambda: heapq.heappush(self._script, (sim_time_s, next(self._script_counter), action)))

@@ -116,5 +116,10 @@ def test_scripted_drift_moves_the_reported_track():
             fleet.call(lambda v=v: (v._cmd_arm(1.0, 0.0), v._cmd_takeoff(0, 0, 0, 0, 0, 0, 20.0)))
         assert fleet.wait_until(lambda f: f.sim_time_s > 20.0, timeout_s=10.0)
         pos = fleet.positions_enu()
+        fleet.set_speedup(1.0)
+        t0, w0 = fleet.sim_time_s, time.monotonic()
+        time.sleep(0.5)
+        rate = (fleet.sim_time_s - t0) / (time.monotonic() - w0)
+    assert 0.5 < rate < 1.5  # was 20 s of simulated time per second
     assert np.hypot(*pos[0, :2]) < 0.01  # vehicle 1 hovers where it took off
     assert pos[1, 0] > 10.0  # vehicle 2's report walked east at ~1 m/s once airborne
