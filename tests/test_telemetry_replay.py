@@ -24,6 +24,7 @@ def flight_path(tmp_path_factory):
     with FlightLogger(path, ORIGIN, plan=make_plan([1, 2, 3]), scenario_text=SCENARIO_TEXT) as logger:
         for msg, raw, t_s in flight_frames([1, 2, 3], samples=20):
             logger.on_frame(msg, raw, t_s)
+        logger.log_event({"event": "start", "sysids": [1, 2, 3]}, t_s=t_s)
     return path
 
 
@@ -92,7 +93,12 @@ def test_replay_command_writes_a_non_empty_rrd_with_all_views(flight_path, tmp_p
             f"/series/mission_item/{s}",
             f"/series/link_loss/{s}",
         } <= entities
-    assert {"/world/obstacles/cylinders", "/world/obstacles/radars/0", "/map/obstacles"} <= entities
+    assert {
+        "/world/obstacles/cylinders",
+        "/world/obstacles/radars/0",
+        "/map/obstacles",
+        "/events",
+    } <= entities
     rows = sum(c.num_rows for c in RrdReader(rrd).stream() if c.entity_path == "/world/vehicle/2")
     assert rows == 20
     assert "wrote" in capsys.readouterr().out
