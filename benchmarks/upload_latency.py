@@ -2,7 +2,8 @@
 
 The mock fleet runs in a child process (its own interpreter and GIL), so every client sees the
 same vehicle. Sections (all on 127.0.0.1):
-  loopback  10/100/1000 items, each client, median of --reps uploads; ratio ours / MAVSDK.
+  loopback  10/100/1000 items, each client, median wall time and client CPU time (all threads of the
+            client process; MAVSDK's C++ threads included); ratio to MAVSDK.
   delay     20 ms one-way (40 ms RTT) link: time / (items x RTT), target <= 1.2.
   loss      10 % loss each way (+ 20 ms delay): success over --loss-uploads uploads, slowdown vs no loss.
   fleet     100 vehicles at once (upload_fleet, workers=100 and the default 8) vs one vehicle.
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import multiprocessing as mp
 import os
 import statistics
@@ -98,9 +100,9 @@ def ours(address, sizes: list[int], reps: int) -> dict[int, list[float]]:
             times = []
             for r in range(reps):
                 mission = items(n, r)
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 await client.upload(mission)
-                times.append(time.perf_counter() - t0)
+                times.append((time.perf_counter() - t0, time.process_time() - c0))
             out[n] = times
         await link.close()
         return out
@@ -120,7 +122,7 @@ def pymavlink_loop(address, sizes: list[int], reps: int) -> dict[int, list[float
         times = []
         for r in range(reps):
             mission = items(n, r)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             conn.mav.mission_count_send(1, 1, n, 0)
             while True:
                 m = conn.recv_match(
@@ -148,7 +150,7 @@ def pymavlink_loop(address, sizes: list[int], reps: int) -> dict[int, list[float
                 )
             if m is None or m.type != 0:
                 raise RuntimeError(f"pymavlink loop upload of {n} items failed: {m}")
-            times.append(time.perf_counter() - t0)
+            times.append((time.perf_counter() - t0, time.process_time() - c0))
         out[n] = times
     conn.close()
     return out
@@ -187,9 +189,9 @@ def mavsdk_client(address, sizes: list[int], reps: int) -> dict[int, list[float]
                 )
                 for i in items(n, r)
             ]
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             raw.upload_mission(mission)
-            times.append(time.perf_counter() - t0)
+            times.append((time.perf_counter() - t0, time.process_time() - c0))
         out[n] = times
     sdk.destroy()
     return out
@@ -205,7 +207,9 @@ def loopback(profile: str, sizes: list[int], reps: int, rounds: int = 3) -> None
     so drifting machine load hits all three alike. Medians over rounds x reps uploads."""
     print(f"\n## loopback, profile {profile}: median upload time [ms] over {rounds} x {reps} uploads")
     clients = {"ours": ours, "pymavlink": pymavlink_loop, "mavsdk": mavsdk_client}
-    samples: dict[str, dict[int, list[float]]] = {name: {n: [] for n in sizes} for name in clients}
+    samples: dict[str, dict[int, list[tuple[float, float]]]] = {
+        name: {n: [] for n in sizes} for name in clients
+    }
     for r in range(rounds):
         names = list(clients)[r % 3 :] + list(clients)[: r % 3]
         for name in names:
@@ -216,20 +220,19 @@ def loopback(profile: str, sizes: list[int], reps: int, rounds: int = 3) -> None
                 continue
             for n in sizes:
                 samples[name][n] += got[n]
-    sdk = samples.get("mavsdk")
-    print(f"{'items':>6} {'ours_ms':>9} {'pymavlink_ms':>13} {'mavsdk_ms':>10} {'ours/mavsdk':>12}")
+    print(f"{'items':>6} {'client':>10} {'wall_ms':>9} {'client_cpu_ms':>14} {'wall/mavsdk':>12}")
     for n in sizes:
-        o, p = med(samples["ours"][n]), med(samples["pymavlink"][n])
-        sdk_ms = f"{1e3 * med(sdk[n]):>10.1f}" if sdk else f"{'n/a':>10}"
-        ratio = f"{o / med(sdk[n]):>12.2f}" if sdk else f"{'n/a':>12}"
-        print(f"{n:>6} {1e3 * o:>9.1f} {1e3 * p:>13.1f} {sdk_ms} {ratio}")
+        sdk_wall = med([w for w, _ in samples["mavsdk"][n]]) if "mavsdk" in samples else math.nan
+        for name, runs in samples.items():
+            wall, cpu = med([w for w, _ in runs[n]]), med([c for _, c in runs[n]])
+            print(f"{n:>6} {name:>10} {1e3 * wall:>9.1f} {1e3 * cpu:>14.1f} {wall / sdk_wall:>12.2f}")
 
 
 def delayed(profile: str, n: int, reps: int) -> None:
     rtt = 0.04
     print(f"\n## 20 ms one-way delay, profile {profile}, {n} items: time / (items x RTT), target <= 1.2")
     with Mock(1, profile, delay_s=0.02) as mock:
-        t = med(ours(mock.addresses[0], [n], reps)[n])
+        t = med([w for w, _ in ours(mock.addresses[0], [n], reps)[n]])
     print(f"{'items':>6} {'time_s':>8} {'ratio':>6}")
     print(f"{n:>6} {t:>8.3f} {t / (n * rtt):>6.2f}")
 
