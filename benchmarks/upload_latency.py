@@ -276,18 +276,18 @@ def fleet(profile: str, count: int, n: int, delay_s: float) -> None:
     async def run(addresses, workers):
         link = await _connect(addresses)
         missions = {s: items(n, s) for s in range(1, len(addresses) + 1)}
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         results = await upload_fleet(link, missions, workers=workers)
-        elapsed = time.perf_counter() - t0
+        elapsed, cpu = time.perf_counter() - t0, time.process_time() - c0
         await link.close()
-        return elapsed, sum(r.ok for r in results.values())
+        return elapsed, cpu, sum(r.ok for r in results.values())
 
     with Mock(count, profile, delay_s=delay_s) as mock:
-        one, _ = asyncio.run(run(mock.addresses[:1], 1))
+        one, _, _ = asyncio.run(run(mock.addresses[:1], 1))
         rows = [(w, *asyncio.run(run(mock.addresses, w))) for w in (count, 8)]
-    print(f"{'workers':>8} {'ok':>5} {'time_s':>8} {'one_vehicle_s':>14} {'ratio':>6}")
-    for workers, elapsed, ok in rows:
-        print(f"{workers:>8} {ok:>5} {elapsed:>8.3f} {one:>14.3f} {elapsed / one:>6.2f}")
+    print(f"{'workers':>8} {'ok':>5} {'time_s':>8} {'client_cpu_s':>13} {'one_vehicle_s':>14} {'ratio':>6}")
+    for workers, elapsed, cpu, ok in rows:
+        print(f"{workers:>8} {ok:>5} {elapsed:>8.3f} {cpu:>13.3f} {one:>14.3f} {elapsed / one:>6.2f}")
 
 
 def main() -> None:

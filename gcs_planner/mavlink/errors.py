@@ -12,12 +12,20 @@ from gcs_planner.errors import UserError
 from gcs_planner.mavlink.enums import CommandResult, MissionResult
 
 __all__ = [
-    "RESULT_ERRORS",
     "BusyError",
     "CommandError",
     "CommandTimeoutError",
     "DeniedError",
     "DuplicateSysidError",
+    "GenericMissionError",
+    "InvalidItemError",
+    "InvalidParam1Error",
+    "InvalidParam2Error",
+    "InvalidParam3Error",
+    "InvalidParam4Error",
+    "InvalidParam5XError",
+    "InvalidParam6YError",
+    "InvalidParam7Error",
     "InvalidParamError",
     "InvalidSequenceError",
     "MavlinkError",
@@ -27,8 +35,13 @@ __all__ = [
     "MissionTimeoutError",
     "NoSpaceError",
     "OperationCancelledError",
+    "RESULT_ERRORS",
+    "UnsupportedCommandError",
+    "UnsupportedFrameError",
     "VerifyError",
+    "command_error",
     "error_for_result",
+    "mission_type_name",
 ]
 
 
