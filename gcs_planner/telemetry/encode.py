@@ -21,18 +21,22 @@ import math
 from collections.abc import Callable
 from operator import attrgetter
 
-__all__ = ["message_json"]
+__all__ = ["json_encoder", "message_json"]
 
 _ENCODERS: dict[type, Callable[[object], bytes]] = {}
 
 
 def message_json(msg) -> bytes:
     """The message's fields as a compact JSON object (UTF-8), in pymavlink's field order."""
-    cls = type(msg)
+    return json_encoder(type(msg))(msg)
+
+
+def json_encoder(cls: type) -> Callable[[object], bytes]:
+    """The (cached) encoder of one pymavlink message class: ``encoder(msg) -> JSON bytes``."""
     encoder = _ENCODERS.get(cls)
     if encoder is None:
         encoder = _ENCODERS[cls] = _make_encoder(cls)
-    return encoder(msg)
+    return encoder
 
 
 def _make_encoder(cls: type) -> Callable[[object], bytes]:

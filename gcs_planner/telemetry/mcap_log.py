@@ -36,6 +36,7 @@ import struct
 import threading
 import time
 import tomllib
+from collections.abc import Callable
 from operator import itemgetter
 from pathlib import Path
 from typing import IO
@@ -46,7 +47,7 @@ from gcs_planner import __version__
 from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.plan import Plan
 from gcs_planner.telemetry.colors import vehicle_color
-from gcs_planner.telemetry.encode import message_json
+from gcs_planner.telemetry.encode import json_encoder
 from gcs_planner.telemetry.mcap_writer import ChunkedMcapWriter
 from gcs_planner.telemetry.schemas import (
     ALTITUDE_DATUMS,
@@ -99,7 +100,7 @@ class FlightLogger:
         self._write_lock = threading.Lock()  # guards the writers
         self._clock_offset_s: float | None = None
         self._raw_channels: dict[int, int] = {}
-        self._json_channels: dict[tuple[int, type], int] = {}
+        self._json_channels: dict[tuple[int, type], tuple[int, Callable[[object], bytes]]] = {}
         self._location_channels: dict[int, int] = {}
         self._fix_template: dict[int, str] = {}
         self._schema_ids: dict[type, int] = {}
@@ -214,10 +215,10 @@ class FlightLogger:
             if msg is None or not hasattr(msg, "fieldnames"):
                 continue
             key = (sysid, type(msg))
-            channel = json_channels.get(key)
-            if channel is None:
-                channel = self._add_json_channel(sysid, type(msg))
-            json_rows.append((channel, t_ns, message_json(msg)))
+            entry = json_channels.get(key)
+            if entry is None:
+                entry = self._add_json_channel(sysid, type(msg))
+            json_rows.append((entry[0], t_ns, entry[1](msg)))
             if msg.id == 33:  # GLOBAL_POSITION_INT
                 fix_rows.append((self._location_channels[sysid], t_ns, self._location_fix(sysid, msg, t_ns)))
         by_channel = itemgetter(0)
@@ -253,7 +254,7 @@ class FlightLogger:
         )
         return channel
 
-    def _add_json_channel(self, sysid: int, cls: type) -> int:
+    def _add_json_channel(self, sysid: int, cls: type) -> tuple[int, Callable[[object], bytes]]:
         schema_id = self._schema_ids.get(cls)
         if schema_id is None:
             schema = mavlink_json_schema(cls)
@@ -262,8 +263,8 @@ class FlightLogger:
         channel = self._writer.register_channel(
             f"/mavlink/{sysid}/{cls.msgname}", "json", schema_id, {"sysid": str(sysid)}
         )
-        self._json_channels[(sysid, cls)] = channel
-        return channel
+        entry = self._json_channels[(sysid, cls)] = (channel, json_encoder(cls))
+        return entry
 
     def _write_header(self) -> None:
         w = self._writer
