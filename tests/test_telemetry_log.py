@@ -184,3 +184,14 @@ def test_link_loss_counts_sequence_gaps(tmp_path):
     t2, loss2 = flight.link_loss(2)
     assert len(t1) == 8 and np.all(loss2 == 0.0)
     assert 0.2 < float(np.mean(loss1)) < 0.3
+
+
+def test_bad_data_keeps_its_raw_frame_but_gets_no_json_channel(tmp_path):
+    msg, raw, t_s = flight_frames([4], samples=1)[0]
+    bad = mavlink.MAVLink_bad_data(bytearray(raw), "test")
+    with FlightLogger(tmp_path / "bad.mcap", ORIGIN) as logger:
+        logger.on_frame(bad, raw, t_s)
+        logger.on_frame(msg, raw, t_s + 0.1)
+    flight = read_flight(tmp_path / "bad.mcap")
+    assert [f.data for f in flight.frames] == [raw, raw]
+    assert flight.message_types() == {msg.get_type()}

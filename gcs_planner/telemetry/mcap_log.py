@@ -100,7 +100,7 @@ class FlightLogger:
         self._write_lock = threading.Lock()  # guards the writers
         self._clock_offset_s: float | None = None
         self._raw_channels: dict[int, int] = {}
-        self._json_channels: dict[tuple[int, type], tuple[int, Callable[[object], bytes]]] = {}
+        self._json_channels: dict[tuple[int, type], tuple[int, Callable[[object], bytes] | None, bool]] = {}
         self._location_channels: dict[int, int] = {}
         self._fix_template: dict[int, str] = {}
         self._schema_ids: dict[type, int] = {}
@@ -200,6 +200,7 @@ class FlightLogger:
         counts = self._frames_per_sysid
         raw_rows, json_rows, fix_rows = [], [], []
         tlog_parts: list[bytes] = []
+        tlog = self._tlog
         for t_s, msg, raw in batch:
             t_ns = round(t_s * 1e6) * 1000 if t_s >= _UNIX_TIME_MIN_S else self._to_ns(t_s)
             raw = bytes(raw)
@@ -209,17 +210,20 @@ class FlightLogger:
                 channel = self._add_vehicle(sysid)
             raw_rows.append((channel, t_ns, raw))
             counts[sysid] += 1
-            if self._tlog is not None:
+            if tlog is not None:
                 tlog_parts.append(_TLOG_TIME.pack((t_ns // 1000) & ~3))
                 tlog_parts.append(raw)
-            if msg is None or not hasattr(msg, "fieldnames"):
+            if msg is None:
                 continue
             key = (sysid, type(msg))
             entry = json_channels.get(key)
             if entry is None:
                 entry = self._add_json_channel(sysid, type(msg))
-            json_rows.append((entry[0], t_ns, entry[1](msg)))
-            if msg.id == 33:  # GLOBAL_POSITION_INT
+            channel, encoder, is_position = entry
+            if encoder is None:
+                continue
+            json_rows.append((channel, t_ns, encoder(msg)))
+            if is_position:
                 fix_rows.append((self._location_channels[sysid], t_ns, self._location_fix(sysid, msg, t_ns)))
         by_channel = itemgetter(0)
         for rows in (raw_rows, json_rows, fix_rows):
@@ -254,7 +258,12 @@ class FlightLogger:
         )
         return channel
 
-    def _add_json_channel(self, sysid: int, cls: type) -> tuple[int, Callable[[object], bytes]]:
+    def _add_json_channel(self, sysid: int, cls: type) -> tuple[int, Callable[[object], bytes] | None, bool]:
+        """(channel, encoder, is GLOBAL_POSITION_INT) of one vehicle's message type; no channel
+        (encoder None) for pseudo-messages without fields such as pymavlink's BAD_DATA."""
+        if not getattr(cls, "fieldnames", None) or not hasattr(cls, "msgname"):
+            entry = self._json_channels[(sysid, cls)] = (0, None, False)
+            return entry
         schema_id = self._schema_ids.get(cls)
         if schema_id is None:
             schema = mavlink_json_schema(cls)
@@ -263,7 +272,11 @@ class FlightLogger:
         channel = self._writer.register_channel(
             f"/mavlink/{sysid}/{cls.msgname}", "json", schema_id, {"sysid": str(sysid)}
         )
-        entry = self._json_channels[(sysid, cls)] = (channel, json_encoder(cls))
+        entry = self._json_channels[(sysid, cls)] = (
+            channel,
+            json_encoder(cls),
+            cls.msgname == "GLOBAL_POSITION_INT",
+        )
         return entry
 
     def _write_header(self) -> None:
