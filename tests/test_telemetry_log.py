@@ -13,7 +13,12 @@ from telemetry_frames import ORIGIN, SCENARIO_TEXT, flight_frames, make_plan, ma
 from gcs_planner import __version__
 from gcs_planner.telemetry import FlightLogger, read_flight
 from gcs_planner.telemetry.encode import message_json
-from gcs_planner.telemetry.schemas import mavlink_json_schema
+from gcs_planner.telemetry.schemas import (
+    EVENT_SCHEMA,
+    GEOJSON_SCHEMA,
+    LOCATION_FIX_SCHEMA,
+    mavlink_json_schema,
+)
 
 SYSIDS = [1, 2, 3]
 
@@ -163,6 +168,33 @@ def test_every_mavlink_type_encodes_as_json_matching_its_schema(cls):
     schema = mavlink_json_schema(cls)
     assert schema["title"] == f"mavlink.{cls.msgname}" and list(schema["properties"]) == list(doc)
     assert "$ref" not in json.dumps(schema)
+    _assert_foxglove_parsable(schema)
+
+
+_FOXGLOVE_TYPES = {"boolean", "string", "number", "integer", "object", "array"}
+
+
+def _assert_foxglove_parsable(schema: dict, path: str = "") -> None:
+    """The rules of Foxglove's JSON Schema parser (mcap-support parseJsonSchema): object roots,
+    one type string per field, arrays of scalars/objects, oneOf only with numeric consts."""
+    assert schema["type"] == "object", path
+    for name, field in schema["properties"].items():
+        where = f"{path}.{name}"
+        if "oneOf" in field:
+            assert all(isinstance(alt["const"], int) for alt in field["oneOf"]), where
+            continue
+        assert field["type"] in _FOXGLOVE_TYPES, where
+        if field["type"] == "object":
+            _assert_foxglove_parsable(field, where)
+        elif field["type"] == "array":
+            assert field["items"]["type"] in _FOXGLOVE_TYPES - {"array"}, where
+            if field["items"]["type"] == "object":
+                _assert_foxglove_parsable(field["items"], where)
+
+
+def test_foxglove_schemas_parse_with_foxgloves_rules():
+    for schema in (LOCATION_FIX_SCHEMA, GEOJSON_SCHEMA, EVENT_SCHEMA):
+        _assert_foxglove_parsable(schema)
 
 
 def test_non_finite_floats_become_null():

@@ -2,7 +2,9 @@
 
 MAVLink schemas are generated from pymavlink's message classes (field names in declaration
 order, C types, array lengths, units, enums), so any MCAP tool can name and type every field.
-They use no ``$ref`` (Foxglove does not resolve it). Field values are logged as pymavlink
+They use no ``$ref`` (Foxglove does not resolve it) and only what Foxglove's JSON Schema parser
+accepts: one ``type`` string per field (no ``["number", "null"]`` unions), numeric ``oneOf``
+constants for enums. Field values are logged as pymavlink
 decodes them: integers and floats as JSON numbers, ``char[n]`` as a string, other arrays as
 arrays of numbers; non-finite floats become ``null``.
 
@@ -59,7 +61,7 @@ def _field_schema(ctype: str, length: int, unit: str, enum: str) -> dict:
             item["maxLength"] = length
         return item
     if ctype in ("float", "double"):
-        scalar: dict = {"type": ["number", "null"]}
+        scalar: dict = {"type": "number"}  # non-finite values are written as null
     else:
         lo, hi = _INT_RANGES.get(ctype, (None, None))
         scalar = {"type": "integer"}
