@@ -298,6 +298,9 @@ class LiveRerunLogger:
         self.views.log_scene(plan, scenario, terrain)
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
+        """Update the views from one received frame (a MavlinkLink subscriber)."""
+        if msg.get_type() == "BAD_DATA":
+            return
         sysid = msg.get_srcSystem()
         self._count_link(sysid, msg.get_srcComponent(), msg.get_seq(), t_s)
         msg_id = msg.get_msgId()
