@@ -306,3 +306,38 @@ def test_clear_in_auto_falls_back_to_empty_upload_on_ardupilot():
             await link.close()
 
     run(main())
+
+
+def test_udpin_link_serves_a_vehicle_that_connects_to_the_gcs():
+    """SITL-style: the vehicle sends first to our listening port; replies are routed back to it by sysid."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from sitl_mock.mission_server import MissionServer
+    from sitl_mock.profiles import PROFILES
+
+    async def main():
+        link = await MavlinkLink.open("udpin:127.0.0.1:0")
+        loop = asyncio.get_running_loop()
+        server = MissionServer(7, 1, PROFILES["px4"])
+        mav, parser = mavlink.MAVLink(None, srcSystem=7, srcComponent=1), mavlink.MAVLink(None)
+
+        class Vehicle(asyncio.DatagramProtocol):
+            def connection_made(self, transport):
+                self.transport = transport
+
+            def datagram_received(self, data, addr):
+                for msg in parser.parse_buffer(data) or []:
+                    for out in server.handle(msg, loop.time()):
+                        self.transport.sendto(out.pack(mav))
+
+        transport, _ = await loop.create_datagram_endpoint(Vehicle, remote_addr=link.local_address)
+        transport.sendto(mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 4, 3).pack(mav))
+        await link.wait_for(lambda m: m.get_srcSystem() == 7, 2)
+        assert link.vehicles[7].autopilot == 12 and not link.vehicles[7].duplicate
+        items = mission(9)
+        result = await MissionClient(link, 7).upload(items)
+        assert server.items() == items and result.opaque_id == server.opaque_id()
+        transport.close()
+        await link.close()
+
+    run(main())
