@@ -138,9 +138,10 @@ def main() -> None:
         "name": "priority_swarm",
         "seed": 1,
         "waypoints": 4,
-        "particles": 16,
-        "iterations": 30,
+        "particles": 12,
+        "iterations": 20,
         "rounds": 2,
+        "rrt_iterations": 200,
     }
     write(
         "swarm500",
