@@ -97,6 +97,12 @@ def test_pairs_batch_and_counts_agree_with_single_calls():
             assert d[b, k] == pytest.approx(single)
             if single < 1.0:  # anything within reach must survive the box pre-filter
                 assert any((pairs == [i, j]).all(axis=1))
+    # the leg-box pruning is exact for every distance below the reach sum
+    reach = np.full(n_u, 1.5)
+    d_pruned, _ = pair_closest_approach(pts, times, all_pairs, reach)
+    close = d < 3.0
+    np.testing.assert_allclose(d_pruned[close], d[close])
+    assert np.all(d_pruned[~close] >= 3.0)
     flags = d < 3.0
     counts = conflict_counts(n_u, all_pairs, flags, np.zeros((n_b, n_u, 0), bool), np.zeros(0, int))
     for b in range(n_b):

@@ -21,13 +21,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from gcs_planner.planning.deconflict4d.trajectory import leg_velocities
-
 __all__ = [
     "candidate_pairs",
     "closest_approach",
     "conflict_counts",
     "pair_closest_approach",
+    "segment_closest_approach",
     "zone_closest_approach",
 ]
 
@@ -44,6 +43,37 @@ def _cpa(d0: np.ndarray, dv: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, 
     return np.sqrt(np.einsum("...i,...i->...", d, d)), s
 
 
+def segment_closest_approach(
+    pa0: np.ndarray,
+    pa1: np.ndarray,
+    ta0: np.ndarray,
+    ta1: np.ndarray,
+    pb0: np.ndarray,
+    pb1: np.ndarray,
+    tb0: np.ndarray,
+    tb1: np.ndarray,
+    scale_b: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closest approach of leg a (pa0 at ta0 -> pa1 at ta1) and leg b over their common time.
+
+    Points (..., 3), times (...), all broadcast; ``scale_b`` (..., 3) divides the relative
+    position axis by axis (ellipsoid semi-axes). Returns (distance, time); +inf without overlap.
+    """
+    lo = np.maximum(ta0, tb0)
+    hi = np.minimum(ta1, tb1)
+    valid = hi > lo
+    da, db = ta1 - ta0, tb1 - tb0
+    va = np.where((da > 0)[..., None], (pa1 - pa0) / np.where(da > 0, da, 1.0)[..., None], 0.0)
+    vb = np.where((db > 0)[..., None], (pb1 - pb0) / np.where(db > 0, db, 1.0)[..., None], 0.0)
+    d0 = (pa0 + va * (lo - ta0)[..., None]) - (pb0 + vb * (lo - tb0)[..., None])
+    dv = va - vb
+    if scale_b is not None:
+        inv = 1.0 / scale_b
+        d0, dv = d0 * inv, dv * inv
+    dist, s = _cpa(d0, dv, np.where(valid, hi - lo, 0.0))
+    return np.where(valid, dist, np.inf), lo + s
+
+
 def closest_approach(
     pa: np.ndarray, ta: np.ndarray, pb: np.ndarray, tb: np.ndarray, scale_b: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -54,27 +84,21 @@ def closest_approach(
     axis (ellipsoid semi-axes in a frame where the ellipsoid is axis-aligned; 1 = on its surface).
     Returns (d_min (...), t_min (...)); d_min is +inf when the time spans never overlap.
     """
-    ta0, ta1 = ta[..., :-1, None], ta[..., 1:, None]
-    tb0, tb1 = tb[..., None, :-1], tb[..., None, 1:]
-    lo = np.maximum(ta0, tb0)
-    hi = np.minimum(ta1, tb1)
-    valid = hi > lo
-    va = leg_velocities(pa, ta)[..., :, None, :]
-    vb = leg_velocities(pb, tb)[..., None, :, :]
-    pos_a = pa[..., :-1, None, :] + va * (lo - ta0)[..., None]
-    pos_b = pb[..., None, :-1, :] + vb * (lo - tb0)[..., None]
-    d0, dv = pos_a - pos_b, va - vb
-    if scale_b is not None:
-        inv = 1.0 / scale_b[..., None, :, :]
-        d0, dv = d0 * inv, dv * inv
-    dist, s = _cpa(d0, dv, np.where(valid, hi - lo, 0.0))
-    dist = np.where(valid, dist, np.inf)
+    dist, t = segment_closest_approach(
+        pa[..., :-1, None, :],
+        pa[..., 1:, None, :],
+        ta[..., :-1, None],
+        ta[..., 1:, None],
+        pb[..., None, :-1, :],
+        pb[..., None, 1:, :],
+        tb[..., None, :-1],
+        tb[..., None, 1:],
+        None if scale_b is None else scale_b[..., None, :, :],
+    )
     flat = dist.reshape(*dist.shape[:-2], -1)
-    k = np.argmin(flat, axis=-1)
-    d_min = np.take_along_axis(flat, k[..., None], axis=-1)[..., 0]
-    t_flat = (lo + s).reshape(flat.shape)
-    t_min = np.take_along_axis(t_flat, k[..., None], axis=-1)[..., 0]
-    return d_min, t_min
+    k = np.argmin(flat, axis=-1)[..., None]
+    t_flat = t.reshape(flat.shape)
+    return np.take_along_axis(flat, k, axis=-1)[..., 0], np.take_along_axis(t_flat, k, axis=-1)[..., 0]
 
 
 def candidate_pairs(points: np.ndarray, times: np.ndarray, reach_m: np.ndarray) -> np.ndarray:
@@ -95,18 +119,65 @@ def candidate_pairs(points: np.ndarray, times: np.ndarray, reach_m: np.ndarray) 
 
 
 def pair_closest_approach(
-    points: np.ndarray, times: np.ndarray, pairs: np.ndarray
+    points: np.ndarray, times: np.ndarray, pairs: np.ndarray, reach_m: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Closest approach (B, P) distance [m] and time [s] for the given UAV pairs (P, 2)."""
+    """Closest approach (B, P) distance [m] and time [s] for the given UAV pairs (P, 2).
+
+    With ``reach_m`` (U,) only leg pairs whose space-time boxes (over all B candidates) come
+    within ``reach_i + reach_j`` are computed; the others report +inf, which is exact for every
+    question "closer than reach_i + reach_j?". Without it every leg pair is computed.
+    """
     n_b, _, n_w, _ = points.shape
     n_p = len(pairs)
     d_min = np.full((n_b, n_p), np.inf)
     t_min = np.zeros((n_b, n_p))
-    step = max(1, _CHUNK_ELEMENTS // max(1, n_b * (n_w - 1) ** 2))
-    for start in range(0, n_p, step):
+    if not n_p:
+        return d_min, t_min
+    p0, p1 = points[:, :, :-1], points[:, :, 1:]
+    t0, t1 = times[:, :, :-1], times[:, :, 1:]
+    if reach_m is None:
+        keep = np.ones((n_p, n_w - 1, n_w - 1), dtype=bool)
+    else:
+        lo = np.minimum(p0, p1).min(axis=0)  # (U, S, 3) leg boxes over all candidates
+        hi = np.maximum(p0, p1).max(axis=0)
+        tlo, thi = t0.min(axis=0), t1.max(axis=0)
+        keep = np.zeros((n_p, n_w - 1, n_w - 1), dtype=bool)
+        step = max(1, _CHUNK_ELEMENTS // (3 * (n_w - 1) ** 2))
+        for start in range(0, n_p, step):
+            i, j = pairs[start : start + step, 0], pairs[start : start + step, 1]
+            r = (reach_m[i] + reach_m[j])[:, None, None, None]
+            near = np.all(
+                (lo[i][:, :, None] - r <= hi[j][:, None, :]) & (lo[j][:, None, :] - r <= hi[i][:, :, None]),
+                axis=-1,
+            )
+            near &= (tlo[i][:, :, None] < thi[j][:, None, :]) & (tlo[j][:, None, :] < thi[i][:, :, None])
+            keep[start : start + step] = near
+    k_p, k_a, k_b = np.nonzero(keep)  # sorted by pair
+    if not len(k_p):
+        return d_min, t_min
+    step = max(1, _CHUNK_ELEMENTS // max(1, n_b))
+    dist = np.empty((n_b, len(k_p)))
+    when = np.empty((n_b, len(k_p)))
+    for start in range(0, len(k_p), step):
         sl = slice(start, start + step)
-        i, j = pairs[sl, 0], pairs[sl, 1]
-        d_min[:, sl], t_min[:, sl] = closest_approach(points[:, i], times[:, i], points[:, j], times[:, j])
+        i, j, a, b = pairs[k_p[sl], 0], pairs[k_p[sl], 1], k_a[sl], k_b[sl]
+        dist[:, sl], when[:, sl] = segment_closest_approach(
+            p0[:, i, a],
+            p1[:, i, a],
+            t0[:, i, a],
+            t1[:, i, a],
+            p0[:, j, b],
+            p1[:, j, b],
+            t0[:, j, b],
+            t1[:, j, b],
+        )
+    starts = np.flatnonzero(np.r_[True, k_p[1:] != k_p[:-1]])
+    group = k_p[starts]
+    best = np.minimum.reduceat(dist, starts, axis=1)
+    counts = np.diff(np.r_[starts, len(k_p)])
+    at_best = dist == np.repeat(best, counts, axis=1)
+    d_min[:, group] = best
+    t_min[:, group] = np.maximum.reduceat(np.where(at_best, when, -np.inf), starts, axis=1)
     return d_min, t_min
 
 

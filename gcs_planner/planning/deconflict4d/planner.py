@@ -95,8 +95,8 @@ class Settings:
     zone_step_s: float = 5.0
     early_stop: bool = True
     w_conflict: float = 1000.0
-    w_accel: float = 100.0
-    w_speed: float = 100.0
+    w_accel: float = 1000.0
+    w_speed: float = 1000.0
     w_turn: float = 10.0
     w_time: float = 1.0
     w_time_limit: float = 100.0
@@ -360,7 +360,7 @@ def evaluate(
         is_act = np.zeros(n_u, dtype=bool)
         is_act[act] = True
         pairs = pairs[is_act[pairs[:, 0]] | is_act[pairs[:, 1]]]
-    d, t = pair_closest_approach(pts, times, pairs)
+    d, t = pair_closest_approach(pts, times, pairs, (sep / 2 + margin.max(axis=0)))
     if len(pairs):
         need = (
             np.maximum(sep[pairs[:, 0]], sep[pairs[:, 1]]) + margin[:, pairs[:, 0]] + margin[:, pairs[:, 1]]
@@ -500,7 +500,21 @@ def _stage_pso(problem: Problem, tracks: list[Track], rng: np.random.Generator) 
     layout = _Layout(problem, tracks, n_int)
     s = problem.settings
     x, _, iters, first = _pso(problem, layout, None, s.particles, s.iterations, rng)
-    return layout.tracks(x, tracks), {"iterations": iters, "first_conflict_free_iteration": first}
+    new = layout.tracks(x, tracks)
+    # a swarm stopped early may leave some UAV outside its limits: keep that UAV's previous
+    # trajectory when it was within them (the later stages cannot repair limits)
+    before, after = _limit_excess(problem, tracks), _limit_excess(problem, new)
+    reverted = [i for i in range(len(tracks)) if after[i] > 0 and before[i] <= 0]
+    for i in reverted:
+        new[i] = tracks[i]
+    return new, {"iterations": iters, "first_conflict_free_iteration": first, "reverted": len(reverted)}
+
+
+def _limit_excess(problem: Problem, tracks: list[Track]) -> np.ndarray:
+    """Sum of the kinematic and time-error limit excesses per UAV (0 = within every limit)."""
+    _, ev = _fleet_state(problem, tracks)
+    keys = ("speed_excess", "blend_overlap_s", "turn_excess_m", "time_error_excess_s")
+    return sum(ev.terms[k][0] for k in keys)
 
 
 def _stage_delay(problem: Problem, tracks: list[Track], events: list[dict]) -> tuple[list[Track], dict]:
@@ -548,7 +562,7 @@ def _insert_waypoint(problem: Problem, track: Track, u: int, t_c: float) -> tupl
     wp_t = times[off : goal_idx + 1]
     t_c = float(np.clip(t_c, wp_t[0], wp_t[-1]))
     k = int(np.clip(np.searchsorted(wp_t, t_c, side="right") - 1, 0, len(track.legs_s) - 1))
-    frac = float(np.clip((t_c - wp_t[k]) / track.legs_s[k], 0.1, 0.9))
+    frac = float(np.clip((t_c - wp_t[k]) / track.legs_s[k], 0.25, 0.75))
     new_wp = track.waypoints[k] + frac * (track.waypoints[k + 1] - track.waypoints[k])
     waypoints = np.insert(track.waypoints, k + 1, new_wp, axis=0)
     legs = np.concatenate(
@@ -760,7 +774,7 @@ def dense_check(
     chord = a_max * tau.max(axis=-1) ** 2 / (8 * per_blend**2)
     sep = np.array([u.separation_m for u in problem.uavs])
     pairs = candidate_pairs(dp, dt, (sep / 2 + chord)[None])
-    d, t = pair_closest_approach(dp, dt, pairs)
+    d, t = pair_closest_approach(dp, dt, pairs, sep / 2 + chord)
     conflicts = []
     min_sep = math.inf
     for (i, j), dd, tt in zip(pairs, d[0], t[0], strict=True):
