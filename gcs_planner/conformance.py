@@ -73,12 +73,18 @@ def point_to_polyline_m(points: np.ndarray, polyline: np.ndarray, chunk: int = 4
 
 
 def _route_window(track: Track, planned: np.ndarray, acceptance_m: float) -> slice:
-    near_start = np.flatnonzero(np.linalg.norm(track.positions - planned[0], axis=1) <= acceptance_m)
-    near_end = np.flatnonzero(np.linalg.norm(track.positions - planned[-1], axis=1) <= acceptance_m)
-    if len(near_start) == 0:
-        return slice(0, 0)
-    end = near_end[-1] + 1 if len(near_end) and near_end[-1] >= near_start[0] else len(track.positions)
-    return slice(near_start[0], end)
+    """Samples from reaching the route's first point to reaching its last one.
+
+    "Reaching" is the first (last) sample within ``acceptance_m``, or the closest sample when the
+    telemetry rate left none that close.
+    """
+    d_start = np.linalg.norm(track.positions - planned[0], axis=1)
+    near = np.flatnonzero(d_start <= acceptance_m)
+    start = int(near[0]) if len(near) else int(np.argmin(d_start))
+    d_end = np.linalg.norm(track.positions[start:] - planned[-1], axis=1)
+    near = np.flatnonzero(d_end <= acceptance_m)
+    end = start + (int(near[-1]) if len(near) else int(np.argmin(d_end)))
+    return slice(start, end + 1)
 
 
 def _obstacle_clearance_m(positions: np.ndarray, cylinders, hemispheres) -> float:

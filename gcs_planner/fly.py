@@ -12,6 +12,12 @@ Choices:
 - Track time is the vehicle's ``time_boot_ms`` for mocks (one simulated clock for the whole fleet,
   so separations are compared at the same instant whatever the speed-up) and the receive time
   for real vehicles, whose boot clocks differ.
+- Two-phase start, so that the plan's timing (and with it the planned separation) holds in the
+  air: every vehicle is armed and takes off (MAV_CMD_NAV_TAKEOFF) to its first waypoint's
+  altitude; once all hover there, each vehicle's route starts with MAV_CMD_MISSION_START at the
+  item after NAV_TAKEOFF, at the common start time plus its planned delay (delayed take-off as
+  a timed start; the mission's NAV_DELAY is then skipped). Climb rates differ between vehicles
+  and altitudes, so a one-shot start would shift every route by its own climb time.
 - A mission is complete when MISSION_CURRENT reports mission_state COMPLETE or the last item's
   MISSION_ITEM_REACHED arrives.
 """
@@ -30,8 +36,10 @@ import numpy as np
 from gcs_planner.conformance import Track, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.enums import MissionState
-from gcs_planner.mavlink.fleet import VehicleResult, start_fleet, upload_fleet
+from gcs_planner.mavlink.errors import MavlinkError
+from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.plan import Plan
@@ -44,6 +52,8 @@ log = logging.getLogger(__name__)
 
 HEARTBEAT_WAIT_S = 10.0
 TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
+TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" within this distance of its take-off altitude
+NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 
 
 @dataclass
@@ -84,6 +94,7 @@ class _TrackRecorder:
         self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in last_seq}
         self.completed: set[int] = set()
         self.started: set[int] = set()
+        self.rel_alt_m: dict[int, float] = {}
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
         sysid = msg.get_srcSystem()
@@ -94,6 +105,7 @@ class _TrackRecorder:
             t = msg.time_boot_ms / 1000.0 if self.sim_clock else t_s
             alt_amsl = msg.alt / 1000.0
             self.samples[sysid].append((t, msg.lat / 1e7, msg.lon / 1e7, alt_amsl))
+            self.rel_alt_m[sysid] = msg.relative_alt / 1000.0
         elif kind == "MISSION_CURRENT":
             state = getattr(msg, "mission_state", MissionState.UNKNOWN)
             if state == MissionState.ACTIVE:
@@ -158,6 +170,9 @@ async def fly(
     ``progress(stage, done, total)`` reports "upload" (vehicles) and "fly" (completed vehicles).
     """
     t_wall = time.monotonic()
+    sysids = [vp.sysid for vp in plan.vehicles]
+    if 0 in sysids or len(set(sysids)) != len(sysids):
+        raise UserError(f"every vehicle needs its own MAVLink sysid in 1..255 to fly, got {sysids}")
     # validate every mission before anything is sent
     missions = {vp.sysid: plan_to_items(vp, plan.origin, options.autopilot) for vp in plan.vehicles}
     options.out_dir.mkdir(parents=True, exist_ok=True)
@@ -197,11 +212,9 @@ async def fly(
                     for sysid, drift in options.drift_mps.items():
                         if fleet is not None:
                             fleet.set_drift(sysid, *drift)
-                    started = await start_fleet(link, sysids, workers=options.workers)
-                    bad = {s: str(r.error) for s, r in started.items() if not r.ok}
-                    if bad:
-                        raise UserError(f"could not start vehicles: {bad}")
-                    logger.log_event({"event": "start", "sysids": sysids})
+                    await _take_off_all(link, plan, recorder, speedup, options)
+                    logger.log_event({"event": "airborne", "sysids": sysids})
+                    await _start_routes(link, plan, missions, speedup, logger)
                     await _wait_until_done(recorder, plan, speedup, options, progress)
             finally:
                 await link.close()
@@ -226,6 +239,57 @@ async def fly(
         rrd_path = options.out_dir / "flight.rrd"
         log_flight_to_rerun(read_flight(mcap_path), rrd_path)
     return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, time.monotonic() - t_wall)
+
+
+async def _take_off_all(
+    link: MavlinkLink, plan: Plan, recorder: _TrackRecorder, speedup: float, options: FlyOptions
+) -> None:
+    """Arm every vehicle and climb it to its first waypoint's altitude; return when all are there."""
+    gate = asyncio.Semaphore(options.workers)
+
+    async def one(vp) -> None:
+        async with gate:
+            command = CommandClient(link, vp.sysid)
+            try:
+                if options.autopilot == "ardupilot":
+                    await command.set_mode("GUIDED")
+                await command.arm()
+                await command.takeoff(float(vp.waypoints[0, 2]))
+            except MavlinkError as exc:
+                raise UserError(
+                    f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) could not take off: {exc}"
+                ) from exc
+
+    await asyncio.gather(*(one(vp) for vp in plan.vehicles))
+    climb_s = max(float(vp.waypoints[0, 2]) for vp in plan.vehicles) / TAKEOFF_CLIMB_MPS
+    deadline = time.monotonic() + climb_s * options.timeout_factor / speedup + 10.0
+    targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
+    while time.monotonic() < deadline:
+        if all(abs(recorder.rel_alt_m.get(s, -1e9) - z) <= TAKEOFF_ALT_TOL_M for s, z in targets.items()):
+            return
+        await asyncio.sleep(0.05)
+    late = [s for s, z in targets.items() if abs(recorder.rel_alt_m.get(s, -1e9) - z) > TAKEOFF_ALT_TOL_M]
+    raise UserError(f"sysid {late} did not reach take-off altitude in time")
+
+
+async def _start_routes(link: MavlinkLink, plan: Plan, missions: dict, speedup: float, logger) -> None:
+    """MISSION_START each route (the item after NAV_TAKEOFF) at its planned start time."""
+    t0 = time.monotonic()
+
+    async def one(vp) -> None:
+        items = missions[vp.sysid]
+        first = next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
+        offset_s = max(vp.takeoff_delay_s, float(vp.path_times_s[0]))
+        await asyncio.sleep(max(0.0, t0 + offset_s / speedup - time.monotonic()))
+        try:
+            await CommandClient(link, vp.sysid).mission_start(first, len(items) - 1)
+        except MavlinkError as exc:
+            raise UserError(
+                f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) refused MISSION_START: {exc}"
+            ) from exc
+        logger.log_event({"event": "route_start", "sysid": vp.sysid, "planned_offset_s": offset_s})
+
+    await asyncio.gather(*(one(vp) for vp in plan.vehicles))
 
 
 async def _wait_until_done(recorder, plan: Plan, speedup: float, options: FlyOptions, progress) -> None:

@@ -7,7 +7,8 @@ that reads them. Every error names the file, the field and the bad value.
     name = "open field"
     [origin]            lat_deg, lon_deg, alt_m (AMSL)
     [planner]           name = "priority_swarm", seed = 1, plus planner parameters
-    [[vehicles]]        id, sysid, type ("multirotor" | "fixed_wing"), start = [x, y, z],
+    [[vehicles]]        id, sysid (MAVLink system id 1..255; 0 or absent = planning only, e.g. a
+                        500-UAV study), type ("multirotor" | "fixed_wing"), start = [x, y, z],
                         goal = [x, y, z], speed_mps, turn_radius_m, min_alt_m, max_alt_m,
                         separation_m, priority
     [[obstacles.cylinders]]    x, y, radius_m, z_min_m (default 0), z_max_m, buffer_m
@@ -125,7 +126,7 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
         raise ScenarioError(f"{where}: planner.name must be a string, got {planner.get('name')!r}")
     vehicles = [_vehicle(v, f"{where}: vehicles[{i}]") for i, v in enumerate(data.get("vehicles", []))]
     _unique([v.id for v in vehicles], "id", where)
-    _unique([v.sysid for v in vehicles], "sysid", where)
+    _unique([v.sysid for v in vehicles if v.sysid], "sysid", where)
     obstacles = data.get("obstacles", {})
     cylinders = [
         Cylinder(
@@ -168,9 +169,13 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
     vtype = d.get("type", "multirotor")
     if vtype not in VEHICLE_TYPES:
         raise ScenarioError(f"{where}: type must be one of {VEHICLE_TYPES}, got {vtype!r}")
-    sysid = d.get("sysid")
-    if not isinstance(sysid, int) or not 1 <= sysid <= 255:
-        raise ScenarioError(f"{where}: sysid must be an integer in 1..255, got {sysid!r}")
+    sysid = d.get("sysid", 0)
+    if not isinstance(sysid, int) or not 0 <= sysid <= 255:
+        raise ScenarioError(
+            f"{where}: sysid must be an integer in 1..255 (0 or absent: planning only), got {sysid!r}"
+        )
+    if "id" not in d and sysid == 0:
+        raise ScenarioError(f"{where}: a vehicle needs an id or a sysid")
     return Vehicle(
         id=str(d.get("id", f"uav{sysid}")),
         sysid=sysid,

@@ -44,6 +44,7 @@ KP_PSI = 1.5  # [1/s] heading error -> turn rate gain (saturates at the bank lim
 K_CIRCLE = 2.0  # loiter circle radial correction gain [-]
 GROUND_TOL_M = 0.05  # touchdown when within this height of the ground
 ALT_TOL_M = 0.5  # takeoff reaches its altitude within this tolerance
+LINE_MIN_H_M = 1.0  # below this horizontal distance to the target a leg is flown as a vertical move
 
 
 @dataclass(frozen=True)
@@ -257,8 +258,21 @@ class Kinematics:
         corner = np.sqrt(self.corner_speed[m] ** 2 + 2.0 * accel * np.maximum(dist_h - self.accept_r[m], 0.0))
         speed = np.where(mode == _PASS, np.minimum(speed, corner), np.minimum(speed, brake))
         speed[mode == _CLIMB] = 0.0
+        # Along a leg the vehicle holds the straight 3-D line (ArduCopter's WPNAV): climb in
+        # proportion to horizontal progress, slowing horizontally when the slope needs more
+        # than the climb/sink limit, and correct towards the line's altitude.
+        leg = self.target[m] - self.leg_from[m]
+        leg_h = np.sqrt(leg[:, 0] ** 2 + leg[:, 1] ** 2)
+        on_leg = ((mode == _GOTO) | (mode == _PASS)) & (dist_h > LINE_MIN_H_M)
+        slope = d[:, 2] / np.maximum(dist_h, 1e-9)
+        vz_ff = speed * slope
+        vz_limit = np.where(vz_ff > 0, self.climb[m], self.sink[m])
+        speed = np.where(on_leg, speed * np.minimum(1.0, vz_limit / np.maximum(np.abs(vz_ff), 1e-9)), speed)
+        progress = np.clip(1.0 - dist_h / np.maximum(leg_h, 1e-9), 0.0, 1.0)
+        z_line = self.leg_from[m][:, 2] + progress * leg[:, 2]
+        z_err = np.where(on_leg, z_line - self.pos[m][:, 2], d[:, 2])
+        vz = np.clip(np.where(on_leg, speed * slope, 0.0) + KP_ALT * z_err, -self.sink[m], self.climb[m])
         scale = speed / np.maximum(dist_h, 1e-9)
-        vz = np.clip(KP_ALT * d[:, 2], -self.sink[m], self.climb[m])
         landing = mode == _LAND
         if landing.any():
             vz = np.where(landing, np.where(dist_h > self.accept_r[m], 0.0, -self.land_speed[m]), vz)

@@ -33,7 +33,7 @@ def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_p
     assert all(len(t) > 20 for t in flight.positions.values())
     assert flight.plan is not None and [v.sysid for v in flight.plan.vehicles] == [1, 2, 3, 4]
     assert flight.origin == plan.origin and flight.scenario_text == SCENARIO.read_text()
-    assert any(e.get("event") == "start" for _, e in flight.events)
+    assert {e["sysid"] for _, e in flight.events if e.get("event") == "route_start"} == {1, 2, 3, 4}
     assert result.rrd_path.stat().st_size > 1000 and result.tlog_path.stat().st_size > 1000
 
 
