@@ -298,6 +298,8 @@ class AcmpsoParams:
     init_noise: float = 0.05
     validate_spacing_m: float = 100.0
     follow_tolerance_m: float = 50.0
+    max_climb_deg: float = 10.0
+    margin_m: float = 25.0
 
     @classmethod
     def from_scenario(cls, scenario: Scenario) -> AcmpsoParams:
@@ -368,7 +370,12 @@ def problem_from_scenario(
 
 
 def follow_terrain(
-    env: ThreatEnv, track: np.ndarray, spacing_m: float, tolerance_m: float, margin_m: float = 5.0
+    env: ThreatEnv,
+    track: np.ndarray,
+    spacing_m: float,
+    tolerance_m: float,
+    margin_m: float = 5.0,
+    max_climb_deg: float | None = None,
 ) -> np.ndarray:
     """Mission waypoints (K, 3) [m] that fly ``track`` clear of terrain, radars and obstacles.
 
@@ -380,8 +387,19 @@ def follow_terrain(
     ``margin_m / 2`` clear of every volume (a straight leg between two clear points can still cut a
     convex dome, cylinder or slope; the half margin covers the sag between the check samples), or
     is no deeper than the samples it replaces where those could not be cleaned.
+
+    ``max_climb_deg`` (the paper has no vehicle limit) caps the climb and descent angle: samples are
+    only ever raised - climbs start early enough, descents end late enough - alternating with the
+    push-out so the raised profile stays clear (three rounds; what remains is left to the validator).
+    Descending legs are then also checked as an autopilot without glide slope flies them (see
+    ``_longest_leg``).
     """
     dense = env.push_out(resample_path(track, spacing_m), margin_m)
+    gradient = None if max_climb_deg is None else float(np.tan(np.radians(max_climb_deg)))
+    if gradient is not None:
+        for _ in range(3):
+            dense[:, 2] = limit_gradient(dense, gradient)
+            dense = env.push_out(dense, margin_m)
     own = np.max(
         np.column_stack(
             [
@@ -395,22 +413,51 @@ def follow_terrain(
     )
     keep = [0]
     while keep[-1] < len(dense) - 1:
-        keep.append(_longest_leg(env, dense, own, keep[-1], tolerance_m, margin_m / 2))
+        keep.append(_longest_leg(env, dense, own, keep[-1], tolerance_m, margin_m / 2, gradient))
     return dense[keep]
 
 
+def limit_gradient(points: np.ndarray, gradient: float) -> np.ndarray:
+    """Altitudes of the (M, 3) polyline raised (never lowered) so |dz| <= gradient x horizontal step.
+
+    Backward pass: z_i >= z_{i+1} - g ds (climb early); forward pass: z_i >= z_{i-1} - g ds
+    (descend late). Raising a point only eases the climb into it, so after both passes every
+    step satisfies the limit, and the result is the lowest such profile above the input.
+    """
+    z = points[:, 2].copy()
+    ds = np.linalg.norm(np.diff(points[:, :2], axis=0), axis=1) * gradient
+    for i in range(len(z) - 2, -1, -1):
+        z[i] = max(z[i], z[i + 1] - ds[i])
+    for i in range(1, len(z)):
+        z[i] = max(z[i], z[i - 1] - ds[i - 1])
+    return z
+
+
 def _longest_leg(
-    env: ThreatEnv, dense: np.ndarray, own: np.ndarray, i: int, tolerance_m: float, clearance_m: float
+    env: ThreatEnv,
+    dense: np.ndarray,
+    own: np.ndarray,
+    i: int,
+    tolerance_m: float,
+    clearance_m: float,
+    dive_gradient: float | None,
 ) -> int:
     """End j of the longest leg i -> j (at most MAX_LEG samples) whose every shorter leg also passes.
 
-    All candidate legs are checked at once: each is sampled at twice the track's resolution.
+    All candidate legs are checked at once: each is sampled at twice the track's resolution. With
+    ``dive_gradient`` a descending leg is checked as flown by an autopilot that goes for the next
+    altitude at once (no glide slope, like the mock fixed wing): max(z_j, z_i - g s), which lies
+    below the straight line whenever the descent is no steeper than g.
     """
     js = np.arange(i + 1, min(i + MAX_LEG, len(dense) - 1) + 1)
     lengths = js - i
     steps = np.arange(2 * lengths[-1] + 1)
     frac = np.minimum(steps[None, :] / (2.0 * lengths[:, None]), 1.0)  # (m, S), padded with the end point
     chord = dense[i] + frac[..., None] * (dense[js] - dense[i])[:, None, :]
+    if dive_gradient is not None:
+        run = frac * np.linalg.norm(dense[js, :2] - dense[i, :2], axis=1)[:, None]
+        dive = np.maximum(dense[js, 2][:, None], dense[i, 2] - dive_gradient * run)
+        chord[..., 2] = np.minimum(chord[..., 2], dive)
     track = dense[np.minimum(i + np.arange(lengths[-1] + 1)[None, :], js[:, None])]
     deviation = np.max(np.abs(chord[:, ::2] - track), axis=(1, 2))
     depth = np.max(env.floor(chord[..., 0], chord[..., 1]) - chord[..., 2], axis=1)
@@ -449,7 +496,13 @@ def plan(scenario: Scenario, rng: np.random.Generator, progress: Progress | None
             step,
         )
         nodes_m = result.nodes * params.length_unit_m
-        waypoints = follow_terrain(env_m, nodes_m, params.validate_spacing_m, params.follow_tolerance_m)
+        waypoints = follow_terrain(
+            env_m,
+            nodes_m,
+            params.validate_spacing_m,
+            params.follow_tolerance_m,
+            max_climb_deg=params.max_climb_deg,
+        )
         node_report = validate_path(env_m, nodes_m, params.validate_spacing_m)
         flown_report = validate_path(env_m, waypoints, params.validate_spacing_m)
         vehicles.append(_vehicle_plan(vehicle, waypoints, result, node_report, flown_report, params))
@@ -483,6 +536,10 @@ def _vehicle_plan(
     cost["length_m"] = float(seg.sum())
     cost.update({f"nodes_{k}": v for k, v in node_report.summary().items()})
     cost.update({f"flown_{k}": v for k, v in flown_report.summary().items()})
+    d = np.diff(waypoints, axis=0)
+    climb_deg = np.degrees(np.arctan2(np.abs(d[:, 2]), np.hypot(d[:, 0], d[:, 1])))
+    cost["max_climb_deg"] = float(climb_deg.max(initial=0.0))
+    climb_ok = cost["max_climb_deg"] <= params.max_climb_deg + 0.01
     notes = [
         f"{params.algorithm} ({params.variant}): F = {result.fitness:.4f} (paper units, length unit"
         f" {params.length_unit_m:g} m), {len(waypoints)} terrain-following waypoints,"
@@ -492,6 +549,16 @@ def _vehicle_plan(
         f"flown path violation: {v.kind} {v.index} samples {v.first}-{v.last} depth {v.depth:.1f} m"
         for v in flown_report.violations
     ]
+    if not climb_ok:
+        notes.append(
+            f"climb angle {cost['max_climb_deg']:.1f} deg exceeds max_climb_deg {params.max_climb_deg:g}"
+        )
+    goal_z = float(vehicle.goal[2])
+    if waypoints[-1, 2] > goal_z + 1.0:
+        notes.append(
+            f"goal altitude raised from {goal_z:.0f} m to {waypoints[-1, 2]:.0f} m"
+            " (terrain, threats or climb limit)"
+        )
     notes += [
         f"smoothed nodes (paper track) violation: {v.kind} {v.index} depth {v.depth:.1f} m"
         for v in node_report.violations
@@ -509,6 +576,6 @@ def _vehicle_plan(
         final_action="loiter" if vehicle.type == "fixed_wing" else "land",
         acceptance_radius_m=max(2.0, min(params.follow_tolerance_m, 0.5 * float(seg.min(initial=1e9)))),
         cost=cost,
-        feasible=flown_report.ok,
+        feasible=flown_report.ok and climb_ok,
         notes=notes,
     )
