@@ -75,7 +75,8 @@ def test_file_cut_at_any_byte_reads_without_error(tmp_path: Path):
                 logger.flush()  # several chunks
     data = path.read_bytes()
     previous = -1
-    for cut in range(0, len(data), max(1, len(data) // 97)):
+    cuts = [*range(0, len(data), max(1, len(data) // 97)), *(len(data) - k for k in (9, 8, 4, 1))]
+    for cut in cuts:  # including cuts inside the footer and the closing magic
         (tmp_path / "cut.mcap").write_bytes(data[:cut])
         flight = read_flight(tmp_path / "cut.mcap")
         assert flight.truncated

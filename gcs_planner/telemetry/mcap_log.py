@@ -37,7 +37,6 @@ import threading
 import time
 import tomllib
 from collections.abc import Callable
-from operator import itemgetter
 from pathlib import Path
 from typing import IO
 
@@ -48,7 +47,12 @@ from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.plan import Plan
 from gcs_planner.telemetry.colors import vehicle_color
 from gcs_planner.telemetry.encode import json_encoder
-from gcs_planner.telemetry.mcap_writer import ChunkedMcapWriter
+from gcs_planner.telemetry.mcap_writer import (
+    MESSAGE_FIXED_LEN,
+    MESSAGE_HEADER,
+    MESSAGE_OPCODE,
+    ChunkedMcapWriter,
+)
 from gcs_planner.telemetry.schemas import (
     ALTITUDE_DATUMS,
     EVENT_SCHEMA,
@@ -194,43 +198,57 @@ class FlightLogger:
         return round(t_s * 1e6) * 1000
 
     def _encode(self, batch: list[tuple[float, object, bytes]]) -> None:
-        """Encode a batch; rows are grouped by channel within the chunk (better compression)."""
+        """Encode a batch into the open chunk, records grouped by channel (better compression).
+
+        Message records are packed here directly (header struct from mcap_writer) into one list
+        per channel: no intermediate row tuples, no sort.
+        """
         raw_channels = self._raw_channels
         json_channels = self._json_channels
         counts = self._frames_per_sysid
-        raw_rows, json_rows, fix_rows = [], [], []
+        buckets: dict[int, list[bytes]] = {}
+        times: list[int] = []
         tlog_parts: list[bytes] = []
         tlog = self._tlog
+        header = MESSAGE_HEADER.pack
+        opcode, fixed = MESSAGE_OPCODE, MESSAGE_FIXED_LEN
         for t_s, msg, raw in batch:
             t_ns = round(t_s * 1e6) * 1000 if t_s >= _UNIX_TIME_MIN_S else self._to_ns(t_s)
+            times.append(t_ns)
             raw = bytes(raw)
             sysid = raw[5] if raw[0] == 0xFD and len(raw) > 5 else _frame_sysid(raw)
             channel = raw_channels.get(sysid)
             if channel is None:
                 channel = self._add_vehicle(sysid)
-            raw_rows.append((channel, t_ns, raw))
+            bucket = buckets.get(channel) or buckets.setdefault(channel, [])
+            bucket.append(header(opcode, fixed + len(raw), channel, 0, t_ns, t_ns))
+            bucket.append(raw)
             counts[sysid] += 1
             if tlog is not None:
                 tlog_parts.append(_TLOG_TIME.pack((t_ns // 1000) & ~3))
                 tlog_parts.append(raw)
             if msg is None:
                 continue
-            key = (sysid, type(msg))
-            entry = json_channels.get(key)
+            entry = json_channels.get((sysid, type(msg)))
             if entry is None:
                 entry = self._add_json_channel(sysid, type(msg))
             channel, encoder, is_position = entry
             if encoder is None:
                 continue
-            json_rows.append((channel, t_ns, encoder(msg)))
+            data = encoder(msg)
+            bucket = buckets.get(channel) or buckets.setdefault(channel, [])
+            bucket.append(header(opcode, fixed + len(data), channel, 0, t_ns, t_ns))
+            bucket.append(data)
             if is_position:
-                fix_rows.append((self._location_channels[sysid], t_ns, self._location_fix(sysid, msg, t_ns)))
-        by_channel = itemgetter(0)
-        for rows in (raw_rows, json_rows, fix_rows):
-            rows.sort(key=by_channel)  # stable: time order kept within a channel
-            self._writer.add_messages(rows)
+                channel = self._location_channels[sysid]
+                data = self._location_fix(sysid, msg, t_ns)
+                bucket = buckets.get(channel) or buckets.setdefault(channel, [])
+                bucket.append(header(opcode, fixed + len(data), channel, 0, t_ns, t_ns))
+                bucket.append(data)
+        if times:
+            self._writer.add_packed(buckets, min(times), max(times))
         if tlog_parts:
-            self._tlog.write(b"".join(tlog_parts))
+            tlog.write(b"".join(tlog_parts))
 
     def _location_fix(self, sysid: int, msg, t_ns: int) -> bytes:
         """foxglove.LocationFix JSON; degE7 and mm printed with 7 and 3 decimals (exact)."""

@@ -23,7 +23,7 @@ from __future__ import annotations
 import json
 import struct
 import zlib
-from collections import Counter, defaultdict
+from collections import defaultdict
 from pathlib import Path
 from typing import IO
 
@@ -47,10 +47,13 @@ from mcap.records import (
 )
 from mcap.writer import MCAP0_MAGIC
 
-__all__ = ["ChunkedMcapWriter"]
+__all__ = ["MESSAGE_FIXED_LEN", "MESSAGE_HEADER", "MESSAGE_OPCODE", "ChunkedMcapWriter"]
 
-_MESSAGE_HEADER = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
-_MESSAGE_FIXED_LEN = 2 + 4 + 8 + 8
+# A Message record is MESSAGE_HEADER.pack(MESSAGE_OPCODE, MESSAGE_FIXED_LEN + len(data), channel,
+# sequence, log_time_ns, publish_time_ns) followed by data (see add_packed).
+MESSAGE_HEADER = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
+MESSAGE_FIXED_LEN = 2 + 4 + 8 + 8
+MESSAGE_OPCODE = int(Opcode.MESSAGE)
 
 
 class ChunkedMcapWriter:
@@ -117,25 +120,35 @@ class ChunkedMcapWriter:
         """Append (channel id, log time [ns], data) rows to the open chunk, in the given order."""
         if not rows:
             return
-        pack = _MESSAGE_HEADER.pack
-        opcode = int(Opcode.MESSAGE)
-        parts = []
-        append = parts.append
+        pack = MESSAGE_HEADER.pack
+        buckets: dict[int, list[bytes]] = {}
         for channel_id, t_ns, data in rows:
-            append(pack(opcode, _MESSAGE_FIXED_LEN + len(data), channel_id, 0, t_ns, t_ns))
-            append(data)
-        self._chunk += b"".join(parts)
-        times = [row[1] for row in rows]
-        lo, hi = min(times), max(times)
-        if self._chunk_messages == 0:
-            self._chunk_start_ns, self._chunk_end_ns = lo, hi
-        else:
-            self._chunk_start_ns = min(self._chunk_start_ns, lo)
-            self._chunk_end_ns = max(self._chunk_end_ns, hi)
-        self._chunk_messages += len(rows)
+            bucket = buckets.setdefault(channel_id, [])
+            bucket.append(pack(MESSAGE_OPCODE, MESSAGE_FIXED_LEN + len(data), channel_id, 0, t_ns, t_ns))
+            bucket.append(data)
+        self.add_packed(buckets, min(row[1] for row in rows), max(row[1] for row in rows))
+
+    def add_packed(self, buckets: dict[int, list[bytes]], start_ns: int, end_ns: int) -> None:
+        """Append packed message records: per channel id a list alternating header, data.
+
+        The hot-path form of add_messages: callers pack headers with MESSAGE_HEADER; start_ns and
+        end_ns bound the log times of these records.
+        """
+        chunk = self._chunk
         counts = self._counts
-        for channel_id, n in Counter(row[0] for row in rows).items():
-            counts[channel_id] += n
+        n = 0
+        for channel_id, parts in buckets.items():
+            chunk += b"".join(parts)
+            counts[channel_id] += len(parts) // 2
+            n += len(parts) // 2
+        if n == 0:
+            return
+        if self._chunk_messages == 0:
+            self._chunk_start_ns, self._chunk_end_ns = start_ns, end_ns
+        else:
+            self._chunk_start_ns = min(self._chunk_start_ns, start_ns)
+            self._chunk_end_ns = max(self._chunk_end_ns, end_ns)
+        self._chunk_messages += n
 
     @property
     def chunk_bytes(self) -> int:

@@ -187,7 +187,7 @@ def read_flight(path: str | Path) -> Flight:
                         collector.message(channel_id, log_time, data)
         except Exception as exc:  # noqa: BLE001 - a cut tail raises EndOfFile, struct, zstd or CRC errors
             flight.error = f"{type(exc).__name__}: {exc}"
-    flight.truncated = not collector.complete
+    flight.truncated = not collector.complete or flight.error is not None
     if flight.truncated:
         log.info(
             "%s: truncated log; recovered %d messages (%s)", path, flight.recovered_messages, flight.error
