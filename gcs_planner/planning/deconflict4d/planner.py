@@ -572,11 +572,11 @@ def _insert_waypoint(problem: Problem, track: Track, u: int, t_c: float) -> tupl
 
 
 def _local_problem(
-    problem: Problem, tracks: list[Track], u: int, new_wp: np.ndarray, ev: _Eval
+    problem: Problem, tracks: list[Track], u: int, free_wps: np.ndarray, ev: _Eval
 ) -> tuple[Problem, list[int]]:
     """The waypoint-insertion sub-problem: UAV u (index 0) and the UAVs it could meet.
 
-    The new waypoint may move within ``insert_radius_m`` of where it was inserted, so u stays in
+    The free waypoints may move within ``insert_radius_m`` of their box, so u stays in
     the box of its current polyline grown by that radius; only UAVs whose flown polylines come
     within separation + margins of that box matter (the others are constant in the cost).
     """
@@ -584,14 +584,14 @@ def _local_problem(
     layout = _Layout(problem, tracks, {})
     pts, tms = layout.decode(np.zeros((1, 0)))
     radius = s.insert_radius_m
-    lo = np.minimum(pts[0, u].min(axis=0), new_wp - radius)
-    hi = np.maximum(pts[0, u].max(axis=0), new_wp + radius)
+    lo = np.minimum(pts[0, u].min(axis=0), free_wps.min(axis=0) - radius)
+    hi = np.maximum(pts[0, u].max(axis=0), free_wps.max(axis=0) + radius)
     reach = max(v.separation_m for v in problem.uavs) + 2 * float(s.insert_radius_m)
     near = np.all((pts[0].min(axis=1) <= hi + reach) & (pts[0].max(axis=1) >= lo - reach), axis=1)
     near[u] = False
     members = [u] + [int(i) for i in np.nonzero(near)[0]]
-    box_lo = np.maximum(problem.lower_m, new_wp - radius)
-    box_hi = np.minimum(problem.upper_m, new_wp + radius)
+    box_lo = np.maximum(problem.lower_m, free_wps.min(axis=0) - radius)
+    box_hi = np.minimum(problem.upper_m, free_wps.max(axis=0) + radius)
     sub = Problem(
         uavs=[problem.uavs[m] for m in members],
         zones=problem.zones,
@@ -606,36 +606,48 @@ def _local_problem(
 def _stage_waypoints(
     problem: Problem, tracks: list[Track], rng: np.random.Generator, events: list[dict]
 ) -> tuple[list[Track], dict]:
+    """Waypoint insertion on the most-conflicting UAV; once conflict-free, a UAV left outside its
+    limits (an insertion may trade a limit for a conflict) is re-optimised the same local way,
+    all its waypoints free, without inserting. Each UAV is repaired at most once per stage."""
     s = problem.settings
-    iters, added = 0, 0
+    iters, added, repaired = 0, 0, set()
+    keys = ("speed_excess", "blend_overlap_s", "turn_excess_m", "time_error_excess_s")
     for _ in range(s.insert_max_steps):
         _, ev = _fleet_state(problem, tracks)
         counts = _counts(problem, ev)
-        if not counts.any():
-            break
+        excess = sum(ev.terms[k][0] for k in keys)
         order = np.lexsort((np.arange(len(counts)), -counts))
         pick = next((int(u) for u in order if counts[u] and len(tracks[u].waypoints) < s.max_waypoints), None)
-        if pick is None:
+        if pick is not None:
+            new_track, new_idx = _insert_waypoint(problem, tracks[pick], pick, _earliest_conflict(ev, pick))
+            free, inserting = [new_idx], True
+        elif not counts.any() and np.any(
+            np.where(np.isin(np.arange(len(excess)), list(repaired)), 0, excess) > 0
+        ):
+            pick = int(np.argmax(np.where(np.isin(np.arange(len(excess)), list(repaired)), 0, excess)))
+            new_track = tracks[pick]
+            free, inserting = list(range(1, len(new_track.waypoints) - 1)), False
+            repaired.add(pick)
+        else:
             break
-        new_track, new_idx = _insert_waypoint(problem, tracks[pick], pick, _earliest_conflict(ev, pick))
-        sub, members = _local_problem(problem, tracks, pick, new_track.waypoints[new_idx], ev)
+        sub, members = _local_problem(problem, tracks, pick, new_track.waypoints[free or [0]], ev)
         sub_tracks = [new_track] + [tracks[m] for m in members[1:]]
-        layout = _Layout(sub, sub_tracks, {0: [new_idx]})
+        layout = _Layout(sub, sub_tracks, {0: free})
         x, _, n_it, _ = _pso(sub, layout, np.array([0]), s.insert_particles, s.insert_iterations, rng)
         tracks = list(tracks)
         tracks[pick] = layout.tracks(x, sub_tracks)[0]
         iters += n_it
-        added += 1
+        added += inserting
         events.append(
             {
-                "stage": "waypoint",
+                "stage": "waypoint" if inserting else "repair",
                 "uav": problem.uavs[pick].id,
                 "conflicts": int(counts[pick]),
                 "waypoints": len(tracks[pick].waypoints),
                 "iterations": n_it,
             }
         )
-    return tracks, {"iterations": iters, "waypoints_added": added}
+    return tracks, {"iterations": iters, "waypoints_added": added, "repaired": len(repaired)}
 
 
 # ---------------------------------------------------------------------------- driver
