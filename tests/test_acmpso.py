@@ -17,6 +17,7 @@ from gcs_planner.planning.acmpso import (
     AcmpsoParams,
     TrackProblem,
     follow_terrain,
+    limit_gradient,
     problem_from_scenario,
     solve,
 )
@@ -231,6 +232,8 @@ def test_plan_is_registered_flies_clean_and_round_trips(scenario, tmp_path):
     assert v.feasible and validate_path(ThreatEnv.from_scenario(small, 500.0), v.waypoints, 100.0).ok
     assert np.all(np.diff(v.times_s) > 0) and v.times_s[-1] == pytest.approx(v.cost["length_m"] / 25.0)
     assert v.cost["fitness"] >= 37.339 and v.cost["flown_radar_violations"] == 0.0
+    d = np.diff(v.waypoints, axis=0)
+    assert np.all(np.abs(d[:, 2]) <= np.tan(np.radians(10.0)) * np.hypot(d[:, 0], d[:, 1]) + 1e-6)
     again = plan_scenario(small, seed=3)
     np.testing.assert_array_equal(again.vehicles[0].waypoints, v.waypoints)
     # the terrain-following waypoints become a valid mission (altitudes relative to home = origin)
@@ -279,3 +282,13 @@ def test_plan_over_a_gridded_elevation_model(scenario, tmp_path):
     v = plan_scenario(dem, seed=2).vehicles[0]
     assert v.feasible and validate_path(env, v.waypoints, 100.0).ok
     assert np.all(v.waypoints[:, 2] >= env.floor(v.waypoints[:, 0], v.waypoints[:, 1]) - 1e-6)
+
+
+def test_limit_gradient_only_raises_to_the_lowest_flyable_profile():
+    x = np.arange(0.0, 2001.0, 100.0)
+    z = np.where(np.abs(x - 1000.0) <= 100.0, 500.0, 0.0)  # a 500 m wall, 200 m wide
+    out = limit_gradient(np.column_stack([x, np.zeros_like(x), z]), 0.5)
+    assert np.all(out >= z)
+    assert np.all(np.abs(np.diff(out)) <= 0.5 * 100.0 + 1e-9)
+    # climbs start exactly 1000 m ahead of the wall (500 m at gradient 0.5) and end as late
+    np.testing.assert_allclose(out, np.maximum(z, 500.0 - 0.5 * np.maximum(np.abs(x - 1000.0) - 100.0, 0.0)))

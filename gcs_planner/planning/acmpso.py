@@ -400,6 +400,7 @@ def follow_terrain(
         for _ in range(3):
             dense[:, 2] = limit_gradient(dense, gradient)
             dense = env.push_out(dense, margin_m)
+        dense[:, 2] = limit_gradient(dense, gradient)  # exact limit last; it only raises points
     own = np.max(
         np.column_stack(
             [
@@ -455,7 +456,9 @@ def _longest_leg(
     frac = np.minimum(steps[None, :] / (2.0 * lengths[:, None]), 1.0)  # (m, S), padded with the end point
     chord = dense[i] + frac[..., None] * (dense[js] - dense[i])[:, None, :]
     if dive_gradient is not None:
-        run = frac * np.linalg.norm(dense[js, :2] - dense[i, :2], axis=1)[:, None]
+        h = np.linalg.norm(dense[js, :2] - dense[i, :2], axis=1)
+        steep = np.abs(dense[js, 2] - dense[i, 2]) > dive_gradient * h + 1e-9
+        run = frac * h[:, None]
         dive = np.maximum(dense[js, 2][:, None], dense[i, 2] - dive_gradient * run)
         chord[..., 2] = np.minimum(chord[..., 2], dive)
     track = dense[np.minimum(i + np.arange(lengths[-1] + 1)[None, :], js[:, None])]
@@ -467,6 +470,8 @@ def _longest_leg(
         depth = np.maximum(depth, env.cylinder_depth(chord).max(axis=(1, 2)))
     allowed = np.maximum.accumulate(np.maximum(own[js], own[i])) - clearance_m
     ok = (deviation <= tolerance_m) & (depth <= allowed)
+    if dive_gradient is not None:
+        ok &= ~steep  # a chord is shorter than the path it replaces: its slope can exceed the limit
     ok[0] = True  # adjacent samples are always joined: nothing finer to fly
     return int(js[np.argmin(ok) - 1] if not ok.all() else js[-1])
 
@@ -539,7 +544,7 @@ def _vehicle_plan(
     d = np.diff(waypoints, axis=0)
     climb_deg = np.degrees(np.arctan2(np.abs(d[:, 2]), np.hypot(d[:, 0], d[:, 1])))
     cost["max_climb_deg"] = float(climb_deg.max(initial=0.0))
-    climb_ok = cost["max_climb_deg"] <= params.max_climb_deg + 0.01
+    climb_ok = cost["max_climb_deg"] <= params.max_climb_deg + 1e-6
     notes = [
         f"{params.algorithm} ({params.variant}): F = {result.fitness:.4f} (paper units, length unit"
         f" {params.length_unit_m:g} m), {len(waypoints)} terrain-following waypoints,"
