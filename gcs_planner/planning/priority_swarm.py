@@ -179,10 +179,8 @@ class Decoded:
     """Particles decoded into Dubins legs (P particles, W waypoints)."""
 
     pts: np.ndarray  # (P, W, 3)
-    q0: np.ndarray  # (P*(W-1), 3) leg start poses
     word: np.ndarray  # (P*(W-1),)
     seg: np.ndarray  # (P*(W-1), 3)
-    radii: np.ndarray  # (P*(W-1), 3)
     lh: np.ndarray  # (P, W-1) horizontal leg lengths
     l3: np.ndarray  # (P, W-1) 3-D leg lengths
     cum: np.ndarray  # (P, W)
@@ -217,7 +215,7 @@ def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
     l3 = np.hypot(lh, d[..., 2])
     cum = np.concatenate([np.zeros((p, 1)), np.cumsum(l3, axis=1)], axis=1)
     starts, kappa = segment_starts(q0, word, seg, radii)
-    return Decoded(pts, q0, word, seg, radii, lh, l3, cum, starts, kappa)
+    return Decoded(pts, word, seg, lh, l3, cum, starts, kappa)
 
 
 def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
@@ -750,6 +748,7 @@ def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
                 convergence[: len(h)] += h
         if best is None or (len(infeasible), total) < (best[0], best[1]):
             best = (len(infeasible), total, dict(xs), list(order))
+        log.info("round %d: %d infeasible UAVs, cost %.3f", r + 1, len(infeasible), total)
         if not infeasible:
             break
         order = infeasible + [i for i in order if i not in infeasible]  # promote the infeasible UAVs
