@@ -4,6 +4,7 @@ the live Rerun views at once; the log read back has every vehicle's positions.""
 from __future__ import annotations
 
 import asyncio
+import time
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ import pytest
 from gcs_planner.geo import geodetic_to_enu
 from gcs_planner.telemetry import FlightLogger, read_flight
 
-sitl_mock = pytest.importorskip("sitl_mock")
+fleet_module = pytest.importorskip("sitl_mock.fleet")  # submodule: works with a stale editable install too
 link_module = pytest.importorskip("gcs_planner.mavlink.link")
 
 SYSIDS = [1, 2, 3]
@@ -41,12 +42,10 @@ def test_mock_fleet_over_udp_is_logged_and_shown_live(tmp_path):
     from gcs_planner.telemetry.rerun_views import APPLICATION_ID, LiveRerunLogger
 
     path, rrd = tmp_path / "live.mcap", tmp_path / "live.rrd"
-    with sitl_mock.MockFleet(count=len(SYSIDS), speedup=5.0) as fleet:
+    with fleet_module.MockFleet(count=len(SYSIDS), speedup=5.0) as fleet:
         origin = fleet.home
         rec = rr.RecordingStream(APPLICATION_ID, recording_id="live-test")
         rec.save(str(rrd))
-        import time
-
         live = LiveRerunLogger(rec, origin, t0_s=time.time())
         live.start()
         with FlightLogger(path, origin, flush_interval_s=0.2) as logger:
