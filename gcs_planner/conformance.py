@@ -73,17 +73,24 @@ def point_to_polyline_m(points: np.ndarray, polyline: np.ndarray, chunk: int = 4
 
 
 def _route_window(track: Track, planned: np.ndarray, acceptance_m: float) -> slice:
-    """Samples from reaching the route's first point to reaching its last one.
+    """Samples from leaving the route's first point to reaching its last one.
 
-    "Reaching" is the first (last) sample within ``acceptance_m``, or the closest sample when the
-    telemetry rate left none that close.
+    Leaving is the last sample of the first stay within ``acceptance_m`` of the first point
+    (a vehicle may hover there until its start time); reaching is the first sample within
+    ``acceptance_m`` of the last point. Where the telemetry rate left no sample that close, the
+    closest sample stands in.
     """
     d_start = np.linalg.norm(track.positions - planned[0], axis=1)
-    near = np.flatnonzero(d_start <= acceptance_m)
-    start = int(near[0]) if len(near) else int(np.argmin(d_start))
+    near = d_start <= acceptance_m
+    if near.any():
+        first = int(np.argmax(near))
+        away = np.flatnonzero(~near[first:])
+        start = first + (int(away[0]) - 1 if len(away) else len(near) - 1 - first)
+    else:
+        start = int(np.argmin(d_start))
     d_end = np.linalg.norm(track.positions[start:] - planned[-1], axis=1)
-    near = np.flatnonzero(d_end <= acceptance_m)
-    end = start + (int(near[-1]) if len(near) else int(np.argmin(d_end)))
+    reached = np.flatnonzero(d_end <= acceptance_m)
+    end = start + (int(reached[0]) if len(reached) else int(np.argmin(d_end)))
     return slice(start, end + 1)
 
 

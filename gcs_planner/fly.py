@@ -18,6 +18,10 @@ Choices:
   item after NAV_TAKEOFF, at the common start time plus its planned delay (delayed take-off as
   a timed start; the mission's NAV_DELAY is then skipped). Climb rates differ between vehicles
   and altitudes, so a one-shot start would shift every route by its own climb time.
+- While the routes run, a ScheduleKeeper (gcs_planner.timekeeping) sends each vehicle ground
+  speed set-points (MAV_CMD_DO_CHANGE_SPEED) that hold it to the plan's timing; autopilots
+  slow for corners and would otherwise fall behind the schedule the separation was planned on.
+  ``keep_schedule=False`` flies the bare missions.
 - A mission is complete when MISSION_CURRENT reports mission_state COMPLETE or the last item's
   MISSION_ITEM_REACHED arrives.
 """
@@ -32,6 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.conformance import Track, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
@@ -45,6 +50,7 @@ from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
+from gcs_planner.timekeeping import ScheduleKeeper
 
 __all__ = ["FlyOptions", "FlyResult", "fly"]
 
@@ -52,8 +58,10 @@ log = logging.getLogger(__name__)
 
 HEARTBEAT_WAIT_S = 10.0
 TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
+LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
 TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" within this distance of its take-off altitude
 NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
+KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
 
 
 @dataclass
@@ -68,6 +76,7 @@ class FlyOptions:
     max_cross_track_m: float = 15.0
     drift_mps: dict[int, tuple[float, float]] = field(default_factory=dict)  # mock fault injection
     timeout_factor: float = 2.0
+    keep_schedule: bool = True
 
 
 @dataclass
@@ -114,6 +123,17 @@ class _TrackRecorder:
                 self.completed.add(sysid)
         elif kind == "MISSION_ITEM_REACHED" and msg.seq == self.last_seq[sysid]:
             self.completed.add(sysid)
+
+    def latest(self, sysid: int) -> tuple[float, np.ndarray] | None:
+        """Time [s] and ENU position [m] of the vehicle's newest position report."""
+        if not self.samples[sysid]:
+            return None
+        t, lat, lon, alt = self.samples[sysid][-1]
+        return t, np.array(geodetic_to_enu(lat, lon, alt, self.origin))
+
+    def now_s(self) -> float:
+        """The newest report time over all vehicles (the fleet's clock)."""
+        return max((rows[-1][0] for rows in self.samples.values() if rows), default=0.0)
 
     def tracks(self) -> dict[int, Track]:
         out = {}
@@ -214,8 +234,17 @@ async def fly(
                             fleet.set_drift(sysid, *drift)
                     await _take_off_all(link, plan, recorder, speedup, options)
                     logger.log_event({"event": "airborne", "sysids": sysids})
-                    await _start_routes(link, plan, missions, speedup, logger)
-                    await _wait_until_done(recorder, plan, speedup, options, progress)
+                    route_t0_s = recorder.now_s() if fleet is not None else time.time()
+                    routes = asyncio.create_task(_start_routes(link, plan, missions, speedup, logger))
+                    keeper = None
+                    if options.keep_schedule:
+                        keeper = ScheduleKeeper()
+                        for vp in plan.vehicles:
+                            keeper.add(vp)
+                    await _wait_until_done(
+                        link, recorder, plan, speedup, options, progress, keeper, route_t0_s
+                    )
+                    await routes
             finally:
                 await link.close()
     finally:
@@ -292,17 +321,45 @@ async def _start_routes(link: MavlinkLink, plan: Plan, missions: dict, speedup: 
     await asyncio.gather(*(one(vp) for vp in plan.vehicles))
 
 
-async def _wait_until_done(recorder, plan: Plan, speedup: float, options: FlyOptions, progress) -> None:
-    climb_s = max(float(v.waypoints[0, 2]) for v in plan.vehicles) / TAKEOFF_CLIMB_MPS
-    planned_s = max(float(v.path_times_s[-1] - v.path_times_s[0]) + v.takeoff_delay_s for v in plan.vehicles)
-    budget_s = (planned_s + 2 * climb_s) * options.timeout_factor / speedup + 10.0
+async def _wait_until_done(
+    link: MavlinkLink,
+    recorder: _TrackRecorder,
+    plan: Plan,
+    speedup: float,
+    options: FlyOptions,
+    progress,
+    keeper: ScheduleKeeper | None,
+    route_t0_s: float,
+) -> None:
+    descent_s = max(float(v.waypoints[-1, 2]) for v in plan.vehicles) / LAND_SPEED_MPS
+    planned_s = max(float(v.path_times_s[-1]) + v.takeoff_delay_s for v in plan.vehicles) + descent_s
+    budget_s = planned_s * options.timeout_factor / speedup + 10.0
     deadline = time.monotonic() + budget_s
     total = len(plan.vehicles)
     while time.monotonic() < deadline and len(recorder.completed) < total:
         if progress:
             progress("fly", len(recorder.completed), total)
-        await asyncio.sleep(0.1)
+        if keeper is not None:
+            _keep_schedule(link, recorder, keeper, route_t0_s)
+        await asyncio.sleep(KEEPER_PERIOD_S / speedup)
     if progress:
         progress("fly", len(recorder.completed), total)
     # a little more telemetry after the last item (landing) for the log
     await asyncio.sleep(min(1.0, 5.0 / speedup))
+
+
+def _keep_schedule(
+    link: MavlinkLink, recorder: _TrackRecorder, keeper: ScheduleKeeper, route_t0_s: float
+) -> None:
+    for sysid in recorder.started - recorder.completed:
+        latest = recorder.latest(sysid)
+        if latest is None:
+            continue
+        t_s, position = latest
+        speed = keeper.speed_command(sysid, t_s - route_t0_s, position)
+        if speed is not None:
+            link.send(
+                mavlink.MAVLink_command_long_message(
+                    sysid, 1, mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 1, speed, -1, 0, 0, 0, 0
+                )
+            )

@@ -46,6 +46,7 @@ log = logging.getLogger(__name__)
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME = 16, 17, 19
 NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_DELAY = 20, 21, 22, 93
 DO_CHANGE_SPEED = 178
+STOP_LEG_M = 0.5  # a next leg shorter than this means: stop at this waypoint
 NAV_COMMANDS = {
     NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_DELAY,
 }  # fmt: skip
@@ -317,7 +318,9 @@ class Navigator:
         here = self.world.kin.pos[self.i, :2]
         a, b = target[:2] - here, self._target(nxt)[:2] - target[:2]
         na, nb = np.hypot(*a), np.hypot(*b)
-        if na < 1e-6 or nb < 1e-6:
+        if nb < STOP_LEG_M:
+            return 0.0  # the next leg has (almost) no length: stop here, as the next target is here
+        if na < 1e-6:
             return np.inf
         theta = np.arccos(np.clip(np.dot(a, b) / (na * nb), -1.0, 1.0))  # turn angle [rad]
         if theta < 1e-3:

@@ -6,7 +6,8 @@ vehicle keeps its row index (`attach`). Mission-protocol messages go to the I/O-
 
 Commands (COMMAND_LONG or COMMAND_INT), each answered with COMMAND_ACK:
 COMPONENT_ARM_DISARM, DO_SET_MODE (ArduPilot: param2 = custom mode; PX4: param2/param3 = main/sub
-mode), MISSION_START (param1 first, param2 last item; 0/0 = whole mission), DO_SET_MISSION_CURRENT
+mode), MISSION_START (param1 first, param2 last item; 0/0 = whole mission), DO_CHANGE_SPEED (param2
+[m/s], clamped to the airframe), DO_SET_MISSION_CURRENT
 (FAILED when out of range), NAV_TAKEOFF (param7 [m above home]), NAV_RETURN_TO_LAUNCH, NAV_LAND,
 PREFLIGHT_REBOOT_SHUTDOWN, REQUEST_MESSAGE / REQUEST_AUTOPILOT_CAPABILITIES (AUTOPILOT_VERSION,
 HOME_POSITION); anything else -> UNSUPPORTED. SET_MODE and MISSION_SET_CURRENT messages work too.
@@ -145,6 +146,7 @@ class MockVehicle:
             mavlink.MAV_CMD_DO_SET_MISSION_CURRENT: self._cmd_set_current,
             mavlink.MAV_CMD_NAV_TAKEOFF: self._cmd_takeoff,
             mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._cmd_rtl,
+            mavlink.MAV_CMD_DO_CHANGE_SPEED: self._cmd_change_speed,
             mavlink.MAV_CMD_NAV_LAND: self._cmd_land,
             mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: self._cmd_reboot,
             mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
@@ -402,6 +404,14 @@ class MockVehicle:
 
     def _cmd_rtl(self, *_: float) -> CommandResult:
         return CommandResult.ACCEPTED if self._set_mode_name("RTL") else CommandResult.FAILED
+
+    def _cmd_change_speed(self, p1: float, p2: float, *_: float) -> CommandResult:
+        """DO_CHANGE_SPEED as a command (param2 [m/s]; -1 or NaN: no change), clamped to the airframe."""
+        if not math.isfinite(p2) or p2 < 0:
+            return CommandResult.ACCEPTED
+        af = self.airframe
+        self._world.kin.speed_cmd[self.index] = float(np.clip(p2, af.min_speed_mps, af.max_speed_mps))
+        return CommandResult.ACCEPTED
 
     def _cmd_land(self, *_: float) -> CommandResult:
         if "LAND" not in self._modes:
