@@ -12,15 +12,16 @@
    includes JSON encoding, LocationFix, zstd and closing the file.
 2. Size: MCAP vs .tlog of the same frames; bytes per vehicle-hour.
 3. Replay to Rerun: read_flight + log_flight_to_rerun into an .rrd, frames/s.
-4. Live: sitl_mock.MockFleet (N vehicles, 10 Hz) over real UDP for --live-seconds: frames
-   received vs logged (drops in the logger) and MAVLink sequence gaps (drops before it).
+4. Live: sitl_mock.MockFleet (N vehicles, 10 Hz) over real UDP into MavlinkLink (as `fly` runs it)
+   for --live-seconds: frames the link delivered vs frames in the log (drops in the logger), MAVLink
+   sequence gaps (drops before it), and MCAP vs .tlog size of exactly the same frames.
 """
 
 from __future__ import annotations
 
 import argparse
+import asyncio
 import os
-import socket
 import struct
 import tempfile
 import time
@@ -135,51 +136,42 @@ def bench_rerun(path: Path, rrd: Path) -> tuple[float, float, int]:
 
 
 def bench_live(vehicles: int, seconds: float, path: Path) -> dict | None:
+    """MockFleet -> MavlinkLink (one UDP socket, like `fly`) -> FlightLogger.on_frame for ``seconds``."""
     try:
-        from sitl_mock import MockFleet
+        from gcs_planner.mavlink.link import MavlinkLink
+        from sitl_mock.fleet import MockFleet
     except ImportError as exc:
-        print(f"live: sitl_mock.MockFleet not importable ({exc}); skipped")
+        print(f"live: MockFleet / MavlinkLink not importable ({exc}); skipped")
         return None
-    parsers: dict[int, mavlink.MAVLink] = {}
-    received = logged_before = 0
-    hb = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
-    heartbeat = bytes(mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3).pack(hb))
     tlog = path.with_suffix(".tlog")
+    received = 0
+
+    async def record(addresses, logger: FlightLogger) -> None:
+        nonlocal received
+        link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in addresses))
+
+        def on_frame(msg, raw, t_s) -> None:
+            nonlocal received
+            received += 1
+            logger.on_frame(msg, raw, t_s)
+
+        unsubscribe = link.subscribe(on_frame)
+        await asyncio.sleep(seconds)
+        unsubscribe()
+        await link.close()
+
     with (
         MockFleet(count=vehicles, speedup=1.0) as fleet,
         FlightLogger(path, ORIGIN, tlog_path=tlog) as logger,
     ):
-        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4 << 20)
-        sock.bind(("127.0.0.1", 0))
-        sock.settimeout(0.1)
-        addresses = [v.address for v in fleet.vehicles]
-        end = time.monotonic() + seconds
-        next_hb = 0.0
         cpu0 = time.process_time()
-        while time.monotonic() < end:
-            if time.monotonic() >= next_hb:
-                for a in addresses:
-                    sock.sendto(heartbeat, a)
-                next_hb = time.monotonic() + 1.0
-            try:
-                data, addr = sock.recvfrom(65535)
-            except TimeoutError:
-                continue
-            parser = parsers.setdefault(addr[1], mavlink.MAVLink(None))
-            now = time.time()
-            for msg in parser.parse_buffer(data) or []:
-                received += 1
-                logger.on_frame(msg, bytes(msg.get_msgbuf()), now)
+        asyncio.run(record(fleet.addresses, logger))
         cpu_s = time.process_time() - cpu0
-        sock.close()
-        logged_before = logger.frames_logged
     flight = read_flight(path)
     loss = [float(np.mean(flight.link_loss(s)[1])) for s in flight.sysids]
     return {
         "received": received,
         "logged": len(flight.frames),
-        "flushed_before_close": logged_before,
         "seq_loss_mean": float(np.mean(loss)) if loss else float("nan"),
         "rate": received / seconds,
         "cpu_s": cpu_s,
@@ -224,7 +216,7 @@ def main() -> None:
         live = bench_live(args.vehicles, args.live_seconds, tmp / "live.mcap")
         if live:
             rows += [
-                (f"live MockFleet {args.vehicles} x 10 Hz: frames received", f"{live['received']}", ""),
+                (f"live MockFleet {args.vehicles} x 10 Hz -> MavlinkLink: frames", f"{live['received']}", ""),
                 ("live: frames in the MCAP log", f"{live['logged']}", "= received"),
                 ("live: receive rate [frames/s]", f"{live['rate']:,.0f}", ""),
                 ("live: MAVLink seq-gap loss (mean per vehicle)", f"{live['seq_loss_mean']:.4f}", ""),
