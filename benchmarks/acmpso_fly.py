@@ -84,6 +84,8 @@ async def fly(args: argparse.Namespace) -> int:
     cruise = track[int(np.argmax(near)) :] if near.any() else track
     horizontal, below, above = deviation(cruise, vp.waypoints)
     report = validate_path(env, cruise, spacing=100.0)
+    if args.save_track:
+        np.savez(args.save_track, flown=track, planned=vp.waypoints)
     print(f"mission: {len(items)} items ({len(vp.waypoints)} waypoints), planned {vp.times_s[-1]:.0f} s")
     print(f"flown: {flight_s:.0f} s simulated in {wall_s:.1f} s wall, {len(track)} position reports")
     print(
@@ -103,6 +105,7 @@ def main() -> int:
     ap.add_argument("--speedup", type=float, default=200.0)
     ap.add_argument("--physics-dt-s", type=float, default=0.2, help="mock physics step (simulated s)")
     ap.add_argument("--rate-hz", type=float, default=1.0, help="position telemetry rate (simulated Hz)")
+    ap.add_argument("--save-track", type=Path, help="write flown and planned tracks (npz) here")
     ap.add_argument("--timeout-s", type=float, default=20000.0, help="simulated seconds")
     return asyncio.run(fly(ap.parse_args()))
 

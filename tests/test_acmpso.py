@@ -232,6 +232,9 @@ def test_plan_is_registered_flies_clean_and_round_trips(scenario, tmp_path):
     assert v.feasible and validate_path(ThreatEnv.from_scenario(small, 500.0), v.waypoints, 100.0).ok
     assert np.all(np.diff(v.times_s) > 0) and v.times_s[-1] == pytest.approx(v.cost["length_m"] / 25.0)
     assert v.cost["fitness"] >= 37.339 and v.cost["flown_radar_violations"] == 0.0
+    flown = resample_path(v.waypoints, 50.0)  # the clearance margin (25 m) is kept, at least half of it
+    env = ThreatEnv.from_scenario(small, 500.0)
+    assert np.min(flown[1:, 2] - env.floor(flown[1:, 0], flown[1:, 1])) >= 12.5 - 1e-6
     d = np.diff(v.waypoints, axis=0)
     assert np.all(np.abs(d[:, 2]) <= np.tan(np.radians(10.0)) * np.hypot(d[:, 0], d[:, 1]) + 1e-6)
     again = plan_scenario(small, seed=3)

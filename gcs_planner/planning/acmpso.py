@@ -506,6 +506,7 @@ def plan(scenario: Scenario, rng: np.random.Generator, progress: Progress | None
             nodes_m,
             params.validate_spacing_m,
             params.follow_tolerance_m,
+            margin_m=params.margin_m,
             max_climb_deg=params.max_climb_deg,
         )
         node_report = validate_path(env_m, nodes_m, params.validate_spacing_m)
