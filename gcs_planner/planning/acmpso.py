@@ -34,7 +34,13 @@ Variants (``variant``):
 - "tuned": every algorithm starts from the straight start-goal line plus Gaussian noise of
   ``init_noise`` x the space span per coordinate (the same initialisation for all three), and
   ACMPSO mutates only the global best with greedy acceptance (one extra evaluation per
-  iteration, 2 % of the budget, counted), the classic adaptive Cauchy-mutation PSO form.
+  iteration, evaluated with the next swarm, 2 % of the budget, counted), the classic adaptive
+  Cauchy-mutation PSO form. With it ACMPSO meets the paper's mean and variance, but ties LPSO.
+
+From track to mission (not in the paper, see ``follow_terrain``): the 100-node track is resampled
+every ``validate_spacing_m``, pushed clear of domes, cylinders and terrain + h_safe with
+``margin_m``, climb-limited to ``max_climb_deg`` and thinned to waypoints; the paper's node track
+and the flown waypoints are both validated on a dense resample and both reports go into the Plan.
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ __all__ = [
     "Weights",
     "algorithm_config",
     "follow_terrain",
+    "limit_gradient",
     "line_init",
     "plan",
     "problem_from_scenario",
