@@ -155,3 +155,19 @@ def test_conflicting_tenders_lower_reward_leader_postpones_and_retenders():
     assert retender_a and retender_a[0]["t_s"] == pytest.approx(b_fail)
     assert not [e for e in ev if e["event"] == "formed" and e["target"] == "A" and e["t_s"] < b_fail]
     assert res.outcomes["A"].t_done_s is not None and res.outcomes["B"].t_done_s is not None
+
+
+def test_bus_one_hop_adjacency_and_link_break_in_flight():
+    from gcs_planner.planning.coalition.bus import MessageBus
+
+    def positions(t):  # UAV 2 flies away from UAV 0 at 100 m/s starting 1450 m out
+        return np.array([[0.0, 0.0], [1000.0, 0.0], [1450.0 + 100.0 * t, 0.0]])
+
+    bus = MessageBus(positions, lambda i, t: positions(t)[i], 1500.0, 0.2, np.random.default_rng(0))
+    adj = bus.adjacency(0.0)
+    assert adj.tolist() == [[False, True, True], [True, False, True], [True, True, False]]
+    assert bus.adjacency(1.0)[0, 2] == False  # noqa: E712 - time-varying: 1550 m at t = 1 s
+    assert list(bus.neighbours(0, 0.0)) == [1, 2]
+    assert bus.arrival_s(0, 1, 0.0) == pytest.approx(0.2)
+    assert bus.arrival_s(0, 2, 0.0) == pytest.approx(0.2)  # 1470 m on arrival: delivered
+    assert bus.arrival_s(0, 2, 0.4) is None  # in range when sent (1490 m), out on arrival (1510 m)

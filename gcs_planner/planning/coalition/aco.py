@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from gcs_planner.planning.coalition.model import ASSESS, STRIKE, CoalitionParams
+from gcs_planner.planning.coalition.model import STRIKE, CoalitionParams
 
 __all__ = ["CoalitionProblem", "Solution", "coverable", "evaluate", "make_solution", "solve_aco"]
 
@@ -183,7 +183,3 @@ def make_solution(assign: np.ndarray, prob: CoalitionProblem, params: CoalitionP
         t_required_s=t_req[0],
         covered=bool((assign >= 0).all()),
     )
-
-
-def task_kind_name(kind: int) -> str:
-    return "strike" if kind == STRIKE else "assess" if kind == ASSESS else "?"
