@@ -61,6 +61,8 @@ TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
 LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
 TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" within this distance of its take-off altitude
 NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
+MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
+MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
 KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
 
 
@@ -162,7 +164,9 @@ def _mock_fleet(plan: Plan, options: FlyOptions):
                 profile=options.autopilot,
             )
         )
-    return MockFleet(vehicles=specs, speedup=options.speedup, home=plan.origin)
+    # position reports at MOCK_TELEMETRY_HZ of flight time, within what one Python process streams
+    rate_hz = min(MOCK_TELEMETRY_HZ * options.speedup, MAX_WALL_TELEMETRY_HZ)
+    return MockFleet(vehicles=specs, speedup=options.speedup, home=plan.origin, rate_hz=rate_hz)
 
 
 async def _wait_for_vehicles(link: MavlinkLink, sysids: list[int], timeout_s: float) -> None:

@@ -42,7 +42,7 @@ class _Route:
 class ScheduleKeeper:
     """Speed set-points that keep vehicles on their planned timing (see module docstring)."""
 
-    horizon_s: float = 4.0
+    horizon_s: float = 2.0
     min_factor: float = 0.5
     max_factor: float = 1.3
     deadband_mps: float = 0.2

@@ -325,7 +325,10 @@ class Navigator:
         theta = np.arccos(np.clip(np.dot(a, b) / (na * nb), -1.0, 1.0))  # turn angle [rad]
         if theta < 1e-3:
             return np.inf
-        return float(np.sqrt(self.airframe.accel_mps2 * max(radius_m, 1.0) / np.tan(theta / 2)))
+        # The turn fits inside the acceptance radius, or - where waypoints sample an arc densely -
+        # follows the arc they trace (radius ~ leg / (2 tan(theta / 2))): v^2 / r <= accel.
+        arc_r = min(na, nb) / (2.0 * np.tan(theta / 2))
+        return float(np.sqrt(self.airframe.accel_mps2 * max(radius_m / np.tan(theta / 2), arc_r, 1.0)))
 
     def _target(self, seq: int) -> np.ndarray:
         """Item ``seq``'s target [m ENU]; lat/lon 0 means the vehicle's current position."""
