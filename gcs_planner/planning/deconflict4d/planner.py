@@ -620,7 +620,7 @@ def _stage_waypoints(
         pick = next((int(u) for u in order if counts[u] and len(tracks[u].waypoints) < s.max_waypoints), None)
         if pick is not None:
             new_track, new_idx = _insert_waypoint(problem, tracks[pick], pick, _earliest_conflict(ev, pick))
-            free, inserting = [new_idx], True
+            free, inserting = list(range(1, len(new_track.waypoints) - 1)), True
         elif not counts.any() and np.any(
             np.where(np.isin(np.arange(len(excess)), list(repaired)), 0, excess) > 0
         ):
@@ -755,6 +755,11 @@ def _finish(
         "dense_check": dense,
         "wall_s": round(wall_s, 3),
         "limits_ok": limits_ok,
+        "limit_violations": {
+            u.id: {k: round(float(ev.terms[k][0, i]), 4) for k in limit_terms if ev.terms[k][0, i] > 1e-9}
+            for i, u in enumerate(problem.uavs)
+            if any(ev.terms[k][0, i] > 1e-9 for k in limit_terms)
+        },
         "length_m": float(ev.terms["length_m"].sum()),
         "time_error_s": float(ev.terms["time_error_s"].sum()),
         "delays_s": {u.id: t.delay_s for u, t in zip(problem.uavs, tracks, strict=True) if t.delay_s},
