@@ -46,6 +46,7 @@ log = logging.getLogger(__name__)
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME = 16, 17, 19
 NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_DELAY = 20, 21, 22, 93
 DO_CHANGE_SPEED = 178
+ARC_LEG_FACTOR = 4.0  # legs shorter than this x acceptance radius are samples of an arc
 STOP_LEG_M = 0.5  # a next leg shorter than this means: stop at this waypoint
 NAV_COMMANDS = {
     NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TIME, NAV_RETURN_TO_LAUNCH, NAV_LAND, NAV_TAKEOFF, NAV_DELAY,
@@ -325,10 +326,13 @@ class Navigator:
         theta = np.arccos(np.clip(np.dot(a, b) / (na * nb), -1.0, 1.0))  # turn angle [rad]
         if theta < 1e-3:
             return np.inf
-        # The turn fits inside the acceptance radius, or - where waypoints sample an arc densely -
-        # follows the arc they trace (radius ~ leg / (2 tan(theta / 2))): v^2 / r <= accel.
-        arc_r = min(na, nb) / (2.0 * np.tan(theta / 2))
-        return float(np.sqrt(self.airframe.accel_mps2 * max(radius_m / np.tan(theta / 2), arc_r, 1.0)))
+        # The turn fits inside the acceptance radius (v^2 / a = r / tan(theta / 2)); where
+        # waypoints sample an arc densely (legs shorter than ARC_LEG_FACTOR x r) the vehicle
+        # follows the arc they trace instead, radius ~ leg / (2 tan(theta / 2)).
+        turn_r = max(radius_m, 1.0) / np.tan(theta / 2)
+        if min(na, nb) <= ARC_LEG_FACTOR * max(radius_m, 1.0):
+            turn_r = max(turn_r, min(na, nb) / (2.0 * np.tan(theta / 2)))
+        return float(np.sqrt(self.airframe.accel_mps2 * turn_r))
 
     def _target(self, seq: int) -> np.ndarray:
         """Item ``seq``'s target [m ENU]; lat/lon 0 means the vehicle's current position."""
