@@ -12,8 +12,9 @@ Stages (paper, steps 3-6), each stopping as soon as the fleet is conflict-free:
    The whole trajectory shifts (the paper's "shortens the time to arrival" would need faster
    flight; here the arrival time error grows instead and counts in J).
 3. Waypoint insertion: on the most-conflicting UAV insert a waypoint where its earliest conflict
-   happens, then PSO over the new waypoint's coordinates and that UAV's leg durations (segment
-   parameters), the other UAVs fixed. The current trajectory is particle 0, so a step never makes
+   happens, then PSO over that UAV's interior waypoints (the new one included; freeing only the
+   new one stalled on short flights whose corner blends need room) and its leg durations
+   (segment parameters), the other UAVs fixed. The current trajectory is particle 0, so a step never makes
    the cost worse. Repeat.
 4. Conflicts left: back to stage 1, warm-started from the current trajectories, at most
    ``max_rounds`` rounds; then the remaining conflicts are reported explicitly.
@@ -607,17 +608,25 @@ def _stage_waypoints(
     problem: Problem, tracks: list[Track], rng: np.random.Generator, events: list[dict]
 ) -> tuple[list[Track], dict]:
     """Waypoint insertion on the most-conflicting UAV; once conflict-free, a UAV left outside its
-    limits (an insertion may trade a limit for a conflict) is re-optimised the same local way,
-    all its waypoints free, without inserting. Each UAV is repaired at most once per stage."""
+    limits is re-optimised the same local way, without inserting. An insertion whose result
+    breaks a limit the UAV kept before is rejected and that UAV skipped for the rest of the
+    stage. Each UAV is repaired at most once per stage."""
     s = problem.settings
-    iters, added, repaired = 0, 0, set()
+    iters, added, repaired, stuck = 0, 0, set(), set()
     keys = ("speed_excess", "blend_overlap_s", "turn_excess_m", "time_error_excess_s")
     for _ in range(s.insert_max_steps):
         _, ev = _fleet_state(problem, tracks)
         counts = _counts(problem, ev)
         excess = sum(ev.terms[k][0] for k in keys)
         order = np.lexsort((np.arange(len(counts)), -counts))
-        pick = next((int(u) for u in order if counts[u] and len(tracks[u].waypoints) < s.max_waypoints), None)
+        pick = next(
+            (
+                int(u)
+                for u in order
+                if counts[u] and len(tracks[u].waypoints) < s.max_waypoints and int(u) not in stuck
+            ),
+            None,
+        )
         if pick is not None:
             new_track, new_idx = _insert_waypoint(problem, tracks[pick], pick, _earliest_conflict(ev, pick))
             free, inserting = list(range(1, len(new_track.waypoints) - 1)), True
@@ -634,9 +643,15 @@ def _stage_waypoints(
         sub_tracks = [new_track] + [tracks[m] for m in members[1:]]
         layout = _Layout(sub, sub_tracks, {0: free})
         x, _, n_it, _ = _pso(sub, layout, np.array([0]), s.insert_particles, s.insert_iterations, rng)
-        tracks = list(tracks)
-        tracks[pick] = layout.tracks(x, sub_tracks)[0]
         iters += n_it
+        candidate = layout.tracks(x, sub_tracks)
+        if excess[pick] <= 0 and _limit_excess(sub, candidate)[0] > 0:
+            # the swarm traded a limit for a conflict: keep the old trajectory, try other UAVs
+            stuck.add(pick)
+            events.append({"stage": "waypoint-rejected", "uav": problem.uavs[pick].id, "iterations": n_it})
+            continue
+        tracks = list(tracks)
+        tracks[pick] = candidate[0]
         added += inserting
         events.append(
             {
