@@ -59,6 +59,7 @@ log = logging.getLogger(__name__)
 HEARTBEAT_WAIT_S = 10.0
 TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
 LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
+TAKEOFF_ATTEMPTS = 3
 TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" within this distance of its take-off altitude
 NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
@@ -283,15 +284,23 @@ async def _take_off_all(
     async def one(vp) -> None:
         async with gate:
             command = CommandClient(link, vp.sysid)
-            try:
-                if options.autopilot == "ardupilot":
-                    await command.set_mode("GUIDED")
-                await command.arm()
-                await command.takeoff(float(vp.waypoints[0, 2]))
-            except MavlinkError as exc:
-                raise UserError(
-                    f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) could not take off: {exc}"
-                ) from exc
+            for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
+                try:
+                    if options.autopilot == "ardupilot":
+                        await command.set_mode("GUIDED")
+                    await command.arm()
+                    await command.takeoff(float(vp.waypoints[0, 2]))
+                    return
+                except MavlinkError as exc:
+                    # a lost ACK makes the retried command fail (already armed / airborne)
+                    if recorder.rel_alt_m.get(vp.sysid, 0.0) > TAKEOFF_ALT_TOL_M:
+                        return
+                    if attempt == TAKEOFF_ATTEMPTS:
+                        raise UserError(
+                            f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) could not take off: {exc}"
+                        ) from exc
+                    log.warning("sysid %d take-off attempt %d failed: %s", vp.sysid, attempt, exc)
+                    await asyncio.sleep(1.0 / speedup)
 
     await asyncio.gather(*(one(vp) for vp in plan.vehicles))
     climb_s = max(float(vp.waypoints[0, 2]) for vp in plan.vehicles) / TAKEOFF_CLIMB_MPS
