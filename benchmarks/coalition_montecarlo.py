@@ -114,6 +114,8 @@ def run_cells(cells: dict, runs: int, workers: int) -> dict:
 def stats(rows: list[dict], key: str) -> str:
     v = np.array([r[key] for r in rows], dtype=float)
     v = v[np.isfinite(v)]
+    if not len(v):
+        return "-"  # e.g. completion time when no target was served
     return (
         f"{v.mean():8.4f} +- {v.std(ddof=1) / math.sqrt(len(v)):6.4f}" if len(v) > 1 else f"{v.mean():8.4f}"
     )
