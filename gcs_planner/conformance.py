@@ -13,6 +13,8 @@ Choices:
   interpolation of each airborne track; exact to the distance flown in one step.
 - Obstacle clearance is the distance outside the obstacle's surface (cylinder radius without its
   planning buffer, hemisphere radius); negative means inside.
+- Manned traffic (MovingObstacle) is checked at every flown sample against its true,
+  constant-velocity track; the bound is its own ``min_distance_m``.
 """
 
 from __future__ import annotations
@@ -24,7 +26,14 @@ import numpy as np
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Cylinder, Hemisphere
 
-__all__ = ["Track", "VehicleReport", "conformance_report", "format_report", "point_to_polyline_m"]
+__all__ = [
+    "MovingObstacle",
+    "Track",
+    "VehicleReport",
+    "conformance_report",
+    "format_report",
+    "point_to_polyline_m",
+]
 
 
 @dataclass
@@ -36,6 +45,21 @@ class Track:
     mission_completed: bool = False
 
 
+@dataclass(frozen=True)
+class MovingObstacle:
+    """Other traffic (e.g. a manned aircraft) at ``position_m`` at ``t0_s``, at constant velocity."""
+
+    name: str
+    position_m: tuple[float, float, float]
+    velocity_mps: tuple[float, float, float]
+    t0_s: float
+    min_distance_m: float
+
+    def positions(self, times_s: np.ndarray) -> np.ndarray:
+        dt = np.asarray(times_s, dtype=float)[:, None] - self.t0_s
+        return np.asarray(self.position_m) + dt * np.asarray(self.velocity_mps)
+
+
 @dataclass
 class VehicleReport:
     vehicle_id: str
@@ -45,6 +69,7 @@ class VehicleReport:
     cross_track_mean_m: float
     min_separation_m: float
     min_obstacle_clearance_m: float
+    min_traffic_distance_m: float
     flight_time_s: float
     planned_time_s: float
     failures: list[str] = field(default_factory=list)
@@ -140,6 +165,7 @@ def conformance_report(
     separation_m: dict[int, float],
     cylinders: list[Cylinder] = (),
     hemispheres: list[Hemisphere] = (),
+    traffic: list[MovingObstacle] = (),
     max_cross_track_m: float = 15.0,
     acceptance_m: float | None = None,
     min_airborne_alt_m: float = 1.0,
@@ -166,8 +192,9 @@ def conformance_report(
                     np.nan,
                     np.nan,
                     np.nan,
+                    np.nan,
                     0.0,
-                    float(vp.path_times_s[-1] - vp.path_times_s[0]),
+                    float(vp.times_s[-1] - vp.times_s[0]),
                     ["never airborne"],
                 )
             )
@@ -187,6 +214,12 @@ def conformance_report(
             failures.append(f"separation {separation[vp.sysid]:.1f} m < {bound:.1f} m")
         if clearance < 0.0:
             failures.append(f"entered an obstacle by {-clearance:.1f} m")
+        traffic_m = np.inf
+        for other in traffic:
+            d = float(np.linalg.norm(tr.positions - other.positions(tr.times_s), axis=1).min())
+            traffic_m = min(traffic_m, d)
+            if d < other.min_distance_m:
+                failures.append(f"{other.name} within {d:.1f} m < {other.min_distance_m:.1f} m")
         reports.append(
             VehicleReport(
                 vehicle_id=vp.vehicle_id,
@@ -196,8 +229,9 @@ def conformance_report(
                 cross_track_mean_m=xt_mean,
                 min_separation_m=separation[vp.sysid],
                 min_obstacle_clearance_m=clearance,
+                min_traffic_distance_m=traffic_m,
                 flight_time_s=float(tr.times_s[window][-1] - tr.times_s[window][0]) if len(xt) else 0.0,
-                planned_time_s=float(vp.path_times_s[-1] - vp.path_times_s[0]),
+                planned_time_s=float(vp.times_s[-1] - vp.times_s[0]),
                 failures=failures,
             )
         )
@@ -208,7 +242,7 @@ def format_report(reports: list[VehicleReport]) -> str:
     """The report as a fixed-width table, one row per vehicle."""
     head = (
         f"{'vehicle':<8} {'sysid':>5} {'done':>5} {'xt_max_m':>9} {'xt_mean_m':>9} {'min_sep_m':>9}"
-        f" {'clear_m':>8} {'flown_s':>8} {'plan_s':>7}  result"
+        f" {'clear_m':>8} {'traffic_m':>9} {'flown_s':>8} {'plan_s':>7}  result"
     )
     rows = [head]
     for r in reports:
@@ -216,6 +250,6 @@ def format_report(reports: list[VehicleReport]) -> str:
         rows.append(
             f"{r.vehicle_id:<8} {r.sysid:>5} {'yes' if r.completed else 'no':>5} {r.cross_track_max_m:>9.2f}"
             f" {r.cross_track_mean_m:>9.2f} {r.min_separation_m:>9.1f} {r.min_obstacle_clearance_m:>8.1f}"
-            f" {r.flight_time_s:>8.1f} {r.planned_time_s:>7.1f}  {verdict}"
+            f" {r.min_traffic_distance_m:>9.1f} {r.flight_time_s:>8.1f} {r.planned_time_s:>7.1f}  {verdict}"
         )
     return "\n".join(rows)

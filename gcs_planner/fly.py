@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.conformance import Track, VehicleReport, conformance_report
+from gcs_planner.conformance import MovingObstacle, Track, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.command import CommandClient
@@ -150,6 +150,27 @@ class _TrackRecorder:
         return out
 
 
+def manned_traffic(scenario: Scenario, route_t0_s: float) -> list[MovingObstacle]:
+    """The scenario's [[manned]] aircraft as constant-velocity traffic from the route start.
+
+    Their bound is the planner's ``safety_m`` when given, else the largest vehicle separation.
+    """
+    bound = float(
+        scenario.planner.get("safety_m", max((v.separation_m for v in scenario.vehicles), default=0))
+    )
+    return [
+        MovingObstacle(
+            str(m.get("id", f"manned{k}")),
+            tuple(m["position_m"]),
+            tuple(m["velocity_mps"]),
+            route_t0_s,
+            bound,
+        )
+        for k, m in enumerate(scenario.raw.get("manned", []))
+        if "position_m" in m and "velocity_mps" in m
+    ]
+
+
 def _mock_fleet(plan: Plan, options: FlyOptions):
     from sitl_mock import MockFleet
 
@@ -204,6 +225,7 @@ async def fly(
     mcap_path = options.out_dir / "flight.mcap"
     tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
     sysids = list(missions)
+    route_t0_s = 0.0
     fleet = None if options.connect else _mock_fleet(plan, options)
     speedup = 1.0 if fleet is None else options.speedup
     scenario_text = scenario.path.read_text() if scenario.path else None
@@ -261,6 +283,7 @@ async def fly(
         {v.sysid: v.separation_m for v in scenario.vehicles},
         scenario.cylinders,
         scenario.hemispheres,
+        manned_traffic(scenario, route_t0_s),
         max_cross_track_m=options.max_cross_track_m,
     )
     for r in reports:
@@ -321,7 +344,7 @@ async def _start_routes(link: MavlinkLink, plan: Plan, missions: dict, speedup: 
     async def one(vp) -> None:
         items = missions[vp.sysid]
         first = next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
-        offset_s = max(vp.takeoff_delay_s, float(vp.path_times_s[0]))
+        offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
         await asyncio.sleep(max(0.0, t0 + offset_s / speedup - time.monotonic()))
         try:
             await CommandClient(link, vp.sysid).mission_start(first, len(items) - 1)

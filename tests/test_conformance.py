@@ -1,7 +1,13 @@
 import numpy as np
 import pytest
 
-from gcs_planner.conformance import Track, conformance_report, format_report, point_to_polyline_m
+from gcs_planner.conformance import (
+    MovingObstacle,
+    Track,
+    conformance_report,
+    format_report,
+    point_to_polyline_m,
+)
 from gcs_planner.geo import Origin
 from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.scenario import Cylinder
@@ -53,3 +59,15 @@ def test_report_passes_on_plan_and_fails_on_drift_separation_obstacle_and_incomp
     r = conformance_report(plan, {1: _flown(plan.vehicles[0], completed=False)}, {1: 5.0, 2: 5.0})
     assert r[0].failures == ["mission not completed"] and r[1].failures == ["never airborne"]
     assert "PASS" in format_report(conformance_report(plan, good, {1: 5.0, 2: 5.0}))
+
+
+def test_manned_traffic_crossing_a_track_is_reported():
+    plan = Plan(Origin(47.0, 8.0, 400.0), "test", [_vehicle(1, 0.0)])
+    flown = {1: _flown(plan.vehicles[0])}
+    # crosses y = 0 at x = 100 when uav1 is there (t = 10 s), 5 m above it
+    heli = MovingObstacle("heli", (100.0, -300.0, 25.0), (0.0, 30.0, 0.0), 0.0, 10.0)
+    r = conformance_report(plan, flown, {1: 5.0}, traffic=[heli])
+    assert r[0].min_traffic_distance_m == pytest.approx(5.0, abs=0.5)
+    assert any("heli within" in f for f in r[0].failures)
+    late = MovingObstacle("heli", (100.0, -300.0, 25.0), (0.0, 30.0, 0.0), 30.0, 10.0)
+    assert conformance_report(plan, flown, {1: 5.0}, traffic=[late])[0].passed

@@ -44,3 +44,14 @@ def test_fly_fails_when_a_vehicle_drifts(scenario_and_plan, tmp_path):
     by_sysid = {r.sysid: r for r in result.reports}
     assert any("cross-track" in f for f in by_sysid[2].failures)
     assert all(by_sysid[s].passed for s in (1, 3, 4))
+
+
+@pytest.mark.slow
+def test_deconflicted_10_uav_plan_flies_clear_of_each_other_and_the_manned_aircraft(tmp_path):
+    scenario = load_scenario(SCENARIO.parent / "deconflict_10uav_manned.toml")
+    plan = plan_scenario(scenario)
+    assert plan.feasible
+    result = _fly(scenario, plan, tmp_path, rrd=False)
+    assert result.passed, [r.failures for r in result.reports]
+    assert all(r.min_traffic_distance_m >= 10.0 for r in result.reports)
+    assert all(r.min_separation_m >= 8.0 for r in result.reports)
