@@ -22,6 +22,7 @@ Scenario keys (besides the common ones of gcs_planner.scenario):
 from __future__ import annotations
 
 import dataclasses
+import logging
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,7 @@ from gcs_planner.scenario import Scenario, ScenarioError
 __all__ = ["build_problem", "plan", "to_plan"]
 
 NAME = "deconflict_4d"
+log = logging.getLogger(__name__)
 _ZONE_KEYS = {"confidence": 0.95, "safety_m": 5.0, "min_mode_weight": 0.01}
 _DYN_KEYS = (
     "v_max_mps",
@@ -73,6 +75,8 @@ def _settings(scenario: Scenario) -> tuple[Settings, dict[str, float]]:
         default = getattr(Settings(), key)
         if isinstance(default, bool) != isinstance(value, bool) or not isinstance(value, int | float | bool):
             raise ScenarioError(f"{scenario.name}: planner.{key} must be like {default!r}, got {value!r}")
+        if isinstance(default, int) and not isinstance(default, bool) and value != int(value):
+            raise ScenarioError(f"{scenario.name}: planner.{key} must be an integer, got {value!r}")
         kwargs[key] = type(default)(value)
     return Settings(**kwargs), zone
 
@@ -159,6 +163,8 @@ def _manned_track(d: dict[str, Any], where: str) -> MannedTrack:
 def build_problem(scenario: Scenario) -> Problem:
     """Scenario -> Problem (settings, UAV specs, manned no-fly zones, waypoint box)."""
     settings, zone_cfg = _settings(scenario)
+    if scenario.cylinders or scenario.hemispheres:
+        log.warning("deconflict_4d ignores static obstacles (cylinders / hemispheres) in %s", scenario.name)
     if not scenario.vehicles:
         raise ScenarioError(f"{scenario.name}: deconflict_4d needs at least one [[vehicles]] entry")
     uavs = [_uav(scenario, i) for i in range(len(scenario.vehicles))]
@@ -203,6 +209,8 @@ def to_plan(scenario: Scenario, problem: Problem, out: Outcome) -> Plan:
         notes = [f"planned take-off {u.takeoff_s:.1f} s, delayed by {tr.delay_s:.1f} s"] if tr.delay_s else []
         if u.id in in_conflict:
             notes.append("conflicts remain: see plan metrics conflicts_remaining")
+        if u.id in out.metrics["limit_violations"]:
+            notes.append(f"outside its limits: {out.metrics['limit_violations'][u.id]}")
         vehicles.append(
             VehiclePlan(
                 vehicle_id=u.id,
@@ -220,7 +228,7 @@ def to_plan(scenario: Scenario, problem: Problem, out: Outcome) -> Plan:
                     "arrival_error_s": float(abs(wp_times[-1] - u.arrival_s)),
                     "delay_s": float(tr.delay_s),
                 },
-                feasible=u.id not in in_conflict and out.metrics["limits_ok"],
+                feasible=u.id not in in_conflict and u.id not in out.metrics["limit_violations"],
                 notes=notes,
             )
         )
