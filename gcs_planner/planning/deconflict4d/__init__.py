@@ -10,7 +10,8 @@ Scenario keys (besides the common ones of gcs_planner.scenario):
                    confidence (0.95), safety_m (manned safety distance, 5.0), min_mode_weight (0.01)
     [[vehicles]]   takeoff_s (planned take-off, 0), arrival_s (planned arrival at the goal; default
                    take-off + climb + straight distance / speed_mps), v_max_mps, a_max_mps2,
-                   climb_mps, descent_mps, min_turn_radius_m, max_time_error_s, limit ("axis"|"norm")
+                   climb_mps, descent_mps, takeoff_settle_s, min_turn_radius_m, max_time_error_s,
+                   limit ("axis"|"norm")
                    override the vehicle type's Dynamics (trajectory.DYNAMICS)
     [[manned]]     id, dt_s, and either track = [[t_s, x, y, z], ...] (observed, last at planning
                    time or before) or position_m + velocity_mps + observed_s (a constant-velocity
@@ -47,6 +48,7 @@ _DYN_KEYS = (
     "v_max_mps",
     "a_max_mps2",
     "climb_mps",
+    "takeoff_settle_s",
     "descent_mps",
     "min_turn_radius_m",
     "max_time_error_s",
@@ -98,7 +100,7 @@ def _uav(scenario: Scenario, i: int) -> UavSpec:
             f"{where}: start/goal z must be > 0 (the climb is planned), got {v.start} / {v.goal}"
         )
     takeoff = float(raw.get("takeoff_s", 0.0))
-    climb = start[2] / dyn.climb_mps if dyn.vertical_takeoff else 0.0
+    climb = start[2] / dyn.climb_mps + dyn.takeoff_settle_s if dyn.vertical_takeoff else 0.0
     arrival = float(raw.get("arrival_s", takeoff + climb + np.linalg.norm(goal - start) / v.speed_mps))
     if not arrival > takeoff + climb:
         raise ScenarioError(
@@ -205,7 +207,7 @@ def to_plan(scenario: Scenario, problem: Problem, out: Outcome) -> Plan:
         off = 1 if u.dyn.vertical_takeoff else 0
         wp_times = times[off : goal_idx + 1]
         legs = np.linalg.norm(np.diff(tr.waypoints, axis=0), axis=1) / np.diff(wp_times)
-        first = u.dyn.climb_mps if u.dyn.vertical_takeoff else legs[0]
+        first = u.start[2] / (wp_times[0] - times[0]) if u.dyn.vertical_takeoff else legs[0]
         notes = [f"planned take-off {u.takeoff_s:.1f} s, delayed by {tr.delay_s:.1f} s"] if tr.delay_s else []
         if u.id in in_conflict:
             notes.append("conflicts remain: see plan metrics conflicts_remaining")

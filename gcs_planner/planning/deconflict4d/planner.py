@@ -171,7 +171,7 @@ def _ground_time(u: UavSpec) -> tuple[float, float]:
     """Climb and descent leg durations [s] (0 for vehicles that do not take off vertically)."""
     if not u.dyn.vertical_takeoff:
         return 0.0, 0.0
-    return u.start[2] / u.dyn.climb_mps, u.goal[2] / u.dyn.descent_mps
+    return u.start[2] / u.dyn.climb_mps + u.dyn.takeoff_settle_s, u.goal[2] / u.dyn.descent_mps
 
 
 def full_polyline(u: UavSpec, tr: Track) -> tuple[np.ndarray, np.ndarray, int]:
@@ -183,7 +183,7 @@ def full_polyline(u: UavSpec, tr: Track) -> tuple[np.ndarray, np.ndarray, int]:
         pts = np.vstack([ground0, tr.waypoints, ground1])
         dur = np.concatenate([[climb], tr.legs_s, [descent]])
         # the blend from rest at the ground point is centred there: shift so motion starts at take-off
-        t0 = u.takeoff_s + tr.delay_s + 0.5 * u.dyn.climb_mps / u.dyn.a_max_mps2
+        t0 = u.takeoff_s + tr.delay_s + 0.5 * (u.start[2] / climb) / u.dyn.a_max_mps2
         goal_idx = len(pts) - 2
     else:
         pts, dur, goal_idx = tr.waypoints, tr.legs_s, len(tr.waypoints) - 1

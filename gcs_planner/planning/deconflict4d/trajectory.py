@@ -51,6 +51,9 @@ class Dynamics:
     climb_mps / descent_mps: vertical speed of the take-off climb / landing descent legs [m/s].
     min_turn_radius_m: smallest allowed radius of curvature in a blend (0 = none) [m].
     max_time_error_s: allowed |arrival - planned arrival| at the last waypoint [s].
+    takeoff_settle_s: extra time the take-off takes before the vehicle leaves the first waypoint
+    (an autopilot finishes its take-off only when settled at altitude) [s]; modelled as a slower
+    climb in the same vertical column, so the column stays occupied that long.
     vertical_takeoff: climb from / descend to the ground under the first / last waypoint.
     """
 
@@ -60,6 +63,7 @@ class Dynamics:
     descent_mps: float = 1.5
     min_turn_radius_m: float = 0.0
     max_time_error_s: float = 30.0
+    takeoff_settle_s: float = 0.0
     limit: str = "axis"
     vertical_takeoff: bool = True
 
