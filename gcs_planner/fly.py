@@ -16,8 +16,9 @@ Choices:
   air: every vehicle is armed and takes off (MAV_CMD_NAV_TAKEOFF) to its first waypoint's
   altitude; once all hover there, each vehicle's route starts with MAV_CMD_MISSION_START at the
   item after NAV_TAKEOFF, at the common start time plus its planned delay (delayed take-off as
-  a timed start; the mission's NAV_DELAY is then skipped). Climb rates differ between vehicles
-  and altitudes, so a one-shot start would shift every route by its own climb time.
+  a timed start; the mission's NAV_DELAY is then skipped), less the time the vehicle loses
+  accelerating to cruise speed (v / 2a, a = ROUTE_ACCEL_MPS2). Climb rates differ between
+  vehicles and altitudes, so a one-shot start would shift every route by its own climb time.
 - While the routes run, a ScheduleKeeper (gcs_planner.timekeeping) sends each vehicle ground
   speed set-points (MAV_CMD_DO_CHANGE_SPEED) that hold it to the plan's timing; autopilots
   slow for corners and would otherwise fall behind the schedule the separation was planned on.
@@ -65,6 +66,7 @@ NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
 MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
 KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
+ROUTE_ACCEL_MPS2 = 2.5  # assumed acceleration from the hover (ArduCopter's WPNAV_ACCEL default)
 
 
 @dataclass
@@ -261,8 +263,9 @@ async def fly(
                             fleet.set_drift(sysid, *drift)
                     await _take_off_all(link, plan, recorder, speedup, options)
                     logger.log_event({"event": "airborne", "sysids": sysids})
-                    route_t0_s = recorder.now_s() if fleet is not None else time.time()
-                    routes = asyncio.create_task(_start_routes(link, plan, missions, speedup, logger))
+                    lead_s = max(_accel_lead_s(vp) for vp in plan.vehicles)
+                    route_t0_s = (recorder.now_s() if fleet is not None else time.time()) + lead_s
+                    routes = asyncio.create_task(_start_routes(link, plan, missions, speedup, logger, lead_s))
                     keeper = None
                     if options.keep_schedule:
                         keeper = ScheduleKeeper()
@@ -337,15 +340,27 @@ async def _take_off_all(
     raise UserError(f"sysid {late} did not reach take-off altitude in time")
 
 
-async def _start_routes(link: MavlinkLink, plan: Plan, missions: dict, speedup: float, logger) -> None:
-    """MISSION_START each route (the item after NAV_TAKEOFF) at its planned start time."""
+def _accel_lead_s(vp) -> float:
+    """How much earlier than planned a route starts, so that accelerating from the hover at
+    ROUTE_ACCEL_MPS2 puts the vehicle where a plan assuming instant cruise speed has it."""
+    return float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0]) / (2.0 * ROUTE_ACCEL_MPS2)
+
+
+async def _start_routes(
+    link: MavlinkLink, plan: Plan, missions: dict, speedup: float, logger, lead_s: float
+) -> None:
+    """MISSION_START each route (the item after NAV_TAKEOFF) at its planned start time.
+
+    Route time 0 is ``lead_s`` after now; each route starts its own acceleration lead earlier.
+    """
     t0 = time.monotonic()
 
     async def one(vp) -> None:
         items = missions[vp.sysid]
         first = next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
         offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
-        await asyncio.sleep(max(0.0, t0 + offset_s / speedup - time.monotonic()))
+        start_s = lead_s + offset_s - _accel_lead_s(vp)
+        await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
         try:
             await CommandClient(link, vp.sysid).mission_start(first, len(items) - 1)
         except MavlinkError as exc:
