@@ -8,7 +8,8 @@ autopilots (sitl_mock) started here, or real ones / SITL reached with ``connect`
 
 Choices:
 - Each mock vehicle's home is the plan's first waypoint projected to the ground, so mission
-  altitudes (relative to home) equal plan ``z`` on the flat mock world.
+  altitudes (relative to home) equal plan ``z`` on the flat mock world, and its airframe is
+  tuned to the planned speed and turn radius (``_airframe_for``).
 - Track time is the vehicle's ``time_boot_ms`` for mocks (one simulated clock for the whole fleet,
   so separations are compared at the same instant whatever the speed-up) and the receive time
   for real vehicles, whose boot clocks differ.
@@ -33,7 +34,7 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +67,9 @@ NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
 MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
 KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
-ROUTE_ACCEL_MPS2 = 2.5  # assumed acceleration from the hover (ArduCopter's WPNAV_ACCEL default)
+CATCH_UP_FACTOR = 1.3  # mock top speed / planned speed (headroom for schedule keeping)
+G_MPS2 = 9.80665
+ROUTE_ACCEL_MPS2 = 2.5  # real vehicles' assumed acceleration from the hover (ArduCopter WPNAV_ACCEL)
 
 
 @dataclass
@@ -173,6 +176,36 @@ def manned_traffic(scenario: Scenario, route_t0_s: float) -> list[MovingObstacle
     ]
 
 
+def _airframe_for(vp):
+    """The mock airframe tuned to the planned vehicle, as one would set SITL parameters.
+
+    The plan's speed and turn radius need a lateral acceleration of v^2 / R; a multirotor gets at
+    least that much acceleration, a fixed wing at least that much bank, and both cruise at the
+    planned speed with headroom to catch up with their schedule.
+    """
+    from sitl_mock import AIRFRAMES
+
+    base = AIRFRAMES[vp.vehicle_type]
+    speed = float(np.max(vp.speeds_mps))
+    if vp.turn_radius_m <= 0 or speed <= 0:
+        return base
+    lateral_mps2 = speed**2 / vp.turn_radius_m
+    if vp.vehicle_type == "fixed_wing":
+        bank = max(base.max_bank_rad, float(np.arctan(lateral_mps2 / G_MPS2)))
+        return replace(
+            base,
+            cruise_speed_mps=speed,
+            max_bank_rad=bank,
+            max_speed_mps=max(base.max_speed_mps, CATCH_UP_FACTOR * speed),
+        )
+    return replace(
+        base,
+        cruise_speed_mps=speed,
+        accel_mps2=max(base.accel_mps2, lateral_mps2),
+        max_speed_mps=max(base.max_speed_mps, CATCH_UP_FACTOR * speed),
+    )
+
+
 def _mock_fleet(plan: Plan, options: FlyOptions):
     from sitl_mock import MockFleet
 
@@ -186,6 +219,7 @@ def _mock_fleet(plan: Plan, options: FlyOptions):
                 home=Origin(lat, lon, alt),
                 vehicle_type=vp.vehicle_type,
                 profile=options.autopilot,
+                airframe=_airframe_for(vp),
             )
         )
     # position reports at MOCK_TELEMETRY_HZ of flight time, within what one Python process streams
@@ -263,9 +297,17 @@ async def fly(
                             fleet.set_drift(sysid, *drift)
                     await _take_off_all(link, plan, recorder, speedup, options)
                     logger.log_event({"event": "airborne", "sysids": sysids})
-                    lead_s = max(_accel_lead_s(vp) for vp in plan.vehicles)
+                    leads = {
+                        vp.sysid: _accel_lead_s(
+                            vp, ROUTE_ACCEL_MPS2 if fleet is None else _airframe_for(vp).accel_mps2
+                        )
+                        for vp in plan.vehicles
+                    }
+                    lead_s = max(leads.values())
                     route_t0_s = (recorder.now_s() if fleet is not None else time.time()) + lead_s
-                    routes = asyncio.create_task(_start_routes(link, plan, missions, speedup, logger, lead_s))
+                    routes = asyncio.create_task(
+                        _start_routes(link, plan, missions, speedup, logger, lead_s, leads)
+                    )
                     keeper = None
                     if options.keep_schedule:
                         keeper = ScheduleKeeper()
@@ -340,14 +382,20 @@ async def _take_off_all(
     raise UserError(f"sysid {late} did not reach take-off altitude in time")
 
 
-def _accel_lead_s(vp) -> float:
+def _accel_lead_s(vp, accel_mps2: float) -> float:
     """How much earlier than planned a route starts, so that accelerating from the hover at
-    ROUTE_ACCEL_MPS2 puts the vehicle where a plan assuming instant cruise speed has it."""
-    return float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0]) / (2.0 * ROUTE_ACCEL_MPS2)
+    ``accel_mps2`` puts the vehicle where a plan assuming instant cruise speed has it."""
+    return float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0]) / (2.0 * accel_mps2)
 
 
 async def _start_routes(
-    link: MavlinkLink, plan: Plan, missions: dict, speedup: float, logger, lead_s: float
+    link: MavlinkLink,
+    plan: Plan,
+    missions: dict,
+    speedup: float,
+    logger,
+    lead_s: float,
+    leads: dict[int, float],
 ) -> None:
     """MISSION_START each route (the item after NAV_TAKEOFF) at its planned start time.
 
@@ -359,7 +407,7 @@ async def _start_routes(
         items = missions[vp.sysid]
         first = next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
         offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
-        start_s = lead_s + offset_s - _accel_lead_s(vp)
+        start_s = lead_s + offset_s - leads[vp.sysid]
         await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
         try:
             await CommandClient(link, vp.sysid).mission_start(first, len(items) - 1)
