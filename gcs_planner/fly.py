@@ -179,31 +179,33 @@ def manned_traffic(scenario: Scenario, route_t0_s: float) -> list[MovingObstacle
 def _airframe_for(vp):
     """The mock airframe tuned to the planned vehicle, as one would set SITL parameters.
 
-    The plan's speed and turn radius need a lateral acceleration of v^2 / R; a multirotor gets at
-    least that much acceleration, a fixed wing at least that much bank, and both cruise at the
-    planned speed with headroom to catch up with their schedule.
+    The plan's speed and turn radius need a lateral acceleration of v^2 / R, and its steepest
+    legs a climb and sink rate of v x slope. A multirotor gets at least that acceleration, a fixed
+    wing at least that bank, both at least those vertical rates, all with headroom
+    (CATCH_UP_FACTOR) to catch up with their schedule.
     """
     from sitl_mock import AIRFRAMES
 
     base = AIRFRAMES[vp.vehicle_type]
     speed = float(np.max(vp.speeds_mps))
-    if vp.turn_radius_m <= 0 or speed <= 0:
+    if speed <= 0:
         return base
-    lateral_mps2 = speed**2 / vp.turn_radius_m
-    if vp.vehicle_type == "fixed_wing":
-        bank = max(base.max_bank_rad, float(np.arctan(lateral_mps2 / G_MPS2)))
-        return replace(
-            base,
-            cruise_speed_mps=speed,
-            max_bank_rad=bank,
-            max_speed_mps=max(base.max_speed_mps, CATCH_UP_FACTOR * speed),
-        )
-    return replace(
+    legs = np.diff(vp.path, axis=0)
+    horizontal = np.hypot(legs[:, 0], legs[:, 1])
+    slope = (legs[:, 2] / np.maximum(horizontal, 1e-9))[horizontal > 1.0]  # not take-off / landing
+    frame = replace(
         base,
         cruise_speed_mps=speed,
-        accel_mps2=max(base.accel_mps2, lateral_mps2),
         max_speed_mps=max(base.max_speed_mps, CATCH_UP_FACTOR * speed),
+        climb_rate_mps=max(base.climb_rate_mps, CATCH_UP_FACTOR * speed * float(np.max(slope, initial=0.0))),
+        sink_rate_mps=max(base.sink_rate_mps, -CATCH_UP_FACTOR * speed * float(np.min(slope, initial=0.0))),
     )
+    if vp.turn_radius_m <= 0:
+        return frame
+    lateral_mps2 = speed**2 / vp.turn_radius_m
+    if vp.vehicle_type == "fixed_wing":
+        return replace(frame, max_bank_rad=max(base.max_bank_rad, float(np.arctan(lateral_mps2 / G_MPS2))))
+    return replace(frame, accel_mps2=max(base.accel_mps2, lateral_mps2))
 
 
 def _mock_fleet(plan: Plan, options: FlyOptions):
