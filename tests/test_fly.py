@@ -19,8 +19,8 @@ def scenario_and_plan():
     return scenario, plan_scenario(scenario)
 
 
-def _fly(scenario, plan, out, **kw):
-    return asyncio.run(fly(scenario, plan, FlyOptions(out_dir=out, speedup=20.0, **kw)))
+def _fly(scenario, plan, out, speedup=20.0, **kw):
+    return asyncio.run(fly(scenario, plan, FlyOptions(out_dir=out, speedup=speedup, **kw)))
 
 
 def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_plan, tmp_path):
@@ -55,3 +55,13 @@ def test_deconflicted_10_uav_plan_flies_clear_of_each_other_and_the_manned_aircr
     assert result.passed, [r.failures for r in result.reports]
     assert all(r.min_traffic_distance_m >= 10.0 for r in result.reports)
     assert all(r.min_separation_m >= 8.0 for r in result.reports)
+
+
+@pytest.mark.slow
+def test_40_uav_priority_swarm_plan_flies_with_no_separation_breach(tmp_path):
+    scenario = load_scenario(SCENARIO.parent / "swarm40_cylinders.toml")
+    plan = plan_scenario(scenario)
+    result = _fly(scenario, plan, tmp_path, rrd=False, speedup=10.0)
+    assert result.passed, [(r.sysid, r.failures) for r in result.reports if r.failures]
+    assert all(r.completed for r in result.reports) and len(result.reports) == 40
+    assert min(r.min_separation_m for r in result.reports) >= 8.0
