@@ -131,23 +131,7 @@ def pymavlink_loop(address, sizes: list[int], reps: int) -> dict[int, list[float
                 if m is None or m.get_type() == "MISSION_ACK":
                     break
                 it = mission[m.seq]
-                conn.mav.mission_item_int_send(
-                    1,
-                    1,
-                    it.seq,
-                    it.frame,
-                    it.command,
-                    it.current,
-                    it.autocontinue,
-                    it.param1,
-                    it.param2,
-                    it.param3,
-                    it.param4,
-                    it.x,
-                    it.y,
-                    it.z,
-                    0,
-                )
+                conn.mav.mission_item_int_send(1, 1, *it.fields())
             if m is None or m.type != 0:
                 raise RuntimeError(f"pymavlink loop upload of {n} items failed: {m}")
             times.append((time.perf_counter() - t0, time.process_time() - c0))

@@ -521,21 +521,7 @@ def _list_id(items: list[MissionItem], mission_type: int) -> int:
         return 0
     crc = zlib.crc32(bytes([mission_type]))
     for it in items:
-        packed = _ITEM_PACK.pack(
-            it.seq,
-            it.frame,
-            it.command,
-            it.current,
-            it.autocontinue,
-            it.param1,
-            it.param2,
-            it.param3,
-            it.param4,
-            it.x,
-            it.y,
-            it.z,
-            it.mission_type,
-        )
+        packed = _ITEM_PACK.pack(*it.fields())
         crc = zlib.crc32(packed, crc)
     return crc or 1
 

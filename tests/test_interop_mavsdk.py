@@ -71,21 +71,7 @@ def to_ours(raw) -> MissionItem:
 
 
 def to_raw(it: MissionItem) -> RawItem:
-    return RawItem(
-        it.seq,
-        it.frame,
-        it.command,
-        it.current,
-        it.autocontinue,
-        it.param1,
-        it.param2,
-        it.param3,
-        it.param4,
-        it.x,
-        it.y,
-        it.z,
-        int(it.mission_type),
-    )
+    return RawItem(*it.fields())
 
 
 class MavsdkServer:

@@ -340,23 +340,9 @@ class UploadTransfer(Transfer):
         return self._fail_timeout(f"no request for {idle:.1f} s")
 
     def _item(self, seq: int) -> mavlink.MAVLink_message:
-        it = self.items[seq]
+        fields = self.items[seq].with_seq(seq).fields()
         return mavlink.MAVLink_mission_item_int_message(
-            self.sysid,
-            self.compid,
-            seq,
-            it.frame,
-            it.command,
-            it.current,
-            it.autocontinue,
-            it.param1,
-            it.param2,
-            it.param3,
-            it.param4,
-            it.x,
-            it.y,
-            it.z,
-            self.mission_type,
+            self.sysid, self.compid, *fields[:-1], self.mission_type
         )
 
 

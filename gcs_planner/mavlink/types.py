@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import astuple, dataclass, replace
 from enum import IntEnum
 
 __all__ = ["MissionItem", "MissionType"]
@@ -47,6 +47,10 @@ class MissionItem:
     @property
     def lon_deg(self) -> float:
         return self.y / 1e7
+
+    def fields(self) -> tuple:
+        """seq .. mission_type in MISSION_ITEM_INT's argument order (after the two targets)."""
+        return astuple(self)
 
     def with_seq(self, seq: int) -> MissionItem:
         return replace(self, seq=seq)
