@@ -140,6 +140,12 @@ def test_check_plan_finds_each_kind_of_violation():
     good_b = _vp("b", 2, [[0, 50, 0], [0, 50, 30], [100, 50, 30]])
     report = check_plan(Plan(Origin(47, 8, 0), "t", [good_a, good_b]), sc)
     assert report.ok, report.summary()
+    # a near-duplicate sample on an arc (numerical noise) is not a tight turn
+    jitter = good_a.path.copy()
+    k = len(jitter) // 3
+    jitter = np.insert(jitter, k + 1, jitter[k] + [1e-9, -2e-9, 0.0], axis=0)
+    noisy = _vp("a", 1, jitter)
+    assert check_plan(Plan(Origin(47, 8, 0), "t", [noisy, good_b]), sc).ok
     through = _vp("a", 1, [[0, 0, 0], [0, 0, 30], [100, 0, 30]])
     low = _vp("b", 2, [[0, 50, 0], [0, 50, 5], [100, 50, 5], [100, 50, 30]])
     report = check_plan(Plan(Origin(47, 8, 0), "t", [through, low]), sc)

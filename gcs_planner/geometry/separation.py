@@ -214,7 +214,9 @@ def check_plan(
         exempt = np.ones(len(p), dtype=bool)  # samples touched only by take-off/landing column segments
         exempt[:-1] &= seg_col
         exempt[1:] &= seg_col
-        dense, dense_exempt = _densify(p, exempt, 0.25 * veh.turn_radius_m)
+        # near-duplicate xy samples (< 1 cm apart) make the circumradius ill-conditioned: drop them
+        distinct = np.concatenate([np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1) > 0.01, [True]])
+        dense, dense_exempt = _densify(p[distinct], exempt[distinct], 0.25 * veh.turn_radius_m)
         radii = turn_radii(dense[:, :2])
         radii = radii[~(dense_exempt[:-2] | dense_exempt[1:-1] | dense_exempt[2:])]
         if radii.size and radii.min() < veh.turn_radius_m * (1 - radius_tol):
