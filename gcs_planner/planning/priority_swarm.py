@@ -604,6 +604,7 @@ def build_vehicle_plan(prob: VehicleProblem, x: np.ndarray, cfg: SwarmConfig, te
         dense_s.append(dec.cum[0, leg] + f_dense * dec.l3[0, leg])
     wp_s = np.unique(np.concatenate(wp_s))
     dense_s = np.unique(np.concatenate(dense_s))
+    dense_s = dense_s[np.concatenate([np.diff(dense_s) > 1e-3, [True]])]  # merge float-noise duplicates
     wp = positions_at_length(dec, wp_s[None, :])[0]
     dense = positions_at_length(dec, dense_s[None, :])[0]
     t_wp = prob.t_offset + wp_s / v.speed_mps
