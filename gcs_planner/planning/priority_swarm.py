@@ -604,7 +604,11 @@ def build_vehicle_plan(prob: VehicleProblem, x: np.ndarray, cfg: SwarmConfig, te
         dense_s.append(dec.cum[0, leg] + f_dense * dec.l3[0, leg])
     wp_s = np.unique(np.concatenate(wp_s))
     dense_s = np.unique(np.concatenate(dense_s))
-    dense_s = dense_s[np.concatenate([np.diff(dense_s) > 1e-3, [True]])]  # merge float-noise duplicates
+    keep = np.concatenate([[True], np.diff(dense_s) > 1e-3])  # merge float-noise duplicates, keep both ends
+    if not keep[-1]:
+        keep[np.flatnonzero(keep)[-1]] = len(keep) == 1 or np.flatnonzero(keep)[-1] == 0
+        keep[-1] = True
+    dense_s = dense_s[keep]
     wp = positions_at_length(dec, wp_s[None, :])[0]
     dense = positions_at_length(dec, dense_s[None, :])[0]
     t_wp = prob.t_offset + wp_s / v.speed_mps
