@@ -249,9 +249,9 @@ def _resample(traj: Trajectory, step_s: float) -> Trajectory:
 
 
 def _densify(p: np.ndarray, flag: np.ndarray, spacing_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Insert points so no segment is longer than spacing_m; inserted points inherit ``flag`` of both ends."""
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    n = np.maximum(1, np.ceil(seg / spacing_m).astype(int))
+    """Insert points so no segment is longer than spacing_m in xy; inserted points inherit both ends' flag."""
+    seg = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1)  # horizontal: the turn test is planar
+    n = np.maximum(1, np.ceil(seg / (1.01 * spacing_m)).astype(int))
     frac = np.concatenate([np.arange(k) / k for k in n])
     idx = np.repeat(np.arange(len(seg)), n)
     pts = p[idx] + frac[:, None] * (p[idx + 1] - p[idx])

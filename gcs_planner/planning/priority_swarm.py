@@ -585,7 +585,7 @@ def build_vehicle_plan(prob: VehicleProblem, x: np.ndarray, cfg: SwarmConfig, te
     n_leg = dec.lh.shape[1]
     r = v.turn_radius_m
     max_angle = 2.0 * math.acos(max(-1.0, 1.0 - cfg.waypoint_tol_m / r))
-    dense_step = min(cfg.dt_s * v.speed_mps, r / 4.0)
+    dense_step = min(cfg.dt_s * v.speed_mps, 0.95 * r / 4.0)  # the checker measures radii on <= R/4
     wp_s, dense_s = [], []
     for leg in range(n_leg):
         seg = dec.seg[leg]
