@@ -76,7 +76,7 @@ def compare(args) -> None:
             rec = _record(plan, name, "priority_swarm", seed, time.process_time() - cpu)
             _append(args.out, rec)
             budget = rec["evaluations"] // len(scenario.vehicles)
-            for method in METHODS:
+            for method in args.baselines:
                 cpu = time.process_time()
                 base = plan_baseline(scenario, np.random.default_rng(seed), method, budget)
                 _append(args.out, _record(base, name, method, seed, time.process_time() - cpu))
@@ -131,6 +131,7 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--iterations", type=int, default=15)
     c.add_argument("--rounds", type=int, default=2)
     c.add_argument("--rrt-iterations", type=int, default=200)
+    c.add_argument("--baselines", nargs="*", default=list(METHODS), choices=METHODS)
     c.add_argument("--out", type=Path, default=Path("bench_swarm.json"))
     s = sub.add_parser("scale")
     s.add_argument("--sizes", type=int, nargs="+", default=[40, 500])
