@@ -16,8 +16,7 @@ from gcs_planner.conformance import format_report
 from gcs_planner.errors import UserError
 from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.plan import Plan
-from gcs_planner.planning import plan_scenario
-from gcs_planner.progress import progress_bar
+from gcs_planner.progress import plan_with_progress, progress_bar
 from gcs_planner.scenario import load_scenario
 
 
@@ -78,15 +77,7 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    if args.plan:
-        plan = Plan.load(args.plan)
-    else:
-        with progress_bar(1.0, f"planning {scenario.name}") as bar:
-            plan = plan_scenario(
-                scenario,
-                seed=args.seed,
-                progress=lambda f, m: (setattr(bar, "n", round(f, 3)), bar.refresh()),
-            )
+    plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
     plan.save(out / "plan.json")
     if not plan.feasible:
         bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]

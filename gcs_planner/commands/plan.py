@@ -10,8 +10,7 @@ import argparse
 
 import numpy as np
 
-from gcs_planner.planning import plan_scenario
-from gcs_planner.progress import progress_bar
+from gcs_planner.progress import plan_with_progress
 from gcs_planner.scenario import load_scenario
 
 
@@ -23,14 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
-    with progress_bar(1.0, f"planning {scenario.name}") as bar:
-
-        def progress(fraction: float, message: str) -> None:
-            bar.n = round(fraction, 3)
-            bar.set_postfix_str(message)
-            bar.refresh()
-
-        plan = plan_scenario(scenario, seed=args.seed, progress=progress)
+    plan = plan_with_progress(scenario, args.seed)
     plan.save(args.output)
     print(f"{'vehicle':<10} {'sysid':>5} {'length_m':>10} {'time_s':>8}  feasible")
     for v in plan.vehicles:
