@@ -75,11 +75,11 @@ __all__ = ["HilOptions", "HilResult", "StrikeRow", "format_strike_report", "run_
 
 log = logging.getLogger(__name__)
 
-EXTEND_S = 10.0  # straight continuation of a pre-award mission [s]
+EXTEND_S = 10.0  # continuation of a pre-award mission at its last turn rate [s]
 TAKEOFF_CLIMB_MPS = 40.0  # mock climb rate for the take-off only
 NAV_WAYPOINT = 16
 LEAD_IN_S = 20.0  # straight lead-in to the window start, flown from the take-off point [s]
-START_AHEAD_S = 2.0  # an award mission starts at its first waypoint at least this far ahead [s]
+START_AHEAD_S = 4.0  # an award mission starts at its first waypoint at least this far ahead [s]
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
 APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a strike entry
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
@@ -168,6 +168,19 @@ def _piece_plan(uav, t: np.ndarray, xy: np.ndarray, t_origin_s: float, dt_s: flo
     )
 
 
+def _continue_turn(t, xy, t_end: float, speed_mps: float, max_rate: float, dt_s: float = 0.5):
+    """EXTEND_S of flight after t_end at the track's turn rate there (the pre-award loiter goes on,
+    as the bids predicted): times (K,) and positions (K, 2), t_end excluded."""
+    tau = t_end + np.array([-2.0, -1.0, 0.0])
+    p = np.column_stack([np.interp(tau, t, xy[:, 0]), np.interp(tau, t, xy[:, 1])])
+    h = np.arctan2(*np.diff(p, axis=0).T[::-1])
+    rate = float(np.clip((h[1] - h[0] + np.pi) % (2 * np.pi) - np.pi, -max_rate, max_rate))
+    steps = np.arange(1, int(EXTEND_S / dt_s) + 1)
+    heading = h[1] + rate * (0.5 + (steps - 0.5) * dt_s)
+    xy_ext = p[-1] + np.cumsum(speed_mps * dt_s * np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)
+    return t_end + steps * dt_s, xy_ext
+
+
 def _slice(t: np.ndarray, xy: np.ndarray, t0: float, t1: float) -> tuple[np.ndarray, np.ndarray]:
     """Track samples in [t0, t1], with the ends interpolated exactly."""
     inner = (t > t0 + 1e-6) & (t < t1 - 1e-6)
@@ -195,10 +208,8 @@ def _schedules(world, result, awards, t_start, t_stop, dt_s) -> list[_VehicleSch
         h0 = np.arctan2(*(xys[1] - xys[0])[::-1])
         lead_in = xys[0] - LEAD_IN_S * uav.speed_mps * np.array([np.cos(h0), np.sin(h0)])
         ts, xys = np.r_[t_start - LEAD_IN_S, ts], np.vstack([lead_in, xys])
-        heading = np.arctan2(*(xys[-1] - xys[-2])[::-1])
-        ext = np.linspace(0.0, EXTEND_S, 6)[1:]
-        ts = np.r_[ts, starts[0] + ext]
-        xys = np.vstack([xys, xys[-1] + np.outer(ext * uav.speed_mps, [np.cos(heading), np.sin(heading)])])
+        ext_t, ext_xy = _continue_turn(t, xy, starts[0], uav.speed_mps, uav.speed_mps / uav.r_min_m)
+        ts, xys = np.r_[ts, ext_t], np.vstack([xys, ext_xy])
         initial = _piece_plan(uav, ts, xys, t_start - LEAD_IN_S, dt_s, [])
         pieces = []
         for k, e in enumerate(mine):
