@@ -154,3 +154,16 @@ def test_bad_planner_parameters_are_named():
         SwarmConfig.from_planner({"dt_s": 1.0})
     with pytest.raises(UserError, match="planner.iterations"):
         SwarmConfig.from_planner({"iterations": 2.5})
+
+
+@pytest.mark.parametrize("method", ["pso", "de", "gwo"])
+def test_baselines_use_the_same_budget_and_are_checked(method):
+    from gcs_planner.planning.baselines import plan_baseline
+
+    scenario = _random_scenario(5)
+    scenario.vehicles = scenario.vehicles[:2]
+    plan = plan_baseline(scenario, np.random.default_rng(0), method, evaluations_per_vehicle=120)
+    assert plan.metrics["evaluations"] <= 120 * len(scenario.vehicles)
+    assert plan.metrics["evaluations"] >= 100 * len(scenario.vehicles)
+    report = check_plan(plan, scenario, step_s=0.5, max_climb_rad=math.radians(20))
+    assert report.bad_vehicles() <= {vp.vehicle_id for vp in plan.vehicles if not vp.feasible}
