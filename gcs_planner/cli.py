@@ -15,7 +15,19 @@ from importlib import import_module
 from gcs_planner import __version__
 from gcs_planner.errors import UserError
 
-COMMANDS = ["plan", "fly", "demo", "replay", "import-tlog", "export", "upload", "download", "clear", "start"]
+COMMANDS = [
+    "plan",
+    "fly",
+    "fly-coalition",
+    "demo",
+    "replay",
+    "import-tlog",
+    "export",
+    "upload",
+    "download",
+    "clear",
+    "start",
+]
 
 
 def build_parser() -> argparse.ArgumentParser:
