@@ -17,28 +17,16 @@ import argparse
 import json
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from gcs_planner.planning.baselines import METHODS, plan_baseline
 from gcs_planner.planning.priority_swarm import plan as plan_method
-from gcs_planner.scenario import Scenario, _vehicle, load_scenario, parse_scenario
+from gcs_planner.scenario import load_scenario
 
 MISSIONS = Path(__file__).resolve().parent.parent / "missions"
 SCENARIOS = ("swarm40_open", "swarm40_cylinders", "swarm40_passages", "swarm40_urban")
-
-
-def load_planning_scenario(path: Path) -> Scenario:
-    """Load a scenario; planning-only fleets above 255 UAVs may repeat sysids (not flyable on MAVLink)."""
-    try:
-        return load_scenario(path)
-    except ValueError:
-        data = tomllib.loads(path.read_text())
-        scenario = parse_scenario({**data, "vehicles": []}, where=str(path))
-        scenario.vehicles = [_vehicle(v, f"{path}: vehicles[{i}]") for i, v in enumerate(data["vehicles"])]
-        return scenario
 
 
 def _record(plan, scenario: str, method: str, seed: int, cpu_s: float) -> dict:
@@ -65,7 +53,7 @@ def _append(out: Path, rec: dict) -> None:
 
 
 def compare(args) -> None:
-    scenarios = {name: load_planning_scenario(MISSIONS / f"{name}.toml") for name in args.scenarios}
+    scenarios = {name: load_scenario(MISSIONS / f"{name}.toml") for name in args.scenarios}
     for scenario in scenarios.values():
         scenario.planner.update(particles=args.particles, iterations=args.iterations, rounds=args.rounds)
         scenario.planner.update(rrt_iterations=args.rrt_iterations)
@@ -83,9 +71,9 @@ def compare(args) -> None:
 
 
 def scale(args) -> None:
-    full = load_planning_scenario(MISSIONS / "swarm500.toml")
+    full = load_scenario(MISSIONS / "swarm500.toml")
     for n in args.sizes:
-        scenario = load_planning_scenario(MISSIONS / "swarm500.toml")
+        scenario = load_scenario(MISSIONS / "swarm500.toml")
         scenario.vehicles = full.vehicles[:n] if n < len(full.vehicles) else full.vehicles
         t0, cpu = time.perf_counter(), time.process_time()
         plan = plan_method(scenario, np.random.default_rng(args.seed))
