@@ -51,3 +51,13 @@ def test_cli_user_error_is_one_line_and_exit_2(tmp_path, capsys):
     assert main(["plan", str(tmp_path / "missing.toml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing.toml" in err[0]
+
+
+def test_plan_convergence_png_written_or_refused_clearly(tmp_path, capsys):
+    png = tmp_path / "conv.png"
+    small = MISSIONS / "swarm_small.toml"
+    assert main(["plan", str(small), "-o", str(tmp_path / "p.json"), "--convergence", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    straight = MISSIONS / "straight_4uav.toml"
+    assert main(["plan", str(straight), "-o", str(tmp_path / "s.json"), "--convergence", str(png)]) == 2
+    assert "no convergence history" in capsys.readouterr().err
