@@ -36,6 +36,7 @@ import asyncio
 import logging
 import time
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -192,36 +193,61 @@ def _slice(t: np.ndarray, xy: np.ndarray, t0: float, t1: float) -> tuple[np.ndar
 class _VehicleSchedule:
     uav: object
     initial: VehiclePlan
-    awards: list[tuple[dict, VehiclePlan]]  # (award event, mission from its leg start)
+    uploads: list[tuple[float, str, dict, VehiclePlan]]  # (scenario time, "award"|"idle", award, mission)
+
+
+def _track_piece(uav, t, xy, t0: float, dt_s: float, a: float, b: float, forced=(), extend: bool = True):
+    """Mission over the simulated track in [a, b] (then the turn continued if ``extend``)."""
+    ts, xys = _slice(t, xy, a, b)
+    if extend:
+        ext_t, ext_xy = _continue_turn(t, xy, b, uav.speed_mps, uav.speed_mps / uav.r_min_m)
+        ts, xys = np.r_[ts, ext_t], np.vstack([xys, ext_xy])
+    return _piece_plan(uav, ts, xys, t0, dt_s, forced)
 
 
 def _schedules(world, result, awards, t_start, t_stop, dt_s) -> list[_VehicleSchedule]:
+    """Each awarded UAV's missions: the initial one, then one per award (uploaded at the award
+    time: the leg plus EXTEND_S of the simulated track after it) and, where the simulation flies on
+    for longer before the next award or the window end, an "idle" one uploaded at the leg end
+    (its idle loiter / station change), so the urgent award missions stay short."""
     by_uav: dict[str, list[dict]] = {}
     for e in awards:
         by_uav.setdefault(e["uav"], []).append(e)
     out = []
     for uav in sorted((u for u in world.uavs if u.id in by_uav), key=lambda u: u.sysid):
-        t, xy, _ = result.tracks[uav.index].history(t_stop + EXTEND_S)
+        t, xy, _ = result.tracks[uav.index].history(t_stop + 2 * EXTEND_S)
+        t0 = t_start - LEAD_IN_S
+
+        piece = partial(_track_piece, uav, t, xy, t0, dt_s)
         mine = sorted(by_uav[uav.id], key=lambda e: e["t_s"])
-        starts = [float(result.award_legs[(e["target"], uav.id)].t[0]) for e in mine]
-        ts, xys = _slice(t, xy, t_start, starts[0])
-        h0 = np.arctan2(*(xys[1] - xys[0])[::-1])
-        lead_in = xys[0] - LEAD_IN_S * uav.speed_mps * np.array([np.cos(h0), np.sin(h0)])
-        ts, xys = np.r_[t_start - LEAD_IN_S, ts], np.vstack([lead_in, xys])
-        ext_t, ext_xy = _continue_turn(t, xy, starts[0], uav.speed_mps, uav.speed_mps / uav.r_min_m)
-        ts, xys = np.r_[ts, ext_t], np.vstack([xys, ext_xy])
-        initial = _piece_plan(uav, ts, xys, t_start - LEAD_IN_S, dt_s, [])
-        pieces = []
-        for k, e in enumerate(mine):
-            end = starts[k + 1] if k + 1 < len(mine) else t_stop + EXTEND_S
-            ts, xys = _slice(t, xy, starts[k], end)
+        legs = [result.award_legs[(e["target"], uav.id)] for e in mine]
+        initial = piece(t_start, float(legs[0].t[0]))
+        h0 = np.arctan2(*(initial.path[1, :2] - initial.path[0, :2])[::-1])
+        lead_in = initial.path[0, :2] - LEAD_IN_S * uav.speed_mps * np.array([np.cos(h0), np.sin(h0)])
+        ts = np.r_[t0, initial.path_times_s + t0]
+        xys = np.vstack([lead_in, initial.path[:, :2]])
+        initial = _piece_plan(uav, ts, xys, t0, dt_s, [])
+        uploads = []
+        for k, (e, leg) in enumerate(zip(mine, legs)):
+            end = float(legs[k + 1].t[0]) if k + 1 < len(mine) else t_stop
+            leg_end = float(leg.t[-1])
             forced = (
-                [e["time_s"] - k * APPROACH_DT_S for k in range(APPROACH_POINTS)]
+                [e["time_s"] - j * APPROACH_DT_S for j in range(APPROACH_POINTS)]
                 if e["task"] == "strike"
                 else []
             )
-            pieces.append((e, _piece_plan(uav, ts, xys, t_start - LEAD_IN_S, dt_s, forced)))
-        out.append(_VehicleSchedule(uav, initial, pieces))
+            short = end - leg_end <= EXTEND_S
+            uploads.append(
+                (
+                    e["t_s"],
+                    "award",
+                    e,
+                    piece(float(leg.t[0]), end if short else leg_end + EXTEND_S, forced, short),
+                )
+            )
+            if not short:
+                uploads.append((leg_end, "idle", e, piece(leg_end, end)))
+        out.append(_VehicleSchedule(uav, initial, uploads))
     return out
 
 
@@ -367,13 +393,14 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                 for vp in initial.vehicles:
                     keeper.add(vp)
                 queue = sorted(replay, key=lambda e: e["t_s"])
-                pending = {
-                    (e["uav"], e["target"]): vp for s in schedules for e, vp in s.awards
-                }  # fmt: skip
+                pending = sorted(
+                    (u for s in schedules for u in s.uploads if u[0] <= t_stop), key=lambda u: u[0]
+                )
                 tasks = []
 
-                async def upload(e: dict, vp: VehiclePlan) -> None:
+                async def upload(kind: str, e: dict, vp: VehiclePlan) -> None:
                     entry = {
+                        "kind": kind,
                         "uav": e["uav"],
                         "sysid": vp.sysid,
                         "target": e["target"],
@@ -392,7 +419,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                         entry.update(ok=True, start_seq=seq, items=len(items))
                     except MavlinkError as exc:
                         entry["error"] = str(exc)
-                        failures.append(f"{e['uav']}: award upload failed: {exc}")
+                        failures.append(f"{e['uav']}: {kind} upload failed: {exc}")
                     entry["upload_end_s"] = _scenario_now()
                     uploads.append(entry)
                     logger.log_event({"event": "upload", **entry})
@@ -407,9 +434,9 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                     while queue and queue[0]["t_s"] <= now:
                         e = queue.pop(0)
                         logger.log_event({**e, "source": "coalition_simulation"})
-                        key = (e.get("uav"), e.get("target"))
-                        if e["event"] == "award" and key in pending:
-                            tasks.append(asyncio.create_task(upload(e, pending.pop(key))))
+                    while pending and pending[0][0] <= now:
+                        _, kind, e, vp = pending.pop(0)
+                        tasks.append(asyncio.create_task(upload(kind, e, vp)))
                     if options.keep_schedule:
                         _keep(link, recorder, keeper, current, route_t0)
                     await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
