@@ -5,20 +5,25 @@ swarm flies. Here the planner in the loop is the coalition simulation
 (gcs_planner.planning.coalition), run first for the seed; it is deterministic, so its decisions
 (tenders, bids, awards, legs) are *replayed* onto the vehicles at their award times:
 
-1. Every vehicle awarded a task (of the chosen targets) is a mock fixed wing whose home is its
-   simulated position at the window start ``t_start`` = first award - ``lead_s``. Its first
-   mission is its simulated pre-award track (idle loiter, recon) up to its leg start t_e^s,
-   continued straight on for ``EXTEND_S`` (what it flies if no award comes).
+1. Every vehicle awarded a task (of the chosen targets) is a mock fixed wing. Its first mission
+   is a straight ``LEAD_IN_S`` lead-in to its simulated position at the window start
+   ``t_start`` = first award - ``lead_s``, then its simulated pre-award track (idle loiter, recon)
+   up to its leg start t_e^s, then ``EXTEND_S`` more at the same turn rate (the loiter the bids
+   predicted, flown until the award lands). Its home is south of the lead-in start by the
+   take-off's ground run (the mock climbs heading north), so the climb ends where the route starts.
 2. The fleet takes off (fly._take_off_all) and every route starts at once at route time 0 =
-   scenario time ``t_start`` (fly._start_routes).
-3. When the route clock reaches an award's time, the awarded vehicle's new mission (its award leg,
-   then its simulated track after the leg up to its next award or the window end) is built with
-   plan_to_items, uploaded with MissionClient while the vehicle flies, and started with
-   MISSION_START at the first waypoint still ahead in time (an upload that ends after t_e^s must
-   not send the vehicle back). The simulation's tender / bid / award events are logged to the
-   MCAP at their times, each upload with its start and end times.
+   scenario time ``t_start - LEAD_IN_S`` (fly._start_routes).
+3. When the route clock reaches an award's time, the awarded vehicle's new mission (its award leg
+   with extra waypoints on the last 1.5 s before a strike entry, then ``EXTEND_S`` of its simulated
+   track) is built with plan_to_items, uploaded with MissionClient while the vehicle flies, and
+   started with MISSION_START at the first waypoint ``START_AHEAD_S`` ahead (an upload that ends
+   after t_e^s must not send the vehicle back). Where the simulation flies on for longer before
+   the next award or the window end, an "idle" mission (that track) is uploaded at the leg end, so
+   urgent award missions stay short. The simulation's tender / bid / award events are logged to
+   the MCAP at their times, each upload with its start and end times.
 4. A ScheduleKeeper holds every vehicle to its current mission's timing (it is replaced at each
-   upload), as in ``gcs-planner fly``.
+   upload), as in ``gcs-planner fly``; it gets the path every ``KEEPER_SAMPLE_S`` so that its
+   60-sample look-ahead stays shorter than a loiter lap.
 5. Report: for each strike award, the flown arrival at the stand-off entry point = the closest
    approach of the piecewise-linear flown track (time interpolated, simulated clock), heading =
    that track segment's direction; both against the award (time_s, angle_deg + 180).

@@ -49,3 +49,10 @@ def test_t1_awards_are_uploaded_in_flight_and_strikes_arrive_on_time_and_angle(t
     kinds = [e.get("event") for _, e in flight.events]
     assert {"tender", "bid", "award", "upload", "route_start"} <= set(kinds)
     assert kinds.count("award") == 10 and kinds.count("upload") == 10
+
+
+def test_fly_coalition_command_refuses_a_scenario_without_the_coalition_planner(capsys):
+    from gcs_planner.cli import main
+
+    assert main(["fly-coalition", str(SCENARIO.parent / "straight_4uav.toml")]) == 2
+    assert "[planner] name must be 'coalition'" in capsys.readouterr().err
