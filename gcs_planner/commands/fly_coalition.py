@@ -51,7 +51,7 @@ def run(args: argparse.Namespace) -> int:
     result = asyncio.run(run_coalition_hil(scenario, options))
     print(format_strike_report(result.rows))
     ok = sum(u["ok"] for u in result.uploads)
-    print(f"{ok}/{len(result.uploads)} award missions uploaded in flight; log {result.mcap_path}; "
+    print(f"{ok}/{len(result.uploads)} missions (award + idle) uploaded in flight; log {result.mcap_path}; "
           f"{result.wall_time_s:.1f} s wall")  # fmt: skip
     for f in result.failures:
         print(f"failure: {f}")
