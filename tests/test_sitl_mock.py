@@ -252,7 +252,7 @@ def test_cli_starts_vehicles_and_stops_on_interrupt():
         gcs.close()
     finally:
         proc.send_signal(2)
-        assert proc.wait(timeout=10) == 0
+        assert proc.wait(timeout=30) == 0  # generous: a loaded 2-core CI machine
 
 
 def test_fleet_in_the_callers_loop_with_the_gcs_stack():
