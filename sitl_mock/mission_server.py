@@ -39,7 +39,7 @@ from enum import StrEnum
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.enums import MissionResult, MissionState
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
 from gcs_planner.mavlink.wire import MissionAckMessage, MissionCountMessage, MissionCurrentMessage
 from sitl_mock.profiles import AutopilotProfile
 
@@ -48,7 +48,6 @@ __all__ = ["Failure", "MissionServer"]
 log = logging.getLogger(__name__)
 
 _LIST_TYPES = (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
-_GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})
 _KNOWN_FRAMES = frozenset({0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21})
 _ARDUPILOT_FRAME_READBACK = {5: 0, 6: 3, 11: 10}  # ArduPilot reports the non-_INT frame numbers
 _NAV_WAYPOINT = 16
@@ -382,33 +381,15 @@ class MissionServer:
 
     def _decode_item(self, msg: mavlink.MAVLink_message) -> tuple[MissionItem, MissionResult]:
         """MISSION_ITEM(_INT) -> stored item (rounded like the profile's autopilot) and a verdict."""
-        x, y = msg.x, msg.y
-        if msg.get_type() == "MISSION_ITEM":  # legacy float message: degrees (global) or metres
-            scale = 1e7 if msg.frame in _GLOBAL_FRAMES else 1e4
-            x, y = round(x * scale), round(y * scale)
-        item = MissionItem(
-            seq=msg.seq,
-            frame=msg.frame,
-            command=msg.command,
-            current=msg.current,
-            autocontinue=msg.autocontinue,
-            param1=msg.param1,
-            param2=msg.param2,
-            param3=msg.param3,
-            param4=msg.param4,
-            x=int(x),
-            y=int(y),
-            z=msg.z,
-            mission_type=msg.mission_type,
-        )
+        item = MissionItem.from_message(msg)
         if msg.frame not in _KNOWN_FRAMES:
             return item, MissionResult.UNSUPPORTED_FRAME
         if msg.command not in mavlink.enums["MAV_CMD"]:
             return item, MissionResult.UNSUPPORTED
-        if msg.frame in _GLOBAL_FRAMES and (x or y):
-            if abs(x) > 90 * 10**7:
+        if msg.frame in GLOBAL_FRAMES and (item.x or item.y):
+            if abs(item.x) > 90 * 10**7:
                 return item, MissionResult.INVALID_PARAM5_X
-            if abs(y) > 180 * 10**7:
+            if abs(item.y) > 180 * 10**7:
                 return item, MissionResult.INVALID_PARAM6_Y
         if not math.isfinite(msg.z):
             return item, MissionResult.INVALID_PARAM7
@@ -558,7 +539,7 @@ def _item_message(
         item.param4,
     )
     if legacy:
-        scale = 1e7 if item.frame in _GLOBAL_FRAMES else 1e4
+        scale = 1e7 if item.frame in GLOBAL_FRAMES else 1e4
         return mavlink.MAVLink_mission_item_message(
             *target, seq, *common, item.x / scale, item.y / scale, item.z, request.mission_type
         )

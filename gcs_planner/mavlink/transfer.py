@@ -75,7 +75,6 @@ FINAL_ITEM_RETRIES = 5  # resends of the last item while waiting for MISSION_ACK
 INACTIVITY_TIMEOUT_S = 10.0  # no message from the vehicle for this long ends the transfer [s]
 DOWNLOAD_RETRIES = 8  # re-requests of one item during a download
 INITIAL_RTT_S = 0.1  # round-trip guess before the first measurement [s]
-_GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})
 _REQUESTS = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST"})
 _ITEMS = frozenset({"MISSION_ITEM_INT", "MISSION_ITEM"})
 
@@ -390,7 +389,7 @@ class DownloadTransfer(Transfer):
             return []  # duplicate, stale or a seq we did not ask for: the timer re-requests
         if self._retries == 0:
             self._rtt_sample(now_s - self._requested_at)
-        self._items.append(_item_from_message(msg, self.mission_type))
+        self._items.append(MissionItem.from_message(msg, self.mission_type))
         if len(self._items) == self._count:
             self._finish(None, items=list(self._items), opaque_id=self._opaque_id)
             return [self._ack(MissionResult.ACCEPTED)]
@@ -484,26 +483,3 @@ class SetCurrentTransfer(Transfer):
         self._retries += 1
         self.deadline_s = now_s + self.timing.count_retry_s
         return [self._set()]
-
-
-def _item_from_message(msg: mavlink.MAVLink_message, mission_type: int) -> MissionItem:
-    """MISSION_ITEM_INT (or legacy float MISSION_ITEM, degrees -> degE7) -> MissionItem."""
-    x, y = msg.x, msg.y
-    if msg.get_type() == "MISSION_ITEM":
-        scale = 1e7 if msg.frame in _GLOBAL_FRAMES else 1e4
-        x, y = round(x * scale), round(y * scale)
-    return MissionItem(
-        seq=msg.seq,
-        frame=msg.frame,
-        command=msg.command,
-        current=msg.current,
-        autocontinue=msg.autocontinue,
-        param1=msg.param1,
-        param2=msg.param2,
-        param3=msg.param3,
-        param4=msg.param4,
-        x=int(x),
-        y=int(y),
-        z=msg.z,
-        mission_type=mission_type,
-    )

@@ -5,7 +5,9 @@ from __future__ import annotations
 from dataclasses import astuple, dataclass, replace
 from enum import IntEnum
 
-__all__ = ["MissionItem", "MissionType"]
+__all__ = ["GLOBAL_FRAMES", "MissionItem", "MissionType"]
+
+GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})  # MAV_FRAMEs whose x, y are latitude, longitude
 
 
 class MissionType(IntEnum):
@@ -47,6 +49,20 @@ class MissionItem:
     @property
     def lon_deg(self) -> float:
         return self.y / 1e7
+
+    @classmethod
+    def from_message(cls, msg, mission_type: int | None = None) -> MissionItem:
+        """From a received MISSION_ITEM_INT, or a legacy float MISSION_ITEM (degrees -> degE7,
+        local metres -> x 1e4); ``mission_type`` overrides the message's."""
+        x, y = msg.x, msg.y
+        if msg.get_type() == "MISSION_ITEM":
+            scale = 1e7 if msg.frame in GLOBAL_FRAMES else 1e4
+            x, y = round(x * scale), round(y * scale)
+        return cls(
+            msg.seq, msg.frame, msg.command, msg.current, msg.autocontinue,
+            msg.param1, msg.param2, msg.param3, msg.param4, int(x), int(y), msg.z,
+            msg.mission_type if mission_type is None else mission_type,
+        )  # fmt: skip
 
     def fields(self) -> tuple:
         """seq .. mission_type in MISSION_ITEM_INT's argument order (after the two targets)."""
