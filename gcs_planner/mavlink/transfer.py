@@ -339,10 +339,7 @@ class UploadTransfer(Transfer):
         return self._fail_timeout(f"no request for {idle:.1f} s")
 
     def _item(self, seq: int) -> mavlink.MAVLink_message:
-        fields = self.items[seq].with_seq(seq).fields()
-        return mavlink.MAVLink_mission_item_int_message(
-            self.sysid, self.compid, *fields[:-1], self.mission_type
-        )
+        return mavlink.MAVLink_mission_item_int_message(self.sysid, self.compid, *self.items[seq].fields())
 
 
 class DownloadTransfer(Transfer):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import astuple, dataclass, replace
+from dataclasses import dataclass, replace
 from enum import IntEnum
 
 __all__ = ["GLOBAL_FRAMES", "MissionItem", "MissionType"]
@@ -65,8 +65,14 @@ class MissionItem:
         )  # fmt: skip
 
     def fields(self) -> tuple:
-        """seq .. mission_type in MISSION_ITEM_INT's argument order (after the two targets)."""
-        return astuple(self)
+        """seq .. mission_type in MISSION_ITEM_INT's argument order (after the two targets).
+
+        Spelled out: dataclasses.astuple deep-copies every field and cost ~130 us per item, the
+        largest share of an upload's CPU time."""
+        return (
+            self.seq, self.frame, self.command, self.current, self.autocontinue,
+            self.param1, self.param2, self.param3, self.param4, self.x, self.y, self.z, self.mission_type,
+        )  # fmt: skip
 
     def with_seq(self, seq: int) -> MissionItem:
         return replace(self, seq=seq)
