@@ -18,7 +18,9 @@ Method (why it is general rather than the textbook normalised formulas):
   are exact for CCC words too.
 - Arc angles are taken modulo 2 pi; an angle within ``_ANGLE_EPS`` of 2 pi is treated as 0 (a
   pose already on the tangent must not produce a spurious full circle).
-- All constructions are numpy-vectorised over a batch of N problems; invalid words get length inf.
+- All constructions are numpy-vectorised over a batch of N problems, with the four CSC words and
+  the two CCC words each evaluated in one pass (small batches are bound by numpy call overhead:
+  the coalition planner makes hundreds of calls per formation); invalid words get length inf.
 
 Free terminal heading (shortest path to a point): the optimum is a CS path (or a CC path when the
 point is inside a turning circle). We evaluate the analytic CS tangent headings for both turn
@@ -180,18 +182,20 @@ def word_lengths(
     rm = np.minimum(r0, r1) if r_mid is None else np.broadcast_to(np.asarray(r_mid, dtype=float), (n,))
     if np.any(r0 <= 0) or np.any(r1 <= 0) or np.any(rm <= 0):
         raise ValueError(f"Dubins radii must be > 0, got r0={r0.min()}, r1={r1.min()}, r_mid={rm.min()}")
-    out = np.full((n, 6, 3), np.inf)
-    for w, word in enumerate(WORDS):
-        s0, s1 = _SIGN[word[0]], _SIGN[word[2]]
-        c0 = _centre(q0, r0, s0)
-        c1 = _centre(q1, r1, s1)
-        if word[1] == "S":
-            out[:, w] = _csc(q0[:, 2], q1[:, 2], c0, c1, r0, r1, s0, s1)
-        else:
-            a = _ccc(q0[:, 2], q1[:, 2], c0, c1, r0, r1, rm, s0, +1.0)
-            b = _ccc(q0[:, 2], q1[:, 2], c0, c1, r0, r1, rm, s0, -1.0)
-            better_b = b.sum(axis=1) < a.sum(axis=1)
-            out[:, w] = np.where(better_b[:, None], b, a)
+    h0, h1 = q0[:, 2], q1[:, 2]
+    c0, c1 = _centres(q0, r0), _centres(q1, r1)
+    # Start- and end-circle centres (6, N) per word; then all CSC words in one set of numpy calls on
+    # (4, N) arrays and both CCC words (both middle-circle sides) on (2, N): for small N the cost is
+    # call overhead, not arithmetic.
+    first, last = _WORD_SIGNS[:, 0], _WORD_SIGNS[:, 2]
+    x0, y0 = (np.stack([c0[s][j] for s in first]) for j in (0, 1))
+    x1, y1 = (np.stack([c1[s][j] for s in last]) for j in (0, 1))
+    out = np.empty((n, 6, 3))
+    csc = _csc(h0, h1, x1[:4] - x0[:4], y1[:4] - y0[:4], r0, r1, first[:4, None], last[:4, None])
+    out[:, :4] = csc.transpose(2, 1, 0)
+    a, b = _ccc(h0, h1, x0[4:], y0[4:], x1[4:], y1[4:], r0, r1, rm, first[4:, None])
+    better_b = b.sum(axis=0) < a.sum(axis=0)
+    out[:, 4:] = np.where(better_b[None], b, a).transpose(2, 1, 0)
     return out
 
 
@@ -404,55 +408,63 @@ def _wrap(a: np.ndarray) -> np.ndarray:
 
 
 def _ccw_angle(a: np.ndarray) -> np.ndarray:
-    """Angle mod 2 pi in [0, 2 pi), with near-2 pi values snapped to 0."""
-    a = np.mod(a, _TWO_PI)
+    """Angle mod 2 pi in [0, 2 pi), with near-2 pi values snapped to 0.
+
+    fmod plus a sign fix equals np.mod (same rounding) at half its cost."""
+    a = np.fmod(a, _TWO_PI)
+    a = np.where(a < 0.0, a + _TWO_PI, a)
     return np.where(a > _TWO_PI - _ANGLE_EPS, 0.0, a)
 
 
-def _centre(q: np.ndarray, r: np.ndarray, s: float) -> np.ndarray:
-    """Turning-circle centre (N, 2): left of the heading for L (s=+1), right for R (s=-1)."""
-    return np.column_stack([q[:, 0] - s * r * np.sin(q[:, 2]), q[:, 1] + s * r * np.cos(q[:, 2])])
+def _centres(q: np.ndarray, r: np.ndarray) -> dict[float, tuple[np.ndarray, np.ndarray]]:
+    """Turning-circle centres (x (N,), y (N,)) for turn sign +1 (L, left of the heading) and -1 (R)."""
+    rs, rc = r * np.sin(q[:, 2]), r * np.cos(q[:, 2])
+    return {1.0: (q[:, 0] - rs, q[:, 1] + rc), -1.0: (q[:, 0] + rs, q[:, 1] - rc)}
 
 
-def _csc(h0, h1, c0, c1, r0, r1, s0: float, s1: float) -> np.ndarray:
-    d = c1 - c0
-    dist = np.hypot(d[:, 0], d[:, 1])
+def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> np.ndarray:
+    """Segment lengths (3, W, N) of CSC words with turn signs s0, s1 (W, 1), centre offsets dx, dy (W, N)."""
+    dist = np.hypot(dx, dy)
     dr = s1 * r1 - s0 * r0
     valid = np.abs(dr) <= dist + 1e-12
-    ratio = np.divide(dr, dist, out=np.zeros_like(dist), where=dist > 1e-12)
-    alpha = np.arctan2(d[:, 1], d[:, 0]) - np.arcsin(np.clip(ratio, -1.0, 1.0))
-    alpha = np.where(dist > 1e-12, alpha, h0)  # concentric equal circles: no straight part
+    apart = dist > 1e-12
+    ratio = np.divide(dr, dist, out=np.zeros_like(dist), where=apart)
+    alpha = np.arctan2(dy, dx) - np.arcsin(np.clip(ratio, -1.0, 1.0))
+    alpha = np.where(apart, alpha, h0)  # concentric equal circles: no straight part
     straight = np.sqrt(np.maximum(dist**2 - dr**2, 0.0))
     a0 = _ccw_angle(s0 * (alpha - h0)) * r0
     a1 = _ccw_angle(s1 * (h1 - alpha)) * r1
-    seg = np.column_stack([a0, straight, a1])
-    seg[~valid] = np.inf
-    return seg
+    return np.where(valid, np.stack([a0, straight, a1]), np.inf)
 
 
-def _ccc(h0, h1, c0, c1, r0, r1, rm, s: float, side: float) -> np.ndarray:
-    d = c1 - c0
-    dist = np.hypot(d[:, 0], d[:, 1])
+def _ccc(h0, h1, x0, y0, x1, y1, r0, r1, rm, s) -> tuple[np.ndarray, np.ndarray]:
+    """Segment lengths (3, W, N) of CCC words (first turn sign s (W, 1)), middle circle on either side."""
+    dx, dy = x1 - x0, y1 - y0
+    dist = np.hypot(dx, dy)
     a, b = r0 + rm, r1 + rm
     valid = (dist > 1e-12) & (dist <= a + b) & (dist >= np.abs(a - b))
     safe = np.where(valid, dist, 1.0)
     x = (a**2 - b**2 + safe**2) / (2.0 * safe)
     h = np.sqrt(np.maximum(a**2 - x**2, 0.0))
-    e = d / safe[:, None]
-    cm = c0 + x[:, None] * e + side * h[:, None] * np.column_stack([-e[:, 1], e[:, 0]])
-    g0 = cm - c0  # tangency with circle 0 is along c0 -> cm
-    g1 = c1 - cm
-    hq0 = np.arctan2(g0[:, 1], g0[:, 0]) + s * math.pi / 2
-    hq1 = np.arctan2(g1[:, 1], g1[:, 0]) - s * math.pi / 2  # middle circle turns the other way
-    seg = np.column_stack(
-        [
-            _ccw_angle(s * (hq0 - h0)) * r0,
-            _ccw_angle(-s * (hq1 - hq0)) * rm,
-            _ccw_angle(s * (h1 - hq1)) * r1,
-        ]
-    )
-    seg[~valid] = np.inf
-    return seg
+    ex, ey = dx / safe, dy / safe
+    out = []
+    for side in (1.0, -1.0):
+        hs = side * h
+        cmx = x0 + x * ex + hs * -ey
+        cmy = y0 + x * ey + hs * ex
+        g0x, g0y = cmx - x0, cmy - y0  # tangency with circle 0 is along c0 -> cm
+        g1x, g1y = x1 - cmx, y1 - cmy
+        hq0 = np.arctan2(g0y, g0x) + s * (math.pi / 2)
+        hq1 = np.arctan2(g1y, g1x) - s * (math.pi / 2)  # middle circle turns the other way
+        seg = np.stack(
+            [
+                _ccw_angle(s * (hq0 - h0)) * r0,
+                _ccw_angle(-s * (hq1 - hq0)) * rm,
+                _ccw_angle(s * (h1 - hq1)) * r1,
+            ]
+        )
+        out.append(np.where(valid, seg, np.inf))
+    return out[0], out[1]
 
 
 def _advance(pose: np.ndarray, kappa: float, ds: float) -> np.ndarray:

@@ -137,41 +137,54 @@ def solve_aco(
     m, iters = params.ants * scale, params.iterations * scale
     cap = prob.capable
     tau = np.full((n, K), params.tau0)
+    tau_t = tau.T[:, None, :]  # (K, 1, n) view of tau
     eta_b = _heuristic(prob, params) ** params.beta
     lfrac = np.clip(prob.range_left_m / prob.range_max_m, 0.0, 1.0)
+    keep, add = 1 - params.rho, params.rho * params.tau0
     rows = np.arange(m)
     best_assign, best_J = np.full(K, -1), -np.inf
+    cap_t = cap.T[:, None, :].astype(float)  # (K, 1, n)
     for _ in range(iters):
         assign = np.full((m, K), -1)
-        busy = np.zeros((m, n), bool)
+        # (K, m, n) 0/1: capable, ant idle, task open; tasks first, so the reductions over tasks
+        # are elementwise passes over (m, n) slices (numpy is slow at reducing short inner axes)
+        allowed = np.repeat(cap_t, m, 1)
+        idle = np.ones((m, n))  # 1.0 while the candidate has no task in that cluster
         for _step in range(K):
-            allowed = cap[None] & ~busy[:, :, None] & (assign < 0)[:, None, :]  # (m, n, K)
-            n_allowed = allowed.sum(2)
-            tau_max = np.where(allowed, tau[None], 0.0).max(2)
-            c = lfrac[None] * tau_max * n_allowed / K * (~busy)  # eq. 27
+            c = lfrac * (allowed * tau_t).max(0) * allowed.sum(0) / K * idle  # eq. 27
             total = c.sum(1)
             live = total > 0
             if not live.any():
                 break
-            cum = np.cumsum(c, 1)
-            ant = (cum < rng.random(m)[:, None] * total[:, None]).sum(1).clip(0, n - 1)  # eq. 26 roulette
-            score = np.where(allowed[rows, ant], tau[ant] ** params.alpha * eta_b[ant], 0.0)  # (m, K)
-            greedy = score.argmax(1)
+            draw = rng.random((3, m))  # the same stream as three rng.random(m) calls
+            ant = _roulette(np.cumsum(c, 1), draw[0] * total)  # eq. 26
+            score = allowed[:, rows, ant].T * (tau**params.alpha * eta_b)[ant]  # (m, K)
             scum = np.cumsum(score, 1)
-            roul = (scum < rng.random(m)[:, None] * scum[:, -1:]).sum(1).clip(0, K - 1)
-            task = np.where(rng.random(m) <= params.q0, greedy, roul)  # eq. 28
+            roul = _roulette(scum, draw[1] * scum[:, -1])
+            task = np.where(draw[2] <= params.q0, score.argmax(1), roul)  # eq. 28
             ok = live & (score[rows, task] > 0)
-            assign[rows[ok], task[ok]] = ant[ok]
-            busy[rows[ok], ant[ok]] = True
-            tau[ant[ok], task[ok]] = (1 - params.rho) * tau[ant[ok], task[ok]] + params.rho * params.tau0
+            r, a, t = rows[ok], ant[ok], task[ok]
+            assign[r, t] = a
+            idle[r, a] = 0.0
+            allowed[:, r, a] = 0.0
+            allowed[t, r, :] = 0.0
+            tau[a, t] = keep * tau[a, t] + add  # ACS local update
         J, _, _ = evaluate(assign, prob, params)
         i = int(np.argmax(J))
         if J[i] > best_J:
             best_J, best_assign = float(J[i]), assign[i].copy()
-        tau *= 1 - params.rho  # eq. 32, global update by the best plan
+        tau *= keep  # eq. 32, global update by the best plan
         has = best_assign >= 0
         tau[best_assign[has], np.flatnonzero(has)] += params.rho * max(best_J, 0.05)
     return make_solution(best_assign, prob, params)
+
+
+def _roulette(cum: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Per row, the number of entries of the non-decreasing cum (m, n) below x (m,), at most n - 1.
+
+    argmax of the first cum >= x: one fast pass, instead of summing a boolean array."""
+    above = cum >= x[:, None]
+    return np.where(above[:, -1], above.argmax(1), cum.shape[1] - 1)
 
 
 def make_solution(assign: np.ndarray, prob: CoalitionProblem, params: CoalitionParams) -> Solution:
