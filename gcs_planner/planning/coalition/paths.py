@@ -35,13 +35,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs_planner.geometry.dubins import WORDS, DubinsPath, word_lengths
+from gcs_planner.geometry.dubins import WORDS, DubinsPath, sample_batch, word_lengths
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.planning.coalition.track import Leg
 
 __all__ = [
     "arc_leg",
     "arc_start_pose",
+    "chains_clear",
     "clearance_m",
     "entry_poses",
     "free_heading_lengths",
@@ -104,10 +105,14 @@ def free_heading_lengths(q0: np.ndarray, goal_xy: np.ndarray, r_m) -> np.ndarray
     return best
 
 
+def _pose(q) -> tuple[float, float, float]:
+    return float(q[0]), float(q[1]), float(q[2])
+
+
 def _path(q0, word_i: int, seg: np.ndarray, r0: float, r1: float) -> DubinsPath:
     word = WORDS[word_i]
     return DubinsPath(
-        start=tuple(float(v) for v in q0),
+        start=_pose(q0),
         word=word,
         lengths=tuple(float(v) for v in seg),
         radii=(float(r0), math.inf if word[1] == "S" else float(min(r0, r1)), float(r1)),
@@ -220,6 +225,36 @@ def _first_violated(xy: np.ndarray, threats: list[Threat]) -> Threat | None:
     return None if not len(hits) else threats[int(np.argmax(inside[hits[0]]))]
 
 
+def chains_clear(chains: list[list[DubinsPath]], threats: list[Threat], ds_m: float) -> np.ndarray:
+    """(len(chains),) bool: every sample of the chain of paths is outside every threat circle.
+
+    The samples are exactly those of ``DubinsPath.sample_step(ds_m)`` (same linspace, same
+    integration), so this equals ``clearance_m(concatenated samples) >= 0`` chain by chain; all
+    paths of all chains are sampled in one vectorised pass (``sample_batch``) instead of one
+    Python-level sampling per path."""
+    ok = np.ones(len(chains), bool)
+    flat = [p for ch in chains for p in ch]
+    if not threats or not flat:
+        return ok
+    owner = np.repeat(np.arange(len(chains)), [len(ch) for ch in chains])
+    total = np.array([p.length for p in flat])
+    n = np.maximum(1, np.ceil(total / ds_m)).astype(int)
+    i = np.arange(n.max() + 1)
+    s = np.where(i < n[:, None], i * (total / n)[:, None], total[:, None])  # linspace(0, L, n + 1), padded
+    xy = sample_batch(
+        np.array([p.start for p in flat]),
+        np.array([WORDS.index(p.word) for p in flat]),
+        np.array([p.lengths for p in flat]),
+        np.array([p.radii for p in flat]),
+        s,
+    )
+    c = np.array([[t.x, t.y] for t in threats])
+    r = np.array([t.radius_m for t in threats])
+    inside = (np.hypot(xy[..., 0, None] - c[:, 0], xy[..., 1, None] - c[:, 1]) - r < 0).any((1, 2))
+    ok[owner[inside]] = False
+    return ok
+
+
 def _shortest(q0, q1, r: float) -> DubinsPath:
     lens = word_lengths(q0, q1, r)[0]
     w = int(lens.sum(1).argmin())
@@ -299,15 +334,15 @@ def min_routes(
 ) -> list[Route]:
     """min_route for many pairs: one batched Dubins call; only paths that hit a threat are re-routed."""
     lens = word_lengths(q0, q1, r_m, r_m)
-    out = []
-    for i in range(len(q0)):
-        w = int(lens[i].sum(1).argmin())
-        direct = _path(q0[i], w, lens[i, w], r_m[i], r_m[i])
-        if _first_violated(_samples(direct, ds_m)[:, :2], threats) is None:
-            out.append(Route([q0[i], q1[i]], float(r_m[i]), direct.length, True))
-        else:
-            out.append(min_route(q0[i], q1[i], float(r_m[i]), threats, kappa, ds_m))
-    return out
+    w = lens.sum(2).argmin(1)
+    direct = [_path(q0[i], w[i], lens[i, w[i]], r_m[i], r_m[i]) for i in range(len(q0))]
+    clear = chains_clear([[d] for d in direct], threats, ds_m)
+    return [
+        Route([q0[i], q1[i]], float(r_m[i]), direct[i].length, True)
+        if clear[i]
+        else min_route(q0[i], q1[i], float(r_m[i]), threats, kappa, ds_m)
+        for i in range(len(q0))
+    ]
 
 
 def _links_lengths(poses_sets: list[list[np.ndarray]], r_m: float) -> np.ndarray:
@@ -318,9 +353,17 @@ def _links_lengths(poses_sets: list[list[np.ndarray]], r_m: float) -> np.ndarray
 
 
 def timed_route(
-    route: Route, length_m: float, threats: list[Threat], ds_m: float = 10.0
+    route: Route,
+    length_m: float,
+    threats: list[Threat],
+    ds_m: float = 10.0,
+    stretched: tuple[DubinsPath | None] | None = None,
 ) -> tuple[list[DubinsPath], bool]:
-    """Dubins segments along `route` of total length_m (stretching one link); and whether they clear."""
+    """Dubins segments along `route` of total length_m (stretching one link); and whether they clear.
+
+    stretched: ``(path,)`` when the caller already has ``stretch_batch``'s result for a two-pose
+    route at length_m (path may be None), so the first fallback is not computed twice.
+    """
     links = [_shortest(a, b, route.r_m) for a, b in zip(route.poses[:-1], route.poses[1:])]
     extra = length_m - sum(p.length for p in links)
     if extra <= 1e-6:
@@ -328,7 +371,10 @@ def timed_route(
     fallback = None
     for j in [len(links) - 1, *range(len(links) - 1)]:
         a, b = route.poses[j], route.poses[j + 1]
-        p = stretch_batch(a[None], b[None], np.array([links[j].length + extra]), np.array([route.r_m]))[0]
+        if stretched is not None and len(links) == 1:
+            p = stretched[0]
+        else:
+            p = stretch_batch(a[None], b[None], np.array([links[j].length + extra]), np.array([route.r_m]))[0]
         if p is None:
             continue
         trial = links[:j] + [p] + links[j + 1 :]
@@ -364,47 +410,61 @@ def timed_route(
 def _delay_on_start_circle(route: Route, length_m: float, threats: list[Threat], ds_m: float):
     """Loiter fallback: fly s along the first link, an arc of length a on a turning circle there, then
     the shortest route on, with s + a + L = length_m (scan of a over up to 3 loops, Illinois refine);
-    s in 0, 1/4, 1/2, 3/4 of the first link. None if nothing clears the threats."""
+    s in 0, 1/4, 1/2, 3/4 of the first link, left then right turn, the first two roots of each.
+    None if nothing clears the threats. The eight scans share one batched Dubins call, all roots
+    are refined together, and the candidates are checked in one pass, in that order."""
     q1, r = route.poses[-1], route.r_m
     first = _shortest(route.poses[0], route.poses[1], r)
     a = np.linspace(0.0, 3 * TWO_PI * r, 600)
+    leads, starts, targets, kappas = [], [], [], []
     for frac in (0.0, 0.25, 0.5, 0.75):
         lead = _truncate(first, frac * first.length)
         q0 = np.asarray(lead.end) if lead.length > 0 else route.poses[0]
-        target = length_m - lead.length
         for side in (1.0, -1.0):
-            arc_pose = _advance_arc(q0, side / r, a)
-            f = a + shortest_lengths(arc_pose, np.broadcast_to(q1, arc_pose.shape), r) - target
-            cross = np.flatnonzero((np.sign(f[:-1]) != np.sign(f[1:])) & (np.abs(f[1:] - f[:-1]) < np.pi * r))
-            for c in cross[:2]:
-                hi = _illinois(
-                    lambda x, q0=q0, side=side, target=target: (
-                        x + shortest_lengths(_advance_arc(q0, side / r, x), q1[None], r) - target
-                    ),
-                    a[c : c + 1],
-                    a[c + 1 : c + 2],
-                    12,
-                )[0]
-                arc = DubinsPath(
-                    tuple(float(v) for v in q0),
-                    "LSL" if side > 0 else "RSR",
-                    (hi, 0.0, 0.0),
-                    (r, math.inf, r),
-                )
-                tail = _shortest(np.asarray(arc.end), q1, r)
-                trial = [p for p in (lead, arc, tail) if p.length > 0]
-                if abs(sum(p.length for p in trial) - length_m) > 1e-2:
-                    continue
-                xy = np.concatenate([_samples(p, ds_m)[:, :2] for p in trial])
-                if clearance_m(xy, threats) >= 0.0:
-                    return trial
+            leads.append(lead)
+            starts.append(q0)
+            targets.append(length_m - lead.length)
+            kappas.append(side / r)
+    starts, targets, kappas = np.array(starts), np.array(targets), np.array(kappas)
+
+    def f(combo: np.ndarray, x: np.ndarray) -> np.ndarray:
+        pose = _advance_arc(starts[combo], kappas[combo], x)
+        return x + shortest_lengths(pose, np.broadcast_to(q1, pose.shape), r) - targets[combo]
+
+    combo, x = np.repeat(np.arange(len(starts)), len(a)), np.tile(a, len(starts))
+    pose = _advance_arc(starts[combo], kappas[combo], x)
+    lower = x + np.hypot(pose[:, 0] - q1[0], pose[:, 1] - q1[1]) - targets[combo]
+    F = _scan(lower.reshape(len(starts), -1), lambda i: f(combo[i], x[i]))
+    cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r)
+    cands = [(b, c) for b in range(len(starts)) for c in np.flatnonzero(cross[b])[:2]]
+    if not cands:
+        return None
+    combo, ci = np.array(cands).T
+    sol = _illinois(lambda x: f(combo, x), a[ci], a[ci + 1], 12)
+    arcs = [
+        DubinsPath(_pose(starts[b]), "LSL" if kappas[b] > 0 else "RSR", (x, 0.0, 0.0), (r, math.inf, r))
+        for b, x in zip(combo, sol)
+    ]
+    ends = np.array([arc.end for arc in arcs])
+    lens = word_lengths(ends, q1, r)
+    w = lens.sum(2).argmin(1)
+    trials = [
+        [p for p in (leads[b], arc, _path(ends[j], w[j], lens[j, w[j]], r, r)) if p.length > 0]
+        for j, (b, arc) in enumerate(zip(combo, arcs))
+    ]
+    clear = chains_clear(trials, threats, ds_m)
+    for trial, ok in zip(trials, clear):
+        if ok and abs(sum(p.length for p in trial) - length_m) <= 1e-2:
+            return trial
     return None
 
 
 def _detour(route: Route, length_m: float, threats: list[Threat], ds_m: float):
     """Lengthen through a via pose at distance rho and bearing theta from the goal, heading at it:
     for each of 48 bearings, solve L(prev -> via(rho)) + L(via(rho) -> goal) = need over rho
-    (scan, Illinois refine); the first solution whose two links clear the threats is taken."""
+    (scan, Illinois refine); the first solution whose two links clear the threats is taken.
+    Both links of every grid point / candidate go through one batched Dubins call, and all
+    candidates are checked for clearance in one pass (the order of preference is unchanged)."""
     prev, q1, r = route.poses[-2], route.poses[-1], route.r_m
     head = [_shortest(a, b, r) for a, b in zip(route.poses[:-2], route.poses[1:-1])]
     need = length_m - sum(p.length for p in head)
@@ -414,18 +474,21 @@ def _detour(route: Route, length_m: float, threats: list[Threat], ds_m: float):
         vx, vy = q1[0] + rho * np.cos(th), q1[1] + rho * np.sin(th)
         return np.column_stack([vx, vy, np.arctan2(q1[1] - vy, q1[0] - vx)])
 
-    def f(rho: np.ndarray, th: np.ndarray) -> np.ndarray:
-        v = via(rho, th)
+    def links(v: np.ndarray) -> np.ndarray:
+        """Segment lengths (2, n, 6, 3) of prev -> v and v -> goal."""
         n = len(v)
-        return (
-            shortest_lengths(np.broadcast_to(prev, (n, 3)), v, r)
-            + shortest_lengths(v, np.broadcast_to(q1, (n, 3)), r)
-            - need
-        )
+        q0 = np.r_[np.broadcast_to(prev, (n, 3)), v]
+        return word_lengths(q0, np.r_[v, np.broadcast_to(q1, (n, 3))], r).reshape(2, n, 6, 3)
+
+    def f(rho: np.ndarray, th: np.ndarray) -> np.ndarray:
+        a, b = links(via(rho, th)).sum(3).min(2)
+        return a + b - need
 
     rho = np.linspace(r, max(need, 2 * r), 60)
-    R, T = np.meshgrid(rho, theta)  # (36, 60)
-    F = f(R.ravel(), T.ravel()).reshape(R.shape)
+    R, T = np.meshgrid(rho, theta)  # (48, 60)
+    v = via(R.ravel(), T.ravel())
+    lower = (np.hypot(v[:, 0] - prev[0], v[:, 1] - prev[1]) + R.ravel() - need).reshape(R.shape)
+    F = _scan(lower, lambda i: f(R.ravel()[i], T.ravel()[i]))
     cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r)
     ti, ri = np.nonzero(cross)
     if not len(ti):
@@ -434,15 +497,39 @@ def _detour(route: Route, length_m: float, threats: list[Threat], ds_m: float):
     ti, ri = ti[first], ri[first]
     th = theta[ti]
     sol = _illinois(lambda x: f(x, th), rho[ri], rho[ri + 1], 12)
-    for k in np.argsort(np.abs(sol - sol.min())):
-        v = via(sol[k : k + 1], th[k : k + 1])[0]
-        trial = [*head, _shortest(prev, v, r), _shortest(v, q1, r)]
-        if abs(sum(p.length for p in trial) - length_m) > 1e-2:
-            continue
-        xy = np.concatenate([_samples(p, ds_m)[:, :2] for p in trial if p.length > 0])
-        if clearance_m(xy, threats) >= 0.0:
-            return [p for p in trial if p.length > 0]
+    order = np.argsort(np.abs(sol - sol.min()))
+    v = via(sol[order], th[order])
+    lens = links(v)
+    w = lens.sum(3).argmin(2)
+    trials = []
+    for j in range(len(v)):
+        tail = [_path(a, w[h, j], lens[h, j, w[h, j]], r, r) for h, a in ((0, prev), (1, v[j]))]
+        trials.append([*head, *tail])
+    exact = [abs(sum(p.length for p in trial) - length_m) <= 1e-2 for trial in trials]
+    chains = [[p for p in trial if p.length > 0] for trial in trials]
+    clear = chains_clear(chains, threats, ds_m)
+    for j in range(len(v)):
+        if exact[j] and clear[j]:
+            return chains[j]
     return None
+
+
+def _scan(lower: np.ndarray, fun) -> np.ndarray:
+    """A root scan grid F (rows, cols) whose sign changes along each row are the candidate roots.
+
+    lower <= F is a cheap lower bound (Euclidean instead of Dubins lengths). Where lower > 1 mm
+    the sign of F is known (+), so F is evaluated (fun(flat indices)) only where it may be <= 0
+    and at their row neighbours, which the jump test |F[j+1] - F[j]| needs; elsewhere lower
+    stands in. Sign changes and their F values are exactly those of the full grid.
+    """
+    need = lower <= 1e-3
+    need[:, 1:] |= need[:, :-1]
+    need[:, :-1] |= need[:, 1:].copy()
+    F = lower.copy()
+    idx = np.flatnonzero(need)
+    if len(idx):
+        F.ravel()[idx] = fun(idx)
+    return F
 
 
 def _truncate(path: DubinsPath, s_m: float) -> DubinsPath:
@@ -452,11 +539,15 @@ def _truncate(path: DubinsPath, s_m: float) -> DubinsPath:
     return DubinsPath(path.start, path.word, tuple(float(v) for v in lengths), path.radii)
 
 
-def _advance_arc(q0: np.ndarray, kappa: float, s: np.ndarray) -> np.ndarray:
-    """Poses (n, 3) after flying arc lengths s on the circle of signed curvature kappa from q0."""
-    h = q0[2] + kappa * s
+def _advance_arc(q0: np.ndarray, kappa: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Poses (n, 3) after flying arc lengths s (n,) from q0 (n, 3) on circles of curvature kappa (n,)."""
+    h = q0[:, 2] + kappa * s
     return np.column_stack(
-        [q0[0] + (np.sin(h) - np.sin(q0[2])) / kappa, q0[1] - (np.cos(h) - np.cos(q0[2])) / kappa, h]
+        [
+            q0[:, 0] + (np.sin(h) - np.sin(q0[:, 2])) / kappa,
+            q0[:, 1] - (np.cos(h) - np.cos(q0[:, 2])) / kappa,
+            h,
+        ]
     )
 
 

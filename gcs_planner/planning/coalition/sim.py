@@ -479,17 +479,18 @@ class CoalitionSim:
                     ),
                 )
             )
+            stretched = [k for k in direct if batch[k] is not None]
+            got_clear = dict(
+                zip(stretched, paths.chains_clear([[batch[k]] for k in stretched], self.known, p.sample_ds_m))
+            )
             legs = []
             for k in range(K):
                 i = sol.assign[k]
-                got = batch.get(k)
-                if (
-                    got is not None
-                    and paths.clearance_m(got.sample_step(p.sample_ds_m)[1][:, :2], self.known) >= 0
-                ):
-                    segs, clear = [got], True
-                else:
-                    segs, clear = paths.timed_route(routes[k], want[k], self.known)
+                if got_clear.get(k, False):
+                    segs, clear = [batch[k]], True
+                else:  # fallbacks (the direct stretch, if any, is passed on, not recomputed)
+                    given = (batch[k],) if k in batch else None
+                    segs, clear = paths.timed_route(routes[k], want[k], self.known, stretched=given)
                 leg = paths.sample_segments(
                     segs,
                     tender.t_es_s,
