@@ -67,6 +67,9 @@ __all__ = [
 WORDS = ("LSL", "RSR", "LSR", "RSL", "RLR", "LRL")
 _SIGN = {"L": 1.0, "R": -1.0, "S": 0.0}
 _WORD_SIGNS = np.array([[_SIGN[c] for c in w] for w in WORDS])
+_FIRST_TURN = (_WORD_SIGNS[:, 0] < 0).astype(int)  # index into _centres: 0 = L, 1 = R
+_LAST_TURN = (_WORD_SIGNS[:, 2] < 0).astype(int)
+_SIDES = np.array([1.0, -1.0])[:, None, None]  # middle circle of CCC words: left / right of c0 -> c1
 _TWO_PI = 2.0 * math.pi
 _ANGLE_EPS = 1e-9
 
@@ -175,21 +178,20 @@ def word_lengths(
     q0 = np.atleast_2d(np.asarray(q0, dtype=float))
     q1 = np.atleast_2d(np.asarray(q1, dtype=float))
     n = max(len(q0), len(q1), *(np.size(r) for r in (r0, r1, r_mid) if r is not None))
-    q0 = np.broadcast_to(q0, (n, 3))
-    q1 = np.broadcast_to(q1, (n, 3))
-    r0 = np.broadcast_to(np.asarray(r0, dtype=float), (n,))
-    r1 = r0 if r1 is None else np.broadcast_to(np.asarray(r1, dtype=float), (n,))
-    rm = np.minimum(r0, r1) if r_mid is None else np.broadcast_to(np.asarray(r_mid, dtype=float), (n,))
-    if np.any(r0 <= 0) or np.any(r1 <= 0) or np.any(rm <= 0):
+    q0, q1 = _rows(q0, (n, 3)), _rows(q1, (n, 3))
+    r0 = _rows(np.asarray(r0, dtype=float), (n,))
+    r1 = r0 if r1 is None else _rows(np.asarray(r1, dtype=float), (n,))
+    rm = np.minimum(r0, r1) if r_mid is None else _rows(np.asarray(r_mid, dtype=float), (n,))
+    if ((rm if r_mid is None else np.minimum(np.minimum(r0, r1), rm)) <= 0).any():
         raise ValueError(f"Dubins radii must be > 0, got r0={r0.min()}, r1={r1.min()}, r_mid={rm.min()}")
     h0, h1 = q0[:, 2], q1[:, 2]
-    c0, c1 = _centres(q0, r0), _centres(q1, r1)
     # Start- and end-circle centres (6, N) per word; then all CSC words in one set of numpy calls on
-    # (4, N) arrays and both CCC words (both middle-circle sides) on (2, N): for small N the cost is
-    # call overhead, not arithmetic.
+    # (4, N) arrays and both CCC words (both middle-circle sides) on (2, 2, N): for small N the cost
+    # is call overhead, not arithmetic.
+    c0, c1 = _centres(q0, r0), _centres(q1, r1)
+    x0, y0 = c0[_FIRST_TURN, 0], c0[_FIRST_TURN, 1]
+    x1, y1 = c1[_LAST_TURN, 0], c1[_LAST_TURN, 1]
     first, last = _WORD_SIGNS[:, 0], _WORD_SIGNS[:, 2]
-    x0, y0 = (np.stack([c0[s][j] for s in first]) for j in (0, 1))
-    x1, y1 = (np.stack([c1[s][j] for s in last]) for j in (0, 1))
     out = np.empty((n, 6, 3))
     csc = _csc(h0, h1, x1[:4] - x0[:4], y1[:4] - y0[:4], r0, r1, first[:4, None], last[:4, None])
     out[:, :4] = csc.transpose(2, 1, 0)
@@ -416,10 +418,14 @@ def _ccw_angle(a: np.ndarray) -> np.ndarray:
     return np.where(a > _TWO_PI - _ANGLE_EPS, 0.0, a)
 
 
-def _centres(q: np.ndarray, r: np.ndarray) -> dict[float, tuple[np.ndarray, np.ndarray]]:
-    """Turning-circle centres (x (N,), y (N,)) for turn sign +1 (L, left of the heading) and -1 (R)."""
+def _rows(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    return a if a.shape == shape else np.broadcast_to(a, shape)
+
+
+def _centres(q: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Turning-circle centres (2, 2, N): [L (left of the heading), R] x [x, y]."""
     rs, rc = r * np.sin(q[:, 2]), r * np.cos(q[:, 2])
-    return {1.0: (q[:, 0] - rs, q[:, 1] + rc), -1.0: (q[:, 0] + rs, q[:, 1] - rc)}
+    return np.array([[q[:, 0] - rs, q[:, 1] + rc], [q[:, 0] + rs, q[:, 1] - rc]])
 
 
 def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> np.ndarray:
@@ -429,42 +435,30 @@ def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> np.ndarray:
     valid = np.abs(dr) <= dist + 1e-12
     apart = dist > 1e-12
     ratio = np.divide(dr, dist, out=np.zeros_like(dist), where=apart)
-    alpha = np.arctan2(dy, dx) - np.arcsin(np.clip(ratio, -1.0, 1.0))
+    alpha = np.arctan2(dy, dx) - np.arcsin(np.minimum(np.maximum(ratio, -1.0), 1.0))
     alpha = np.where(apart, alpha, h0)  # concentric equal circles: no straight part
     straight = np.sqrt(np.maximum(dist**2 - dr**2, 0.0))
-    a0 = _ccw_angle(s0 * (alpha - h0)) * r0
-    a1 = _ccw_angle(s1 * (h1 - alpha)) * r1
-    return np.where(valid, np.stack([a0, straight, a1]), np.inf)
+    turn = _ccw_angle(np.stack([s0 * (alpha - h0), s1 * (h1 - alpha)]))
+    return np.where(valid, np.stack([turn[0] * r0, straight, turn[1] * r1]), np.inf)
 
 
-def _ccc(h0, h1, x0, y0, x1, y1, r0, r1, rm, s) -> tuple[np.ndarray, np.ndarray]:
-    """Segment lengths (3, W, N) of CCC words (first turn sign s (W, 1)), middle circle on either side."""
+def _ccc(h0, h1, x0, y0, x1, y1, r0, r1, rm, s) -> np.ndarray:
+    """Segment lengths (2, 3, W, N) of CCC words (first turn sign s (W, 1)), middle circle on the left /
+    right of c0 -> c1 (first axis)."""
     dx, dy = x1 - x0, y1 - y0
     dist = np.hypot(dx, dy)
     a, b = r0 + rm, r1 + rm
     valid = (dist > 1e-12) & (dist <= a + b) & (dist >= np.abs(a - b))
     safe = np.where(valid, dist, 1.0)
     x = (a**2 - b**2 + safe**2) / (2.0 * safe)
-    h = np.sqrt(np.maximum(a**2 - x**2, 0.0))
+    h = _SIDES * np.sqrt(np.maximum(a**2 - x**2, 0.0))  # (2, W, N)
     ex, ey = dx / safe, dy / safe
-    out = []
-    for side in (1.0, -1.0):
-        hs = side * h
-        cmx = x0 + x * ex + hs * -ey
-        cmy = y0 + x * ey + hs * ex
-        g0x, g0y = cmx - x0, cmy - y0  # tangency with circle 0 is along c0 -> cm
-        g1x, g1y = x1 - cmx, y1 - cmy
-        hq0 = np.arctan2(g0y, g0x) + s * (math.pi / 2)
-        hq1 = np.arctan2(g1y, g1x) - s * (math.pi / 2)  # middle circle turns the other way
-        seg = np.stack(
-            [
-                _ccw_angle(s * (hq0 - h0)) * r0,
-                _ccw_angle(-s * (hq1 - hq0)) * rm,
-                _ccw_angle(s * (h1 - hq1)) * r1,
-            ]
-        )
-        out.append(np.where(valid, seg, np.inf))
-    return out[0], out[1]
+    cmx = x0 + x * ex + h * -ey
+    cmy = y0 + x * ey + h * ex
+    hq0 = np.arctan2(cmy - y0, cmx - x0) + s * (math.pi / 2)  # tangency with circle 0 is along c0 -> cm
+    hq1 = np.arctan2(y1 - cmy, x1 - cmx) - s * (math.pi / 2)  # middle circle turns the other way
+    turn = _ccw_angle(np.stack([s * (hq0 - h0), -s * (hq1 - hq0), s * (h1 - hq1)]))
+    return np.where(valid, np.stack([turn[0] * r0, turn[1] * rm, turn[2] * r1], axis=1), np.inf)
 
 
 def _advance(pose: np.ndarray, kappa: float, ds: float) -> np.ndarray:
