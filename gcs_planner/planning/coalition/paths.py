@@ -48,6 +48,7 @@ __all__ = [
     "free_heading_lengths",
     "min_route",
     "min_routes",
+    "sample_legs",
     "shortest_lengths",
     "stretch_batch",
     "timed_route",
@@ -237,22 +238,32 @@ def chains_clear(chains: list[list[DubinsPath]], threats: list[Threat], ds_m: fl
     if not threats or not flat:
         return ok
     owner = np.repeat(np.arange(len(chains)), [len(ch) for ch in chains])
+    xy = _sample_flat(flat, ds_m)[1]
+    c = np.array([[t.x, t.y] for t in threats])
+    r = np.array([t.radius_m for t in threats])
+    inside = (np.hypot(xy[..., 0, None] - c[:, 0], xy[..., 1, None] - c[:, 1]) - r < 0).any((1, 2))
+    ok[owner[inside]] = False
+    return ok
+
+
+def _sample_flat(flat: list[DubinsPath], ds_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every path sampled as ``DubinsPath.sample_step(ds_m)`` does, in one ``sample_batch`` call.
+
+    Returns arc lengths s (P, M), poses (P, M, 3) (heading not wrapped) and the sample count per
+    path (P,); rows are padded with the end point up to M.
+    """
     total = np.array([p.length for p in flat])
     n = np.maximum(1, np.ceil(total / ds_m)).astype(int)
     i = np.arange(n.max() + 1)
     s = np.where(i < n[:, None], i * (total / n)[:, None], total[:, None])  # linspace(0, L, n + 1), padded
-    xy = sample_batch(
+    poses = sample_batch(
         np.array([p.start for p in flat]),
         np.array([WORDS.index(p.word) for p in flat]),
         np.array([p.lengths for p in flat]),
         np.array([p.radii for p in flat]),
         s,
     )
-    c = np.array([[t.x, t.y] for t in threats])
-    r = np.array([t.radius_m for t in threats])
-    inside = (np.hypot(xy[..., 0, None] - c[:, 0], xy[..., 1, None] - c[:, 1]) - r < 0).any((1, 2))
-    ok[owner[inside]] = False
-    return ok
+    return s, poses, n + 1
 
 
 def _shortest(q0, q1, r: float) -> DubinsPath:
@@ -555,18 +566,27 @@ def sample_segments(
     paths: list[DubinsPath], t0_s: float, speed_mps: float, ds_m: float, kind: str, info=None
 ) -> Leg:
     """Sample a chain of Dubins paths at <= ds_m into a timed Leg starting at t0_s."""
-    pts, s_off = [], 0.0
-    ss = []
-    for i, p in enumerate(paths):
-        s, q = p.sample_step(ds_m)
-        if i:
-            s, q = s[1:], q[1:]
-        pts.append(q)
-        ss.append(s + s_off)
-        s_off += p.length
-    q = np.concatenate(pts)
-    s = np.concatenate(ss)
-    return Leg(t0_s + s / speed_mps, q[:, :2], q[:, 2], kind, dict(info or {}))
+    return sample_legs([paths], t0_s, np.array([speed_mps]), ds_m, [kind], [info])[0]
+
+
+def sample_legs(
+    chains: list[list[DubinsPath]], t0_s: float, speed_mps: np.ndarray, ds_m: float, kinds: list[str], infos
+) -> list[Leg]:
+    """sample_segments for many chains at once (one vectorised sampling of all their paths)."""
+    s, q, n = _sample_flat([p for ch in chains for p in ch], ds_m)
+    q[..., 2] = (q[..., 2] + math.pi) % TWO_PI - math.pi  # as DubinsPath.sample
+    legs, j = [], 0
+    for chain, speed, kind, info in zip(chains, speed_mps, kinds, infos):
+        pts, ss, s_off = [], [], 0.0
+        for i, p in enumerate(chain):
+            first = 1 if i else 0  # a segment starts where the previous one ended
+            pts.append(q[j, first : n[j]])
+            ss.append(s[j, first : n[j]] + s_off)
+            s_off += p.length
+            j += 1
+        qc, sc = np.concatenate(pts), np.concatenate(ss)
+        legs.append(Leg(t0_s + sc / speed, qc[:, :2], qc[:, 2], kind, dict(info or {})))
+    return legs
 
 
 def arc_leg(

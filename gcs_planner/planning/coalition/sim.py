@@ -483,24 +483,17 @@ class CoalitionSim:
             got_clear = dict(
                 zip(stretched, paths.chains_clear([[batch[k]] for k in stretched], self.known, p.sample_ds_m))
             )
-            legs = []
+            segs, clear = [], []
             for k in range(K):
-                i = sol.assign[k]
                 if got_clear.get(k, False):
-                    segs, clear = [batch[k]], True
+                    segs.append([batch[k]])
+                    clear.append(True)
                 else:  # fallbacks (the direct stretch, if any, is passed on, not recomputed)
                     given = (batch[k],) if k in batch else None
-                    segs, clear = paths.timed_route(routes[k], want[k], self.known, stretched=given)
-                leg = paths.sample_segments(
-                    segs,
-                    tender.t_es_s,
-                    speed[i],
-                    p.sample_ds_m,
-                    "strike" if kind[k] == STRIKE else "transit",
-                    {"target": target.id, "clear": clear},
-                )
-                legs.append(leg)
-            bad = [k for k in range(K) if not legs[k].info["clear"]]
+                    segs_k, clear_k = paths.timed_route(routes[k], want[k], self.known, stretched=given)
+                    segs.append(segs_k)
+                    clear.append(clear_k)
+            bad = [k for k in range(K) if not clear[k]]
             if not bad:
                 break
             for k in bad:
@@ -511,6 +504,14 @@ class CoalitionSim:
                     target=target.id,
                     reason="timed path cannot clear the threats",
                 )
+        legs = paths.sample_legs(  # the last attempt's legs (all clear unless attempts ran out)
+            segs,
+            tender.t_es_s,
+            speed[sol.assign],
+            p.sample_ds_m,
+            ["strike" if kind[k] == STRIKE else "transit" for k in range(K)],
+            [{"target": target.id, "clear": clear[k]} for k in range(K)],
+        )
         dt = time.perf_counter() - t_wall
         self.compute_s.append(dt)
         self.optimiser_s.append(opt_s)
