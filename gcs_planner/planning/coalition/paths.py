@@ -132,24 +132,22 @@ def stretch_batch(
     q0, q1 = np.atleast_2d(q0).astype(float), np.atleast_2d(q1).astype(float)
     length_m = np.atleast_1d(length_m).astype(float)
     r_m = np.broadcast_to(np.asarray(r_m, float), len(q0)).copy()
-    out = _stretch_search(q0, q1, length_m, r_m, np.geomspace(1.0, K_MAX, 60))
-    short = shortest_lengths(q0, q1, r_m)
+    out, short = _stretch_search(q0, q1, length_m, r_m, np.geomspace(1.0, K_MAX, 60))
     miss = [i for i in range(len(q0)) if out[i] is None and length_m[i] >= short[i] - 1e-3]
     if miss:  # CCC words valid on narrow k intervals: a denser grid for the misses only
         dense = _stretch_search(q0[miss], q1[miss], length_m[miss], r_m[miss], np.geomspace(1.0, K_MAX, 300))
-        for i, path in zip(miss, dense):
+        for i, path in zip(miss, dense[0]):
             out[i] = path
     return out
 
 
-def _stretch_search(q0, q1, length_m, r_m, ks) -> list[DubinsPath | None]:
+def _stretch_search(q0, q1, length_m, r_m, ks) -> tuple[list[DubinsPath | None], np.ndarray]:
+    """stretch_batch on one k grid (ks[0] = 1); also returns the shortest lengths (k = 1)."""
     n = len(q0)
     nk = len(ks)
-    table = (
-        word_lengths(np.repeat(q0, nk, 0), np.repeat(q1, nk, 0), np.tile(ks, n) * np.repeat(r_m, nk))
-        .sum(2)
-        .reshape(n, nk, 6)
-    )
+    segs = word_lengths(np.repeat(q0, nk, 0), np.repeat(q1, nk, 0), np.tile(ks, n) * np.repeat(r_m, nk))
+    segs = segs.reshape(n, nk, 6, 3)
+    table = segs.sum(3)
     out: list[DubinsPath | None] = [None] * n
     cands = []  # (problem, word, k_lo, k_hi, loops)
     for i in range(n):
@@ -158,7 +156,7 @@ def _stretch_search(q0, q1, length_m, r_m, ks) -> list[DubinsPath | None]:
             continue
         if length_m[i] <= shortest + 1e-6:
             w = int(table[i, 0].argmin())
-            out[i] = _path(q0[i], w, word_lengths(q0[i], q1[i], r_m[i])[0, w], r_m[i], r_m[i])
+            out[i] = _path(q0[i], w, segs[i, 0, w], r_m[i], r_m[i])
             continue
         loop_len = TWO_PI * r_m[i] * ks
         n0 = max(0, int((length_m[i] - table[i].max(initial=0, where=np.isfinite(table[i]))) // loop_len[-1]))
@@ -186,7 +184,7 @@ def _stretch_search(q0, q1, length_m, r_m, ks) -> list[DubinsPath | None]:
             i = pi[j]
             if out[i] is None and abs(f[j]) < 1e-3:
                 out[i] = _path(q0[i], w[j], seg[j], hi[j] * r_m[i], hi[j] * r_m[i])
-    return out
+    return out, table[:, 0].min(1)
 
 
 def _illinois(fun, lo: np.ndarray, hi: np.ndarray, iters: int) -> np.ndarray:
