@@ -91,7 +91,8 @@ def evaluate(assign: np.ndarray, prob: CoalitionProblem, params: CoalitionParams
     eta = prob.t_start_s + prob.length_m[a, np.arange(K)] / prob.speed_mps[a]
     eta = np.where(has, eta, np.nan)
     strike = prob.kind == STRIKE
-    lam0 = np.nanmax(np.where(strike, eta - prob.offset_s, np.nan), axis=1, initial=-np.inf)
+    # max over strikes ignoring NaN (what np.nanmax computes, without its wrapper overhead)
+    lam0 = np.fmax.reduce(np.where(strike, eta - prob.offset_s, np.nan), axis=1, initial=-np.inf)
     lam0 = np.where(np.isfinite(lam0), lam0, prob.t_start_s)
     t_last_strike = lam0 + (prob.offset_s[strike].max() if strike.any() else 0.0)
     t_req = np.where(strike, lam0[:, None] + prob.offset_s, (t_last_strike + prob.assess_delay_s)[:, None])
@@ -158,12 +159,12 @@ def solve_aco(
                 break
             draw = rng.random((3, m))  # the same stream as three rng.random(m) calls
             ant = _roulette(np.cumsum(c, 1), draw[0] * total)  # eq. 26
-            score = allowed[:, rows, ant].T * (tau**params.alpha * eta_b)[ant]  # (m, K)
+            score = allowed[:, rows, ant].T * (tau**params.alpha * eta_b)[ant]  # (m, K), 0 if not allowed
             scum = np.cumsum(score, 1)
             roul = _roulette(scum, draw[1] * scum[:, -1])
             task = np.where(draw[2] <= params.q0, score.argmax(1), roul)  # eq. 28
             ok = live & (score[rows, task] > 0)
-            r, a, t = rows[ok], ant[ok], task[ok]
+            r, a, t = (rows, ant, task) if ok.all() else (rows[ok], ant[ok], task[ok])
             assign[r, t] = a
             idle[r, a] = 0.0
             allowed[:, r, a] = 0.0
