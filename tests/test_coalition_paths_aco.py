@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from gcs_planner.geometry.dubins import shortest_path_free_heading
+from gcs_planner.geometry.dubins import WORDS, DubinsPath, shortest_path_free_heading, word_lengths
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.aco import CoalitionProblem, evaluate, make_solution, solve_aco
 from gcs_planner.planning.coalition.baselines import solve_polynomial
@@ -127,3 +127,128 @@ def test_staggered_slots_and_assessment_timing_follow_the_latest_member():
     assert t_req[0, 1] == pytest.approx(lam0 + 5.0)
     assert t_req[0, 2] == pytest.approx(lam0 + 5.0 + prob.assess_delay_s)
     assert make_solution(np.array([0, -1, 6]), prob, params).covered is False
+
+
+# ---- fast paths of the formation compute: they must give exactly what the plain computations give
+
+
+def _random_chains(rng, n_chains=12):
+    """Chains of 1-3 consecutive Dubins paths (random words, radii, loops) from random poses."""
+    chains = []
+    for _ in range(n_chains):
+        q = np.r_[rng.uniform(0, 3000, 2), rng.uniform(-7, 7)]
+        chain = []
+        for _ in range(rng.integers(1, 4)):
+            goal = np.r_[q[:2] + rng.uniform(-1500, 1500, 2), rng.uniform(-3, 3)]
+            r = rng.uniform(60, 250)
+            lens = word_lengths(q, goal, r)[0]
+            w = int(rng.choice(np.flatnonzero(np.isfinite(lens.sum(1)))))
+            seg = lens[w].copy()
+            seg[0] += rng.integers(0, 2) * 2 * math.pi * r  # sometimes a loiter loop
+            word = WORDS[w]
+            chain.append(DubinsPath(tuple(q), word, tuple(seg), (r, math.inf if word[1] == "S" else r, r)))
+            q = np.array(chain[-1].end)
+        chains.append(chain)
+    return chains
+
+
+def test_batched_clearance_and_leg_sampling_equal_per_path_sampling():
+    rng = np.random.default_rng(11)
+    chains = _random_chains(rng)
+    per_path = [np.concatenate([p.sample_step(10.0)[1] for p in ch]) for ch in chains]
+    threats = [Threat(x, y, r) for x, y, r in zip(*rng.uniform(0, 3000, (2, 6)), rng.uniform(100, 400, 6))]
+    # a threat whose boundary passes exactly through a sample: touching is clear in both
+    touch = per_path[0][7, :2]
+    threats.append(
+        Threat(
+            touch[0] + 300.0, touch[1], float(np.hypot(*(per_path[0][:, :2] - touch - [300.0, 0.0]).T).min())
+        )
+    )
+    slow = np.array([paths.clearance_m(xy[:, :2], threats) >= 0.0 for xy in per_path])
+    fast = paths.chains_clear(chains, threats, 10.0)
+    assert slow.any() and not slow.all()  # both outcomes are exercised
+    np.testing.assert_array_equal(fast, slow)
+    speeds = rng.uniform(40, 60, len(chains))
+    legs = paths.sample_legs(
+        chains, 12.5, speeds, 10.0, ["strike"] * len(chains), [{"k": i} for i in range(len(chains))]
+    )
+    for ch, speed, leg, i in zip(chains, speeds, legs, itertools.count()):
+        s_ref, q_ref, off = [], [], 0.0
+        for j, p in enumerate(ch):
+            s, q = p.sample_step(10.0)
+            s_ref.append((s if j == 0 else s[1:]) + off)
+            q_ref.append(q if j == 0 else q[1:])
+            off += p.length
+        q_ref = np.concatenate(q_ref)
+        np.testing.assert_array_equal(leg.t, 12.5 + np.concatenate(s_ref) / speed)
+        np.testing.assert_array_equal(leg.xy, q_ref[:, :2])
+        np.testing.assert_array_equal(leg.heading, q_ref[:, 2])
+        assert leg.info == {"k": i}
+
+
+def test_word_lengths_of_a_batch_equal_row_by_row_calls():
+    rng = np.random.default_rng(12)
+    q0 = np.column_stack([rng.uniform(-500, 500, (40, 2)), rng.uniform(-9, 9, 40)])
+    q1 = np.column_stack([rng.uniform(-500, 500, (40, 2)), rng.uniform(-9, 9, 40)])
+    q1[:5] = q0[:5]  # coincident poses
+    q1[5:10, :2] = q0[5:10, :2] + 1e-3  # nearly coincident
+    r0, r1 = rng.uniform(20, 200, 40), rng.uniform(20, 200, 40)
+    batch = word_lengths(q0, q1, r0, r1)
+    rows = np.array([word_lengths(a, b, x, y)[0] for a, b, x, y in zip(q0, q1, r0, r1)])
+    np.testing.assert_array_equal(batch, rows)
+    assert np.isinf(batch).any() and np.isfinite(batch).any()
+
+
+def test_pruned_root_scan_keeps_every_sign_change_of_the_full_grid():
+    """_scan evaluates F only where its Euclidean lower bound may be <= 0 (the detour's scan)."""
+    prev, goal, r = np.array([1198.4, 1341.9, 5.474]), np.array([1200.0, 500.0, math.pi]), 200.0
+    need = 1772.8
+    rho, theta = np.meshgrid(np.linspace(r, need, 60), np.linspace(0, 2 * math.pi, 48, endpoint=False))
+    via = np.column_stack(
+        [goal[0] + rho.ravel() * np.cos(theta.ravel()), goal[1] + rho.ravel() * np.sin(theta.ravel())]
+    )
+    via = np.column_stack([via, np.arctan2(goal[1] - via[:, 1], goal[0] - via[:, 0])])
+    n = len(via)
+    full = (
+        paths.shortest_lengths(np.broadcast_to(prev, (n, 3)), via, r)
+        + paths.shortest_lengths(via, np.broadcast_to(goal, (n, 3)), r)
+        - need
+    ).reshape(rho.shape)
+    lower = (np.hypot(via[:, 0] - prev[0], via[:, 1] - prev[1]) + rho.ravel() - need).reshape(rho.shape)
+    assert (lower <= full + 1e-9).all()  # the bound is a bound
+    evaluated = []
+    F = paths._scan(lower, lambda i: (evaluated.append(len(i)), full.ravel()[i])[1])
+    assert 0 < evaluated[0] < n  # some points skipped, some evaluated
+
+    def crossings(G):
+        return (np.sign(G[:, :-1]) != np.sign(G[:, 1:])) & (np.abs(G[:, 1:] - G[:, :-1]) < math.pi * r)
+
+    c_full, c_fast = crossings(full), crossings(F)
+    assert c_full.any()
+    np.testing.assert_array_equal(c_fast, c_full)
+    ti, ri = np.nonzero(c_full)
+    np.testing.assert_array_equal(F[ti, ri], full[ti, ri])
+    np.testing.assert_array_equal(F[ti, ri + 1], full[ti, ri + 1])
+
+
+@pytest.mark.parametrize("fallback", ["_detour", "_delay_on_start_circle"])
+def test_batched_timing_fallbacks_give_exact_clear_paths_to_the_goal(fallback):
+    """A T2 member of the paper run: radius stretching has no solution, so the fallbacks are needed."""
+    threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0)]
+    q0, q1, r, want = (
+        np.array([1198.4071, 1341.8888, 5.474]),
+        np.array([1200.0, 500.0, math.pi]),
+        200.0,
+        1772.84,
+    )
+    route = paths.min_route(q0, q1, r, threats, kappa=1.3)
+    assert route.clear and len(route.poses) == 2
+    assert paths.stretch_batch(q0[None], q1[None], np.array([want]), np.array([r]))[0] is None
+    segs = getattr(paths, fallback)(route, want, threats, 10.0)
+    assert segs is not None
+    assert sum(p.length for p in segs) == pytest.approx(want, abs=1e-2)
+    assert paths.chains_clear([segs], threats, 10.0)[0]
+    assert paths.clearance_m(np.concatenate([p.sample_step(2.0)[1][:, :2] for p in segs]), threats) >= -1.0
+    assert np.allclose(segs[0].start, q0)
+    end = np.array(segs[-1].end)
+    assert np.hypot(*(end[:2] - q1[:2])) < 1e-3 and abs(_wrap(end[2] - q1[2])) < 1e-6
