@@ -150,9 +150,9 @@ def solve_aco(
         # (K, m, n) 0/1: capable, ant idle, task open; tasks first, so the reductions over tasks
         # are elementwise passes over (m, n) slices (numpy is slow at reducing short inner axes)
         allowed = np.repeat(cap_t, m, 1)
-        idle = np.ones((m, n))  # 1.0 while the candidate has no task in that cluster
         for _step in range(K):
-            c = lfrac * (allowed * tau_t).max(0) * allowed.sum(0) / K * idle  # eq. 27
+            # eq. 27; (N_max - N_cur) = 0 for a candidate with a task: its allowed row is all 0 already
+            c = lfrac * (allowed * tau_t).max(0) * allowed.sum(0) / K
             total = c.sum(1)
             live = total > 0
             if not live.any():
@@ -166,7 +166,6 @@ def solve_aco(
             ok = live & (score[rows, task] > 0)
             r, a, t = (rows, ant, task) if ok.all() else (rows[ok], ant[ok], task[ok])
             assign[r, t] = a
-            idle[r, a] = 0.0
             allowed[:, r, a] = 0.0
             allowed[t, r, :] = 0.0
             tau[a, t] = keep * tau[a, t] + add  # ACS local update
