@@ -9,7 +9,8 @@ compute per formed coalition: total = what the leader computes between bid close
 legs of every member); optimiser = the last optimiser run only. Both are wall times
 (time.perf_counter). With --repeat N the whole simulation runs N times (the results must be
 identical) and the compute table gives the first run, the median and the minimum per coalition,
-with the 1-minute load average before and after.
+with the 1-minute load average before and after and the CPU share stolen by the hypervisor
+(/proc/stat) during the runs: on a shared VM the wall time of the same formation varies ~2x.
 """
 
 from __future__ import annotations
@@ -91,6 +92,23 @@ def summarise(events: list[dict], target: str) -> dict[str, str]:
     }
 
 
+def _cpu_times() -> list[int] | None:
+    """Aggregate CPU jiffies from /proc/stat (user nice system idle iowait irq softirq steal), if any."""
+    try:
+        with open("/proc/stat") as f:
+            return [int(v) for v in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+
+
+def _steal_share(before: list[int] | None, after: list[int] | None) -> str:
+    """Share of CPU time taken by the hypervisor (steal) between two /proc/stat readings."""
+    if not before or not after or len(before) < 8:
+        return "n/a"
+    d = [b - a for a, b in zip(before, after)]
+    return f"{100.0 * d[7] / max(sum(d), 1):.0f}%"
+
+
 def _stripped(events: list[dict]) -> list[dict]:
     return [{k: v for k, v in e.items() if k not in ("compute_s", "optimiser_s")} for e in events]
 
@@ -120,9 +138,9 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=1, help="run the simulation N times for compute statistics")
     args = ap.parse_args()
     world = load_world(load_scenario(MISSION))
-    load_before = os.getloadavg()[0]
+    load_before, cpu_before = os.getloadavg()[0], _cpu_times()
     results = [simulate(world, np.random.default_rng(args.seed)) for _ in range(max(1, args.repeat))]
-    load_after = os.getloadavg()[0]
+    load_after, cpu_after = os.getloadavg()[0], _cpu_times()
     result = results[0]
     if any(_stripped(r.events) != _stripped(result.events) for r in results[1:]):
         raise SystemExit("repeated runs of the same seed differ: the simulation is not deterministic")
@@ -144,7 +162,8 @@ def main() -> int:
             print(f"  {label:34s} {PAPER[t][key]:28s} {ours[key]}")
     print(
         f"\nplanning compute per formed coalition [s], wall, {len(results)} run(s) of seed {args.seed}"
-        f" (target <= 0.05 s; load average {load_before:.2f} before, {load_after:.2f} after):"
+        f" (target <= 0.05 s; load average {load_before:.2f} before, {load_after:.2f} after;"
+        f" CPU steal {_steal_share(cpu_before, cpu_after)}):"
     )
     print("\n".join(compute_table([r.events for r in results])))
     print(f"mean effectiveness J {result.effectiveness:.4f}, mean reveal-to-done {result.completion_s:.2f} s")
