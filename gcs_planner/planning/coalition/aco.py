@@ -28,6 +28,12 @@ J of a plan (eqs. 7-12), normalised so the weights are comparable:
 - J3 = sum_k |t_predicted_k - t_required_k| / (n_tasks * time_scale_s), t_predicted = fastest
   arrival (so J3 is the total stretching/waiting plus any lateness).
 Defaults (not in the paper): alpha 1, beta 2, q0 0.9, rho 0.1, tau0 1, 10 clusters, 15 iterations.
+
+Compute: a construction step is ~35 numpy calls on (tasks, clusters, candidates) arrays.
+Tasks come first, so the eq. 27 reductions are elementwise passes. ``allowed`` is updated in
+place. A roulette draw is one argmax of "cumulative sum >= x". The step's three uniform draws come
+from one ``rng.random((3, m))`` call, the same stream as three ``rng.random(m)`` calls, so a seed
+gives the same plans as a one-draw-at-a-time implementation.
 """
 
 from __future__ import annotations
