@@ -109,6 +109,28 @@ class Sim:
         return sum(1 for m in self.to_vehicle if m.get_type() == name and (seq is None or m.seq == seq))
 
 
+class DropOnce(Sim):
+    """A Sim whose channel loses the first frame of one type and seq (request types by prefix)."""
+
+    def __init__(self, server: MissionServer, channel: Channel, name: str, seq: int) -> None:
+        super().__init__(server, channel)
+        self.victim: tuple[str, int] | None = (name, seq)
+
+    def _send(self, side: str, msgs: list, now: float) -> None:
+        kept = []
+        for m in msgs:
+            if (
+                self.victim
+                and m.get_type().startswith(self.victim[0])
+                and getattr(m, "seq", -1) == self.victim[1]
+            ):
+                self.victim = None
+                (self.to_vehicle if side == "gcs" else self.to_gcs).append(m)
+                continue
+            kept.append(m)
+        super()._send(side, kept, now)
+
+
 def mission(
     n: int, mission_type: int = MissionType.MISSION, base_lat: int = 473_977_000
 ) -> list[MissionItem]:
@@ -207,16 +229,47 @@ def test_count_first_response_recovers_with_one_resend():
 
 @pytest.mark.parametrize(("profile", "cancel_at_s"), [("ardupilot", 8.0), ("px4", 5.0)])
 def test_request1_no_response_vehicle_cancels_previous_intact(profile, cancel_at_s):
+    """The spec-literal client (no push-ahead) waits for a request that never comes."""
     srv = server(profile)
     old = mission(3)
     preload(srv, old)
     before = srv.items()
     srv.failure = Failure.WRITE_REQUEST1_NO_RESPONSE
     sim = Sim(srv)
-    up = upload(sim, mission(6, base_lat=400_000_000))
+    up = upload(sim, mission(6, base_lat=400_000_000), timing=Timing(push_ahead=False))
     assert isinstance(up.outcome.error, errors.OperationCancelledError)
     assert sim.now == pytest.approx(cancel_at_s, abs=0.1)
     assert srv.items() == before and not srv.busy()
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+def test_request1_no_response_recovered_by_push_ahead(profile):
+    """The default client pushes item 1 when its request is overdue; the vehicle takes it."""
+    srv = server(profile)
+    srv.failure = Failure.WRITE_REQUEST1_NO_RESPONSE
+    sim = Sim(srv)
+    items = mission(6, base_lat=400_000_000)
+    up = upload(sim, items)
+    assert up.outcome.error is None and srv.items() == items
+    assert sim.now < 0.2  # the vehicle itself would have waited 5-8 s
+    assert sim.sent("MISSION_ITEM_INT", 0) == 2 and sim.sent("MISSION_ITEM_INT", 1) == 1
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+@pytest.mark.parametrize("direction", ["item", "request"])
+def test_one_lost_frame_costs_a_push_not_the_vehicle_retry(profile, direction):
+    """Item 3 or the request for item 4 lost on a 20 ms link: recovered in ~2.5 RTT + 1 RTT."""
+    srv = server(profile)
+    victim = ("MISSION_ITEM_INT", 3) if direction == "item" else ("MISSION_REQUEST", 4)
+    sim = DropOnce(srv, Channel(delay_s=0.02), *victim)
+    items = mission(10)
+    clean = Sim(server(profile), Channel(delay_s=0.02))
+    upload(clean, items)
+    up = upload(sim, items)
+    assert up.outcome.error is None and srv.items() == items
+    assert sim.now - clean.now < 0.2  # the vehicle's own re-request: 0.25 s (PX4), 1 s (ArduPilot)
+    assert sim.sent("MISSION_ITEM_INT", 3) == 2  # the push resent 3 ...
+    assert sim.sent("MISSION_ITEM_INT", 4) == 1  # ... and sent 4 once, unasked
 
 
 @pytest.mark.parametrize("profile", PROFILE_NAMES)
@@ -232,7 +285,7 @@ def test_incorrect_sequence_requests_are_recovered(profile, failure):
     assert up.outcome.error is None
     assert len(srv.items()) == 5
     if profile == "ardupilot":  # ArduPilot answers the skipped item with INVALID_SEQUENCE, which we survive
-        assert up.stats.invalid_sequence_acks == 1
+        assert up.stats.invalid_sequence_acks >= 1
 
 
 @pytest.mark.parametrize(

@@ -202,16 +202,20 @@ class MissionClient:
                 mission_type=transfer.mission_type,
             )
         loop = asyncio.get_running_loop()
-        finished = loop.create_future()
         send = self.link.send
+        wakeup = loop.create_future()
+        armed_s = math.inf  # the deadline the waiting loop below wakes up at
+
+        def due_s() -> float:
+            return math.inf if transfer.deadline_s is None else transfer.deadline_s
 
         def on_frame(msg, raw: bytes, t_s: float) -> None:
             if not transfer.accepts(msg):
                 return
             for out in transfer.on_message(msg, loop.time()):
                 send(out)
-            if transfer.done and not finished.done():
-                finished.set_result(None)
+            if (transfer.done or due_s() < armed_s) and not wakeup.done():
+                wakeup.set_result(None)  # finished, or a timer moved earlier: re-arm
 
         active.add(key)
         unsubscribe = self.link.subscribe(on_frame)  # the matcher exists before the first send
@@ -219,9 +223,11 @@ class MissionClient:
             for out in transfer.start(loop.time()):
                 send(out)
             while not transfer.done:
-                delay = transfer.deadline_s - loop.time() if transfer.deadline_s is not None else math.inf
+                armed_s = due_s()
+                delay = armed_s - loop.time()
                 if delay > 0:
-                    await asyncio.wait([finished], timeout=delay)
+                    wakeup = loop.create_future()
+                    await asyncio.wait([wakeup], timeout=delay)
                     continue
                 for out in transfer.on_timeout(loop.time()):
                     send(out)
