@@ -164,9 +164,9 @@ def solve_aco(
             if not live.any():
                 break
             draw = rng.random((3, m))  # the same stream as three rng.random(m) calls
-            ant = _roulette(np.cumsum(c, 1), draw[0] * total)  # eq. 26
+            ant = _roulette(c.cumsum(1), draw[0] * total)  # eq. 26
             score = allowed[:, rows, ant].T * (tau**params.alpha * eta_b)[ant]  # (m, K), 0 if not allowed
-            scum = np.cumsum(score, 1)
+            scum = score.cumsum(1)
             roul = _roulette(scum, draw[1] * scum[:, -1])
             task = np.where(draw[2] <= params.q0, score.argmax(1), roul)  # eq. 28
             ok = live & (score[rows, task] > 0)
