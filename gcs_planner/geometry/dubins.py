@@ -438,8 +438,8 @@ def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> np.ndarray:
     alpha = np.arctan2(dy, dx) - np.arcsin(np.minimum(np.maximum(ratio, -1.0), 1.0))
     alpha = np.where(apart, alpha, h0)  # concentric equal circles: no straight part
     straight = np.sqrt(np.maximum(dist**2 - dr**2, 0.0))
-    turn = _ccw_angle(np.stack([s0 * (alpha - h0), s1 * (h1 - alpha)]))
-    return np.where(valid, np.stack([turn[0] * r0, straight, turn[1] * r1]), np.inf)
+    turn = _ccw_angle(np.array([s0 * (alpha - h0), s1 * (h1 - alpha)]))  # np.array: stack, less overhead
+    return np.where(valid, np.array([turn[0] * r0, straight, turn[1] * r1]), np.inf)
 
 
 def _ccc(h0, h1, x0, y0, x1, y1, r0, r1, rm, s) -> np.ndarray:
@@ -457,8 +457,8 @@ def _ccc(h0, h1, x0, y0, x1, y1, r0, r1, rm, s) -> np.ndarray:
     cmy = y0 + x * ey + h * ex
     hq0 = np.arctan2(cmy - y0, cmx - x0) + s * (math.pi / 2)  # tangency with circle 0 is along c0 -> cm
     hq1 = np.arctan2(y1 - cmy, x1 - cmx) - s * (math.pi / 2)  # middle circle turns the other way
-    turn = _ccw_angle(np.stack([s * (hq0 - h0), -s * (hq1 - hq0), s * (h1 - hq1)]))
-    return np.where(valid, np.stack([turn[0] * r0, turn[1] * rm, turn[2] * r1], axis=1), np.inf)
+    turn = _ccw_angle(np.array([s * (hq0 - h0), -s * (hq1 - hq0), s * (h1 - hq1)]))
+    return np.where(valid, np.array([turn[0] * r0, turn[1] * rm, turn[2] * r1]).swapaxes(0, 1), np.inf)
 
 
 def _advance(pose: np.ndarray, kappa: float, ds: float) -> np.ndarray:

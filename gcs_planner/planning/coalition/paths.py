@@ -494,8 +494,8 @@ def _detour(route: Route, length_m: float, threats: list[Threat], ds_m: float):
     def links(v: np.ndarray) -> np.ndarray:
         """Segment lengths (2, n, 6, 3) of prev -> v and v -> goal."""
         n = len(v)
-        q0 = np.r_[np.broadcast_to(prev, (n, 3)), v]
-        return word_lengths(q0, np.r_[v, np.broadcast_to(q1, (n, 3))], r).reshape(2, n, 6, 3)
+        q0 = np.concatenate([np.broadcast_to(prev, (n, 3)), v])
+        return word_lengths(q0, np.concatenate([v, np.broadcast_to(q1, (n, 3))]), r).reshape(2, n, 6, 3)
 
     def f(rho: np.ndarray, th: np.ndarray) -> np.ndarray:
         a, b = links(via(rho, th)).sum(3).min(2)
