@@ -219,11 +219,10 @@ class MavlinkLink:
             parser.robust_parsing = True
             if addr not in self._peers:
                 self._peers[addr] = None  # udpin: answer whoever talks to us
+        whole = _single_v2_frame(data) and parser.buf_len() == 0
         try:
-            if _single_v2_frame(data) and parser.buf_len() == 0:
-                msgs = [parser.decode(bytearray(data))]  # fast path: one whole frame per datagram
-            else:
-                msgs = parser.parse_buffer(data) or []
+            # fast path: one whole frame per datagram, decoded without the byte-wise parser
+            msgs = [parser.decode(bytearray(data))] if whole else parser.parse_buffer(data) or []
         except mavlink.MAVError as exc:
             log.debug("bad frame from %s: %s", addr, exc)
             return
@@ -232,7 +231,7 @@ class MavlinkLink:
         for msg in msgs:
             if isinstance(msg, mavlink.MAVLink_bad_data):
                 continue
-            raw = bytes(msg.get_msgbuf())
+            raw = data if whole else bytes(msg.get_msgbuf())
             self._note_source(msg, addr, now)
             attach_extensions(msg, raw)
             self.frames_received += 1

@@ -210,9 +210,7 @@ class MissionClient:
             return math.inf if transfer.deadline_s is None else transfer.deadline_s
 
         def on_frame(msg, raw: bytes, t_s: float) -> None:
-            if not transfer.accepts(msg):
-                return
-            for out in transfer.on_message(msg, loop.time()):
+            for out in transfer.on_message(msg, loop.time()):  # [] for frames of other transfers
                 send(out)
             if (transfer.done or due_s() < armed_s) and not wakeup.done():
                 wakeup.set_result(None)  # finished, or a timer moved earlier: re-arm
