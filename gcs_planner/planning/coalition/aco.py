@@ -144,7 +144,7 @@ def solve_aco(
     m, iters = params.ants * scale, params.iterations * scale
     cap = prob.capable
     tau = np.full((n, K), params.tau0)
-    tau_t = tau.T[:, None, :]  # (K, 1, n) view of tau
+    tau_t = tau.T[:, None, :]  # (K, 1, n) view: tau is only ever updated in place below
     eta_b = _heuristic(prob, params) ** params.beta
     lfrac = np.clip(prob.range_left_m / prob.range_max_m, 0.0, 1.0)
     keep, add = 1 - params.rho, params.rho * params.tau0

@@ -448,10 +448,10 @@ def _delay_on_start_circle(route: Route, length_m: float, threats: list[Threat],
         pose = _advance_arc(starts[combo], kappas[combo], x)
         return x + shortest_lengths(pose, np.broadcast_to(q1, pose.shape), r) - targets[combo]
 
-    combo, x = np.repeat(np.arange(len(starts)), len(a)), np.tile(a, len(starts))
-    pose = _advance_arc(starts[combo], kappas[combo], x)
-    lower = x + np.hypot(pose[:, 0] - q1[0], pose[:, 1] - q1[1]) - targets[combo]
-    F = _scan(lower.reshape(len(starts), -1), lambda i: f(combo[i], x[i]))
+    grid_combo, grid_a = np.repeat(np.arange(len(starts)), len(a)), np.tile(a, len(starts))
+    pose = _advance_arc(starts[grid_combo], kappas[grid_combo], grid_a)
+    lower = grid_a + np.hypot(pose[:, 0] - q1[0], pose[:, 1] - q1[1]) - targets[grid_combo]
+    F = _scan(lower.reshape(len(starts), -1), lambda i: f(grid_combo[i], grid_a[i]))
     cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r)
     cands = [(b, c) for b in range(len(starts)) for c in np.flatnonzero(cross[b])[:2]]
     if not cands:
@@ -539,9 +539,10 @@ def _scan(lower: np.ndarray, fun) -> np.ndarray:
     and at their row neighbours, which the jump test |F[j+1] - F[j]| needs; elsewhere lower
     stands in. Sign changes and their F values are exactly those of the full grid.
     """
-    need = lower <= 1e-3
-    need[:, 1:] |= need[:, :-1]
-    need[:, :-1] |= need[:, 1:].copy()
+    may = lower <= 1e-3
+    need = may.copy()
+    need[:, 1:] |= may[:, :-1]
+    need[:, :-1] |= may[:, 1:]
     F = lower.copy()
     idx = np.flatnonzero(need)
     if len(idx):
