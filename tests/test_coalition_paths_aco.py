@@ -231,7 +231,7 @@ def test_pruned_root_scan_keeps_every_sign_change_of_the_full_grid():
     np.testing.assert_array_equal(F[ti, ri + 1], full[ti, ri + 1])
 
 
-@pytest.mark.parametrize("fallback", ["_detour", "_delay_on_start_circle"])
+@pytest.mark.parametrize("fallback", ["_detours", "_delays_on_start_circle"])
 def test_batched_timing_fallbacks_give_exact_clear_paths_to_the_goal(fallback):
     """A T2 member of the paper run: radius stretching has no solution, so the fallbacks are needed."""
     threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0)]
@@ -244,7 +244,7 @@ def test_batched_timing_fallbacks_give_exact_clear_paths_to_the_goal(fallback):
     route = paths.min_route(q0, q1, r, threats, kappa=1.3)
     assert route.clear and len(route.poses) == 2
     assert paths.stretch_batch(q0[None], q1[None], np.array([want]), np.array([r]))[0] is None
-    segs = getattr(paths, fallback)(route, want, threats, 10.0)
+    segs = getattr(paths, fallback)([route], [want], threats, 10.0)[0]
     assert segs is not None
     assert sum(p.length for p in segs) == pytest.approx(want, abs=1e-2)
     assert paths.chains_clear([segs], threats, 10.0)[0]
@@ -252,3 +252,19 @@ def test_batched_timing_fallbacks_give_exact_clear_paths_to_the_goal(fallback):
     assert np.allclose(segs[0].start, q0)
     end = np.array(segs[-1].end)
     assert np.hypot(*(end[:2] - q1[:2])) < 1e-3 and abs(_wrap(end[2] - q1[2])) < 1e-6
+
+
+def test_timed_routes_of_a_formation_equal_route_by_route_results():
+    """Members' fallbacks run as one batch: each member gets exactly what it gets alone."""
+    threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0)]
+    starts = [(1198.4071, 1341.8888, 5.474), (1248.8447, 1335.594, 5.3916), (1352.5437, 1529.6002, 4.4161)]
+    goals = paths.entry_poses((1000.0, 500.0), np.radians([90.0, 60.0, 120.0]), 200.0)
+    radii, wants = [200.0, 150.0, 200.0], [1772.84, 1700.0, 1792.28]
+    routes = [paths.min_route(np.array(a), b, r, threats, 1.3) for a, b, r in zip(starts, goals, radii)]
+    batch = paths.timed_routes(routes, wants, threats)
+    alone = [paths.timed_routes([rt], [w], threats)[0] for rt, w in zip(routes, wants)]
+    assert batch == alone  # DubinsPath is a dataclass: equal segments, words, lengths and radii
+    assert any(ok for _, ok in batch)
+    for (segs, ok), want in zip(batch, wants):
+        if ok:
+            assert sum(p.length for p in segs) == pytest.approx(want, abs=1e-2)

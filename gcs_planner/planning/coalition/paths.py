@@ -32,8 +32,9 @@ sampled for clearance checks and legs in one ``sample_batch`` call (``chains_cle
 ``sample_legs``), with exactly ``DubinsPath.sample_step``'s samples. The detour and loiter
 fallbacks evaluate their whole scan in one Dubins call and refine all roots together. Their scans
 skip points where a Euclidean lower bound (Dubins length >= distance) proves the residual
-positive (``_scan``). The candidates are still taken in the same order of preference, so the
-results equal the one-candidate-at-a-time computation.
+positive (``_scan``). ``timed_routes`` runs these fallbacks for all members of a formation that
+need them in one batch. The candidates are still taken in the same order of preference, so the
+results equal the one-candidate-at-a-time, one-member-at-a-time computation.
 """
 
 from __future__ import annotations
@@ -60,6 +61,7 @@ __all__ = [
     "shortest_lengths",
     "stretch_batch",
     "timed_route",
+    "timed_routes",
 ]
 
 TWO_PI = 2.0 * math.pi
@@ -381,10 +383,45 @@ def timed_route(
     stretched: ``(path,)`` when the caller already has ``stretch_batch``'s result for a two-pose
     route at length_m (path may be None), so the first fallback is not computed twice.
     """
+    return timed_routes([route], [length_m], threats, ds_m, [stretched])[0]
+
+
+def timed_routes(
+    routes: list[Route],
+    lengths_m: list[float],
+    threats: list[Threat],
+    ds_m: float = 10.0,
+    stretched: list[tuple[DubinsPath | None] | None] | None = None,
+) -> list[tuple[list[DubinsPath], bool]]:
+    """timed_route for many routes (the members of one formation), with the same results.
+
+    The stretching and push steps run route by route. The detour, then the loiter fallback, run
+    once for all routes that still need them, so their Dubins calls are shared.
+    """
+    out: list = [None] * len(routes)
+    last_resort: list = [None] * len(routes)
+    for i, (route, length_m, given) in enumerate(zip(routes, lengths_m, stretched or [None] * len(routes))):
+        out[i], last_resort[i] = _stretch_or_push(route, length_m, threats, ds_m, given)
+    pending = [i for i in range(len(routes)) if out[i] is None]
+    for fallback in (_detours, _delays_on_start_circle):
+        if not pending:
+            break
+        found = fallback([routes[i] for i in pending], [lengths_m[i] for i in pending], threats, ds_m)
+        for i, segs in zip(pending, found):
+            if segs is not None:
+                out[i] = (segs, True)
+        pending = [i for i in pending if out[i] is None]
+    for i in pending:
+        out[i] = (last_resort[i], False)
+    return out
+
+
+def _stretch_or_push(route: Route, length_m: float, threats: list[Threat], ds_m: float, stretched):
+    """The first timing steps: ((segments, clear) or None, the segments to use if every step fails)."""
     links = [_shortest(a, b, route.r_m) for a, b in zip(route.poses[:-1], route.poses[1:])]
     extra = length_m - sum(p.length for p in links)
     if extra <= 1e-6:
-        return links, route.clear
+        return (links, route.clear), links
     fallback = None
     for j in [len(links) - 1, *range(len(links) - 1)]:
         a, b = route.poses[j], route.poses[j + 1]
@@ -397,7 +434,7 @@ def timed_route(
         trial = links[:j] + [p] + links[j + 1 :]
         ok = clearance_m(_samples(p, ds_m)[:, :2], threats) >= 0.0
         if ok:
-            return trial, route.clear
+            return (trial, route.clear), trial
         fallback = fallback or trial
     if len(route.poses) > 2:  # lengthen by pushing the safe points outwards (larger kappa), on a grid
         sig = np.geomspace(1.0, 8.0, 200)
@@ -414,121 +451,146 @@ def timed_route(
                 trial = [*links[:-1], p]
                 xy = np.concatenate([_samples(q, ds_m)[:, :2] for q in trial])
                 if clearance_m(xy, threats) >= 0.0:
-                    return trial, True
-    longer = _detour(route, length_m, threats, ds_m)
-    if longer is not None:
-        return longer, True
-    delayed = _delay_on_start_circle(route, length_m, threats, ds_m)
-    if delayed is not None:
-        return delayed, True
-    return (fallback or links), False
+                    return (trial, True), trial
+    return None, fallback or links
 
 
-def _delay_on_start_circle(route: Route, length_m: float, threats: list[Threat], ds_m: float):
+def _delays_on_start_circle(
+    routes: list[Route], lengths_m: list[float], threats: list[Threat], ds_m: float
+) -> list[list[DubinsPath] | None]:
     """Loiter fallback: fly s along the first link, an arc of length a on a turning circle there, then
     the shortest route on, with s + a + L = length_m (scan of a over up to 3 loops, Illinois refine);
     s in 0, 1/4, 1/2, 3/4 of the first link, left then right turn, the first two roots of each.
-    None if nothing clears the threats. The eight scans share one batched Dubins call, all roots
-    are refined together, and the candidates are checked in one pass, in that order."""
-    q1, r = route.poses[-1], route.r_m
-    first = _shortest(route.poses[0], route.poses[1], r)
-    a = np.linspace(0.0, 3 * TWO_PI * r, 600)
-    leads, starts, targets, kappas = [], [], [], []
-    for frac in (0.0, 0.25, 0.5, 0.75):
-        lead = _truncate(first, frac * first.length)
-        q0 = np.asarray(lead.end) if lead.length > 0 else route.poses[0]
-        for side in (1.0, -1.0):
-            leads.append(lead)
-            starts.append(q0)
-            targets.append(length_m - lead.length)
-            kappas.append(side / r)
-    starts, targets, kappas = np.array(starts), np.array(targets), np.array(kappas)
+    None for a route where nothing clears the threats. The eight scans of every route share one
+    batched Dubins call, all roots are refined together, and the candidates are checked in one
+    pass; each route takes its first clear candidate in that order."""
+    owner, leads, starts, targets, kappas = [], [], [], [], []
+    for k, (route, length_m) in enumerate(zip(routes, lengths_m)):
+        r = route.r_m
+        first = _shortest(route.poses[0], route.poses[1], r)
+        for frac in (0.0, 0.25, 0.5, 0.75):
+            lead = _truncate(first, frac * first.length)
+            q0 = np.asarray(lead.end) if lead.length > 0 else route.poses[0]
+            for side in (1.0, -1.0):
+                owner.append(k)
+                leads.append(lead)
+                starts.append(q0)
+                targets.append(length_m - lead.length)
+                kappas.append(side / r)
+    owner, starts, targets, kappas = np.array(owner), np.array(starts), np.array(targets), np.array(kappas)
+    goal = np.array([routes[k].poses[-1] for k in owner])
+    r = np.array([routes[k].r_m for k in owner])
+    a = np.array([np.linspace(0.0, 3 * TWO_PI * routes[k].r_m, 600) for k in owner])  # (combos, 600)
 
     def f(combo: np.ndarray, x: np.ndarray) -> np.ndarray:
         pose = _advance_arc(starts[combo], kappas[combo], x)
-        return x + shortest_lengths(pose, np.broadcast_to(q1, pose.shape), r) - targets[combo]
+        return x + shortest_lengths(pose, goal[combo], r[combo]) - targets[combo]
 
-    grid_combo, grid_a = np.repeat(np.arange(len(starts)), len(a)), np.tile(a, len(starts))
+    grid_combo, grid_a = np.repeat(np.arange(len(starts)), a.shape[1]), a.ravel()
     pose = _advance_arc(starts[grid_combo], kappas[grid_combo], grid_a)
-    lower = grid_a + np.hypot(pose[:, 0] - q1[0], pose[:, 1] - q1[1]) - targets[grid_combo]
-    F = _scan(lower.reshape(len(starts), -1), lambda i: f(grid_combo[i], grid_a[i]))
-    cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r)
+    gap = np.hypot(pose[:, 0] - goal[grid_combo, 0], pose[:, 1] - goal[grid_combo, 1])
+    lower = (grid_a + gap - targets[grid_combo]).reshape(a.shape)
+    F = _scan(lower, lambda i: f(grid_combo[i], grid_a[i]))
+    cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r[:, None])
     cands = [(b, c) for b in range(len(starts)) for c in np.flatnonzero(cross[b])[:2]]
+    out: list[list[DubinsPath] | None] = [None] * len(routes)
     if not cands:
-        return None
+        return out
     combo, ci = np.array(cands).T
-    sol = _illinois(lambda x: f(combo, x), a[ci], a[ci + 1], 12)
+    sol = _illinois(lambda x: f(combo, x), a[combo, ci], a[combo, ci + 1], 12)
     arcs = [
-        DubinsPath(_pose(starts[b]), "LSL" if kappas[b] > 0 else "RSR", (x, 0.0, 0.0), (r, math.inf, r))
-        for b, x in zip(combo, sol)
+        DubinsPath(_pose(starts[b]), "LSL" if kappas[b] > 0 else "RSR", (x, 0.0, 0.0), (rb, math.inf, rb))
+        for b, x, rb in zip(combo, sol, r[combo].tolist())
     ]
     ends = np.array([arc.end for arc in arcs])
-    lens = word_lengths(ends, q1, r)
+    lens = word_lengths(ends, goal[combo], r[combo])
     w = lens.sum(2).argmin(1)
     trials = [
-        [p for p in (leads[b], arc, _path(ends[j], w[j], lens[j, w[j]], r, r)) if p.length > 0]
+        [p for p in (leads[b], arc, _path(ends[j], w[j], lens[j, w[j]], r[b], r[b])) if p.length > 0]
         for j, (b, arc) in enumerate(zip(combo, arcs))
     ]
     clear = chains_clear(trials, threats, ds_m)
-    for trial, ok in zip(trials, clear):
-        if ok and abs(sum(p.length for p in trial) - length_m) <= 1e-2:
-            return trial
-    return None
+    for trial, ok, b in zip(trials, clear, combo):
+        k = owner[b]
+        if out[k] is None and ok and abs(sum(p.length for p in trial) - lengths_m[k]) <= 1e-2:
+            out[k] = trial
+    return out
 
 
-def _detour(route: Route, length_m: float, threats: list[Threat], ds_m: float):
+def _detours(
+    routes: list[Route], lengths_m: list[float], threats: list[Threat], ds_m: float
+) -> list[list[DubinsPath] | None]:
     """Lengthen through a via pose at distance rho and bearing theta from the goal, heading at it:
     for each of 48 bearings, solve L(prev -> via(rho)) + L(via(rho) -> goal) = need over rho
     (scan, Illinois refine); the first solution whose two links clear the threats is taken.
-    Both links of every grid point / candidate go through one batched Dubins call, and all
-    candidates are checked for clearance in one pass (the order of preference is unchanged)."""
-    prev, q1, r = route.poses[-2], route.poses[-1], route.r_m
-    head = [_shortest(a, b, r) for a, b in zip(route.poses[:-2], route.poses[1:-1])]
-    need = length_m - sum(p.length for p in head)
+    For every route at once: both links of every grid point / candidate of every route go through
+    one batched Dubins call and all candidates are checked for clearance in one pass (the order
+    of preference within a route is unchanged)."""
+    prev = np.array([route.poses[-2] for route in routes])
+    goal = np.array([route.poses[-1] for route in routes])
+    r = np.array([route.r_m for route in routes])
+    heads = [[_shortest(a, b, rt.r_m) for a, b in zip(rt.poses[:-2], rt.poses[1:-1])] for rt in routes]
+    need = np.array([length_m - sum(p.length for p in head) for length_m, head in zip(lengths_m, heads)])
     theta = np.linspace(0, TWO_PI, 48, endpoint=False)
+    rho = np.array([np.linspace(rk, max(nk, 2 * rk), 60) for rk, nk in zip(r, need)])  # (routes, 60)
 
-    def via(rho: np.ndarray, th: np.ndarray) -> np.ndarray:
-        vx, vy = q1[0] + rho * np.cos(th), q1[1] + rho * np.sin(th)
-        return np.column_stack([vx, vy, np.arctan2(q1[1] - vy, q1[0] - vx)])
+    def via(g: np.ndarray, rho: np.ndarray, th: np.ndarray) -> np.ndarray:
+        """Via poses of route g[i] at rho[i], th[i]."""
+        vx, vy = goal[g, 0] + rho * np.cos(th), goal[g, 1] + rho * np.sin(th)
+        return np.column_stack([vx, vy, np.arctan2(goal[g, 1] - vy, goal[g, 0] - vx)])
 
-    def links(v: np.ndarray) -> np.ndarray:
+    def links(g: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Segment lengths (2, n, 6, 3) of prev -> v and v -> goal."""
-        n = len(v)
-        q0 = np.concatenate([np.broadcast_to(prev, (n, 3)), v])
-        return word_lengths(q0, np.concatenate([v, np.broadcast_to(q1, (n, 3))]), r).reshape(2, n, 6, 3)
+        q0, q1 = np.concatenate([prev[g], v]), np.concatenate([v, goal[g]])
+        return word_lengths(q0, q1, np.concatenate([r[g], r[g]])).reshape(2, len(v), 6, 3)
 
-    def f(rho: np.ndarray, th: np.ndarray) -> np.ndarray:
-        a, b = links(via(rho, th)).sum(3).min(2)
-        return a + b - need
+    def f(g: np.ndarray, rho: np.ndarray, th: np.ndarray) -> np.ndarray:
+        a, b = links(g, via(g, rho, th)).sum(3).min(2)
+        return a + b - need[g]
 
-    rho = np.linspace(r, max(need, 2 * r), 60)
-    R, T = np.meshgrid(rho, theta)  # (48, 60)
-    v = via(R.ravel(), T.ravel())
-    lower = (np.hypot(v[:, 0] - prev[0], v[:, 1] - prev[1]) + R.ravel() - need).reshape(R.shape)
-    F = _scan(lower, lambda i: f(R.ravel()[i], T.ravel()[i]))
-    cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r)
-    ti, ri = np.nonzero(cross)
-    if not len(ti):
-        return None
-    first = np.argsort(ri, kind="stable")[:16]  # the nearest via rings first
-    ti, ri = ti[first], ri[first]
+    shape = (len(routes), len(theta), rho.shape[1])
+    G = np.repeat(np.arange(len(routes)), shape[1] * shape[2])
+    RHO = np.broadcast_to(rho[:, None, :], shape).ravel()
+    TH = np.broadcast_to(theta[None, :, None], shape).ravel()
+    v = via(G, RHO, TH)
+    lower = np.hypot(v[:, 0] - prev[G, 0], v[:, 1] - prev[G, 1]) + RHO - need[G]
+    F = _scan(lower.reshape(-1, shape[2]), lambda i: f(G[i], RHO[i], TH[i])).reshape(shape)
+    cross = (np.sign(F[..., :-1]) != np.sign(F[..., 1:])) & (
+        np.abs(F[..., 1:] - F[..., :-1]) < np.pi * r[:, None, None]
+    )
+    g, ti, ri = [], [], []
+    for k in range(len(routes)):
+        t_k, r_k = np.nonzero(cross[k])
+        first = np.argsort(r_k, kind="stable")[:16]  # the nearest via rings first
+        g += [k] * len(first)
+        ti.append(t_k[first])
+        ri.append(r_k[first])
+    out: list[list[DubinsPath] | None] = [None] * len(routes)
+    if not g:
+        return out
+    g, ti, ri = np.array(g), np.concatenate(ti), np.concatenate(ri)
     th = theta[ti]
-    sol = _illinois(lambda x: f(x, th), rho[ri], rho[ri + 1], 12)
-    order = np.argsort(np.abs(sol - sol.min()))
-    v = via(sol[order], th[order])
-    lens = links(v)
+    sol = _illinois(lambda x: f(g, x, th), rho[g, ri], rho[g, ri + 1], 12)
+    order = []  # per route: the candidates nearest its smallest root first
+    for k in range(len(routes)):
+        idx = np.flatnonzero(g == k)
+        if len(idx):
+            order.append(idx[np.argsort(np.abs(sol[idx] - sol[idx].min()))])
+    order = np.concatenate(order)
+    g, v = g[order], via(g[order], sol[order], th[order])
+    lens = links(g, v)
     w = lens.sum(3).argmin(2)
     trials = []
-    for j in range(len(v)):
-        tail = [_path(a, w[h, j], lens[h, j, w[h, j]], r, r) for h, a in ((0, prev), (1, v[j]))]
-        trials.append([*head, *tail])
-    exact = [abs(sum(p.length for p in trial) - length_m) <= 1e-2 for trial in trials]
+    for j, k in enumerate(g):
+        ends = ((0, prev[k]), (1, v[j]))
+        trials.append([*heads[k], *(_path(a, w[h, j], lens[h, j, w[h, j]], r[k], r[k]) for h, a in ends)])
     chains = [[p for p in trial if p.length > 0] for trial in trials]
     clear = chains_clear(chains, threats, ds_m)
-    for j in range(len(v)):
-        if exact[j] and clear[j]:
-            return chains[j]
-    return None
+    for j, k in enumerate(g):
+        exact = abs(sum(p.length for p in trials[j]) - lengths_m[k]) <= 1e-2
+        if out[k] is None and exact and clear[j]:
+            out[k] = chains[j]
+    return out
 
 
 def _scan(lower: np.ndarray, fun) -> np.ndarray:

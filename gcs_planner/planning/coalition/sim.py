@@ -483,16 +483,18 @@ class CoalitionSim:
             got_clear = dict(
                 zip(stretched, paths.chains_clear([[batch[k]] for k in stretched], self.known, p.sample_ds_m))
             )
-            segs, clear = [], []
-            for k in range(K):
-                if got_clear.get(k, False):
-                    segs.append([batch[k]])
-                    clear.append(True)
-                else:  # fallbacks (the direct stretch, if any, is passed on, not recomputed)
-                    given = (batch[k],) if k in batch else None
-                    segs_k, clear_k = paths.timed_route(routes[k], want[k], self.known, stretched=given)
-                    segs.append(segs_k)
-                    clear.append(clear_k)
+            segs = [[batch[k]] if got_clear.get(k, False) else None for k in range(K)]
+            clear = [s is not None for s in segs]
+            # the other members' timing fallbacks, all at once (a direct stretch is passed on)
+            rest = [k for k in range(K) if segs[k] is None]
+            timed = paths.timed_routes(
+                [routes[k] for k in rest],
+                [want[k] for k in rest],
+                self.known,
+                stretched=[(batch[k],) if k in batch else None for k in rest],
+            )
+            for k, (segs_k, clear_k) in zip(rest, timed):
+                segs[k], clear[k] = segs_k, clear_k
             bad = [k for k in range(K) if not clear[k]]
             if not bad:
                 break
