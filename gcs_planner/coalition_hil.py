@@ -1,45 +1,76 @@
-"""Coalition HIL run (seed 003): the coalition awards become missions uploaded to flying mock vehicles.
+"""Coalition HIL run (seed 003): coalition awards flown by mock vehicles on legs planned from live telemetry.
 
 The paper's hardware-in-the-loop test pushes each coalition's new paths to the vehicles while the
-swarm flies. Here the planner in the loop is the coalition simulation
-(gcs_planner.planning.coalition), run first for the seed; it is deterministic, so its decisions
-(tenders, bids, awards, legs) are *replayed* onto the vehicles at their award times:
+swarm flies. Here the run splits the work in two:
 
+- **The decisions come from the simulation.** The coalition simulation
+  (gcs_planner.planning.coalition) runs first for the seed. Its contract net decides every award:
+  the winning vehicle, the target and task, the awarded time and the attack (or assessment)
+  angle. The run keeps those decisions and logs them at their times. A real-time contract net with
+  bids from telemetry is future work.
+- **The flown legs come from live state.** When an award's time comes, the vehicle's leg is
+  planned from its own latest GLOBAL_POSITION_INT reports, not from the simulated state: position,
+  course and ground speed of the newest report, turn rate fitted over the last ``FIT_S`` of
+  course. That turn is propagated to the leg start t0 = now + the upload estimate +
+  ``START_AHEAD_S``. From that pose the leg goes to the award's stand-off entry pose (strike) or
+  assessment-arc start pose (assess), arriving at the awarded time at the awarded angle. It uses
+  the coalition path functions as sim.py's ``_replan`` does: ``paths.min_route`` for safe-point
+  threat avoidance (threats known at the award), ``paths.timed_route`` for radius stretching with
+  detour and loiter fallbacks, ``paths.sample_segments``, and for an assessment ``paths.arc_leg``.
+  The report gives, per award, the distance and heading between the simulated and the flown
+  (live) pose at the leg start.
+
+Flow:
 1. Every vehicle awarded a task (of the chosen targets) is a mock fixed wing. Its first mission
    is a straight ``LEAD_IN_S`` lead-in to its simulated position at the window start
    ``t_start`` = first award - ``lead_s``, then its simulated pre-award track (idle loiter, recon)
-   up to its leg start t_e^s, then ``EXTEND_S`` more at the same turn rate (the loiter the bids
-   predicted, flown until the award lands). Its home is south of the lead-in start by the
-   take-off's ground run (the mock climbs heading north), so the climb ends where the route starts.
+   up to its leg start t_e^s, then ``PRE_AWARD_EXTEND_S`` more at the same turn rate (the loiter the
+   bids predicted, flown until the award's mission starts). Its home is south of the lead-in start
+   by the take-off's ground run (the mock climbs heading north), so the climb ends where the route
+   starts. ``HilOptions.offset_m`` moves a vehicle's first mission (tests: the live state then
+   differs from the simulated one).
 2. The fleet takes off (fly._take_off_all) and every route starts at once at route time 0 =
    scenario time ``t_start - LEAD_IN_S`` (fly._start_routes).
-3. When the route clock reaches an award's time, the awarded vehicle's new mission (its award leg
-   with extra waypoints on the last 1.5 s before a strike entry, then ``EXTEND_S`` of its simulated
-   track) is built with plan_to_items, uploaded with MissionClient while the vehicle flies, and
-   started with MISSION_START at the first waypoint ``START_AHEAD_S`` ahead (an upload that ends
-   after t_e^s must not send the vehicle back). Where the simulation flies on for longer before
-   the next award or the window end, an "idle" mission (that track) is uploaded at the leg end, so
-   urgent award missions stay short. The simulation's tender / bid / award events are logged to
-   the MCAP at their times, each upload with its start and end times.
+3. At an award's time the award joins a priority queue served by ``UPLOAD_WORKERS`` upload
+   workers: strikes by awarded time, then assessments, then the "idle" missions. A worker plans
+   the leg just before its upload starts, so the leg start only has to allow for that one upload,
+   not for the queue. The mission is: the predicted turn from now to t0 (waypoints every
+   ``PREFIX_DT_S``, the path the vehicle is flying anyway), the leg (extra waypoints on the last
+   1.5 s before the entry pose), then ``EXTEND_S`` of the simulated track after the leg end. It is
+   built with plan_to_items, uploaded with MissionClient while the vehicle flies, and started with
+   MISSION_START at the first waypoint ``START_AHEAD_S`` ahead. The upload estimate is the measured
+   wall time per item (an EMA over the uploads so far, seeded by the initial fleet upload) x items
+   x speed-up x ``UPLOAD_SAFETY``. Where the simulation flies on for longer before the next award
+   or the window end, an "idle" mission (that track) is uploaded at the leg end, so urgent award
+   missions stay short. Waypoints are placed every ``TURN_STEP_DEG`` of turn and at least every
+   ``waypoint_dt_s``: fewer items on straights, so uploads land sooner.
+   ``HilOptions.replay_legs`` uploads the simulation's own legs instead (the earlier behaviour,
+   kept for comparison).
 4. A ScheduleKeeper holds every vehicle to its current mission's timing (it is replaced at each
    upload), as in ``gcs-planner fly``; it gets the path every ``KEEPER_SAMPLE_S`` so that its
    60-sample look-ahead stays shorter than a loiter lap.
-5. Report: for each strike award, the flown arrival at the stand-off entry point = the closest
-   approach of the piecewise-linear flown track (time interpolated, simulated clock), heading =
-   that track segment's direction; both against the award (time_s, angle_deg + 180).
+5. Report, one row per award: the flown arrival at the goal pose (strike: stand-off entry point;
+   assess: arc start point) = the closest approach of the piecewise-linear flown track (time
+   interpolated, simulated clock), heading = that track segment's direction, both against the
+   award (time_s; strike heading angle_deg + 180, assessment heading the CCW tangent angle_deg +
+   90). An assessment row also gives the largest radial deviation from the assessment circle over
+   the arc's duration (bound ``ARC_TOL_M``).
 
-Choices: the real-time contract net against live telemetry (bids from the vehicles' reported
-states) is future work; awards are replayed. Take-off climbs at ``TAKEOFF_CLIMB_MPS`` (the climb is
-not part of the measurement and a real fleet would be airborne before the scenario starts). The
-airframe is tuned like fly._airframe_for, with bank for the minimum turn radius at the schedule
-keeper's top speed (CATCH_UP_FACTOR x cruise), so catching up does not widen turns.
+Choices: take-off climbs at ``TAKEOFF_CLIMB_MPS`` (the climb is not part of the measurement and a
+real fleet would be airborne before the scenario starts). The airframe is tuned like
+fly._airframe_for, with bank for the minimum turn radius at the schedule keeper's top speed
+(CATCH_UP_FACTOR x cruise), so catching up does not widen turns. A live leg that cannot arrive on
+time (minimum route longer than the time left) is flown at its minimum length and reported late.
 """
 
 from __future__ import annotations
 
 import asyncio
+import itertools
 import logging
+import math
 import time
+from collections import deque
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
@@ -63,7 +94,7 @@ from gcs_planner.fly import (
     _TrackRecorder,
     _wait_for_vehicles,
 )
-from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
@@ -71,25 +102,44 @@ from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.plan import Plan, VehiclePlan
-from gcs_planner.planning.coalition import load_world, simulate
+from gcs_planner.planning.coalition import load_world, paths, simulate
+from gcs_planner.planning.coalition.track import Leg
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.timekeeping import ScheduleKeeper
 from sitl_mock.flight import ALT_TOL_M, KP_ALT
 
-__all__ = ["HilOptions", "HilResult", "StrikeRow", "format_strike_report", "run_coalition_hil"]
+__all__ = [
+    "HilOptions",
+    "HilResult",
+    "LiveState",
+    "TaskRow",
+    "format_strike_report",
+    "live_state",
+    "measure_task",
+    "plan_live_leg",
+    "run_coalition_hil",
+]
 
 log = logging.getLogger(__name__)
 
-EXTEND_S = 10.0  # continuation of a pre-award mission at its last turn rate [s]
+EXTEND_S = 10.0  # simulated track flown after an award leg when the next piece is an idle upload [s]
+PRE_AWARD_EXTEND_S = 30.0  # continuation of a pre-award mission at its last turn rate [s]
 TAKEOFF_CLIMB_MPS = 40.0  # mock climb rate for the take-off only
 NAV_WAYPOINT = 16
 LEAD_IN_S = 20.0  # straight lead-in to the window start, flown from the take-off point [s]
-START_AHEAD_S = 4.0  # an award mission starts at its first waypoint at least this far ahead [s]
+START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
+PREFIX_DT_S = 1.0  # waypoint spacing on the predicted turn before a live leg [s]
+FIT_S = 2.0  # turn rate fitted over this much of the newest course reports [s]
+UPLOAD_SAFETY = 1.5  # upload estimate = measured wall time per item x items x speed-up x this
+UPLOAD_WORKERS = 4
+LEG_SPEED_FACTOR = 1.2  # a live leg short of time may be planned up to this x cruise (mock top: 1.3)
+TURN_STEP_DEG = 20.0  # a waypoint every this much turn of the planned path
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
-APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a strike entry
+APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a goal pose (and 1 s after)
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
 MEASURE_WINDOW_S = 15.0  # closest approach searched within this of the awarded time [s]
+ARC_TOL_M = 50.0  # an assessment arc is flown within this of the assessment circle [m]
 LOGGED_EVENTS = ("tender", "bid", "not_bidding", "late_bid_ignored", "formed", "formation_failed", "award")
 
 
@@ -99,26 +149,35 @@ class HilOptions:
     speedup: float = 10.0
     seed: int | None = None  # default: the scenario's [planner] seed
     targets: tuple[str, ...] | None = None  # awards of these targets only (None: all)
+    uavs: tuple[str, ...] | None = None  # fly only these awarded UAVs (None: all)
     lead_s: float = 30.0  # window starts this long before the first award [s]
-    tail_s: float = 5.0  # and ends this long after the last awarded strike [s]
-    waypoint_dt_s: float = 2.0
+    tail_s: float = 5.0  # and ends this long after the last awarded strike / assessment arc [s]
+    waypoint_dt_s: float = 4.0  # longest time between waypoints [s]
     max_time_error_s: float = 1.0
     max_angle_error_deg: float = 10.0
     autopilot: str = "ardupilot"
     keep_schedule: bool = True
+    replay_legs: bool = False  # upload the simulation's legs instead of live-planned ones (comparison)
+    offset_m: dict[str, tuple[float, float]] = field(default_factory=dict)  # UAV id: first-mission shift
 
 
 @dataclass
-class StrikeRow:
+class TaskRow:
+    """One award's flown arrival at its goal pose against the award, and its start-pose difference."""
+
     uav: str
     sysid: int
     target: str
+    task: str  # "strike" | "assess"
     awarded_s: float
     flown_s: float
     awarded_heading_deg: float
     flown_heading_deg: float
     miss_m: float
     limits: tuple[float, float] = (1.0, 10.0)
+    arc_dev_m: float = float("nan")  # assess: largest |distance to target - arc radius| on the arc [m]
+    start_diff_m: float = float("nan")  # simulated vs flown position at the flown leg's start [m]
+    start_dheading_deg: float = float("nan")  # simulated vs flown heading there [deg]
 
     @property
     def time_error_s(self) -> float:
@@ -130,12 +189,13 @@ class StrikeRow:
 
     @property
     def passed(self) -> bool:
-        return abs(self.time_error_s) <= self.limits[0] and abs(self.angle_error_deg) <= self.limits[1]
+        ok = abs(self.time_error_s) <= self.limits[0] and abs(self.angle_error_deg) <= self.limits[1]
+        return ok and (self.task != "assess" or self.arc_dev_m <= ARC_TOL_M)
 
 
 @dataclass
 class HilResult:
-    rows: list[StrikeRow]
+    rows: list[TaskRow]
     uploads: list[dict]
     mcap_path: Path
     t_start_s: float
@@ -145,16 +205,138 @@ class HilResult:
     tracks: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # sysid: t [s], ENU [m]
 
     @property
+    def strikes(self) -> list[TaskRow]:
+        return [r for r in self.rows if r.task == "strike"]
+
+    @property
     def passed(self) -> bool:
-        return bool(self.rows) and all(r.passed for r in self.rows) and not self.failures
+        return bool(self.strikes) and all(r.passed for r in self.rows) and not self.failures
+
+
+# ---- live state
+@dataclass(frozen=True)
+class LiveState:
+    """A vehicle's newest reported state: time [s, simulated], ENU position [m], course [rad, CCW
+    from east], ground speed [m/s] and fitted turn rate [rad/s]."""
+
+    t_s: float
+    x_m: float
+    y_m: float
+    course_rad: float
+    speed_mps: float
+    rate_rps: float
+
+    def predict(self, t_s) -> np.ndarray:
+        """(len(t), 3) x, y, course at times t_s, flying the same turn at the same speed."""
+        dt = np.atleast_1d(np.asarray(t_s, dtype=float)) - self.t_s
+        h = self.course_rad + self.rate_rps * dt
+        if abs(self.rate_rps) < 1e-6:
+            x = self.x_m + self.speed_mps * dt * math.cos(self.course_rad)
+            y = self.y_m + self.speed_mps * dt * math.sin(self.course_rad)
+        else:
+            rho = self.speed_mps / self.rate_rps
+            x = self.x_m + rho * (np.sin(h) - math.sin(self.course_rad))
+            y = self.y_m - rho * (np.cos(h) - math.cos(self.course_rad))
+        return np.column_stack([x, y, h])
+
+
+def live_state(rows, origin: Origin, max_rate_rps: float, fit_s: float = FIT_S) -> LiveState | None:
+    """LiveState from GLOBAL_POSITION_INT rows (t [s], lat, lon [deg], v_east, v_north [m/s]), oldest
+    first: the newest row's position, course and speed; the turn rate is the least-squares slope of
+    the unwrapped course over the last fit_s, clipped to +-max_rate_rps."""
+    if not rows:
+        return None
+    arr = np.asarray(rows, dtype=float)
+    arr = arr[arr[:, 0] >= arr[-1, 0] - fit_s]
+    course = np.unwrap(np.arctan2(arr[:, 4], arr[:, 3]))
+    rate = 0.0
+    if len(arr) >= 3 and arr[-1, 0] - arr[0, 0] > 0.2:
+        rate = float(np.clip(np.polyfit(arr[:, 0], course, 1)[0], -max_rate_rps, max_rate_rps))
+    x, y, _ = geodetic_to_enu(arr[-1, 1], arr[-1, 2], origin.alt_m, origin)
+    speed = float(np.hypot(arr[-1, 3], arr[-1, 4]))
+    return LiveState(float(arr[-1, 0]), float(x), float(y), float(course[-1]), speed, rate)
+
+
+class _Telemetry:
+    """The newest GLOBAL_POSITION_INT reports of each vehicle (simulated clock)."""
+
+    def __init__(self, sysids, keep: int = 64) -> None:
+        self.rows = {s: deque(maxlen=keep) for s in sysids}
+
+    def on_frame(self, msg, raw: bytes, t_s: float) -> None:
+        if msg.get_type() != "GLOBAL_POSITION_INT":
+            return
+        rows = self.rows.get(msg.get_srcSystem())
+        if rows is not None:
+            rows.append(
+                (msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7, msg.vy / 100.0, msg.vx / 100.0)
+            )
+
+
+def _goal_pose(world, award: dict) -> np.ndarray:
+    """The award's goal pose: strike stand-off entry pose or assessment arc start pose."""
+    p = world.params
+    target = next(t for t in world.targets if t.id == award["target"])
+    angle = math.radians(award["angle_deg"])
+    if award["task"] == "strike":
+        return paths.entry_poses(target.xy, [angle], p.standoff_m)[0]
+    return paths.arc_start_pose(target.xy, angle, p.assess_radius_m)[0]
+
+
+def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0) -> Leg:
+    """The award's leg from pose q0 (x, y, heading [rad]) at t0_s: a threat-avoiding timed Dubins
+    path to the strike entry pose, or to the assessment arc start followed by the assessment arc,
+    arriving at award["time_s"]. At cruise speed when there is time; else the minimum route, flown
+    up to max_speed_factor x cruise (info["speed_mps"]); if that is still too slow, late
+    (info["late_s"] > 0)."""
+    p = world.params
+    uav = next(u for u in world.uavs if u.id == award["uav"])
+    target = next(t for t in world.targets if t.id == award["target"])
+    angle = math.radians(award["angle_deg"])
+    known = [th for th in world.threats if th.appear_s <= award["t_s"]]
+    strike = award["task"] == "strike"
+    t_goal = float(award["time_s"])
+    goal = _goal_pose(world, award)
+    route = paths.min_route(q0, goal, uav.r_min_m, known, p.kappa, p.sample_ds_m)
+    need_mps = route.length_m / max(t_goal - t0_s, 1e-3)
+    speed = float(np.clip(need_mps, uav.speed_mps, max_speed_factor * uav.speed_mps))
+    segs, clear = paths.timed_route(route, max(route.length_m, speed * (t_goal - t0_s)), known, p.sample_ds_m)
+    info = {"target": target.id, "clear": bool(clear and route.clear), "speed_mps": speed}
+    leg = paths.sample_segments(segs, t0_s, speed, p.sample_ds_m, "strike" if strike else "transit", info)
+    leg.info["late_s"] = float(leg.t[-1] - t_goal)
+    if strike:
+        return leg
+    arc = paths.arc_leg(target.xy, p.assess_radius_m, angle, float(leg.t[-1]), target.assess_duration_s,
+                        uav.speed_mps, p.sample_ds_m, "assess")  # fmt: skip
+    return Leg(np.r_[leg.t, arc.t[1:]], np.r_[leg.xy, arc.xy[1:]], np.r_[leg.heading, arc.heading[1:]],
+               "assess", {**leg.info, "arc_t0_s": float(arc.t[0])})  # fmt: skip
+
+
+# ---- missions
+def _waypoint_index(t: np.ndarray, xy: np.ndarray, dt_s: float, forced) -> np.ndarray:
+    """Indices of the waypoints: every TURN_STEP_DEG of turn, at least every dt_s, the samples
+    nearest the forced times, and the last sample."""
+    h = np.unwrap(np.arctan2(*np.diff(xy, axis=0).T[::-1])) if len(t) > 1 else np.zeros(1)
+    turn = np.r_[0.0, np.cumsum(np.abs(np.diff(h)))]
+    by_turn = np.searchsorted(turn, np.arange(0.0, turn[-1], math.radians(TURN_STEP_DEG)), side="left")
+    by_time = np.searchsorted(t, np.arange(t[0], t[-1], dt_s), side="right") - 1
+    forced_idx = [int(np.argmin(np.abs(t - f))) for f in forced if t[0] <= f <= t[-1]]
+    idx = np.r_[by_turn, by_time, np.asarray(forced_idx, dtype=int), len(t) - 1]
+    return np.unique(np.clip(idx, 0, len(t) - 1)).astype(int)
+
+
+def _speeds(t: np.ndarray, xy: np.ndarray, keep: np.ndarray, cruise_mps: float) -> np.ndarray:
+    """Ground speed on the leg ending at each kept sample (path length / time); within 2 % of
+    cruise it is cruise, so that speed items are only emitted where the speed really changes."""
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))][keep]
+    v = np.r_[cruise_mps, np.diff(s) / np.maximum(np.diff(t[keep]), 1e-9)]
+    return np.where(np.abs(v - cruise_mps) <= 0.02 * cruise_mps, cruise_mps, np.maximum(v, 1.0))
 
 
 def _piece_plan(uav, t: np.ndarray, xy: np.ndarray, t_origin_s: float, dt_s: float, forced) -> VehiclePlan:
-    """A VehiclePlan over one piece of simulated track: waypoints every dt_s, at the forced times
-    (strike entries) and at the end; times relative to t_origin_s (route time)."""
-    keep = np.searchsorted(t, np.arange(t[0], t[-1], dt_s), side="right") - 1
-    forced_idx = [int(np.argmin(np.abs(t - f))) for f in forced if t[0] <= f <= t[-1]]
-    keep = np.unique(np.r_[keep, np.asarray(forced_idx, dtype=int), len(t) - 1]).astype(int)
+    """A VehiclePlan over one piece of track (see _waypoint_index); times relative to t_origin_s
+    (route time)."""
+    keep = _waypoint_index(t, xy, dt_s, forced)
     path = np.column_stack([xy, np.full(len(t), uav.altitude_m)])
     # dense path for the ScheduleKeeper: its look-ahead (60 samples) must stay below one loiter lap
     dense_t = np.unique(np.r_[np.arange(t[0], t[-1], KEEPER_SAMPLE_S), t[-1]])
@@ -165,7 +347,7 @@ def _piece_plan(uav, t: np.ndarray, xy: np.ndarray, t_origin_s: float, dt_s: flo
         vehicle_type="fixed_wing",
         waypoints=path[keep],
         times_s=t[keep] - t_origin_s,
-        speeds_mps=np.full(len(keep), uav.speed_mps),
+        speeds_mps=_speeds(t, xy, keep, uav.speed_mps),
         path=np.column_stack([dense, np.full(len(dense_t), uav.altitude_m)]),
         path_times_s=dense_t - t_origin_s,
         turn_radius_m=uav.r_min_m,
@@ -174,14 +356,16 @@ def _piece_plan(uav, t: np.ndarray, xy: np.ndarray, t_origin_s: float, dt_s: flo
     )
 
 
-def _continue_turn(t, xy, t_end: float, speed_mps: float, max_rate: float, dt_s: float = 0.5):
-    """EXTEND_S of flight after t_end at the track's turn rate there (the pre-award loiter goes on,
+def _continue_turn(
+    t, xy, t_end: float, speed_mps: float, max_rate: float, extend_s: float, dt_s: float = 0.5
+):
+    """extend_s of flight after t_end at the track's turn rate there (the pre-award loiter goes on,
     as the bids predicted): times (K,) and positions (K, 2), t_end excluded."""
     tau = t_end + np.array([-2.0, -1.0, 0.0])
     p = np.column_stack([np.interp(tau, t, xy[:, 0]), np.interp(tau, t, xy[:, 1])])
     h = np.arctan2(*np.diff(p, axis=0).T[::-1])
     rate = float(np.clip((h[1] - h[0] + np.pi) % (2 * np.pi) - np.pi, -max_rate, max_rate))
-    steps = np.arange(1, int(EXTEND_S / dt_s) + 1)
+    steps = np.arange(1, int(extend_s / dt_s) + 1)
     heading = h[1] + rate * (0.5 + (steps - 0.5) * dt_s)
     xy_ext = p[-1] + np.cumsum(speed_mps * dt_s * np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)
     return t_end + steps * dt_s, xy_ext
@@ -194,66 +378,110 @@ def _slice(t: np.ndarray, xy: np.ndarray, t0: float, t1: float) -> tuple[np.ndar
     return ts, np.column_stack([np.interp(ts, t, xy[:, 0]), np.interp(ts, t, xy[:, 1])])
 
 
+def _pose_at(t: np.ndarray, xy: np.ndarray, t_s: float) -> np.ndarray:
+    """x, y, heading [rad] of a sampled track at t_s (heading of the segment there)."""
+    k = int(np.clip(np.searchsorted(t, t_s) - 1, 0, len(t) - 2))
+    u = (t_s - t[k]) / max(t[k + 1] - t[k], 1e-9)
+    d = xy[k + 1] - xy[k]
+    return np.r_[xy[k] + u * d, math.atan2(d[1], d[0])]
+
+
+@dataclass
+class _Award:
+    """One award to fly: the simulated leg and the simulated track after it, up to ``end_s``."""
+
+    event: dict
+    sim_leg: Leg
+    end_s: float  # the next award's leg start or the window end
+    short: bool  # the award mission runs to end_s (no idle mission after it)
+
+
 @dataclass
 class _VehicleSchedule:
     uav: object
     initial: VehiclePlan
-    uploads: list[tuple[float, str, dict, VehiclePlan]]  # (scenario time, "award"|"idle", award, mission)
+    track: tuple[np.ndarray, np.ndarray]  # simulated t [s], xy [m] over the window
+    awards: list[_Award]
+    idles: list[tuple[float, dict, VehiclePlan]]  # (scenario time, award, mission)
 
 
-def _track_piece(uav, t, xy, t0: float, dt_s: float, a: float, b: float, forced=(), extend: bool = True):
-    """Mission over the simulated track in [a, b] (then the turn continued if ``extend``)."""
+def _track_piece(uav, t, xy, t0: float, dt_s: float, a: float, b: float, forced=(), extend_s: float = 0.0):
+    """Mission over the simulated track in [a, b] (then the turn continued for extend_s)."""
     ts, xys = _slice(t, xy, a, b)
-    if extend:
-        ext_t, ext_xy = _continue_turn(t, xy, b, uav.speed_mps, uav.speed_mps / uav.r_min_m)
+    if extend_s > 0:
+        ext_t, ext_xy = _continue_turn(t, xy, b, uav.speed_mps, uav.speed_mps / uav.r_min_m, extend_s)
         ts, xys = np.r_[ts, ext_t], np.vstack([xys, ext_xy])
     return _piece_plan(uav, ts, xys, t0, dt_s, forced)
 
 
-def _schedules(world, result, awards, t_start, t_stop, dt_s) -> list[_VehicleSchedule]:
-    """Each awarded UAV's missions: the initial one, then one per award (uploaded at the award
-    time: the leg plus EXTEND_S of the simulated track after it) and, where the simulation flies on
-    for longer before the next award or the window end, an "idle" one uploaded at the leg end
-    (its idle loiter / station change), so the urgent award missions stay short."""
+def _schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> list[_VehicleSchedule]:
+    """Each awarded UAV's missions: the initial one, its awards (flown from the award time: the leg
+    plus EXTEND_S of the simulated track after it) and, where the simulation flies on for longer
+    before the next award or the window end, an "idle" one uploaded at the leg end (its idle loiter /
+    station change), so the urgent award missions stay short."""
     by_uav: dict[str, list[dict]] = {}
     for e in awards:
         by_uav.setdefault(e["uav"], []).append(e)
     out = []
     for uav in sorted((u for u in world.uavs if u.id in by_uav), key=lambda u: u.sysid):
-        t, xy, _ = result.tracks[uav.index].history(t_stop + 2 * EXTEND_S)
+        t, xy, _ = result.tracks[uav.index].history(t_stop + 2 * PRE_AWARD_EXTEND_S)
         t0 = t_start - LEAD_IN_S
-
         piece = partial(_track_piece, uav, t, xy, t0, dt_s)
         mine = sorted(by_uav[uav.id], key=lambda e: e["t_s"])
         legs = [result.award_legs[(e["target"], uav.id)] for e in mine]
-        initial = piece(t_start, float(legs[0].t[0]))
+        initial = piece(t_start, float(legs[0].t[0]), extend_s=PRE_AWARD_EXTEND_S)
         h0 = np.arctan2(*(initial.path[1, :2] - initial.path[0, :2])[::-1])
         lead_in = initial.path[0, :2] - LEAD_IN_S * uav.speed_mps * np.array([np.cos(h0), np.sin(h0)])
         ts = np.r_[t0, initial.path_times_s + t0]
-        xys = np.vstack([lead_in, initial.path[:, :2]])
+        xys = np.vstack([lead_in, initial.path[:, :2]]) + np.asarray(offsets.get(uav.id, (0.0, 0.0)))
         initial = _piece_plan(uav, ts, xys, t0, dt_s, [])
-        uploads = []
+        flown, idles = [], []
         for k, (e, leg) in enumerate(zip(mine, legs)):
             end = float(legs[k + 1].t[0]) if k + 1 < len(mine) else t_stop
             leg_end = float(leg.t[-1])
-            forced = (
-                [e["time_s"] - j * APPROACH_DT_S for j in range(APPROACH_POINTS)]
-                if e["task"] == "strike"
-                else []
-            )
             short = end - leg_end <= EXTEND_S
-            uploads.append(
-                (
-                    e["t_s"],
-                    "award",
-                    e,
-                    piece(float(leg.t[0]), end if short else leg_end + EXTEND_S, forced, short),
-                )
-            )
+            flown.append(_Award(e, leg, end, short))
             if not short:
-                uploads.append((leg_end, "idle", e, piece(leg_end, end)))
-        out.append(_VehicleSchedule(uav, initial, uploads))
+                idles.append((leg_end, e, piece(leg_end, end, extend_s=PRE_AWARD_EXTEND_S)))
+        out.append(_VehicleSchedule(uav, initial, (t, xy), flown, idles))
     return out
+
+
+def _award_track(uav, sched: _VehicleSchedule, award: _Award, leg: Leg):
+    """Times and positions of an award mission after its leg: the simulated track from the
+    simulated leg's end (where the live leg also ends), shifted by a live leg's lateness."""
+    t, xy = sched.track
+    sim_end = float(award.sim_leg.t[-1])
+    late = max(0.0, float(leg.t[-1]) - sim_end)
+    stop = award.end_s if award.short else sim_end + EXTEND_S
+    if stop - sim_end < 1e-3:
+        return np.zeros(0), np.zeros((0, 2))
+    ts, xys = _slice(t, xy, sim_end, stop)
+    if award.short:
+        ext_t, ext_xy = _continue_turn(t, xy, stop, uav.speed_mps, uav.speed_mps / uav.r_min_m, EXTEND_S)
+        ts, xys = np.r_[ts, ext_t], np.vstack([xys, ext_xy])
+    return ts[1:] + late, xys[1:]
+
+
+def _award_mission(
+    sched, award: _Award, leg: Leg, prefix, t_route0: float, dt_s: float, prefix_wp_s
+) -> VehiclePlan:
+    """The award mission: [the predicted turn up to the leg start (prefix: times, xy), waypoints at
+    prefix_wp_s,] the leg, the track after it."""
+    uav, e = sched.uav, award.event
+    tail_t, tail_xy = _award_track(uav, sched, award, leg)
+    parts_t, parts_xy = [leg.t], [leg.xy]
+    forced = []
+    if prefix is not None:
+        pt, pxy = prefix
+        parts_t.insert(0, pt[:-1])
+        parts_xy.insert(0, pxy[:-1])
+        forced += list(prefix_wp_s)
+    goal_s = float(leg.info.get("arc_t0_s", leg.t[-1] if e["task"] == "strike" else e["time_s"]))
+    forced += [goal_s + j * APPROACH_DT_S for j in range(-APPROACH_POINTS + 1, 3)]
+    ts = np.r_[np.concatenate(parts_t), tail_t]
+    xys = np.vstack([*parts_xy, tail_xy])
+    return _piece_plan(uav, ts, xys, t_route0, dt_s, forced)
 
 
 def _mock_fleet(schedules, origin: Origin, speedup: float):
@@ -304,46 +532,71 @@ def _first_ahead(items, vp: VehiclePlan, route_now_s: float, margin_s: float) ->
     return seqs[int(ahead[0])] if len(ahead) else seqs[-1]
 
 
-def measure_strike(track_t: np.ndarray, track_xy: np.ndarray, award: dict, limits) -> StrikeRow:
-    """Closest approach of the flown track (scenario time, ENU) to the award's entry point."""
-    goal = np.asarray(award["entry_xy"], dtype=float)
-    sel = np.abs(track_t - award["time_s"]) <= MEASURE_WINDOW_S
-    t, p = track_t[sel], track_xy[sel]
+# ---- report
+def measure_task(track_t: np.ndarray, track_xy: np.ndarray, award: dict, limits, world=None) -> TaskRow:
+    """Closest approach of the flown track (scenario time, ENU) to the award's goal point: the strike
+    entry point (award["entry_xy"]) or, for an assessment (``world`` needed), the arc start; plus the
+    largest radial deviation over the assessment arc."""
     nan = float("nan")
-    awarded_heading = (award["angle_deg"] + 180.0) % 360.0
+    strike = award["task"] == "strike"
+    t_goal = float(award["time_s"])
+    if strike:
+        goal = np.asarray(award["entry_xy"], dtype=float)
+        awarded_heading = (award["angle_deg"] + 180.0) % 360.0
+    else:
+        p = world.params
+        target = next(t for t in world.targets if t.id == award["target"])
+        goal = paths.arc_start_pose(target.xy, math.radians(award["angle_deg"]), p.assess_radius_m)[0, :2]
+        awarded_heading = (award["angle_deg"] + 90.0) % 360.0
+    row = partial(TaskRow, award["uav"], award["sysid"], award["target"], award["task"], t_goal)
+    sel = np.abs(track_t - t_goal) <= MEASURE_WINDOW_S
+    t, pts = track_t[sel], track_xy[sel]
     if len(t) < 2:
-        return StrikeRow(award["uav"], award["sysid"], award["target"], award["time_s"], nan,
-                         awarded_heading, nan, nan, limits)  # fmt: skip
-    a, ab = p[:-1], np.diff(p, axis=0)
+        return row(nan, awarded_heading, nan, nan, limits)
+    a, ab = pts[:-1], np.diff(pts, axis=0)
     u = np.clip(((goal - a) * ab).sum(1) / np.maximum((ab**2).sum(1), 1e-12), 0.0, 1.0)
     d = np.linalg.norm(a + u[:, None] * ab - goal, axis=1)
     k = int(np.argmin(d))
     flown_s = float(t[k] + u[k] * (t[k + 1] - t[k]))
     heading = float(np.degrees(np.arctan2(ab[k, 1], ab[k, 0])) % 360.0)
-    return StrikeRow(award["uav"], award["sysid"], award["target"], award["time_s"], flown_s,
-                     awarded_heading, heading, float(d[k]), limits)  # fmt: skip
+    arc_dev = nan
+    if not strike:
+        on_arc = (track_t >= t_goal) & (track_t <= t_goal + target.assess_duration_s)
+        if on_arc.sum() >= 2:
+            r = np.hypot(*(track_xy[on_arc] - np.asarray(target.xy)).T)
+            arc_dev = float(np.abs(r - p.assess_radius_m).max())
+    return row(flown_s, awarded_heading, heading, float(d[k]), limits, arc_dev)
 
 
-def format_strike_report(rows: list[StrikeRow]) -> str:
-    head = "uav   sysid target awarded_s flown_s  dt_s   awarded_deg flown_deg dangle_deg miss_m  ok"
+def format_strike_report(rows: list[TaskRow]) -> str:
+    """The report table (strikes and assessments), then the worst errors per task kind."""
+    head = ("uav   sysid target task   awarded_s flown_s  dt_s   awarded_deg flown_deg dangle_deg miss_m "
+            "arc_dev_m start_diff_m start_dh_deg  ok")  # fmt: skip
     lines = [head]
     for r in rows:
         lines.append(
-            f"{r.uav:<5} {r.sysid:>5} {r.target:<6} {r.awarded_s:>9.2f} {r.flown_s:>7.2f} "
+            f"{r.uav:<5} {r.sysid:>5} {r.target:<6} {r.task:<6} {r.awarded_s:>9.2f} {r.flown_s:>7.2f} "
             f"{r.time_error_s:>+6.2f} {r.awarded_heading_deg:>11.1f} {r.flown_heading_deg:>9.1f} "
-            f"{r.angle_error_deg:>+10.1f} {r.miss_m:>6.1f}  {'yes' if r.passed else 'NO'}"
+            f"{r.angle_error_deg:>+10.1f} {r.miss_m:>6.1f} {r.arc_dev_m:>9.1f} {r.start_diff_m:>12.1f} "
+            f"{r.start_dheading_deg:>+12.1f}  {'yes' if r.passed else 'NO'}"
         )
-    if rows:
-        dt = np.array([abs(r.time_error_s) for r in rows])
-        da = np.array([abs(r.angle_error_deg) for r in rows])
-        lines.append(
-            f"max |dt| {np.nanmax(dt):.2f} s, max |dangle| {np.nanmax(da):.1f} deg over {len(rows)} strikes"
-        )
+    for task in ("strike", "assess"):
+        sel = [r for r in rows if r.task == task]
+        if sel:
+            dt = np.array([abs(r.time_error_s) for r in sel])
+            da = np.array([abs(r.angle_error_deg) for r in sel])
+            ok = sum(r.passed for r in sel)
+            lines.append(
+                f"{task}: {ok}/{len(sel)} within bounds, max |dt| {np.nanmax(dt):.2f} s, "
+                f"max |dangle| {np.nanmax(da):.1f} deg"
+            )
     return "\n".join(lines)
 
 
+# ---- the run
 async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResult:
-    """Simulate, fly the awarded vehicles on mock autopilots, replay the awards as live uploads."""
+    """Simulate, fly the awarded vehicles on mock autopilots, upload each award as a leg planned from
+    the vehicle's live state (or, with ``replay_legs``, the simulation's leg)."""
     t_wall = time.monotonic()
     world = load_world(scenario)
     seed = options.seed if options.seed is not None else int(scenario.planner.get("seed", 0))
@@ -351,14 +604,26 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
     awards = [
         e for e in result.events
         if e["event"] == "award" and (options.targets is None or e["target"] in options.targets)
+        and (options.uavs is None or e["uav"] in options.uavs)
+        and (e["target"], e["uav"]) in result.award_legs
     ]  # fmt: skip
     strikes = [e for e in awards if e["task"] == "strike"]
     if not strikes:
-        raise UserError(f"no strike awards for targets {options.targets} in the simulation (seed {seed})")
+        raise UserError(
+            f"no strike awards for targets {options.targets} and UAVs {options.uavs} "
+            f"in the simulation (seed {seed})"
+        )
     t_start = max(0.0, min(e["t_s"] for e in awards) - options.lead_s)
-    t_stop = max(e["time_s"] for e in strikes) + options.tail_s
+    ends = [
+        e["time_s"] if e["task"] == "strike" else result.award_legs[(e["target"], e["uav"])].t[-1]
+        for e in awards
+    ]
+    t_stop = float(max(ends)) + options.tail_s
     awards = [e for e in awards if e["t_s"] <= t_stop]
-    schedules = _schedules(world, result, awards, t_start, t_stop, options.waypoint_dt_s)
+    unknown = set(options.offset_m) - {e["uav"] for e in awards}
+    if unknown:
+        raise UserError(f"offset_m names UAVs without an award in the run: {sorted(unknown)}")
+    schedules = _schedules(world, result, awards, t_start, t_stop, options.waypoint_dt_s, options.offset_m)
     t_route0 = t_start - LEAD_IN_S  # scenario time of route time 0 (the lead-in start)
     flying = {s.uav.sysid for s in schedules}
     targets = {e["target"] for e in awards}
@@ -374,19 +639,27 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
     scenario_text = scenario.path.read_text() if scenario.path else None
     uploads: list[dict] = []
     failures: list[str] = []
+    flown_legs: dict[tuple[str, str], Leg] = {}
     fleet = _mock_fleet(schedules, scenario.origin, options.speedup)
     recorder = _TrackRecorder(scenario.origin, True, {s: len(m) - 1 for s, m in missions.items()})
+    telemetry = _Telemetry(flying)
     with fleet:
         link = await MavlinkLink.open(*[f"udpout:{h}:{p}" for h, p in fleet.addresses])
         try:
             with FlightLogger(mcap_path, scenario.origin, initial, scenario_text) as logger:
                 link.subscribe(logger.on_frame)
                 link.subscribe(recorder.on_frame)
+                link.subscribe(telemetry.on_frame)
                 await _wait_for_vehicles(link, sorted(flying), HEARTBEAT_WAIT_S)
+                t_up = time.monotonic()
                 first = await upload_fleet(link, missions, workers=8)
                 bad = [s for s, r in first.items() if not r.ok]
                 if bad:
                     raise UserError(f"initial mission upload failed for sysid {bad}")
+                # seed of the upload estimate: wall time per item at this concurrency
+                n_items = sum(len(m) for m in missions.values())
+                timing = {"item_wall_s": (time.monotonic() - t_up) * min(8, len(missions)) / n_items,
+                          "plan_wall_s": 0.0, "items": 20}  # fmt: skip
                 await _take_off_all(link, initial, recorder, options.speedup, fly_options)
                 lead_s = 2.0
                 route_t0 = recorder.now_s() + lead_s
@@ -397,72 +670,173 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                 current = {vp.sysid: vp for vp in initial.vehicles}
                 for vp in initial.vehicles:
                     keeper.add(vp)
-                queue = sorted(replay, key=lambda e: e["t_s"])
-                pending = sorted(
-                    (u for s in schedules for u in s.uploads if u[0] <= t_stop), key=lambda u: u[0]
-                )
-                tasks = []
 
-                async def upload(kind: str, e: dict, vp: VehiclePlan) -> None:
-                    entry = {
-                        "kind": kind,
-                        "uav": e["uav"],
-                        "sysid": vp.sysid,
-                        "target": e["target"],
-                        "task": e["task"],
-                        "award_t_s": e["t_s"],
-                        "upload_start_s": _scenario_now(),
-                        "ok": False,
+                def scenario_now() -> float:
+                    return recorder.now_s() - route_t0 + t_route0
+
+                def upload_estimate_s(items: int) -> float:
+                    wall = timing["plan_wall_s"] + timing["item_wall_s"] * items
+                    return options.speedup * wall * UPLOAD_SAFETY
+
+                def vehicle_state(uav) -> LiveState:
+                    rows = telemetry.rows[uav.sysid]
+                    state = live_state(rows, scenario.origin, 1.05 * uav.speed_mps / uav.r_min_m)
+                    return replace(state, t_s=state.t_s - route_t0 + t_route0)
+
+                def slack_s(uav, e: dict, now: float) -> float:
+                    """Time to spare [s] on the shortest path (threats ignored) from the vehicle's
+                    newest pose to the award's goal at cruise: the uploads' order of urgency."""
+                    q = vehicle_state(uav).predict([now])
+                    length = paths.shortest_lengths(q, _goal_pose(world, e)[None], uav.r_min_m)[0]
+                    return float(e["time_s"] - now - length / uav.speed_mps)
+
+                def live_leg(sched: _VehicleSchedule, award: _Award) -> tuple[Leg, VehiclePlan, dict]:
+                    """Plan the award's leg from the vehicle's newest reports (see module docstring)."""
+                    uav, e = sched.uav, award.event
+                    t_plan = time.monotonic()
+                    state = vehicle_state(uav)
+                    items = timing["items"]
+                    for _ in range(2):  # once more when the mission has more items than guessed
+                        now = scenario_now()
+                        t0 = now + upload_estimate_s(items) + START_AHEAD_S
+                        q0 = state.predict([t0])[0]
+                        leg = plan_live_leg(world, e, q0, t0, LEG_SPEED_FACTOR)
+                        pre_t = np.unique(np.r_[np.arange(state.t_s, t0, KEEPER_SAMPLE_S), t0])
+                        prefix = (pre_t, state.predict(pre_t)[:, :2])
+                        vp = _award_mission(sched, award, leg, prefix, t_route0, options.waypoint_dt_s,
+                                            np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
+                        n = len(vp.waypoints) + 4
+                        if upload_estimate_s(n) <= upload_estimate_s(items) + 0.5:
+                            break
+                        items = n
+                    timing["plan_wall_s"] = 0.5 * timing["plan_wall_s"] + 0.5 * (time.monotonic() - t_plan)
+                    info = {
+                        "t0_s": round(t0, 3),
+                        "estimate_s": round(t0 - now - START_AHEAD_S, 3),
+                        "live_pose": [round(float(v), 2) for v in q0],
+                        "state_age_s": round(now - state.t_s, 3),
+                        "turn_rate_dps": round(math.degrees(state.rate_rps), 2),
+                        "leg_late_s": round(leg.info["late_s"], 3),
+                        "clear": leg.info["clear"],
                     }
+                    return leg, vp, info
+
+                async def upload(kind: str, sched: _VehicleSchedule, payload) -> None:
+                    e = payload.event if kind == "award" else payload[1]
+                    sysid = sched.uav.sysid
+                    entry = {"kind": kind, "uav": e["uav"], "sysid": sysid, "target": e["target"],
+                             "task": e["task"], "award_t_s": e["t_s"], "ok": False}  # fmt: skip
                     try:
+                        if kind == "idle":
+                            vp = payload[2]
+                        elif options.replay_legs:
+                            leg = payload.sim_leg
+                            vp = _award_mission(
+                                sched, payload, leg, None, t_route0, options.waypoint_dt_s, []
+                            )
+                            entry["t0_s"] = round(float(leg.t[0]), 3)
+                        else:
+                            leg, vp, info = live_leg(sched, payload)
+                            entry.update(info)
                         items = plan_to_items(vp, scenario.origin, options.autopilot)
-                        await MissionClient(link, vp.sysid).upload(items)
-                        seq = _first_ahead(items, vp, _scenario_now() - t_route0, START_AHEAD_S)
-                        await CommandClient(link, vp.sysid).mission_start(seq, len(items) - 1)
-                        current[vp.sysid] = vp
+                        entry["upload_start_s"] = scenario_now()
+                        t_up = time.monotonic()
+                        await MissionClient(link, sysid).upload(items)
+                        per_item = (time.monotonic() - t_up) / len(items)
+                        timing["item_wall_s"] = 0.5 * timing["item_wall_s"] + 0.5 * per_item
+                        if kind == "award":
+                            timing["items"] = len(items)
+                        seq = _first_ahead(items, vp, scenario_now() - t_route0, START_AHEAD_S)
+                        await CommandClient(link, sysid).mission_start(seq, len(items) - 1)
+                        current[sysid] = vp
                         keeper.add(vp)
+                        if kind == "award":
+                            flown_legs[(e["target"], e["uav"])] = leg
                         entry.update(ok=True, start_seq=seq, items=len(items))
                     except MavlinkError as exc:
                         entry["error"] = str(exc)
                         failures.append(f"{e['uav']}: {kind} upload failed: {exc}")
-                    entry["upload_end_s"] = _scenario_now()
+                    entry["upload_end_s"] = scenario_now()
+                    if "t0_s" in entry:
+                        entry["landed_before_leg_s"] = round(entry["t0_s"] - entry["upload_end_s"], 3)
                     uploads.append(entry)
                     logger.log_event({"event": "upload", **entry})
 
-                def _scenario_now() -> float:
-                    return recorder.now_s() - route_t0 + t_route0
+                queue: asyncio.PriorityQueue = asyncio.PriorityQueue()
+                order = itertools.count()
 
+                async def worker() -> None:
+                    while True:
+                        *_, kind, sched, payload = await queue.get()
+                        try:
+                            await upload(kind, sched, payload)
+                        finally:
+                            queue.task_done()
+
+                workers = [asyncio.create_task(worker()) for _ in range(UPLOAD_WORKERS)]
+                due = [
+                    (a.event["t_s"], (a.event["task"] != "strike", a.event["time_s"]), "award", s, a)
+                    for s in schedules
+                    for a in s.awards
+                ]
+                due += [
+                    (idle[0], (2, idle[0]), "idle", s, idle)
+                    for s in schedules
+                    for idle in s.idles
+                    if idle[0] <= t_stop
+                ]
+                due.sort(key=lambda d: (d[0], d[1]))
+                events = sorted(replay, key=lambda e: e["t_s"])
                 route_end = t_stop - t_route0
                 deadline = time.monotonic() + (route_end + 10.0) * 2.0 / options.speedup + 10.0
-                while _scenario_now() - t_route0 < route_end and time.monotonic() < deadline:
-                    now = _scenario_now()
-                    while queue and queue[0]["t_s"] <= now:
-                        e = queue.pop(0)
-                        logger.log_event({**e, "source": "coalition_simulation"})
-                    while pending and pending[0][0] <= now:
-                        _, kind, e, vp = pending.pop(0)
-                        tasks.append(asyncio.create_task(upload(kind, e, vp)))
+                while scenario_now() - t_route0 < route_end and time.monotonic() < deadline:
+                    now = scenario_now()
+                    while events and events[0]["t_s"] <= now:
+                        logger.log_event({**events.pop(0), "source": "coalition_simulation"})
+                    while due and due[0][0] <= now:
+                        _, rank, kind, sched, payload = due.pop(0)
+                        if kind == "award" and not options.replay_legs:
+                            rank = (False, slack_s(sched.uav, payload.event, now))
+                        queue.put_nowait((rank, next(order), kind, sched, payload))
                     if options.keep_schedule:
                         _keep(link, recorder, keeper, current, route_t0)
                     await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
-                await asyncio.gather(*tasks)
+                try:
+                    await asyncio.wait_for(queue.join(), 10.0)
+                finally:
+                    for w in workers:
+                        w.cancel()
+                    await asyncio.gather(*workers, return_exceptions=True)
                 if time.monotonic() >= deadline:
                     failures.append("the run did not reach the window end in time")
         finally:
             await link.close()
         lag = int(getattr(fleet, "lag_events", 0))
     tracks = recorder.tracks()
-    rows = []
     flown = {s: (tr.times_s - route_t0 + t_route0, tr.positions) for s, tr in tracks.items()}
-    for e in sorted(strikes, key=lambda e: (e["time_s"], e["sysid"])):
-        tr = tracks.get(e["sysid"])
-        if tr is None:
+    sim_tracks = {s.uav.id: s.track for s in schedules}
+    limits = (options.max_time_error_s, options.max_angle_error_deg)
+    rows = []
+    for e in sorted(awards, key=lambda e: (e["task"] != "strike", e["time_s"], e["sysid"])):
+        if e["sysid"] not in flown:
             failures.append(f"{e['uav']}: no telemetry")
             continue
+        leg = flown_legs.get((e["target"], e["uav"]))
+        if leg is None:
+            failures.append(f"{e['uav']}: its {e['target']} {e['task']} award was not uploaded")
+            continue
         t, positions = flown[e["sysid"]]
-        rows.append(
-            measure_strike(t, positions[:, :2], e, (options.max_time_error_s, options.max_angle_error_deg))
-        )
+        row = measure_task(t, positions[:, :2], e, limits, world)
+        t0 = float(leg.t[0])
+        sim_pose, flown_pose = _pose_at(*sim_tracks[e["uav"]], t0), _pose_at(t, positions[:, :2], t0)
+        row.start_diff_m = float(np.hypot(*(flown_pose[:2] - sim_pose[:2])))
+        row.start_dheading_deg = float((math.degrees(flown_pose[2] - sim_pose[2]) + 180.0) % 360.0 - 180.0)
+        rows.append(row)
+    for u in uploads:  # how far the live prediction of the leg start was from the flown pose
+        if "live_pose" in u and u["sysid"] in flown:
+            t, positions = flown[u["sysid"]]
+            miss = _pose_at(t, positions[:, :2], u["t0_s"])[:2] - np.asarray(u["live_pose"][:2])
+            u["prediction_error_m"] = round(float(np.hypot(*miss)), 2)
     return HilResult(rows, uploads, mcap_path, t_start, time.monotonic() - t_wall, lag, failures, flown)
 
 

@@ -1,54 +1,130 @@
-"""Coalition HIL: awards uploaded over real UDP to flying mock fixed wings; strike time and angle."""
+"""Coalition HIL: awards flown on legs planned from live telemetry, uploaded over real UDP to flying mock
+fixed wings; strike and assessment arrival time and angle against the award."""
 
 import asyncio
+import math
 from pathlib import Path
 
 import numpy as np
 
-from gcs_planner.coalition_hil import HilOptions, measure_strike, run_coalition_hil
+from gcs_planner.coalition_hil import HilOptions, live_state, measure_task, plan_live_leg, run_coalition_hil
+from gcs_planner.geo import enu_to_geodetic
+from gcs_planner.planning.coalition import load_world
 from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
 
 
-def test_measure_strike_interpolates_closest_approach_and_heading():
+def test_measure_task_interpolates_closest_approach_and_heading():
     t = np.arange(0.0, 20.0, 0.5)
     heading = np.radians(200.0)
     xy = np.column_stack([np.cos(heading), np.sin(heading)]) * (50.0 * (t - 10.3))[:, None]
-    award = {"uav": "U1", "sysid": 1, "target": "T1", "time_s": 10.0, "angle_deg": 20.0, "entry_xy": [0, 0]}
-    row = measure_strike(t, xy + [0.0, 3.0], award, (1.0, 10.0))
+    award = {"uav": "U1", "sysid": 1, "target": "T1", "task": "strike", "time_s": 10.0, "angle_deg": 20.0,
+             "entry_xy": [0, 0]}  # fmt: skip
+    row = measure_task(t, xy + [0.0, 3.0], award, (1.0, 10.0))
     assert abs(row.flown_s - 10.3) < 0.1 and abs(row.time_error_s - 0.3) < 0.1
     assert abs(row.angle_error_deg) < 1e-6 and row.passed
-    late = measure_strike(t + 1.5, xy, award, (1.0, 10.0))
+    late = measure_task(t + 1.5, xy, award, (1.0, 10.0))
     assert not late.passed and abs(late.time_error_s - 1.8) < 1e-6
 
 
-def test_t1_awards_are_uploaded_in_flight_and_strikes_arrive_on_time_and_angle(tmp_path):
+def test_measure_task_checks_the_assessment_arc_start_and_radius():
+    world = load_world(load_scenario(SCENARIO))
+    target = next(tg for tg in world.targets if tg.id == "T1")
+    radius, speed = world.params.assess_radius_m, 40.0
+    t = np.arange(80.0, 130.0, 0.5)
+    bearing = math.radians(90.0) + speed * (t - 100.0) / radius  # CCW, at bearing 90 deg at t = 100 s
+    award = {"uav": "U2", "sysid": 2, "target": "T1", "task": "assess", "time_s": 100.0, "angle_deg": 90.0}
+    for wobble_m, ok in ((5.0, True), (80.0, False)):
+        r = radius + wobble_m * np.sin(t)
+        xy = np.asarray(target.xy) + np.column_stack([np.cos(bearing), np.sin(bearing)]) * r[:, None]
+        row = measure_task(t, xy, award, (1.0, 10.0), world)
+        assert wobble_m - 1.0 <= row.arc_dev_m <= wobble_m + 1.0 and row.passed is ok, row
+    assert abs(row.time_error_s) < 0.5  # the arc start is still found (a wide wobble shifts it a little)
+
+
+def test_live_state_fits_the_turn_and_predicts_the_pose_ahead():
+    world = load_world(load_scenario(SCENARIO))
+    origin = load_scenario(SCENARIO).origin
+    speed, radius = 40.0, 300.0
+    t = np.arange(0.0, 3.0, 0.1)
+    th = speed * t / radius  # CCW circle about (1000, 2000), heading = th + 90 deg
+    x, y = 1000.0 + radius * np.cos(th), 2000.0 + radius * np.sin(th)
+    lat, lon, _ = enu_to_geodetic(x, y, 0.0, origin)
+    rows = list(zip(t, lat, lon, -speed * np.sin(th), speed * np.cos(th)))
+    state = live_state(rows, origin, max_rate_rps=1.0)
+    assert abs(state.rate_rps - speed / radius) < 1e-3 and abs(state.speed_mps - speed) < 0.05
+    ahead = state.predict([t[-1] + 5.0])[0]
+    th5 = speed * (t[-1] + 5.0) / radius
+    assert np.hypot(ahead[0] - 1000.0 - radius * np.cos(th5), ahead[1] - 2000.0 - radius * np.sin(th5)) < 1.0
+    # a leg from there reaches the award's stand-off entry pose at the awarded time and angle; from
+    # too far away it is planned faster (up to the factor given) and still arrives on time
+    award = {"uav": "U8", "target": "T1", "task": "strike", "t_s": 60.0, "time_s": 100.0, "angle_deg": 15.0}
+    target = np.asarray(next(tg for tg in world.targets if tg.id == "T1").xy)
+    entry = target + world.params.standoff_m * np.array(
+        [math.cos(math.radians(15.0)), math.sin(math.radians(15.0))]
+    )
+    for q0, factor, fast in (
+        ((target[0] - 1500.0, target[1], ahead[2]), 1.0, False),
+        ((target[0] - 4300.0, target[1], math.pi), 1.2, True),
+    ):
+        leg = plan_live_leg(world, award, np.asarray(q0), 10.0, factor)
+        assert abs(leg.t[0] - 10.0) < 1e-9 and abs(leg.t[-1] - 100.0) < 1e-6 and leg.info["clear"], leg.info
+        assert (
+            np.hypot(*(leg.xy[-1] - entry)) < 1.0 and abs(math.degrees(leg.heading[-1]) % 360 - 195.0) < 0.5
+        )
+        assert (leg.info["speed_mps"] > 50.0) is fast and np.allclose(leg.xy[0], q0[:2])
+
+
+def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_path):
     scenario = load_scenario(SCENARIO)
     result = asyncio.run(
         run_coalition_hil(scenario, HilOptions(out_dir=tmp_path, speedup=10.0, targets=("T1",)))
     )
     assert not result.failures, result.failures
     # the 8 strikes of T1's simultaneous attack, each within 1 s and 10 deg of its award
-    assert len(result.rows) == 8 and len({r.awarded_s for r in result.rows}) == 1
-    for r in result.rows:
+    assert len(result.strikes) == 8 and len({r.awarded_s for r in result.strikes}) == 1
+    for r in result.strikes:
         assert abs(r.time_error_s) <= 1.0 and abs(r.angle_error_deg) <= 10.0, r
         assert r.miss_m < 15.0, r
+    # the 2 assessors reach their arc start on time, tangent, and fly the arc
+    assess = [r for r in result.rows if r.task == "assess"]
+    assert len(assess) == 2 and all(r.passed and r.arc_dev_m < 50.0 for r in assess), assess
     assert result.passed
-    # every award (8 strikes + 2 assessments) became a mission uploaded while flying, after its award
-    # time and before the strike
-    assert len(result.uploads) == 10 and all(u["ok"] for u in result.uploads)
-    strike_s = result.rows[0].awarded_s
-    for u in result.uploads:
-        assert u["award_t_s"] <= u["upload_start_s"] < u["upload_end_s"] < strike_s - 10.0, u
+    # every award became a mission planned from telemetry and uploaded while flying, after its award
+    # time, landing before its leg starts
+    awards = [u for u in result.uploads if u["kind"] == "award"]
+    assert len(awards) == 10 and all(u["ok"] for u in result.uploads)
+    strike_s = result.strikes[0].awarded_s
+    for u in awards:
+        assert u["award_t_s"] <= u["upload_start_s"] < u["upload_end_s"] < u["t0_s"] < strike_s - 10.0, u
+        assert u["prediction_error_m"] < 25.0, u
         t, p = result.tracks[u["sysid"]]
         k = np.searchsorted(t, u["upload_end_s"])
         assert p[k, 2] > 250.0  # airborne at the upload (cruise altitudes 300-500 m)
     flight = read_flight(result.mcap_path)
     kinds = [e.get("event") for _, e in flight.events]
     assert {"tender", "bid", "award", "upload", "route_start"} <= set(kinds)
-    assert kinds.count("award") == 10 and kinds.count("upload") == 10
+    assert kinds.count("award") == 10 and kinds.count("upload") == len(result.uploads)
+
+
+def test_a_vehicle_away_from_its_simulated_state_still_strikes_because_its_leg_is_planned_live(tmp_path):
+    """U13 flies its pre-award loiter 424 m from the simulated one: the simulation's own leg (replay)
+    misses by far, the leg planned from its telemetry hits on time and angle."""
+    scenario = load_scenario(SCENARIO)
+    runs = {}
+    for replay in (False, True):
+        options = HilOptions(out_dir=tmp_path / str(replay), speedup=20.0, targets=("T1",), uavs=("U13",),
+                             offset_m={"U13": (300.0, -300.0)}, replay_legs=replay)  # fmt: skip
+        runs[replay] = asyncio.run(run_coalition_hil(scenario, options))
+    live, replayed = runs[False], runs[True]
+    assert not live.failures and not replayed.failures, (live.failures, replayed.failures)
+    (row,) = live.strikes
+    assert row.start_diff_m > 350.0, row  # the live start pose is far from the simulated one
+    assert row.passed and row.miss_m < 15.0, row
+    (bad,) = replayed.strikes
+    assert not bad.passed, bad
 
 
 def test_fly_coalition_command_refuses_a_scenario_without_the_coalition_planner(capsys):
