@@ -38,8 +38,8 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
         required=True,
         action="append",
         metavar="URL",
-        help="MAVLink endpoint, e.g. udpout:127.0.0.1:14550 (to a vehicle) or udpin:0.0.0.0:14550 (listen);"
-        " repeat for vehicles on several ports",
+        help="MAVLink endpoint, e.g. udpout:127.0.0.1:14550 (to a vehicle), udpin:0.0.0.0:14550 (listen)"
+        " or serial:/dev/ttyUSB0:57600 (radio / USB); repeat for vehicles on several UDP ports",
     )
     if fleet:
         p.add_argument(

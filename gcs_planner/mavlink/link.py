@@ -3,6 +3,8 @@
 ``await MavlinkLink.open("udpout:127.0.0.1:14550")`` talks to a vehicle that listens (ArduPilot SITL
 ``udpin``, our sitl-mock); several ``udpout`` URLs share one socket, so one link reaches a whole mock
 fleet (one port per vehicle). ``udpin:0.0.0.0:14550`` listens and answers every peer heard from.
+``serial:/dev/ttyUSB0:57600`` (baud optional, default 57600) opens a telemetry radio or an
+autopilot's USB port instead (serial_port.py); everything above the transport is the same.
 
 Choices:
 - One pymavlink parser per remote address, so interleaved datagrams of different vehicles never
@@ -36,6 +38,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
+from gcs_planner.mavlink.serial_port import DEFAULT_BAUD, SerialPort  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = ["DUPLICATE_WINDOW_S", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo", "parse_url"]
@@ -73,7 +76,15 @@ class VehicleInfo:
 
 
 def parse_url(url: str) -> tuple[str, Address]:
-    """'udpout:host:port' / 'udpin:host:port' (also 'udp:' = udpin) -> (kind, (host, port))."""
+    """'udpout:host:port' / 'udpin:host:port' (also 'udp:' = udpin) -> (kind, (host, port));
+    'serial:PATH[:BAUD]' -> ('serial', (PATH, BAUD))."""
+    if url.startswith("serial:"):
+        rest = url.removeprefix("serial:")
+        head, sep, tail = rest.rpartition(":")  # by-path device names contain colons
+        path, baud = (head, int(tail)) if sep and tail.isdigit() else (rest, DEFAULT_BAUD)
+        if not path:
+            raise ValueError(f"connection URL {url!r}: expected serial:PATH or serial:PATH:BAUD")
+        return "serial", (path, baud)
     try:
         kind, host, port_text = url.split(":")
         port = int(port_text)
@@ -81,7 +92,7 @@ def parse_url(url: str) -> tuple[str, Address]:
         raise ValueError(f"connection URL {url!r}: expected udpin:HOST:PORT or udpout:HOST:PORT") from None
     kind = {"udp": "udpin"}.get(kind, kind)
     if kind not in ("udpin", "udpout"):
-        raise ValueError(f"connection URL {url!r}: scheme {kind!r} not supported (udpin, udpout)")
+        raise ValueError(f"connection URL {url!r}: scheme {kind!r} not supported (udpin, udpout, serial)")
     if not 0 <= port <= 65535:
         raise ValueError(f"connection URL {url!r}: port {port} out of range")
     return kind, (host, port)
@@ -109,7 +120,7 @@ class MavlinkLink:
         self._peers: dict[Address, None] = {}  # ordered set of addresses we send broadcasts to
         self._subscribers: list[Callback] = []
         self.vehicles: dict[int, VehicleInfo] = {}
-        self._transport: asyncio.DatagramTransport | None = None
+        self._transport: asyncio.DatagramTransport | SerialPort | None = None
         self._heartbeat_task: asyncio.Task | None = None
         self.frames_received = 0
         self.frames_sent = 0
@@ -123,8 +134,13 @@ class MavlinkLink:
         compid: int = GCS_COMPID,
         heartbeat_period_s: float = HEARTBEAT_PERIOD_S,
     ) -> MavlinkLink:
-        """Bind one UDP socket: at most one udpin URL (the bind address), any number of udpout remotes."""
+        """Bind one UDP socket: at most one udpin URL (the bind address), any number of udpout remotes;
+        or open one serial port (a serial URL stands alone)."""
         parsed = [parse_url(u) for u in (url, *more_urls)]
+        if any(kind == "serial" for kind, _ in parsed):
+            if len(parsed) > 1:
+                raise ValueError("a serial URL cannot share a link with other URLs")
+            return await cls._open_serial(parsed[0][1], sysid, compid, heartbeat_period_s)
         binds = [addr for kind, addr in parsed if kind == "udpin"]
         if len(binds) > 1:
             raise ValueError(f"only one udpin URL per link, got {len(binds)}")
@@ -135,9 +151,22 @@ class MavlinkLink:
         link._transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(link), local_addr=local)
         for remote in remotes:
             link._peers[(_resolve(remote[0]), remote[1])] = None
-        if heartbeat_period_s > 0:
-            link._heartbeat_task = asyncio.create_task(link._heartbeat_loop(heartbeat_period_s))
+        link._start_heartbeat(heartbeat_period_s)
         return link
+
+    @classmethod
+    async def _open_serial(
+        cls, address: Address, sysid: int, compid: int, heartbeat_period_s: float
+    ) -> MavlinkLink:
+        link = cls(sysid, compid)
+        link._transport = SerialPort.open(address[0], address[1], link._on_datagram)
+        link._peers[address] = None
+        link._start_heartbeat(heartbeat_period_s)
+        return link
+
+    def _start_heartbeat(self, period_s: float) -> None:
+        if period_s > 0:
+            self._heartbeat_task = asyncio.create_task(self._heartbeat_loop(period_s))
 
     @property
     def local_address(self) -> Address:
