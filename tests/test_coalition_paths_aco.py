@@ -268,3 +268,55 @@ def test_timed_routes_of_a_formation_equal_route_by_route_results():
     for (segs, ok), want in zip(batch, wants):
         if ok:
             assert sum(p.length for p in segs) == pytest.approx(want, abs=1e-2)
+
+
+def test_formation_paths_memo_equals_a_fresh_computation():
+    """The leader's attempts share routes and timed paths by (candidate, task, length): whatever the
+    memo returns must be what a fresh computation gives, and a new length must not hit the memo."""
+    threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0)]
+    poses = np.array(
+        [
+            (1198.4071, 1341.8888, 5.474),
+            (1248.8447, 1335.594, 5.3916),
+            (1352.5437, 1529.6002, 4.4161),
+            (1389.1, 1251.0, 5.5),
+            (300.0, 2200.0, -0.4),
+        ]
+    )
+    goals = paths.entry_poses((1000.0, 500.0), np.radians([90.0, 60.0, 120.0]), 200.0)
+    r = np.array([200.0, 150.0, 200.0, 200.0, 150.0])
+
+    def fresh_routes(assign):
+        return paths.FormationPaths(poses, goals, r, threats, 1.3, 10.0).routes(assign)
+
+    def fresh(assign, want):
+        return paths.FormationPaths(poses, goals, r, threats, 1.3, 10.0).timed(assign, want)
+
+    plans = paths.FormationPaths(poses, goals, r, threats, 1.3, 10.0)
+    calls = [
+        (np.array([0, 3, 2]), np.array([1772.84, 1778.0, 1792.28])),
+        (np.array([0, 1, 4]), np.array([1772.84, 1700.0, 2300.0])),  # task 0: same pair and length
+        (np.array([0, 3, 2]), np.array([1772.84, 1778.0, 1792.28])),  # all memoised
+        (np.array([0, 3, 2]), np.array([1812.84, 1200.0, 1850.0])),  # new lengths: re-planned
+        (np.array([3, 0, 1]), np.array([1500.0, 1600.0, 1700.0])),  # new pairs
+    ]
+    first = None
+    for i, (assign, want) in enumerate(calls):
+        # as the leader asks: never shorter than the route (max of the route and the timed length)
+        want = np.maximum(want, [rt.length_m for rt in fresh_routes(assign)])
+        calls[i] = (assign, want)
+        got = plans.timed(assign, want)
+        assert got == fresh(assign, want)
+        memo_routes = plans.routes(assign)
+        new_routes = fresh_routes(assign)
+        for a, b in zip(memo_routes, new_routes):
+            assert (a.r_m, a.length_m, a.clear) == (b.r_m, b.length_m, b.clear)
+            assert np.array_equal(np.array(a.poses), np.array(b.poses))
+        for segs, ok, w in zip(*got, want):
+            if ok:
+                assert sum(p.length for p in segs) == pytest.approx(w, abs=1e-2)
+                assert paths.chains_clear([segs], threats, 10.0)[0]
+        first = first or got
+    again = plans.timed(*calls[0])
+    assert all(a is b for a, b in zip(again[0], first[0]))  # served from the memo, not re-planned
+    assert any(not ok for ok in first[1]) and any(ok for ok in first[1])

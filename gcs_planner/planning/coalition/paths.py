@@ -49,6 +49,7 @@ from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.planning.coalition.track import Leg
 
 __all__ = [
+    "FormationPaths",
     "arc_leg",
     "arc_start_pose",
     "chains_clear",
@@ -170,12 +171,18 @@ def _stretch_search(q0, q1, length_m, r_m, ks) -> tuple[list[DubinsPath | None],
             continue
         loop_len = TWO_PI * r_m[i] * ks
         n0 = max(0, int((length_m[i] - table[i].max(initial=0, where=np.isfinite(table[i]))) // loop_len[-1]))
-        for loops in range(n0, n0 + 200):
-            f = table[i] + loops * loop_len[:, None] - length_m[i]
+        # the smallest loop count in n0 .. n0 + 199 with a sign change: the first one alone, then
+        # the others in one (loops, k, word) pass (the same values as one count at a time)
+        for counts in (np.arange(n0, n0 + 1), np.arange(n0 + 1, n0 + 200)):
+            f = table[i] + counts[:, None, None] * loop_len[:, None] - length_m[i]
             with np.errstate(invalid="ignore"):
-                cross = np.isfinite(f[:-1]) & np.isfinite(f[1:]) & (np.sign(f[:-1]) != np.sign(f[1:]))
-            if cross.any():
-                cands += [(i, w, ks[ki], ks[ki + 1], loops) for ki, w in np.argwhere(cross)]
+                cross = (
+                    np.isfinite(f[:, :-1]) & np.isfinite(f[:, 1:]) & (np.sign(f[:, :-1]) != np.sign(f[:, 1:]))
+                )
+            hit = np.flatnonzero(cross.any((1, 2)))
+            if len(hit):
+                loops = int(counts[hit[0]])
+                cands += [(i, w, ks[ki], ks[ki + 1], loops) for ki, w in np.argwhere(cross[hit[0]])]
                 break
     if cands:
         c = np.array(cands, dtype=float)
@@ -362,6 +369,76 @@ def min_routes(
         else min_route(q0[i], q1[i], float(r_m[i]), threats, kappa, ds_m)
         for i in range(len(q0))
     ]
+
+
+class FormationPaths:
+    """One formation's threat-avoiding routes and timed paths, memoised over the leader's attempts.
+
+    poses (n, 3): candidates' start poses at t_e^s; goals (K, 3): task entry poses; r_m (n,) turn
+    radii. Within one formation these and the known threats are fixed, so a route depends only on
+    (candidate, task) and a timed path only on (candidate, task, required length): after a member is
+    excluded, the next attempt plans only the (candidate, task, length) triples it has not seen.
+    Every step is computed row by row inside its batch (``min_routes``, ``stretch_batch``,
+    ``chains_clear``, ``timed_routes``), so a memoised path equals a fresh computation exactly.
+    """
+
+    def __init__(
+        self,
+        poses: np.ndarray,
+        goals: np.ndarray,
+        r_m: np.ndarray,
+        threats: list[Threat],
+        kappa: float,
+        ds_m: float,
+    ) -> None:
+        self.poses, self.goals, self.r_m = poses, goals, r_m
+        self.threats, self.kappa, self.ds_m = threats, kappa, ds_m
+        self._routes: dict[tuple[int, int], Route] = {}
+        self._timed: dict[tuple[int, int, float], tuple[list[DubinsPath], bool]] = {}
+
+    def routes(self, assign: np.ndarray) -> list[Route]:
+        """Minimum threat-avoiding route of candidate assign[k] to task k, for every task k."""
+        keys = [(int(i), k) for k, i in enumerate(assign)]
+        new = [k for k, key in enumerate(keys) if key not in self._routes]
+        if new:
+            a = np.asarray(assign)[new]
+            found = min_routes(self.poses[a], self.goals[new], self.r_m[a], self.threats, self.kappa)
+            for k, route in zip(new, found):
+                self._routes[keys[k]] = route
+        return [self._routes[key] for key in keys]
+
+    def timed(self, assign: np.ndarray, want_m: np.ndarray) -> tuple[list[list[DubinsPath]], list[bool]]:
+        """Segments of length want_m[k] from candidate assign[k] to task k, and whether they clear.
+
+        A direct clear route is radius-stretched (all such members in one batch); the others, and
+        stretched paths that cross a threat, go through ``timed_routes``'s fallbacks."""
+        assign = np.asarray(assign)
+        routes = self.routes(assign)
+        keys = [(int(i), k, float(want_m[k])) for k, i in enumerate(assign)]
+        todo = [k for k, key in enumerate(keys) if key not in self._timed]
+        direct = [k for k in todo if len(routes[k].poses) == 2 and routes[k].clear]
+        batch: dict[int, DubinsPath | None] = {}
+        if direct:
+            starts = np.array([routes[k].poses[0] for k in direct]).reshape(-1, 3)
+            found = stretch_batch(starts, self.goals[direct], want_m[direct], self.r_m[assign[direct]])
+            batch = dict(zip(direct, found))
+        stretched = [k for k in direct if batch[k] is not None]
+        ok = dict(zip(stretched, chains_clear([[batch[k]] for k in stretched], self.threats, self.ds_m)))
+        rest = [k for k in todo if not ok.get(k, False)]
+        for k in todo:
+            if ok.get(k, False):
+                self._timed[keys[k]] = ([batch[k]], True)
+        if rest:  # the other members' timing fallbacks, all at once (a direct stretch is passed on)
+            found = timed_routes(
+                [routes[k] for k in rest],
+                [want_m[k] for k in rest],
+                self.threats,
+                stretched=[(batch[k],) if k in batch else None for k in rest],
+            )
+            for k, result in zip(rest, found):
+                self._timed[keys[k]] = result
+        out = [self._timed[key] for key in keys]
+        return [segs for segs, _ in out], [clear for _, clear in out]
 
 
 def _links_lengths(poses_sets: list[list[np.ndarray]], r_m: float) -> np.ndarray:

@@ -440,6 +440,7 @@ class CoalitionSim:
         if not coverable(prob):
             return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
         base = L.copy()
+        plans = paths.FormationPaths(poses_a, goals, rmin, self.known, p.kappa, p.sample_ds_m)
         for _attempt in range(3):  # members whose timed leg cannot clear the threats are excluded
             prob.length_m = base.copy()
             if not coverable(prob):
@@ -453,7 +454,7 @@ class CoalitionSim:
             if not sol.covered:
                 return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
             # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
-            routes = paths.min_routes(poses_a[sol.assign], goals, rmin[sol.assign], self.known, p.kappa)
+            routes = plans.routes(sol.assign)
             exact = L.copy()
             for k in range(K):
                 exact[sol.assign[k], k] = routes[k].length_m
@@ -467,34 +468,7 @@ class CoalitionSim:
                     for k in range(K)
                 ]
             )
-            direct = [k for k in range(K) if len(routes[k].poses) == 2 and routes[k].clear]
-            batch = dict(
-                zip(
-                    direct,
-                    paths.stretch_batch(
-                        np.array([routes[k].poses[0] for k in direct]).reshape(-1, 3),
-                        goals[direct],
-                        want[direct],
-                        rmin[sol.assign[direct]],
-                    ),
-                )
-            )
-            stretched = [k for k in direct if batch[k] is not None]
-            got_clear = dict(
-                zip(stretched, paths.chains_clear([[batch[k]] for k in stretched], self.known, p.sample_ds_m))
-            )
-            segs = [[batch[k]] if got_clear.get(k, False) else None for k in range(K)]
-            clear = [s is not None for s in segs]
-            # the other members' timing fallbacks, all at once (a direct stretch is passed on)
-            rest = [k for k in range(K) if segs[k] is None]
-            timed = paths.timed_routes(
-                [routes[k] for k in rest],
-                [want[k] for k in rest],
-                self.known,
-                stretched=[(batch[k],) if k in batch else None for k in rest],
-            )
-            for k, (segs_k, clear_k) in zip(rest, timed):
-                segs[k], clear[k] = segs_k, clear_k
+            segs, clear = plans.timed(sol.assign, want)
             bad = [k for k in range(K) if not clear[k]]
             if not bad:
                 break
