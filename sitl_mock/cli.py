@@ -12,6 +12,7 @@ import logging
 import sys
 
 from gcs_planner.geo import Origin
+from gcs_planner.mavlink.signing import key_from_passphrase
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.flight import AIRFRAMES
@@ -49,6 +50,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duplicate", type=float, default=0.0, help="duplication probability")
     p.add_argument("--reorder", type=float, default=0.0, help="reordering probability")
     p.add_argument("--seed", type=int, default=0, help="fault generator seed")
+    p.add_argument(
+        "--signing-passphrase",
+        metavar="TEXT",
+        help="MAVLink 2 signing: sign every frame and drop unsigned ones (key = SHA-256 of TEXT)",
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return p
 
@@ -65,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
             count=args.vehicles, base_port=args.base_port, speedup=args.speedup, home=args.home,
             profile=args.profile, vehicle_type=args.vehicle_type, host=args.host, faults=faults,
             rate_hz=args.rate,
+            signing_key=key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None,
         )  # fmt: skip
     except ValueError as exc:
         parser.error(str(exc))

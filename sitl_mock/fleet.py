@@ -79,6 +79,7 @@ class MockFleet:
         home_rate_hz: float = 0.2,
         physics_dt_s: float = 0.05,
         tick_s: float = 0.02,
+        signing_key: bytes | None = None,
     ) -> None:
         if (count is None) == (vehicles is None):
             raise ValueError("MockFleet needs exactly one of count= or vehicles=")
@@ -101,7 +102,8 @@ class MockFleet:
                 continue
             port = base_port + k if base_port else 0
             kwargs = {"sysid": k + 1, "profile": profile, "vehicle_type": vehicle_type, "home": home,
-                      "port": port, "faults": faults, "host": host, **spec}  # fmt: skip
+                      "port": port, "faults": faults, "host": host, "signing_key": signing_key,
+                      **spec}  # fmt: skip
             self.vehicles.append(MockVehicle(**kwargs))
         sysids = [v.sysid for v in self.vehicles]
         if len(set(sysids)) != len(sysids):

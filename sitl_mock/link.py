@@ -4,7 +4,8 @@ Behaves like ArduPilot's ``udpin``: the vehicle binds its own port and sends to 
 has heard from (up to ``MAX_PEERS``, oldest forgotten first), so a GCS must send first (its
 heartbeat). Frames are MAVLink 2 with srcSystem = the vehicle's system id, srcComponent = 1.
 Outgoing and incoming datagrams each pass through their own `FaultyChannel`; a datagram lost
-on the way in teaches the vehicle nothing (not even the peer's address).
+on the way in teaches the vehicle nothing (not even the peer's address). With a signing key the
+vehicle signs every frame and drops unsigned or badly signed ones, as ArduPilot does with signing on.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from collections.abc import Callable
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
+from gcs_planner.mavlink.signing import enable_signing  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 from sitl_mock.faults import FaultyChannel, LinkFaults  # noqa: E402
 
@@ -38,11 +40,16 @@ class VehicleLink(asyncio.DatagramProtocol):
         faults: LinkFaults,
         compid: int = 1,
         on_new_peer: Callable[[tuple], None] | None = None,
+        signing_key: bytes | None = None,
     ) -> None:
         self.sysid = sysid
         self._on_message = on_message
         self._on_new_peer = on_new_peer
+        self._signing_key = signing_key
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        if signing_key is not None:
+            enable_signing(self._mav, signing_key, sign_outgoing=True)
+        self.rejected = 0  # frames dropped: undecodable, or unsigned / badly signed
         self._parsers: dict[tuple, mavlink.MAVLink] = {}
         self.peers: list[tuple] = []
         self.out = FaultyChannel(self._sendto, faults, (sysid, 0))
@@ -108,9 +115,11 @@ class VehicleLink(asyncio.DatagramProtocol):
             msgs = parser.parse_buffer(data) or []
         except mavlink.MAVError as exc:
             log.debug("vehicle %d: undecodable datagram from %s: %s", self.sysid, addr, exc)
+            self.rejected += 1
             return
         for msg in msgs:
             if msg.get_type() == "BAD_DATA":
+                self.rejected += 1
                 continue
             attach_extensions(msg, msg.get_msgbuf())
             self._on_message(msg, addr)
@@ -121,6 +130,8 @@ class VehicleLink(asyncio.DatagramProtocol):
             self._parsers.pop(oldest, None)
         parser = mavlink.MAVLink(None)
         parser.robust_parsing = True
+        if self._signing_key is not None:
+            enable_signing(parser, self._signing_key, sign_outgoing=False)
         self._parsers[addr] = parser
         self.peers.append(addr)
         log.info("vehicle %d: GCS peer %s:%d", self.sysid, *addr[:2])

@@ -101,6 +101,7 @@ class MockVehicle:
         persist_mission: bool = False,
         non_atomic: bool = False,
         airframe: Airframe | None = None,
+        signing_key: bytes | None = None,
     ) -> None:
         if not (isinstance(sysid, int) and 1 <= sysid <= 254):
             raise ValueError(f"vehicle sysid must be an integer in 1..254, got {sysid!r}")
@@ -122,7 +123,9 @@ class MockVehicle:
         )
         self.mission_server.on_change = self._on_list_change
         self.mission_server.on_current = self._on_server_current
-        self.link = VehicleLink(sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer)
+        self.link = VehicleLink(
+            sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer, signing_key
+        )
         self._modes = self.profile.modes[vehicle_type]
         self._default_mode = next(m for m in ("STABILIZE", "MANUAL") if m in self._modes)
         self.mode = self._default_mode

@@ -2,6 +2,8 @@
 
 Not a subcommand itself (it is not in gcs_planner.cli.COMMANDS).
 
+Signing: --signing-passphrase, or the environment variable GCS_PLANNER_SIGNING_PASSPHRASE.
+
 Autopilot conventions (home at seq 0 or not) follow the vehicle's HEARTBEAT.autopilot unless
 --autopilot says otherwise: MAV_AUTOPILOT_ARDUPILOTMEGA -> "ardupilot", anything else -> "px4"
 (PX4 and generic MAVLink autopilots such as MAVSDK's server expect no home item).
@@ -13,6 +15,7 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import os
 from collections.abc import AsyncIterator, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -20,12 +23,14 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.signing import key_from_passphrase
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
 log = logging.getLogger(__name__)
 
 MISSION_TYPES = {"mission": MissionType.MISSION, "fence": MissionType.FENCE, "rally": MissionType.RALLY}
 HEARTBEAT_TIMEOUT_S = 5.0
+SIGNING_ENV = "GCS_PLANNER_SIGNING_PASSPHRASE"  # keeps the passphrase out of shell history
 
 
 def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) -> None:
@@ -53,6 +58,13 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
             "--sysid", required=True, type=_sysid, help="target vehicle's MAVLink system id (1..255)"
         )
     p.add_argument("--compid", type=int, default=1, help="target component id [1 = autopilot]")
+    p.add_argument(
+        "--signing-passphrase",
+        metavar="TEXT",
+        default=os.environ.get(SIGNING_ENV),
+        help=f"MAVLink 2 signing: sign every frame, accept only signed ones (key = SHA-256 of TEXT, as"
+        f" MAVProxy and QGroundControl); default: ${SIGNING_ENV}",
+    )
     p.add_argument(
         "--autopilot",
         choices=("auto", "ardupilot", "px4"),
@@ -90,7 +102,8 @@ def _sysids(text: str) -> list[int] | None:
 
 async def open_link(args: argparse.Namespace) -> MavlinkLink:
     try:
-        return await MavlinkLink.open(*args.connect)
+        key = key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None
+        return await MavlinkLink.open(*args.connect, signing_key=key)
     except (OSError, ValueError) as exc:
         raise UserError(f"cannot open --connect {' '.join(args.connect)!r}: {exc}") from None
 

@@ -21,6 +21,8 @@ Choices:
   seconds (telemetry logging); MISSION_COUNT/ACK/CURRENT carry their opaque ids (wire.py).
 - The GCS sends HEARTBEAT (MAV_TYPE_GCS) at 1 Hz from open until close: autopilots use it for
   GCS failsafe and udpin-style endpoints only talk to peers they have heard from.
+- ``signing_key`` (signing.py): every frame sent is signed and every frame received must carry a
+  valid signature; the rest are dropped and counted in ``frames_dropped``.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD, SerialPort  # noqa: E402
+from gcs_planner.mavlink.signing import enable_signing  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = ["DUPLICATE_WINDOW_S", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo", "parse_url"]
@@ -112,10 +115,15 @@ class _Protocol(asyncio.DatagramProtocol):
 class MavlinkLink:
     """See module docstring. Create with :meth:`open`; close with :meth:`close`."""
 
-    def __init__(self, sysid: int = GCS_SYSID, compid: int = GCS_COMPID) -> None:
+    def __init__(
+        self, sysid: int = GCS_SYSID, compid: int = GCS_COMPID, signing_key: bytes | None = None
+    ) -> None:
         self.sysid = sysid
         self.compid = compid
+        self._signing_key = signing_key
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        if signing_key is not None:
+            enable_signing(self._mav, signing_key, sign_outgoing=True)
         self._parsers: dict[Address, mavlink.MAVLink] = {}
         self._peers: dict[Address, None] = {}  # ordered set of addresses we send broadcasts to
         self._subscribers: list[Callback] = []
@@ -124,6 +132,7 @@ class MavlinkLink:
         self._heartbeat_task: asyncio.Task | None = None
         self.frames_received = 0
         self.frames_sent = 0
+        self.frames_dropped = 0  # undecodable, bad CRC, or (signing) unsigned / badly signed
 
     @classmethod
     async def open(
@@ -133,34 +142,28 @@ class MavlinkLink:
         sysid: int = GCS_SYSID,
         compid: int = GCS_COMPID,
         heartbeat_period_s: float = HEARTBEAT_PERIOD_S,
+        signing_key: bytes | None = None,
     ) -> MavlinkLink:
         """Bind one UDP socket: at most one udpin URL (the bind address), any number of udpout remotes;
-        or open one serial port (a serial URL stands alone)."""
+        or open one serial port (a serial URL stands alone). ``signing_key``: sign and verify."""
         parsed = [parse_url(u) for u in (url, *more_urls)]
+        link = cls(sysid, compid, signing_key)
         if any(kind == "serial" for kind, _ in parsed):
             if len(parsed) > 1:
                 raise ValueError("a serial URL cannot share a link with other URLs")
-            return await cls._open_serial(parsed[0][1], sysid, compid, heartbeat_period_s)
+            link._transport = SerialPort.open(*parsed[0][1], link._on_datagram)
+            link._peers[parsed[0][1]] = None
+            link._start_heartbeat(heartbeat_period_s)
+            return link
         binds = [addr for kind, addr in parsed if kind == "udpin"]
         if len(binds) > 1:
             raise ValueError(f"only one udpin URL per link, got {len(binds)}")
         remotes = [addr for kind, addr in parsed if kind == "udpout"]
         local = binds[0] if binds else ("0.0.0.0", 0)
-        link = cls(sysid, compid)
         loop = asyncio.get_running_loop()
         link._transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(link), local_addr=local)
         for remote in remotes:
             link._peers[(_resolve(remote[0]), remote[1])] = None
-        link._start_heartbeat(heartbeat_period_s)
-        return link
-
-    @classmethod
-    async def _open_serial(
-        cls, address: Address, sysid: int, compid: int, heartbeat_period_s: float
-    ) -> MavlinkLink:
-        link = cls(sysid, compid)
-        link._transport = SerialPort.open(address[0], address[1], link._on_datagram)
-        link._peers[address] = None
         link._start_heartbeat(heartbeat_period_s)
         return link
 
@@ -246,6 +249,8 @@ class MavlinkLink:
         if parser is None:
             parser = self._parsers[addr] = mavlink.MAVLink(None)
             parser.robust_parsing = True
+            if self._signing_key is not None:
+                enable_signing(parser, self._signing_key, sign_outgoing=False)
             if addr not in self._peers:
                 self._peers[addr] = None  # udpin: answer whoever talks to us
         whole = _single_v2_frame(data) and parser.buf_len() == 0
@@ -254,11 +259,13 @@ class MavlinkLink:
             msgs = [parser.decode(bytearray(data))] if whole else parser.parse_buffer(data) or []
         except mavlink.MAVError as exc:
             log.debug("bad frame from %s: %s", addr, exc)
+            self.frames_dropped += 1
             return
         t_s = time.time()
         now = time.monotonic()
         for msg in msgs:
             if isinstance(msg, mavlink.MAVLink_bad_data):
+                self.frames_dropped += 1
                 continue
             raw = data if whole else bytes(msg.get_msgbuf())
             self._note_source(msg, addr, now)

@@ -1,0 +1,86 @@
+"""MAVLink 2 signing end to end over real UDP: GCS link and mock vehicle with the same, no or a wrong key."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from gcs_planner.mavlink import errors
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.signing import key_from_passphrase
+from gcs_planner.mavlink.transfer import Timing
+from gcs_planner.mavlink.types import MissionItem
+from sitl_mock.fleet import MockFleet
+
+KEY = key_from_passphrase("correct horse battery staple")
+SIGNED = 0x01  # MAVLink 2 incompat flag: a signature block follows
+
+
+def _mission(n: int, lat: int = 473_977_000) -> list[MissionItem]:
+    return [MissionItem(seq=i, frame=3, command=16, current=int(i == 0), x=lat + 41 * i, y=85_455_000, z=30.0)
+            for i in range(n)]  # fmt: skip
+
+
+async def _link(fleet: MockFleet, key: bytes | None) -> tuple[MavlinkLink, list[bytes]]:
+    link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses), signing_key=key)
+    frames: list[bytes] = []
+    link.subscribe(lambda msg, raw, t: frames.append(raw))
+    return link, frames
+
+
+def test_signed_gcs_uploads_to_a_signed_vehicle_and_every_frame_is_signed():
+    async def main():
+        async with MockFleet(count=1, profile="px4", signing_key=KEY) as fleet:
+            link, frames = await _link(fleet, KEY)
+            await link.wait_for(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, 10)
+            items = _mission(12)
+            assert (await MissionClient(link, 1).upload(items, verify=True)).verified
+            vehicle = fleet.vehicle(1)
+            assert vehicle.mission_server.items() == items and vehicle.link.rejected == 0
+            assert frames and all(raw[2] & SIGNED for raw in frames)
+            await link.close()
+
+    asyncio.run(asyncio.wait_for(main(), 60))
+
+
+def test_signed_vehicle_ignores_an_unsigned_gcs_and_keeps_its_mission():
+    async def main():
+        async with MockFleet(count=1, profile="ardupilot", signing_key=KEY) as fleet:
+            vehicle = fleet.vehicle(1)
+            signed, _ = await _link(fleet, KEY)
+            await signed.wait_for(lambda m: m.get_type() == "HEARTBEAT", 10)
+            await MissionClient(signed, 1).upload(_mission(5))
+            before = vehicle.mission_server.items()
+            await signed.close()
+
+            unsigned, frames = await _link(fleet, None)  # hears the vehicle (signed frames decode) ...
+            await unsigned.wait_for(lambda m: m.get_type() == "HEARTBEAT", 10)
+            fast = Timing(count_retry_s=0.2, count_retries=2)
+            with pytest.raises(errors.MissionTimeoutError, match="no answer to MISSION_COUNT"):
+                await MissionClient(unsigned, 1, timing=fast).upload(_mission(7, lat=400_000_000))
+            assert vehicle.mission_server.items() == before  # ... but cannot command it
+            assert vehicle.link.rejected >= 3
+            await unsigned.close()
+
+    asyncio.run(asyncio.wait_for(main(), 60))
+
+
+def test_wrong_key_is_dropped_both_ways():
+    async def main():
+        async with MockFleet(count=1, profile="px4", signing_key=KEY) as fleet:
+            link, frames = await _link(fleet, key_from_passphrase("wrong"))
+            await asyncio.sleep(1.5)  # our heartbeats go out, the vehicle streams back
+            assert not link.vehicles and not frames and link.frames_dropped > 0
+            assert fleet.vehicle(1).link.rejected > 0
+            await link.close()
+
+    asyncio.run(asyncio.wait_for(main(), 60))
+
+
+def test_signing_key_checks():
+    with pytest.raises(ValueError, match="must not be empty"):
+        key_from_passphrase("")
+    with pytest.raises(ValueError, match="32 bytes, got 5"):
+        MavlinkLink(signing_key=b"short")
