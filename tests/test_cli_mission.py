@@ -248,3 +248,20 @@ def test_fleet_arguments_are_checked(tmp_path, capsys):
     ]:
         assert main(["upload", "--connect", "udpout:127.0.0.1:9", *argv]) == 2
         assert message in capsys.readouterr().err
+
+
+def test_signed_vehicle_takes_an_upload_signed_from_the_environment(tmp_path, capsys, monkeypatch):
+    sitl_mock = pytest.importorskip("sitl_mock")
+    from gcs_planner.mavlink.signing import key_from_passphrase
+
+    key = key_from_passphrase("field-day")
+    with sitl_mock.MockFleet(count=1, profile="px4", home=ORIGIN, speedup=20.0, signing_key=key) as signed:
+        plan = Plan.load(make_plan(tmp_path, sysids=(1,)))
+        items = plan_to_items(plan.vehicles[0], ORIGIN, "px4")
+        (tmp_path / "m.waypoints").write_text(dumps_wpl(items))
+        monkeypatch.setenv("GCS_PLANNER_SIGNING_PASSPHRASE", "field-day")
+        assert (
+            main(["upload", "--connect", url(signed, 1), "--sysid", "1", str(tmp_path / "m.waypoints")]) == 0
+        )
+        assert "ACCEPTED" in capsys.readouterr().out
+        assert held(signed, 1) == items
