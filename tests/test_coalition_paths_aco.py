@@ -10,7 +10,7 @@ import pytest
 
 from gcs_planner.geometry.dubins import WORDS, DubinsPath, shortest_path_free_heading, word_lengths
 from gcs_planner.planning.coalition import paths
-from gcs_planner.planning.coalition.aco import CoalitionProblem, evaluate, make_solution, solve_aco
+from gcs_planner.planning.coalition.aco import CoalitionProblem, evaluate, make_solution, repair, solve_aco
 from gcs_planner.planning.coalition.baselines import solve_polynomial
 from gcs_planner.planning.coalition.model import ASSESS, STRIKE, CoalitionParams, Threat
 
@@ -320,3 +320,33 @@ def test_formation_paths_memo_equals_a_fresh_computation():
     again = plans.timed(*calls[0])
     assert all(a is b for a, b in zip(again[0], first[0]))  # served from the memo, not re-planned
     assert any(not ok for ok in first[1]) and any(ok for ok in first[1])
+
+
+def test_repair_recovers_only_the_excluded_task_and_prefers_keeping_the_schedule():
+    params = CoalitionParams()
+    prob = _problem(np.random.default_rng(4))  # 7 candidates: 0-4 strike only, 5 and 6 assess
+    sol = solve_aco(prob, params, np.random.default_rng(0))
+    latest = int(np.argmax(prob.length_m[sol.assign[:3], [0, 1, 2]] / prob.speed_mps[sol.assign[:3]]))
+    k = (latest + 1) % 3  # a striker that is not the reference: keeping the schedule is possible
+    prob.length_m[sol.assign[k], k] = np.inf  # its timed path could not clear the threats
+    fixed = repair(sol.assign, [k], sol.t_required_s, prob, params)
+    assert fixed is not None and fixed[k] != sol.assign[k]
+    assert prob.capable[fixed, np.arange(4)].all() and len(set(fixed)) == 4
+    moved = np.flatnonzero(fixed != sol.assign)
+    assert set(moved) <= {k, *range(4)} and len(moved) <= 2  # one move: a free candidate or a swap
+    J, _, t_req = evaluate(np.array([fixed]), prob, params)
+    # every single move that re-covers task k
+    free = [c for c in range(7) if prob.capable[c, k] and c not in sol.assign]
+    plans = [np.where(np.arange(4) == k, c, sol.assign) for c in free]
+    for k2 in range(4):
+        j, x = sol.assign[k2], sol.assign[k]
+        if k2 != k and prob.capable[j, k] and prob.capable[x, k2]:
+            plan = sol.assign.copy()
+            plan[k], plan[k2] = j, x
+            plans.append(plan)
+    Js, _, reqs = evaluate(np.array(plans), prob, params)
+    keep = (reqs == sol.t_required_s).all(1)
+    assert keep.any() and (t_req[0] == sol.t_required_s).all()  # the schedule is kept ...
+    assert J[0] == pytest.approx(Js[keep].max())  # ... by the best such move
+    prob.can_strike[:] = False  # nothing can take the strike: no repair
+    assert repair(sol.assign, [k], sol.t_required_s, prob, params) is None

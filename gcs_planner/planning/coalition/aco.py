@@ -45,7 +45,7 @@ from scipy.optimize import linear_sum_assignment
 
 from gcs_planner.planning.coalition.model import STRIKE, CoalitionParams
 
-__all__ = ["CoalitionProblem", "Solution", "coverable", "evaluate", "make_solution", "solve_aco"]
+__all__ = ["CoalitionProblem", "Solution", "coverable", "evaluate", "make_solution", "repair", "solve_aco"]
 
 EPS = 1e-3
 
@@ -183,6 +183,41 @@ def solve_aco(
         has = best_assign >= 0
         tau[best_assign[has], np.flatnonzero(has)] += params.rho * max(best_J, 0.05)
     return make_solution(best_assign, prob, params)
+
+
+def repair(
+    assign: np.ndarray,
+    tasks: list[int],
+    t_required_s: np.ndarray,
+    prob: CoalitionProblem,
+    params: CoalitionParams,
+) -> np.ndarray | None:
+    """The plan `assign` with only `tasks` re-covered (their members were excluded), or None.
+
+    Each task in turn gets the best single move: a free capable candidate takes it, or another
+    member takes it and gives its own task to the excluded member (a swap). Moves that keep every
+    required time (t_required_s, the schedule of `assign`) come first, so the other members keep
+    their planned paths; among them, or else among all moves, the highest J wins (the first on a
+    tie). None when no move covers a task. prob.length_m holds inf for excluded pairs.
+    """
+    out = np.array(assign, copy=True)
+    cap = prob.capable
+    n = len(cap)
+    for k in tasks:
+        x, out[k] = out[k], -1
+        moves = [(k, c, -1, -1) for c in np.flatnonzero(cap[:, k] & ~np.isin(np.arange(n), out))]
+        moves += [(k, j, k2, x) for k2, j in enumerate(out) if j >= 0 and cap[j, k] and cap[x, k2]]
+        if not moves:
+            return None
+        plans = np.repeat(out[None], len(moves), 0)
+        for row, (k1, c1, k2, c2) in enumerate(moves):
+            plans[row, k1] = c1
+            if k2 >= 0:
+                plans[row, k2] = c2
+        J, _, t_req = evaluate(plans, prob, params)
+        same = (t_req == t_required_s).all(1)
+        out = plans[int(np.argmax(np.where(same, J, -np.inf)) if same.any() else np.argmax(J))]
+    return out
 
 
 def _roulette(cum: np.ndarray, x: np.ndarray) -> np.ndarray:

@@ -407,6 +407,13 @@ class FormationPaths:
                 self._routes[keys[k]] = route
         return [self._routes[key] for key in keys]
 
+    def lengths(self, length_m: np.ndarray) -> np.ndarray:
+        """length_m (n, K) with the route length of every (candidate, task) routed so far."""
+        out = np.array(length_m, copy=True)
+        for (i, k), route in self._routes.items():
+            out[i, k] = route.length_m
+        return out
+
     def timed(self, assign: np.ndarray, want_m: np.ndarray) -> tuple[list[list[DubinsPath]], list[bool]]:
         """Segments of length want_m[k] from candidate assign[k] to task k, and whether they clear.
 
