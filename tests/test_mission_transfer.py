@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pytest
@@ -517,3 +517,45 @@ def test_server_rejects_unknown_command_and_bad_latitude():
         srv = server()
         up = upload(Sim(srv), [item])
         assert type(up.outcome.error) is error and srv.count() == 0
+
+
+def test_partial_write_replaces_only_its_range_on_ardupilot_and_px4_refuses_it():
+    srv = server("ardupilot")
+    old = mission(6)
+    preload(srv, old)
+    new = [replace(it, x=it.x + 999) for it in old[2:5]]
+    sim = Sim(srv)
+    up = sim.run(UploadTransfer(1, new, partial=True))
+    assert up.outcome.error is None
+    assert srv.items()[2:5] == new and srv.items()[:2] == old[:2] and srv.items()[5] == old[5]
+    assert sim.sent("MISSION_WRITE_PARTIAL_LIST") == 1 and sim.sent("MISSION_COUNT") == 0
+    assert [m.seq for m in sim.to_vehicle if m.get_type() == "MISSION_ITEM_INT"] == [2, 3, 4]
+
+    px4 = server("px4")
+    preload(px4, old)
+    up = Sim(px4).run(UploadTransfer(1, new, partial=True))
+    assert isinstance(up.outcome.error, errors.UnsupportedCommandError)
+    assert "partial upload: UNSUPPORTED" in str(up.outcome.error) and px4.items() == old
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_partial_write_over_a_lossy_link(seed):
+    srv = server("ardupilot")
+    old = mission(10)
+    preload(srv, old)
+    new = [replace(it, z=it.z + 5.0) for it in old[4:9]]
+    up = Sim(srv, Channel(loss=0.2, duplicate=0.1, reorder=0.2, seed=seed)).run(
+        UploadTransfer(1, new, partial=True)
+    )
+    if up.outcome.error is None or up.outcome.ack_lost:
+        assert srv.items()[4:9] == new
+    else:
+        assert srv.items() == old
+    assert srv.items()[:4] == old[:4] and srv.items()[9:] == old[9:]
+
+
+def test_partial_write_input_is_checked():
+    with pytest.raises(errors.MissionInputError, match="at least one item"):
+        UploadTransfer(1, [], partial=True)
+    with pytest.raises(errors.MissionInputError, match="item 1: seq is 7, expected 4"):
+        UploadTransfer(1, [mission(5)[3], mission(8)[7]], partial=True)

@@ -183,6 +183,23 @@ def test_missing_request_is_pushed_ahead_long_before_the_vehicle_would_cancel():
     run(main())
 
 
+def test_partial_write_verified_by_download_over_udp():
+    async def main():
+        async with MockFleet(count=1, profile="ardupilot") as fleet:
+            link = await connected(fleet)
+            client = MissionClient(link, 1)
+            old = mission(8)
+            await client.upload(old)
+            ahead = mission(8, base_lat=470_000_000)[5:]  # re-plan the legs ahead only
+            result = await client.upload(ahead, partial=True, verify=True)
+            assert result.verified and result.count == 3
+            held = fleet.vehicle(1).mission_server.items()
+            assert held[5:] == ahead and held[1:5] == old[1:5]
+            await link.close()
+
+    run(main())
+
+
 def test_vehicle_reboot_forgets_mission_and_client_sees_it():
     async def main():
         async with MockFleet(count=1, profile="px4") as fleet:

@@ -78,7 +78,7 @@ class UnsupportedFrameError(MissionError):
 
 
 class UnsupportedCommandError(MissionError):
-    """MAV_MISSION_UNSUPPORTED: an item's command is not supported."""
+    """MAV_MISSION_UNSUPPORTED: an item's command, or the request (a partial write), is not supported."""
 
 
 class NoSpaceError(MissionError):

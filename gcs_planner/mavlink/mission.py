@@ -97,9 +97,18 @@ class MissionClient:
 
     # ----------------------------------------------------------------- operations
     async def upload(
-        self, items: Sequence[MissionItem], mission_type: int = MissionType.MISSION, *, verify: bool = False
+        self,
+        items: Sequence[MissionItem],
+        mission_type: int = MissionType.MISSION,
+        *,
+        verify: bool = False,
+        partial: bool = False,
     ) -> UploadResult:
         """Send ``items`` as the vehicle's list of ``mission_type``; returns once it said ACCEPTED.
+
+        ``partial``: replace only the vehicle's items ``items[0].seq .. items[-1].seq`` (consecutive
+        seqs) with MISSION_WRITE_PARTIAL_LIST, e.g. the legs ahead of a flying vehicle; a vehicle
+        without partial writes (PX4) raises UnsupportedError and keeps its mission.
 
         Raises a MissionError subclass naming the vehicle's MAV_MISSION_RESULT, MissionTimeoutError,
         MissionInputError (malformed items, nothing sent), VerifyError (``verify`` and the read-back
@@ -107,19 +116,20 @@ class MissionClient:
         """
         items = list(items)
         t0 = time.monotonic()
-        transfer = self._transfer(UploadTransfer, items=items, mission_type=mission_type)
+        transfer = self._transfer(UploadTransfer, items=items, mission_type=mission_type, partial=partial)
         outcome = await self._run(transfer)
         opaque_id, ack_lost, verified = outcome.opaque_id, False, False
+        written = slice(transfer.first, transfer.first + len(items)) if partial else slice(None)
         if outcome.error is not None:
             if not outcome.ack_lost:
                 raise outcome.error
             back, opaque_id = await self._read_back(mission_type, outcome.error)
-            if self._difference(items, back) is not None:
+            if self._difference(items, back[written]) is not None:
                 raise outcome.error
             ack_lost = verified = True
         if verify and not verified:
             back, _ = await self._read_back(mission_type, None)
-            problem = self._difference(items, back)
+            problem = self._difference(items, back[written])
             if problem is not None:
                 raise VerifyError(
                     f"vehicle {self.sysid}: read-back differs: {problem}",

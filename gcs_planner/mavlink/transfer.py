@@ -252,7 +252,12 @@ class Transfer:
 
 
 class UploadTransfer(Transfer):
-    """MISSION_COUNT -> answer requests with MISSION_ITEM_INT -> MISSION_ACK(ACCEPTED)."""
+    """MISSION_COUNT -> answer requests with MISSION_ITEM_INT -> MISSION_ACK(ACCEPTED).
+
+    ``partial=True``: MISSION_WRITE_PARTIAL_LIST instead of MISSION_COUNT, replacing the vehicle's
+    items ``items[0].seq .. items[-1].seq`` only (ArduPilot supports it, PX4 answers UNSUPPORTED).
+    Internally every position is an index into ``items``; ``first`` maps it to the wire seq.
+    """
 
     operation = "upload"
     _accepted_types = frozenset({*_REQUESTS, "MISSION_ACK"})
@@ -263,13 +268,23 @@ class UploadTransfer(Transfer):
         items: Sequence[MissionItem],
         compid: int = 1,
         mission_type: int = MissionType.MISSION,
+        *,
+        partial: bool = False,
         **kwargs,
     ) -> None:
         super().__init__(sysid, compid, mission_type, **kwargs)
         self.items = tuple(items)
+        self.partial = partial
+        if partial:
+            self.operation = "partial upload"
+        if partial and not self.items:
+            raise MissionInputError("a partial write needs at least one item", sysid=sysid)
+        self.first = self.items[0].seq if partial else 0
         for index, item in enumerate(self.items):
-            if item.seq != index:
-                raise MissionInputError(f"item {index}: seq is {item.seq}, expected {index}", sysid=sysid)
+            if item.seq != self.first + index:
+                raise MissionInputError(
+                    f"item {index}: seq is {item.seq}, expected {self.first + index}", sysid=sysid
+                )
             if item.mission_type != self.mission_type:
                 raise MissionInputError(
                     f"item {index}: mission_type is {item.mission_type}, transfer is for {self.mission_type}",
@@ -282,8 +297,8 @@ class UploadTransfer(Transfer):
         self._sent_at = [math.nan] * len(self.items)
         self._last_request_s = 0.0
         self._count_sent_s = 0.0
-        self._highest_sent = -1
-        self._requested = -1  # the highest seq the vehicle asked for
+        self._highest_sent = -1  # indexes into items from here on
+        self._requested = -1  # the highest item the vehicle asked for
         self._pushes = 0  # push-ahead rounds since the last request
 
     def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
@@ -294,6 +309,10 @@ class UploadTransfer(Transfer):
         return self.stats.count([self._count()])
 
     def _count(self) -> mavlink.MAVLink_message:
+        if self.partial:
+            return mavlink.MAVLink_mission_write_partial_list_message(
+                self.sysid, self.compid, self.first, self.first + len(self.items) - 1, self.mission_type
+            )
         return mavlink.MAVLink_mission_count_message(
             self.sysid, self.compid, len(self.items), self.mission_type
         )
@@ -301,26 +320,26 @@ class UploadTransfer(Transfer):
     def _handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
         if msg.get_type() == "MISSION_ACK":
             return self._on_ack(msg)
-        seq = msg.seq
-        if not 0 <= seq < len(self.items):
-            log.warning("vehicle %d requested item %d of %d: ignored", self.sysid, seq, len(self.items))
+        i = msg.seq - self.first
+        if not 0 <= i < len(self.items):
+            log.warning("vehicle %d requested item %d, not in this upload: ignored", self.sysid, msg.seq)
             return []
         if self.phase is Phase.COUNT and self._retries == 0:  # unambiguous: COUNT went out once
             self._rtt_sample(now_s - self._count_sent_s)
         self._last_request_s = now_s
         self._pushes = 0
-        self._requested = max(self._requested, seq)
-        sent = self._sent_at[seq]
+        self._requested = max(self._requested, i)
+        sent = self._sent_at[i]
         if now_s - sent < self.timing.duplicate_window_s:
             self.stats.duplicates_ignored += 1
             return []
-        if seq > 0 and not math.isnan(self._sent_at[seq - 1]) and math.isnan(sent):
-            self._rtt_sample(now_s - self._sent_at[seq - 1])
-        return self._send_from(seq, now_s)
+        if i > 0 and not math.isnan(self._sent_at[i - 1]) and math.isnan(sent):
+            self._rtt_sample(now_s - self._sent_at[i - 1])
+        return self._send_from(i, now_s)
 
-    def _send_from(self, seq: int, now_s: float, extra: int = 0) -> list[mavlink.MAVLink_message]:
-        """Item ``seq`` and ``extra`` more unasked (push-ahead), then the timer of the new phase."""
-        sent = list(range(seq, min(seq + 1 + extra, len(self.items))))
+    def _send_from(self, i: int, now_s: float, extra: int = 0) -> list[mavlink.MAVLink_message]:
+        """Item ``i`` and ``extra`` more unasked (push-ahead), then the timer of the new phase."""
+        sent = list(range(i, min(i + 1 + extra, len(self.items))))
         for k in sent:
             self._sent_at[k] = now_s
         self._highest_sent = max(self._highest_sent, sent[-1])
@@ -353,7 +372,8 @@ class UploadTransfer(Transfer):
     def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
         if self.phase is Phase.COUNT:
             if self._retries >= self.timing.count_retries:
-                return self._fail_timeout(f"no answer to MISSION_COUNT sent {self._retries + 1} times")
+                what = "MISSION_WRITE_PARTIAL_LIST" if self.partial else "MISSION_COUNT"
+                return self._fail_timeout(f"no answer to {what} sent {self._retries + 1} times")
             self._retries += 1
             self.deadline_s = now_s + self.timing.count_retry_s
             return [self._count()]
@@ -385,8 +405,8 @@ class UploadTransfer(Transfer):
             return []
         return self._fail_timeout(f"no request for {idle:.1f} s")
 
-    def _item(self, seq: int) -> mavlink.MAVLink_message:
-        return mavlink.MAVLink_mission_item_int_message(self.sysid, self.compid, *self.items[seq].fields())
+    def _item(self, i: int) -> mavlink.MAVLink_message:
+        return mavlink.MAVLink_mission_item_int_message(self.sysid, self.compid, *self.items[i].fields())
 
 
 class DownloadTransfer(Transfer):
