@@ -350,3 +350,17 @@ def test_repair_recovers_only_the_excluded_task_and_prefers_keeping_the_schedule
     assert J[0] == pytest.approx(Js[keep].max())  # ... by the best such move
     prob.can_strike[:] = False  # nothing can take the strike: no repair
     assert repair(sol.assign, [k], sol.t_required_s, prob, params) is None
+
+
+def test_stretch_batch_of_a_batch_equals_problem_by_problem():
+    """Row independence (FormationPaths memoises per member): a problem gets the same path in any
+    batch, including problems that need the dense k grid."""
+    rng = np.random.default_rng(11)
+    q0 = np.column_stack([rng.uniform(0, 1500, (16, 2)), rng.uniform(-3, 3, 16)])
+    q1 = paths.entry_poses((1000.0, 500.0), np.radians(np.arange(0, 360, 22.5)), 200.0)
+    short = paths.shortest_lengths(q0, q1, 200.0)
+    want = short + rng.uniform(50.0, 1200.0, 16)
+    batch = paths.stretch_batch(q0, q1, want, np.full(16, 200.0))
+    alone = [paths.stretch_batch(q0[i : i + 1], q1[i : i + 1], want[i : i + 1], 200.0)[0] for i in range(16)]
+    assert batch == alone
+    assert sum(p is not None for p in batch) >= 8

@@ -138,29 +138,61 @@ def stretch_batch(
 
     Every sign change of (word length + loops - target) on a k grid is a candidate; all candidates
     are bisected together and each problem keeps its smallest k that converges (a sign change
-    across a discontinuity does not). None where length_m[i] is below the shortest path.
+    across a discontinuity does not). A problem with no converged candidate on the coarse grid
+    gets the result of a dense grid (CCC words are valid on narrow k intervals). None where
+    length_m[i] is below the shortest path.
+
+    Compute: a problem whose coarse sign changes are all jumps (|f_hi - f_lo| >= r k: an arc
+    wrapping by 2 pi, the usual cause of non-convergence) has its dense grid scanned up front and
+    refined in the same batch as the coarse candidates; the dense result is used only if the
+    coarse ones do not converge, so the results equal a dense pass after the coarse one.
     """
     q0, q1 = np.atleast_2d(q0).astype(float), np.atleast_2d(q1).astype(float)
     length_m = np.atleast_1d(length_m).astype(float)
     r_m = np.broadcast_to(np.asarray(r_m, float), len(q0)).copy()
-    out, short = _stretch_search(q0, q1, length_m, r_m, np.geomspace(1.0, K_MAX, 60))
-    miss = [i for i in range(len(q0)) if out[i] is None and length_m[i] >= short[i] - 1e-3]
-    if miss:  # CCC words valid on narrow k intervals: a denser grid for the misses only
-        dense = _stretch_search(q0[miss], q1[miss], length_m[miss], r_m[miss], np.geomspace(1.0, K_MAX, 300))
-        for i, path in zip(miss, dense[0]):
-            out[i] = path
+    n = len(q0)
+    out: list[DubinsPath | None] = [None] * n
+    cands, jumps, short = _stretch_scan(q0, q1, length_m, r_m, _KS_COARSE, out)
+    open_ = [i for i in range(n) if out[i] is None and length_m[i] >= short[i] - 1e-3]
+    smooth = {c[0] for c, jump in zip(cands, jumps) if not jump}
+    ahead = [i for i in open_ if i not in smooth]
+    dense = _dense_scan(ahead, q0, q1, length_m, r_m, out) if ahead else []
+    dense_out: list[DubinsPath | None] = [None] * n
+    _stretch_refine([(cands, out), (dense, dense_out)], q0, q1, length_m, r_m)
+    for i in ahead:
+        out[i] = out[i] or dense_out[i]
+    late = [i for i in open_ if out[i] is None and i in smooth]
+    if late:
+        _stretch_refine([(_dense_scan(late, q0, q1, length_m, r_m, out), out)], q0, q1, length_m, r_m)
     return out
 
 
-def _stretch_search(q0, q1, length_m, r_m, ks) -> tuple[list[DubinsPath | None], np.ndarray]:
-    """stretch_batch on one k grid (ks[0] = 1); also returns the shortest lengths (k = 1)."""
+_KS_COARSE = np.geomspace(1.0, K_MAX, 60)
+_KS_DENSE = np.geomspace(1.0, K_MAX, 300)
+
+
+def _dense_scan(idx: list[int], q0, q1, length_m, r_m, out: list) -> list[tuple]:
+    """_stretch_scan of problems idx on the dense k grid; candidates indexed like the full batch."""
+    sub: list[DubinsPath | None] = [None] * len(idx)
+    cands, _, _ = _stretch_scan(q0[idx], q1[idx], length_m[idx], r_m[idx], _KS_DENSE, sub)
+    for j, path in enumerate(sub):
+        if path is not None:
+            out[idx[j]] = path
+    return [(idx[c[0]], *c[1:]) for c in cands]
+
+
+def _stretch_scan(q0, q1, length_m, r_m, ks, out: list) -> tuple[list[tuple], list[bool], np.ndarray]:
+    """Candidates (problem, word, k_lo, k_hi, loops) of every problem on one k grid (ks[0] = 1).
+
+    A problem whose length is its shortest path gets that path in out. Also returns, per
+    candidate, whether its sign change is a jump (|f_hi - f_lo| >= r k_lo), and the shortest
+    lengths (k = 1)."""
     n = len(q0)
     nk = len(ks)
     segs = word_lengths(np.repeat(q0, nk, 0), np.repeat(q1, nk, 0), np.tile(ks, n) * np.repeat(r_m, nk))
     segs = segs.reshape(n, nk, 6, 3)
     table = segs.sum(3)
-    out: list[DubinsPath | None] = [None] * n
-    cands = []  # (problem, word, k_lo, k_hi, loops)
+    cands, jumps = [], []
     for i in range(n):
         shortest = table[i, 0].min()
         if length_m[i] < shortest - 1e-3:
@@ -182,26 +214,40 @@ def _stretch_search(q0, q1, length_m, r_m, ks) -> tuple[list[DubinsPath | None],
             hit = np.flatnonzero(cross.any((1, 2)))
             if len(hit):
                 loops = int(counts[hit[0]])
-                cands += [(i, w, ks[ki], ks[ki + 1], loops) for ki, w in np.argwhere(cross[hit[0]])]
+                fh = f[hit[0]]
+                for ki, w in np.argwhere(cross[hit[0]]):
+                    cands.append((i, w, ks[ki], ks[ki + 1], loops))
+                    jumps.append(bool(abs(fh[ki + 1, w] - fh[ki, w]) >= r_m[i] * ks[ki]))
                 break
-    if cands:
-        c = np.array(cands, dtype=float)
-        pi, w, lo, hi, loops = c[:, 0].astype(int), c[:, 1].astype(int), c[:, 2], c[:, 3], c[:, 4]
-        rows = np.arange(len(c))
+    return cands, jumps, table[:, 0].min(1)
 
-        def resid(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            seg = word_lengths(q0[pi], q1[pi], k * r_m[pi])[rows, w]
-            return seg, seg.sum(1) + loops * TWO_PI * r_m[pi] * k - length_m[pi]
 
-        hi = _illinois(lambda k: resid(k)[1], lo, hi, 14)
-        seg, f = resid(hi)
-        seg = seg.copy()
-        seg[:, 0] += loops * TWO_PI * r_m[pi] * hi
-        for j in np.lexsort((hi, pi)):  # per problem, smallest converged k first
+def _stretch_refine(groups: list[tuple[list[tuple], list]], q0, q1, length_m, r_m) -> None:
+    """Refine the candidates of all groups together (Illinois); in each group's output list, every
+    problem still without a path takes its smallest converged k."""
+    allc = [c for cands, _ in groups for c in cands]
+    if not allc:
+        return
+    c = np.array(allc, dtype=float)
+    pi, w, lo, hi, loops = c[:, 0].astype(int), c[:, 1].astype(int), c[:, 2], c[:, 3], c[:, 4]
+    rows = np.arange(len(c))
+
+    def resid(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        seg = word_lengths(q0[pi], q1[pi], k * r_m[pi])[rows, w]
+        return seg, seg.sum(1) + loops * TWO_PI * r_m[pi] * k - length_m[pi]
+
+    hi = _illinois(lambda k: resid(k)[1], lo, hi, 14)
+    seg, f = resid(hi)
+    seg = seg.copy()
+    seg[:, 0] += loops * TWO_PI * r_m[pi] * hi
+    start = 0
+    for cands, dest in groups:
+        sel = np.arange(start, start + len(cands))
+        start += len(cands)
+        for j in sel[np.lexsort((hi[sel], pi[sel]))]:  # per problem, smallest converged k first
             i = pi[j]
-            if out[i] is None and abs(f[j]) < 1e-3:
-                out[i] = _path(q0[i], w[j], seg[j], hi[j] * r_m[i], hi[j] * r_m[i])
-    return out, table[:, 0].min(1)
+            if dest[i] is None and abs(f[j]) < 1e-3:
+                dest[i] = _path(q0[i], w[j], seg[j], hi[j] * r_m[i], hi[j] * r_m[i])
 
 
 def _illinois(fun, lo: np.ndarray, hi: np.ndarray, iters: int) -> np.ndarray:
