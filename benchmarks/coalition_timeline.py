@@ -5,8 +5,8 @@
 Prints the key events per target (leader time, neighbours / potential members, coalition size,
 strike and assessment times, failed tenders) next to the paper's numbers, and the planning
 compute per formed coalition: total = what the leader computes between bid close and award
-(optimiser, including re-runs after excluded members, plus the threat-avoiding timed paths and
-legs of every member); optimiser = the last optimiser run only. Both are wall times
+(optimiser, including the repairs after excluded members, plus the threat-avoiding timed paths
+and legs of every member); optimiser = the colony run plus any repairs. Both are wall times
 (time.perf_counter). With --repeat N the whole simulation runs N times (the results must be
 identical) and the compute table gives the first run, the median and the minimum per coalition,
 with the 1-minute load average before and after and the CPU share stolen by the hypervisor

@@ -115,7 +115,9 @@ class CoalitionSim:
         self.tenders: dict[int, Tender] = {}
         self.outcomes = {t.id: TargetOutcome(t.id) for t in world.targets}
         self.compute_s: list[float] = []  # wall time of every formation (optimiser + paths), failed ones too
-        self.optimiser_s: list[float] = []  # ACO / polynomial / global optimiser only, formed coalitions
+        self.optimiser_s: list[
+            float
+        ] = []  # optimiser runs (ACO / polynomial / global, repairs), formed coalitions
         self.award_legs: dict[tuple[str, str], Leg] = {}
         self.st: list[UavState] = []
         for u in self.uavs:
@@ -451,7 +453,7 @@ class CoalitionSim:
             return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
         base = L.copy()
         plans = paths.FormationPaths(poses_a, goals, rmin, self.known, p.kappa, p.sample_ds_m)
-        sol, bad = None, []
+        sol, bad, opt_s = None, [], 0.0
         for _attempt in range(3):  # members whose timed leg cannot clear the threats are excluded
             prob.length_m = base.copy()
             if not coverable(prob):
@@ -468,7 +470,7 @@ class CoalitionSim:
                 sol = solve_polynomial(prob, p, np.array(etas))
             else:
                 sol = solve_aco(prob, p, self.rng, scale=GLOBAL_SCALE if p.method == "global" else 1)
-            opt_s = time.perf_counter() - t_opt
+            opt_s += time.perf_counter() - t_opt  # the colony run plus any repairs
             if not sol.covered:
                 return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
             # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
