@@ -115,9 +115,7 @@ class CoalitionSim:
         self.tenders: dict[int, Tender] = {}
         self.outcomes = {t.id: TargetOutcome(t.id) for t in world.targets}
         self.compute_s: list[float] = []  # wall time of every formation (optimiser + paths), failed ones too
-        self.optimiser_s: list[
-            float
-        ] = []  # optimiser runs (ACO / polynomial / global, repairs), formed coalitions
+        self.optimiser_s: list[float] = []  # optimiser runs and repairs per formed coalition
         self.award_legs: dict[tuple[str, str], Leg] = {}
         self.st: list[UavState] = []
         for u in self.uavs:
