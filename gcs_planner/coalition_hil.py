@@ -69,6 +69,7 @@ import asyncio
 import itertools
 import logging
 import math
+import multiprocessing
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -129,10 +130,11 @@ TAKEOFF_CLIMB_MPS = 40.0  # mock climb rate for the take-off only
 NAV_WAYPOINT = 16
 LEAD_IN_S = 20.0  # straight lead-in to the window start, flown from the take-off point [s]
 START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
-PREFIX_DT_S = 1.0  # waypoint spacing on the predicted turn before a live leg [s]
+PREFIX_DT_S = 2.0  # waypoint spacing on the predicted turn before a live leg [s]
 FIT_S = 2.0  # turn rate fitted over this much of the newest course reports [s]
 UPLOAD_SAFETY = 1.5  # upload estimate = measured wall time per item x items x speed-up x this
 UPLOAD_WORKERS = 4
+SPEED_TRIES = (0.9, 1.1, 0.8, 1.2)  # other speeds / cruise for a live leg that cannot clear the threats
 LEG_SPEED_FACTOR = 1.2  # a live leg short of time may be planned up to this x cruise (mock top: 1.3)
 TURN_STEP_DEG = 20.0  # a waypoint every this much turn of the planned path
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
@@ -140,6 +142,7 @@ APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a 
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
 MEASURE_WINDOW_S = 15.0  # closest approach searched within this of the awarded time [s]
 ARC_TOL_M = 50.0  # an assessment arc is flown within this of the assessment circle [m]
+FLEET_START_S = 30.0  # the mock fleet's process must be serving within this [s]
 LOGGED_EVENTS = ("tender", "bid", "not_bidding", "late_bid_ignored", "formed", "formation_failed", "award")
 
 
@@ -210,7 +213,7 @@ class HilResult:
 
     @property
     def passed(self) -> bool:
-        return bool(self.strikes) and all(r.passed for r in self.rows) and not self.failures
+        return bool(self.rows) and all(r.passed for r in self.rows) and not self.failures
 
 
 # ---- live state
@@ -288,7 +291,8 @@ def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_fac
     path to the strike entry pose, or to the assessment arc start followed by the assessment arc,
     arriving at award["time_s"]. At cruise speed when there is time; else the minimum route, flown
     up to max_speed_factor x cruise (info["speed_mps"]); if that is still too slow, late
-    (info["late_s"] > 0)."""
+    (info["late_s"] > 0). When the timing fallbacks find no threat-clear path of the length the
+    speed asks for, the other speeds of SPEED_TRIES (up to max_speed_factor) are tried."""
     p = world.params
     uav = next(u for u in world.uavs if u.id == award["uav"])
     target = next(t for t in world.targets if t.id == award["target"])
@@ -298,10 +302,22 @@ def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_fac
     t_goal = float(award["time_s"])
     goal = _goal_pose(world, award)
     route = paths.min_route(q0, goal, uav.r_min_m, known, p.kappa, p.sample_ds_m)
-    need_mps = route.length_m / max(t_goal - t0_s, 1e-3)
-    speed = float(np.clip(need_mps, uav.speed_mps, max_speed_factor * uav.speed_mps))
-    segs, clear = paths.timed_route(route, max(route.length_m, speed * (t_goal - t0_s)), known, p.sample_ds_m)
-    info = {"target": target.id, "clear": bool(clear and route.clear), "speed_mps": speed}
+    span_s = max(t_goal - t0_s, 1e-3)
+    speed = float(np.clip(route.length_m / span_s, uav.speed_mps, max_speed_factor * uav.speed_mps))
+    # a timed path that cannot clear the threats at this speed: try others (slower first)
+    others = [f * uav.speed_mps for f in SPEED_TRIES if f * uav.speed_mps * span_s >= route.length_m]
+    first = None
+    for v in [speed, *(v for v in others if v <= max_speed_factor * uav.speed_mps and v != speed)]:
+        segs, clear = paths.timed_route(route, max(route.length_m, v * span_s), known, p.sample_ds_m)
+        length = sum(seg.length for seg in segs)
+        attempt = (segs, bool(clear and route.clear), v)
+        first = first or attempt
+        if attempt[1] and abs(length - v * span_s) < 0.05 * v:
+            break
+    else:
+        attempt = first
+    segs, clear, speed = attempt
+    info = {"target": target.id, "clear": clear, "speed_mps": speed}
     leg = paths.sample_segments(segs, t0_s, speed, p.sample_ds_m, "strike" if strike else "transit", info)
     leg.info["late_s"] = float(leg.t[-1] - t_goal)
     if strike:
@@ -326,11 +342,14 @@ def _waypoint_index(t: np.ndarray, xy: np.ndarray, dt_s: float, forced) -> np.nd
 
 
 def _speeds(t: np.ndarray, xy: np.ndarray, keep: np.ndarray, cruise_mps: float) -> np.ndarray:
-    """Ground speed on the leg ending at each kept sample (path length / time); within 2 % of
-    cruise it is cruise, so that speed items are only emitted where the speed really changes."""
+    """Ground speed on the leg ending at each kept sample (path length / time), within [0.8, 1.2] x
+    cruise (SPEED_TRIES, LEG_SPEED_FACTOR), as a live leg may be flown; a jump in a simulated track
+    (the simulation's tracks have some) must not set the airframe's speed. Within 2 % of cruise it
+    is cruise, so that speed items are only emitted where the speed really changes."""
     s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))][keep]
     v = np.r_[cruise_mps, np.diff(s) / np.maximum(np.diff(t[keep]), 1e-9)]
-    return np.where(np.abs(v - cruise_mps) <= 0.02 * cruise_mps, cruise_mps, np.maximum(v, 1.0))
+    v = np.clip(v, min(SPEED_TRIES) * cruise_mps, LEG_SPEED_FACTOR * cruise_mps)
+    return np.where(np.abs(v - cruise_mps) <= 0.02 * cruise_mps, cruise_mps, v)
 
 
 def _piece_plan(uav, t: np.ndarray, xy: np.ndarray, t_origin_s: float, dt_s: float, forced) -> VehiclePlan:
@@ -414,6 +433,17 @@ def _track_piece(uav, t, xy, t0: float, dt_s: float, a: float, b: float, forced=
     return _piece_plan(uav, ts, xys, t0, dt_s, forced)
 
 
+def _drop_spikes(t: np.ndarray, xy: np.ndarray, speed_mps: float) -> tuple[np.ndarray, np.ndarray]:
+    """The simulated track without its isolated far samples: a sample reached and left at more than
+    twice the cruise speed. Track.start_leg, cutting a leg short, fills the gap up to the new leg
+    with the loiter planned after the cut leg, which starts elsewhere (one sample, up to 1.6 km
+    away, on the station changes at t = 140 s of the paper scenario); as a waypoint it would send the
+    vehicle there."""
+    v = np.hypot(*np.diff(xy, axis=0).T) / np.maximum(np.diff(t), 1e-9)
+    spike = np.r_[False, (v[:-1] > 2.0 * speed_mps) & (v[1:] > 2.0 * speed_mps), False]
+    return t[~spike], xy[~spike]
+
+
 def _schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> list[_VehicleSchedule]:
     """Each awarded UAV's missions: the initial one, its awards (flown from the award time: the leg
     plus EXTEND_S of the simulated track after it) and, where the simulation flies on for longer
@@ -424,7 +454,9 @@ def _schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> list[_V
         by_uav.setdefault(e["uav"], []).append(e)
     out = []
     for uav in sorted((u for u in world.uavs if u.id in by_uav), key=lambda u: u.sysid):
-        t, xy, _ = result.tracks[uav.index].history(t_stop + 2 * PRE_AWARD_EXTEND_S)
+        t, xy = _drop_spikes(
+            *result.tracks[uav.index].history(t_stop + 2 * PRE_AWARD_EXTEND_S)[:2], uav.speed_mps
+        )
         t0 = t_start - LEAD_IN_S
         piece = partial(_track_piece, uav, t, xy, t0, dt_s)
         mine = sorted(by_uav[uav.id], key=lambda e: e["t_s"])
@@ -484,9 +516,51 @@ def _award_mission(
     return _piece_plan(uav, ts, xys, t_route0, dt_s, forced)
 
 
-def _mock_fleet(schedules, origin: Origin, speedup: float):
+def _serve_fleet(conn, kwargs: dict) -> None:
+    """Child process: run a MockFleet, send its addresses, run until told to stop, send its lag count."""
     from sitl_mock import MockFleet
 
+    with MockFleet(**kwargs) as fleet:
+        conn.send(fleet.addresses)
+        conn.recv()
+        lag = fleet.lag_events
+    conn.send(lag)
+
+
+class _FleetProcess:
+    """The mock fleet in its own process. In the GCS's process the fleet's thread shares the GIL,
+    so the simulation, telemetry parsing, planning and uploads all ran on one core; at speed-up 20
+    with 26 vehicles that core was saturated and an upload of 50 items took 10 s of flight time."""
+
+    def __init__(self, **kwargs) -> None:
+        self.kwargs = kwargs
+        self.addresses: list[tuple[str, int]] = []
+        self.lag_events = 0
+
+    def __enter__(self) -> _FleetProcess:
+        ctx = multiprocessing.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self._proc = ctx.Process(target=_serve_fleet, args=(child, self.kwargs), daemon=True)
+        self._proc.start()
+        if not self._conn.poll(FLEET_START_S):
+            self._proc.terminate()
+            raise UserError(f"the mock fleet process did not start within {FLEET_START_S} s")
+        self.addresses = self._conn.recv()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            self._conn.send("stop")
+            if self._conn.poll(10.0):
+                self.lag_events = int(self._conn.recv())
+        except (BrokenPipeError, EOFError):
+            pass
+        self._proc.join(10.0)
+        if self._proc.is_alive():
+            self._proc.terminate()
+
+
+def _mock_fleet(schedules, origin: Origin, speedup: float) -> _FleetProcess:
     specs = []
     for s in schedules:
         vp = s.initial
@@ -506,7 +580,7 @@ def _mock_fleet(schedules, origin: Origin, speedup: float):
             )
         )
     rate_hz = min(MOCK_TELEMETRY_HZ * speedup, MAX_WALL_TELEMETRY_HZ)
-    return MockFleet(vehicles=specs, speedup=speedup, home=origin, rate_hz=rate_hz)
+    return _FleetProcess(vehicles=specs, speedup=speedup, home=origin, rate_hz=rate_hz)
 
 
 def _climb_run_m(speed_mps: float, climb_mps: float, alt_m: float, dt_s: float = 0.05) -> float:
@@ -607,11 +681,9 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
         and (options.uavs is None or e["uav"] in options.uavs)
         and (e["target"], e["uav"]) in result.award_legs
     ]  # fmt: skip
-    strikes = [e for e in awards if e["task"] == "strike"]
-    if not strikes:
+    if not awards:
         raise UserError(
-            f"no strike awards for targets {options.targets} and UAVs {options.uavs} "
-            f"in the simulation (seed {seed})"
+            f"no awards for targets {options.targets} and UAVs {options.uavs} in the simulation (seed {seed})"
         )
     t_start = max(0.0, min(e["t_s"] for e in awards) - options.lead_s)
     ends = [
@@ -811,7 +883,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                     failures.append("the run did not reach the window end in time")
         finally:
             await link.close()
-        lag = int(getattr(fleet, "lag_events", 0))
+    lag = fleet.lag_events
     tracks = recorder.tracks()
     flown = {s: (tr.times_s - route_t0 + t_route0, tr.positions) for s, tr in tracks.items()}
     sim_tracks = {s.uav.id: s.track for s in schedules}
