@@ -29,6 +29,10 @@ J of a plan (eqs. 7-12), normalised so the weights are comparable:
   arrival (so J3 is the total stretching/waiting plus any lateness).
 Defaults (not in the paper): alpha 1, beta 2, q0 0.9, rho 0.1, tau0 1, 10 clusters, 15 iterations.
 
+Repair (choice, not in the paper): when a member's timed path cannot clear the threats, the leader
+re-covers only that task (``repair``: a free candidate or a swap, schedule-keeping moves first,
+then the best J) instead of running the colony again; see sim.py.
+
 Compute: a construction step is ~35 numpy calls on (tasks, clusters, candidates) arrays.
 Tasks come first, so the eq. 27 reductions are elementwise passes. ``allowed`` is updated in
 place. A roulette draw is one argmax of "cumulative sum >= x". The step's three uniform draws come

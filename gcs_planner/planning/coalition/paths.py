@@ -34,7 +34,9 @@ fallbacks evaluate their whole scan in one Dubins call and refine all roots toge
 skip points where a Euclidean lower bound (Dubins length >= distance) proves the residual
 positive (``_scan``). ``timed_routes`` runs these fallbacks for all members of a formation that
 need them in one batch. The candidates are still taken in the same order of preference, so the
-results equal the one-candidate-at-a-time, one-member-at-a-time computation.
+results equal the one-candidate-at-a-time, one-member-at-a-time computation. ``FormationPaths``
+memoises a formation's routes and timed paths over the leader's attempts (row-independent
+batches make a memoised path equal a fresh one).
 """
 
 from __future__ import annotations

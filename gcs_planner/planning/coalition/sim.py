@@ -25,7 +25,7 @@ that keep their task and required time keep their memoised paths (``paths.Format
 The colony re-runs only when no move covers a task; the polynomial and global baselines re-run
 their optimiser as before. On the paper scenario (seed 3) this changes only T2: the strikes
 come 0.33 s earlier (240.42 s instead of 240.75 s), J rises from 0.730 to 0.746, and the
-formation's compute falls from ~0.24 s to ~0.17 s.
+formation's compute falls from ~0.24 s to 0.13-0.19 s (median of 10 runs, shared 2-core VM).
 
 ``SimResult.events`` is the timeline (tenders, bids, awards with time, vehicle, strike point,
 arrival time and attack angle, failures, strikes, assessments, re-plans); ``SimResult.award_legs``
