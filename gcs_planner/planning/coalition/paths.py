@@ -446,17 +446,13 @@ class FormationPaths:
 
     def routes(self, assign: np.ndarray) -> list[Route]:
         """Minimum threat-avoiding route of candidate assign[k] to task k, for every task k."""
-        return self.pair_routes(np.asarray(assign), np.arange(len(assign)))
-
-    def pair_routes(self, cands: np.ndarray, tasks: np.ndarray) -> list[Route]:
-        """Minimum threat-avoiding route of candidate cands[j] to task tasks[j], for every j."""
-        keys = [(int(i), int(k)) for i, k in zip(cands, tasks)]
-        new = _first_unseen(keys, self._routes)
+        keys = [(int(i), k) for k, i in enumerate(assign)]
+        new = [k for k, key in enumerate(keys) if key not in self._routes]
         if new:
-            c, t = np.asarray(cands)[new], np.asarray(tasks)[new]
-            found = min_routes(self.poses[c], self.goals[t], self.r_m[c], self.threats, self.kappa)
-            for j, route in zip(new, found):
-                self._routes[keys[j]] = route
+            a = np.asarray(assign)[new]
+            found = min_routes(self.poses[a], self.goals[new], self.r_m[a], self.threats, self.kappa)
+            for k, route in zip(new, found):
+                self._routes[keys[k]] = route
         return [self._routes[key] for key in keys]
 
     def lengths(self, length_m: np.ndarray) -> np.ndarray:
@@ -471,56 +467,33 @@ class FormationPaths:
 
         A direct clear route is radius-stretched (all such members in one batch); the others, and
         stretched paths that cross a threat, go through ``timed_routes``'s fallbacks."""
-        out = self._timed_pairs(np.asarray(assign), np.arange(len(assign)), np.asarray(want_m), True)
-        return [segs for segs, _ in out], [clear for _, clear in out]
-
-    def stretch_clears(self, cands: np.ndarray, tasks: np.ndarray, want_m: np.ndarray) -> list[bool]:
-        """Per pair: does a direct clear route, radius-stretched to want_m, clear the threats?
-
-        Only the first timing step (no push, detour or loiter fallback); a clear result is memoised
-        as ``timed`` would compute it. False means unknown: the fallbacks may still find a path."""
-        out = self._timed_pairs(np.asarray(cands), np.asarray(tasks), np.asarray(want_m), False)
-        return [found is not None and found[1] for found in out]
-
-    def _timed_pairs(self, cands, tasks, want_m, fallbacks: bool) -> list:
-        routes = self.pair_routes(cands, tasks)
-        keys = [(int(i), int(k), float(w)) for i, k, w in zip(cands, tasks, want_m)]
-        todo = _first_unseen(keys, self._timed)
-        direct = [j for j in todo if len(routes[j].poses) == 2 and routes[j].clear]
+        assign = np.asarray(assign)
+        routes = self.routes(assign)
+        keys = [(int(i), k, float(want_m[k])) for k, i in enumerate(assign)]
+        todo = [k for k, key in enumerate(keys) if key not in self._timed]
+        direct = [k for k in todo if len(routes[k].poses) == 2 and routes[k].clear]
         batch: dict[int, DubinsPath | None] = {}
         if direct:
-            starts = np.array([routes[j].poses[0] for j in direct]).reshape(-1, 3)
-            found = stretch_batch(starts, self.goals[tasks[direct]], want_m[direct], self.r_m[cands[direct]])
+            starts = np.array([routes[k].poses[0] for k in direct]).reshape(-1, 3)
+            found = stretch_batch(starts, self.goals[direct], want_m[direct], self.r_m[assign[direct]])
             batch = dict(zip(direct, found))
-        stretched = [j for j in direct if batch[j] is not None]
-        ok = dict(zip(stretched, chains_clear([[batch[j]] for j in stretched], self.threats, self.ds_m)))
-        rest = [j for j in todo if not ok.get(j, False)]
-        for j in todo:
-            if ok.get(j, False):
-                self._timed[keys[j]] = ([batch[j]], True)
-        if (
-            rest and fallbacks
-        ):  # the other members' timing fallbacks, all at once (a direct stretch is passed on)
+        stretched = [k for k in direct if batch[k] is not None]
+        ok = dict(zip(stretched, chains_clear([[batch[k]] for k in stretched], self.threats, self.ds_m)))
+        rest = [k for k in todo if not ok.get(k, False)]
+        for k in todo:
+            if ok.get(k, False):
+                self._timed[keys[k]] = ([batch[k]], True)
+        if rest:  # the other members' timing fallbacks, all at once (a direct stretch is passed on)
             found = timed_routes(
-                [routes[j] for j in rest],
-                [want_m[j] for j in rest],
+                [routes[k] for k in rest],
+                [want_m[k] for k in rest],
                 self.threats,
-                stretched=[(batch[j],) if j in batch else None for j in rest],
+                stretched=[(batch[k],) if k in batch else None for k in rest],
             )
-            for j, result in zip(rest, found):
-                self._timed[keys[j]] = result
-        return [self._timed.get(key) for key in keys]
-
-
-def _first_unseen(keys: list, memo: dict) -> list[int]:
-    """Indices of the first occurrence of every key not in memo, in order."""
-    seen: set = set()
-    out = []
-    for j, key in enumerate(keys):
-        if key not in memo and key not in seen:
-            seen.add(key)
-            out.append(j)
-    return out
+            for k, result in zip(rest, found):
+                self._timed[keys[k]] = result
+        out = [self._timed[key] for key in keys]
+        return [segs for segs, _ in out], [clear for _, clear in out]
 
 
 def _links_lengths(poses_sets: list[list[np.ndarray]], r_m: float) -> np.ndarray:
