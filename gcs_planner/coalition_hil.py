@@ -70,6 +70,7 @@ import itertools
 import logging
 import math
 import multiprocessing
+import socket
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -102,6 +103,7 @@ from gcs_planner.mavlink.fleet import upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.planning.coalition import load_world, paths, simulate
 from gcs_planner.planning.coalition.track import Leg
@@ -124,24 +126,28 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-EXTEND_S = 10.0  # simulated track flown after an award leg when the next piece is an idle upload [s]
+AFTER_GOAL_S = 2.0  # simulated track flown after an award leg; the idle upload follows [s]
 PRE_AWARD_EXTEND_S = 30.0  # continuation of a pre-award mission at its last turn rate [s]
 TAKEOFF_CLIMB_MPS = 40.0  # mock climb rate for the take-off only
 NAV_WAYPOINT = 16
 LEAD_IN_S = 20.0  # straight lead-in to the window start, flown from the take-off point [s]
 START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
 PREFIX_DT_S = 2.0  # waypoint spacing on the predicted turn before a live leg [s]
+DEADLINE_HORIZON_S = 30.0  # leg-start deadlines searched this far ahead [s]
 FIT_S = 2.0  # turn rate fitted over this much of the newest course reports [s]
 UPLOAD_SAFETY = 1.5  # upload estimate = measured wall time per item x items x speed-up x this
 UPLOAD_WORKERS = 4
 SPEED_TRIES = (0.9, 1.1, 0.8, 1.2)  # other speeds / cruise for a live leg that cannot clear the threats
 LEG_SPEED_FACTOR = 1.2  # a live leg short of time may be planned up to this x cruise (mock top: 1.3)
-TURN_STEP_DEG = 20.0  # a waypoint every this much turn of the planned path
+TURN_STEP_DEG = 30.0  # a waypoint every this much turn of the planned path
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
 APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a goal pose (and 1 s after)
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
 MEASURE_WINDOW_S = 15.0  # closest approach searched within this of the awarded time [s]
 ARC_TOL_M = 50.0  # an assessment arc is flown within this of the assessment circle [m]
+RCVBUF_BYTES = 4 << 20  # GCS socket receive buffer (Linux caps it at net.core.rmem_max)
+# Mission transfers in flight: the defaults' 1.5 s COUNT re-send is 30 s of flight at speed-up 20
+UPLOAD_TIMING = Timing(count_retry_s=0.25, count_retries=12, ack_timeout_max_s=0.5, item_timeout_max_s=0.5)
 FLEET_START_S = 30.0  # the mock fleet's process must be serving within this [s]
 LOGGED_EVENTS = ("tender", "bid", "not_bidding", "late_bid_ignored", "formed", "formation_failed", "award")
 
@@ -412,7 +418,6 @@ class _Award:
     event: dict
     sim_leg: Leg
     end_s: float  # the next award's leg start or the window end
-    short: bool  # the award mission runs to end_s (no idle mission after it)
 
 
 @dataclass
@@ -446,8 +451,8 @@ def _drop_spikes(t: np.ndarray, xy: np.ndarray, speed_mps: float) -> tuple[np.nd
 
 def _schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> list[_VehicleSchedule]:
     """Each awarded UAV's missions: the initial one, its awards (flown from the award time: the leg
-    plus EXTEND_S of the simulated track after it) and, where the simulation flies on for longer
-    before the next award or the window end, an "idle" one uploaded at the leg end (its idle loiter /
+    plus AFTER_GOAL_S of the simulated track after it) and, where the simulation flies on before
+    the next award or the window end, an "idle" one uploaded at the leg end (its idle loiter /
     station change), so the urgent award missions stay short."""
     by_uav: dict[str, list[dict]] = {}
     for e in awards:
@@ -471,28 +476,23 @@ def _schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> list[_V
         for k, (e, leg) in enumerate(zip(mine, legs)):
             end = float(legs[k + 1].t[0]) if k + 1 < len(mine) else t_stop
             leg_end = float(leg.t[-1])
-            short = end - leg_end <= EXTEND_S
-            flown.append(_Award(e, leg, end, short))
-            if not short:
+            flown.append(_Award(e, leg, end))
+            if end - leg_end > AFTER_GOAL_S:
                 idles.append((leg_end, e, piece(leg_end, end, extend_s=PRE_AWARD_EXTEND_S)))
         out.append(_VehicleSchedule(uav, initial, (t, xy), flown, idles))
     return out
 
 
-def _award_track(uav, sched: _VehicleSchedule, award: _Award, leg: Leg):
-    """Times and positions of an award mission after its leg: the simulated track from the
-    simulated leg's end (where the live leg also ends), shifted by a live leg's lateness."""
+def _award_track(sched: _VehicleSchedule, award: _Award, leg: Leg):
+    """Times and positions of an award mission after its leg: AFTER_GOAL_S of the simulated track
+    from the simulated leg's end (where the live leg also ends), shifted by a live leg's lateness."""
     t, xy = sched.track
     sim_end = float(award.sim_leg.t[-1])
-    late = max(0.0, float(leg.t[-1]) - sim_end)
-    stop = award.end_s if award.short else sim_end + EXTEND_S
+    stop = min(award.end_s, sim_end + AFTER_GOAL_S)
     if stop - sim_end < 1e-3:
         return np.zeros(0), np.zeros((0, 2))
     ts, xys = _slice(t, xy, sim_end, stop)
-    if award.short:
-        ext_t, ext_xy = _continue_turn(t, xy, stop, uav.speed_mps, uav.speed_mps / uav.r_min_m, EXTEND_S)
-        ts, xys = np.r_[ts, ext_t], np.vstack([xys, ext_xy])
-    return ts[1:] + late, xys[1:]
+    return ts[1:] + max(0.0, float(leg.t[-1]) - sim_end), xys[1:]
 
 
 def _award_mission(
@@ -501,7 +501,7 @@ def _award_mission(
     """The award mission: [the predicted turn up to the leg start (prefix: times, xy), waypoints at
     prefix_wp_s,] the leg, the track after it."""
     uav, e = sched.uav, award.event
-    tail_t, tail_xy = _award_track(uav, sched, award, leg)
+    tail_t, tail_xy = _award_track(sched, award, leg)
     parts_t, parts_xy = [leg.t], [leg.xy]
     forced = []
     if prefix is not None:
@@ -717,6 +717,10 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
     telemetry = _Telemetry(flying)
     with fleet:
         link = await MavlinkLink.open(*[f"udpout:{h}:{p}" for h, p in fleet.addresses])
+        # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
+        # message lost when it overflows costs a re-send timer (MavlinkLink has no option for this)
+        sock = link._transport.get_extra_info("socket")
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
         try:
             with FlightLogger(mcap_path, scenario.origin, initial, scenario_text) as logger:
                 link.subscribe(logger.on_frame)
@@ -751,25 +755,31 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                     return options.speedup * wall * UPLOAD_SAFETY
 
                 def vehicle_state(uav) -> LiveState:
-                    rows = telemetry.rows[uav.sysid]
+                    rows = list(telemetry.rows[uav.sysid])  # a copy: planning runs in a thread
                     state = live_state(rows, scenario.origin, 1.05 * uav.speed_mps / uav.r_min_m)
                     return replace(state, t_s=state.t_s - route_t0 + t_route0)
 
-                def slack_s(uav, e: dict, now: float) -> float:
-                    """Time to spare [s] on the shortest path (threats ignored) from the vehicle's
-                    newest pose to the award's goal at cruise: the uploads' order of urgency."""
-                    q = vehicle_state(uav).predict([now])
-                    length = paths.shortest_lengths(q, _goal_pose(world, e)[None], uav.r_min_m)[0]
-                    return float(e["time_s"] - now - length / uav.speed_mps)
+                def deadline_s(uav, e: dict, now: float) -> float:
+                    """The latest leg start [s] from which the shortest path (threats ignored) to the
+                    award's goal, flown at cruise from the pose predicted then, still arrives on
+                    time: the uploads' order of urgency (earliest deadline first). A vehicle turning
+                    away from its goal loses more than a second per second of waiting."""
+                    at = now + np.arange(0.0, DEADLINE_HORIZON_S, 0.5)
+                    q = vehicle_state(uav).predict(at)
+                    goal = np.broadcast_to(_goal_pose(world, e), q.shape)
+                    spare = e["time_s"] - at - paths.shortest_lengths(q, goal, uav.r_min_m) / uav.speed_mps
+                    late = np.nonzero(spare < 0.0)[0]
+                    return float(at[late[0]] if len(late) else at[-1] + spare[-1])
 
-                def live_leg(sched: _VehicleSchedule, award: _Award) -> tuple[Leg, VehiclePlan, dict]:
-                    """Plan the award's leg from the vehicle's newest reports (see module docstring)."""
-                    uav, e = sched.uav, award.event
+                def live_leg(sched: _VehicleSchedule, award: _Award, state: LiveState, now: float):
+                    """Plan the award's leg from the vehicle's newest reports (see module docstring).
+                    Runs in a thread, so that the event loop keeps draining the sockets: a loop
+                    blocked for ~0.1 s overflows them and a lost mission message costs a 1 s
+                    (wall) re-request."""
+                    e = award.event
                     t_plan = time.monotonic()
-                    state = vehicle_state(uav)
                     items = timing["items"]
                     for _ in range(2):  # once more when the mission has more items than guessed
-                        now = scenario_now()
                         t0 = now + upload_estimate_s(items) + START_AHEAD_S
                         q0 = state.predict([t0])[0]
                         leg = plan_live_leg(world, e, q0, t0, LEG_SPEED_FACTOR)
@@ -781,8 +791,10 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                         if upload_estimate_s(n) <= upload_estimate_s(items) + 0.5:
                             break
                         items = n
-                    timing["plan_wall_s"] = 0.5 * timing["plan_wall_s"] + 0.5 * (time.monotonic() - t_plan)
+                    plan_wall_s = time.monotonic() - t_plan
+                    timing["plan_wall_s"] = 0.5 * timing["plan_wall_s"] + 0.5 * plan_wall_s
                     info = {
+                        "plan_wall_ms": round(1000.0 * plan_wall_s, 1),
                         "t0_s": round(t0, 3),
                         "estimate_s": round(t0 - now - START_AHEAD_S, 3),
                         "live_pose": [round(float(v), 2) for v in q0],
@@ -808,12 +820,13 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                             )
                             entry["t0_s"] = round(float(leg.t[0]), 3)
                         else:
-                            leg, vp, info = live_leg(sched, payload)
+                            state, now = vehicle_state(sched.uav), scenario_now()
+                            leg, vp, info = await asyncio.to_thread(live_leg, sched, payload, state, now)
                             entry.update(info)
                         items = plan_to_items(vp, scenario.origin, options.autopilot)
                         entry["upload_start_s"] = scenario_now()
                         t_up = time.monotonic()
-                        await MissionClient(link, sysid).upload(items)
+                        await MissionClient(link, sysid, timing=UPLOAD_TIMING).upload(items)
                         per_item = (time.monotonic() - t_up) / len(items)
                         timing["item_wall_s"] = 0.5 * timing["item_wall_s"] + 0.5 * per_item
                         if kind == "award":
@@ -868,7 +881,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                     while due and due[0][0] <= now:
                         _, rank, kind, sched, payload = due.pop(0)
                         if kind == "award" and not options.replay_legs:
-                            rank = (False, slack_s(sched.uav, payload.event, now))
+                            rank = (False, deadline_s(sched.uav, payload.event, now))
                         queue.put_nowait((rank, next(order), kind, sched, payload))
                     if options.keep_schedule:
                         _keep(link, recorder, keeper, current, route_t0)
