@@ -100,7 +100,7 @@ def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_pa
     for u in awards:
         assert u["award_t_s"] <= u["upload_start_s"] < u["upload_end_s"] < u["t0_s"] + 1.0, u
         assert u["t0_s"] < strike_s - 10.0, u
-        assert u["prediction_error_m"] < 25.0, u
+        assert u["prediction_error_m"] < 60.0, u  # predicted vs flown pose at the leg start
         t, p = result.tracks[u["sysid"]]
         k = np.searchsorted(t, u["upload_end_s"])
         assert p[k, 2] > 250.0  # airborne at the upload (cruise altitudes 300-500 m)
