@@ -364,3 +364,37 @@ def test_stretch_batch_of_a_batch_equals_problem_by_problem():
     alone = [paths.stretch_batch(q0[i : i + 1], q1[i : i + 1], want[i : i + 1], 200.0)[0] for i in range(16)]
     assert batch == alone
     assert sum(p is not None for p in batch) >= 8
+
+
+def test_dubins_lower_bound_never_exceeds_the_shortest_path():
+    """The scans' pruning bound (free-heading reach, both directions) is a bound on random cases,
+    including goals close to or inside the turning circles."""
+    rng = np.random.default_rng(21)
+    n = 20000
+    r = rng.uniform(50.0, 300.0, n)
+    q0 = np.column_stack([rng.uniform(-1500, 1500, (n, 2)), rng.uniform(-7, 7, n)])
+    q1 = np.column_stack([rng.uniform(-1500, 1500, (n, 2)), rng.uniform(-7, 7, n)])
+    q1[: n // 2, :2] = q0[: n // 2, :2] + rng.uniform(-3, 3, (n // 2, 2)) * r[: n // 2, None]
+    exact = paths.shortest_lengths(q0, q1, r)
+    bound = paths._dubins_lower_bound(q0, q1, r)
+    assert (bound <= exact + 1e-9).all()
+    euclid = np.hypot(*(q1[:, :2] - q0[:, :2]).T)
+    assert (bound >= euclid).all() and (bound > euclid + 1.0).mean() > 0.5  # tighter than Euclid
+
+
+@pytest.mark.parametrize("fallback", ["_detours", "_delays_on_start_circle"])
+def test_pruned_fallback_scans_equal_the_full_scans(fallback, monkeypatch):
+    """Pruning by the lower bound never drops a candidate: random routes get the same paths (or the
+    same None) as with every grid point evaluated."""
+    rng = np.random.default_rng(5 if fallback == "_detours" else 6)
+    threats = [Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0), Threat(900.0, 1300.0, 180.0)]
+    goals = paths.entry_poses((1000.0, 500.0), rng.uniform(0, 2 * math.pi, 6), 200.0)
+    starts = np.column_stack([rng.uniform(200, 2200, (6, 2)), rng.uniform(-3, 3, 6)])
+    radii = rng.choice([150.0, 200.0], 6)
+    routes = [paths.min_route(a, b, r, threats, 1.3) for a, b, r in zip(starts, goals, radii)]
+    wants = [rt.length_m + x for rt, x in zip(routes, rng.uniform(150.0, 1300.0, 6))]
+    pruned = getattr(paths, fallback)(routes, wants, threats, 10.0)
+    monkeypatch.setattr(paths, "_dubins_lower_bound", lambda q0, q1, r: np.full(len(q0), -np.inf))
+    full = getattr(paths, fallback)(routes, wants, threats, 10.0)
+    assert pruned == full
+    assert any(p is not None for p in full)

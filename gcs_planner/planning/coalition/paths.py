@@ -31,12 +31,15 @@ Compute (target 0.05 s per formation; numpy call overhead, not arithmetic, domin
 sampled for clearance checks and legs in one ``sample_batch`` call (``chains_clear``,
 ``sample_legs``), with exactly ``DubinsPath.sample_step``'s samples. The detour and loiter
 fallbacks evaluate their whole scan in one Dubins call and refine all roots together. Their scans
-skip points where a Euclidean lower bound (Dubins length >= distance) proves the residual
-positive (``_scan``). ``timed_routes`` runs these fallbacks for all members of a formation that
-need them in one batch. The candidates are still taken in the same order of preference, so the
-results equal the one-candidate-at-a-time, one-member-at-a-time computation. ``FormationPaths``
-memoises a formation's routes and timed paths over the leader's attempts (row-independent
-batches make a memoised path equal a fresh one).
+skip points where a lower bound of the Dubins length proves the residual positive (``_scan``):
+the larger of the free-heading reach lengths (turn + tangent, Dubins 1957) forwards from the
+start pose and backwards from the end pose (``_dubins_lower_bound``; Euclidean inside a turning
+circle); it leaves about half of the Euclidean bound's points to evaluate. ``timed_routes`` runs
+these fallbacks for all members of a formation that need them in one batch. The candidates are
+still taken in the same order of preference, so the results equal the one-candidate-at-a-time,
+one-member-at-a-time computation. ``FormationPaths`` memoises a formation's routes and timed
+paths over the leader's attempts (row-independent batches make a memoised path equal a fresh
+one).
 """
 
 from __future__ import annotations
@@ -620,7 +623,7 @@ def _delays_on_start_circle(
 
     grid_combo, grid_a = np.repeat(np.arange(len(starts)), a.shape[1]), a.ravel()
     pose = _advance_arc(starts[grid_combo], kappas[grid_combo], grid_a)
-    gap = np.hypot(pose[:, 0] - goal[grid_combo, 0], pose[:, 1] - goal[grid_combo, 1])
+    gap = _dubins_lower_bound(pose, goal[grid_combo], r[grid_combo])
     lower = (grid_a + gap - targets[grid_combo]).reshape(a.shape)
     F = _scan(lower, lambda i: f(grid_combo[i], grid_a[i]))
     cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r[:, None])
@@ -685,7 +688,7 @@ def _detours(
     RHO = np.broadcast_to(rho[:, None, :], shape).ravel()
     TH = np.broadcast_to(theta[None, :, None], shape).ravel()
     v = via(G, RHO, TH)
-    lower = np.hypot(v[:, 0] - prev[G, 0], v[:, 1] - prev[G, 1]) + RHO - need[G]
+    lower = _dubins_lower_bound(prev[G], v, r[G]) + RHO - need[G]
     F = _scan(lower.reshape(-1, shape[2]), lambda i: f(G[i], RHO[i], TH[i])).reshape(shape)
     cross = (np.sign(F[..., :-1]) != np.sign(F[..., 1:])) & (
         np.abs(F[..., 1:] - F[..., :-1]) < np.pi * r[:, None, None]
@@ -725,10 +728,41 @@ def _detours(
     return out
 
 
+def _reach_lower_bound(q: np.ndarray, p: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """A lower bound [m] of the length of any path of curvature <= 1/r from poses q (n, 3) to points p (n, 2).
+
+    For a point outside both turning circles the shortest such path is a turn then a straight
+    tangent (CS, Dubins 1957; the free-heading optimum), so min over both turn directions of
+    arc + tangent bounds every fixed-heading Dubins path too. Arcs within 1e-6 rad of a full turn
+    count as 0 (as ``word_lengths`` snaps them); inside or on a turning circle the bound is the
+    Euclidean distance."""
+    x, y, h = q[:, 0], q[:, 1], q[:, 2]
+    dx0, dy0 = p[:, 0] - x, p[:, 1] - y
+    rs, rc = r * np.sin(h), r * np.cos(h)
+    best, outside = np.full(len(q), np.inf), np.ones(len(q), bool)
+    for s in (1.0, -1.0):
+        dx, dy = dx0 + s * rs, dy0 - s * rc  # point relative to the turning circle's centre
+        dist = np.hypot(dx, dy)
+        outside &= dist > r * (1.0 + 1e-9)
+        tangent = np.sqrt(np.maximum(dist * dist - r * r, 0.0))
+        leave = np.arctan2(dy, dx) + s * np.arcsin(np.minimum(r / np.maximum(dist, 1e-9), 1.0))
+        turn = np.mod(s * (leave - h), TWO_PI)
+        best = np.minimum(best, np.where(turn > TWO_PI - 1e-6, 0.0, turn) * r + tangent)
+    euclid = np.hypot(dx0, dy0)
+    return np.where(outside, np.maximum(best, euclid), euclid)
+
+
+def _dubins_lower_bound(q0: np.ndarray, q1: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """A lower bound [m] of the Dubins length q0 -> q1 (n, 3) with radius r (n,): the larger of the
+    reach bounds forwards from q0 to q1's point and backwards (reversed q1 heading) to q0's point."""
+    back = np.column_stack([q1[:, 0], q1[:, 1], q1[:, 2] + math.pi])
+    return np.maximum(_reach_lower_bound(q0, q1[:, :2], r), _reach_lower_bound(back, q0[:, :2], r))
+
+
 def _scan(lower: np.ndarray, fun) -> np.ndarray:
     """A root scan grid F (rows, cols) whose sign changes along each row are the candidate roots.
 
-    lower <= F is a cheap lower bound (Euclidean instead of Dubins lengths). Where lower > 1 mm
+    lower <= F is a cheap lower bound (``_dubins_lower_bound`` instead of Dubins lengths). Where lower > 1 mm
     the sign of F is known (+), so F is evaluated (fun(flat indices)) only where it may be <= 0
     and at their row neighbours, which the jump test |F[j+1] - F[j]| needs; elsewhere lower
     stands in. Sign changes and their F values are exactly those of the full grid.
