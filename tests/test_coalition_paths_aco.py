@@ -398,3 +398,41 @@ def test_pruned_fallback_scans_equal_the_full_scans(fallback, monkeypatch):
     full = getattr(paths, fallback)(routes, wants, threats, 10.0)
     assert pruned == full
     assert any(p is not None for p in full)
+
+
+def test_stretch_scan_stops_at_the_last_loop_count_that_can_change_sign():
+    """_stretch_scan scans loop counts only while some length may still be short: its candidates
+    equal those of the scan over all 200 counts (including problems with no candidate at all)."""
+    rng = np.random.default_rng(12)
+    n = 24
+    q0 = np.column_stack([rng.uniform(0, 1500, (n, 2)), rng.uniform(-3, 3, n)])
+    q1 = paths.entry_poses((1000.0, 500.0), rng.uniform(0, 2 * math.pi, n), 200.0)
+    r = rng.choice([150.0, 200.0], n)
+    want = paths.shortest_lengths(q0, q1, r) + rng.uniform(20.0, 6000.0, n)
+    # plus a T2 member of the paper run whose length has no sign change at any k and loop count
+    q0 = np.r_[q0, [[1352.5437, 1529.6002, 4.4161]]]
+    q1 = np.r_[q1, paths.entry_poses((1000.0, 500.0), np.radians([60.0]), 200.0)]
+    r, want = np.r_[r, 200.0], np.r_[want, 1772.84]
+    n += 1
+    for ks in (paths._KS_COARSE, paths._KS_DENSE):
+        cands, jumps, _ = paths._stretch_scan(q0, q1, want, r, ks, [None] * n)
+        nk = len(ks)
+        seg = word_lengths(np.repeat(q0, nk, 0), np.repeat(q1, nk, 0), np.tile(ks, n) * np.repeat(r, nk))
+        table = seg.reshape(n, nk, 6, 3).sum(3)
+        full = []
+        for i in range(n):
+            loop = 2 * math.pi * r[i] * ks
+            n0 = max(0, int((want[i] - table[i].max(initial=0, where=np.isfinite(table[i]))) // loop[-1]))
+            f = table[i] + np.arange(n0, n0 + 200)[:, None, None] * loop[:, None] - want[i]
+            with np.errstate(invalid="ignore"):
+                cross = (
+                    np.isfinite(f[:, :-1]) & np.isfinite(f[:, 1:]) & (np.sign(f[:, :-1]) != np.sign(f[:, 1:]))
+                )
+            hit = np.flatnonzero(cross.any((1, 2)))
+            if len(hit):
+                full += [(i, w, ks[k], ks[k + 1], n0 + hit[0]) for k, w in np.argwhere(cross[hit[0]])]
+        assert [(int(i), int(w), k0, k1, int(c)) for i, w, k0, k1, c in cands] == [
+            (int(i), int(w), k0, k1, int(c)) for i, w, k0, k1, c in full
+        ]
+        assert len({c[4] for c in full}) >= 2  # several loop counts are exercised
+    assert n - 1 not in {c[0] for c in full}  # and a problem without any sign change

@@ -207,10 +207,14 @@ def _stretch_scan(q0, q1, length_m, r_m, ks, out: list) -> tuple[list[tuple], li
             out[i] = _path(q0[i], w, segs[i, 0, w], r_m[i], r_m[i])
             continue
         loop_len = TWO_PI * r_m[i] * ks
-        n0 = max(0, int((length_m[i] - table[i].max(initial=0, where=np.isfinite(table[i]))) // loop_len[-1]))
+        finite = np.isfinite(table[i])
+        n0 = max(0, int((length_m[i] - table[i].max(initial=0, where=finite)) // loop_len[-1]))
+        # f grows with the loop count (monotone rounding), so from n_hi on, where every finite
+        # f > 0 by a margin of a loop (>= 2 pi r), no count has a sign change: stop there
+        n_hi = int(((length_m[i] - table[i]) / loop_len[:, None]).max(initial=0.0, where=finite)) + 2
         # the smallest loop count in n0 .. n0 + 199 with a sign change: the first one alone, then
         # the others in one (loops, k, word) pass (the same values as one count at a time)
-        for counts in (np.arange(n0, n0 + 1), np.arange(n0 + 1, n0 + 200)):
+        for counts in (np.arange(n0, n0 + 1), np.arange(n0 + 1, min(n0 + 200, n_hi))):
             f = table[i] + counts[:, None, None] * loop_len[:, None] - length_m[i]
             with np.errstate(invalid="ignore"):
                 cross = (
