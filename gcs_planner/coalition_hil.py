@@ -141,6 +141,9 @@ NAV_WAYPOINT = 16
 LEAD_IN_S = 20.0  # straight lead-in to the window start, flown from the take-off point [s]
 START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
 PREFIX_DT_S = 2.0  # waypoint spacing on the predicted turn before a live leg [s]
+IDLE_SPAN_S = 40.0  # an idle mission covers at most this much simulated track; the next one follows [s]
+IDLE_LEAD_S = 10.0  # the next idle mission is uploaded this long before the last one's track ends [s]
+REJOIN_MIN_S = 10.0  # an idle mission rejoins the simulated track at least this long after its start [s]
 DEADLINE_HORIZON_S = 30.0  # leg-start deadlines searched this far ahead [s]
 FIT_S = 2.0  # turn rate fitted over this much of the newest course reports [s]
 UPLOAD_SAFETY = 2.0  # upload estimate = measured wall time per item x items x speed-up x this
@@ -300,25 +303,18 @@ def _goal_pose(world, award: dict) -> np.ndarray:
     return paths.arc_start_pose(target.xy, angle, p.assess_radius_m)[0]
 
 
-def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0) -> Leg:
-    """The award's leg from pose q0 (x, y, heading [rad]) at t0_s: a threat-avoiding timed Dubins
-    path to the strike entry pose, or to the assessment arc start followed by the assessment arc,
-    arriving at award["time_s"]. At cruise speed when there is time; else the minimum route, flown
-    up to max_speed_factor x cruise (info["speed_mps"]); if that is still too slow, late
-    (info["late_s"] > 0). When the timing fallbacks find no threat-clear path of the length the
-    speed asks for, the other speeds of SPEED_TRIES (up to max_speed_factor) are tried."""
+def timed_leg(
+    world, uav, q0, t0_s: float, goal, t_goal_s: float, known, kind: str, max_speed_factor=1.0
+) -> Leg:
+    """A threat-avoiding Dubins leg from pose q0 at t0_s to pose goal at t_goal_s (poses: x, y,
+    heading [rad]): at cruise when there is time; else the minimum route, flown up to
+    max_speed_factor x cruise (info["speed_mps"]); if that is still too slow, late (info["late_s"]
+    > 0). When the timing fallbacks find no threat-clear path of the length the speed asks for,
+    the other speeds of SPEED_TRIES (up to max_speed_factor) are tried."""
     p = world.params
-    uav = next(u for u in world.uavs if u.id == award["uav"])
-    target = next(t for t in world.targets if t.id == award["target"])
-    angle = math.radians(award["angle_deg"])
-    known = [th for th in world.threats if th.appear_s <= award["t_s"]]
-    strike = award["task"] == "strike"
-    t_goal = float(award["time_s"])
-    goal = _goal_pose(world, award)
     route = paths.min_route(q0, goal, uav.r_min_m, known, p.kappa, p.sample_ds_m)
-    span_s = max(t_goal - t0_s, 1e-3)
+    span_s = max(t_goal_s - t0_s, 1e-3)
     speed = float(np.clip(route.length_m / span_s, uav.speed_mps, max_speed_factor * uav.speed_mps))
-    # a timed path that cannot clear the threats at this speed: try others (slower first)
     others = [f * uav.speed_mps for f in SPEED_TRIES if f * uav.speed_mps * span_s >= route.length_m]
     first = None
     for v in [speed, *(v for v in others if v <= max_speed_factor * uav.speed_mps and v != speed)]:
@@ -331,15 +327,57 @@ def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_fac
     else:
         attempt = first
     segs, clear, speed = attempt
-    info = {"target": target.id, "clear": clear, "speed_mps": speed}
-    leg = paths.sample_segments(segs, t0_s, speed, p.sample_ds_m, "strike" if strike else "transit", info)
-    leg.info["late_s"] = float(leg.t[-1] - t_goal)
+    leg = paths.sample_segments(segs, t0_s, speed, p.sample_ds_m, kind, {"clear": clear, "speed_mps": speed})
+    leg.info["late_s"] = float(leg.t[-1] - t_goal_s)
+    return leg
+
+
+def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0) -> Leg:
+    """The award's leg from pose q0 (x, y, heading [rad]) at t0_s (see ``timed_leg``): to the strike
+    entry pose, or to the assessment arc start followed by the assessment arc, arriving at
+    award["time_s"], around the threats known at the award."""
+    p = world.params
+    uav = next(u for u in world.uavs if u.id == award["uav"])
+    target = next(t for t in world.targets if t.id == award["target"])
+    known = [th for th in world.threats if th.appear_s <= award["t_s"]]
+    strike = award["task"] == "strike"
+    leg = timed_leg(world, uav, q0, t0_s, _goal_pose(world, award), float(award["time_s"]), known,
+                    "strike" if strike else "transit", max_speed_factor)  # fmt: skip
+    leg.info["target"] = target.id
     if strike:
         return leg
-    arc = paths.arc_leg(target.xy, p.assess_radius_m, angle, float(leg.t[-1]), target.assess_duration_s,
-                        uav.speed_mps, p.sample_ds_m, "assess")  # fmt: skip
+    arc = paths.arc_leg(target.xy, p.assess_radius_m, math.radians(award["angle_deg"]), float(leg.t[-1]),
+                        target.assess_duration_s, uav.speed_mps, p.sample_ds_m, "assess")  # fmt: skip
     return Leg(np.r_[leg.t, arc.t[1:]], np.r_[leg.xy, arc.xy[1:]], np.r_[leg.heading, arc.heading[1:]],
                "assess", {**leg.info, "arc_t0_s": float(arc.t[0])})  # fmt: skip
+
+
+def rejoin_leg(world, uav, q0, t0_s: float, track, end_s: float, now_s: float) -> Leg:
+    """A timed leg from pose q0 at t0_s back onto the simulated track (t, xy) at the earliest time
+    t_j >= t0_s + REJOIN_MIN_S (and <= end_s) whose point the shortest path reaches at 0.9 x
+    cruise: after a strike or assessment the vehicle returns to where the simulation has it, so
+    that its next award starts from about the simulated state."""
+    t, xy = track
+    grid = np.arange(t0_s + REJOIN_MIN_S, max(end_s, t0_s + REJOIN_MIN_S + 1.0), 1.0)
+    goals = np.array([_pose_at(t, xy, tj) for tj in grid])
+    lengths = paths.shortest_lengths(np.broadcast_to(q0, goals.shape), goals, uav.r_min_m)
+    ok = np.nonzero(lengths <= 0.9 * uav.speed_mps * (grid - t0_s))[0]
+    j = int(ok[0]) if len(ok) else len(grid) - 1
+    known = [th for th in world.threats if th.appear_s <= now_s]
+    return timed_leg(world, uav, q0, t0_s, goals[j], float(grid[j]), known, "transit")
+
+
+def _onto_sim_leg(world, uav, q0, t0_s: float, sim_leg: Leg, now_s: float) -> Leg | None:
+    """Fallback for a strike whose live leg finds no threat-clear path of the right length: a
+    timed leg onto the simulation's own strike leg (``rejoin_leg``), then the rest of that leg
+    (which the simulation planned clear). None when that is not clear and on time either."""
+    rejoin = rejoin_leg(world, uav, q0, t0_s, (sim_leg.t, sim_leg.xy), float(sim_leg.t[-1]), now_s)
+    if not rejoin.info["clear"] or abs(rejoin.info["late_s"]) >= 0.05 or rejoin.t[-1] >= sim_leg.t[-1]:
+        return None
+    rest = sim_leg.t > rejoin.t[-1] + 1e-6
+    info = {**sim_leg.info, **rejoin.info, "onto_sim_leg": True, "late_s": 0.0}
+    return Leg(np.r_[rejoin.t, sim_leg.t[rest]], np.r_[rejoin.xy, sim_leg.xy[rest]],
+               np.r_[rejoin.heading, sim_leg.heading[rest]], "strike", info)  # fmt: skip
 
 
 # ---- missions
@@ -429,12 +467,22 @@ class _Award:
 
 
 @dataclass
+class _Idle:
+    """The flight after an award's leg: the simulated track from t_s (the leg end) to end_s."""
+
+    t_s: float
+    event: dict  # the award whose leg ends at t_s
+    end_s: float
+    mission: VehiclePlan | None  # the simulated track itself (replay_legs)
+
+
+@dataclass
 class _VehicleSchedule:
     uav: object
     initial: VehiclePlan
     track: tuple[np.ndarray, np.ndarray]  # simulated t [s], xy [m] over the window
     awards: list[_Award]
-    idles: list[tuple[float, dict, VehiclePlan]]  # (scenario time, award, mission)
+    idles: list[_Idle]
 
 
 def _track_piece(uav, t, xy, t0: float, dt_s: float, a: float, b: float, forced=(), extend_s: float = 0.0):
@@ -486,7 +534,7 @@ def _schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> list[_V
             leg_end = float(leg.t[-1])
             flown.append(_Award(e, leg, end))
             if end - leg_end > AFTER_GOAL_S:
-                idles.append((leg_end, e, piece(leg_end, end, extend_s=PRE_AWARD_EXTEND_S)))
+                idles.append(_Idle(leg_end, e, end, piece(leg_end, end, extend_s=PRE_AWARD_EXTEND_S)))
         out.append(_VehicleSchedule(uav, initial, (t, xy), flown, idles))
     return out
 
@@ -566,6 +614,32 @@ class _FleetProcess:
         self._proc.join(10.0)
         if self._proc.is_alive():
             self._proc.terminate()
+
+
+def _idle_mission(
+    sched, idle: _Idle, leg: Leg, prefix, t_route0: float, dt_s: float, prefix_wp_s
+) -> VehiclePlan:
+    """The idle mission: the predicted turn up to the leg start (prefix: times, xy; waypoints at
+    prefix_wp_s), the rejoin leg, the simulated track from where it rejoins to end_s but for at
+    most IDLE_SPAN_S (the next idle mission takes over), then PRE_AWARD_EXTEND_S more at the same
+    turn rate (times shifted by the leg's lateness)."""
+    uav = sched.uav
+    t, xy = sched.track
+    late = max(0.0, leg.info["late_s"])
+    t_join = float(leg.t[-1]) - late
+    pt, pxy = prefix
+    parts_t, parts_xy = [pt[:-1], leg.t], [pxy[:-1], leg.xy]
+    t_end = max(min(idle.end_s, t_join + IDLE_SPAN_S), t_join)
+    if t_end - t_join > 1e-3:
+        ts, xys = _slice(t, xy, t_join, t_end)
+        parts_t.append(ts[1:] + late)
+        parts_xy.append(xys[1:])
+    ext_t, ext_xy = _continue_turn(
+        t, xy, t_end, uav.speed_mps, uav.speed_mps / uav.r_min_m, PRE_AWARD_EXTEND_S
+    )
+    ts = np.r_[np.concatenate(parts_t), ext_t + late]
+    xys = np.vstack([*parts_xy, ext_xy])
+    return _piece_plan(uav, ts, xys, t_route0, dt_s, list(prefix_wp_s) + [float(leg.t[0])])
 
 
 def _mock_fleet(schedules, origin: Origin, speedup: float) -> _FleetProcess:
@@ -743,7 +817,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                 # seed of the upload estimate: wall time per item at this concurrency
                 n_items = sum(len(m) for m in missions.values())
                 timing = {"item_wall_s": (time.monotonic() - t_up) * min(8, len(missions)) / n_items,
-                          "plan_wall_s": 0.0, "items": 20}  # fmt: skip
+                          "plan_wall_s": 0.0, "items": 20, "idle_items": 30}  # fmt: skip
                 await _take_off_all(link, initial, recorder, options.speedup, fly_options)
                 lead_s = 2.0
                 route_t0 = recorder.now_s() + lead_s
@@ -791,6 +865,10 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                         t0 = now + upload_estimate_s(items) + START_AHEAD_S
                         q0 = state.predict([t0])[0]
                         leg = plan_live_leg(world, e, q0, t0, LEG_SPEED_FACTOR)
+                        if e["task"] == "strike" and not (
+                            leg.info["clear"] and abs(leg.info["late_s"]) < 0.05
+                        ):
+                            leg = _onto_sim_leg(world, sched.uav, q0, t0, award.sim_leg, e["t_s"]) or leg
                         pre_t = np.unique(np.r_[np.arange(state.t_s, t0, KEEPER_SAMPLE_S), t0])
                         prefix = (pre_t, state.predict(pre_t)[:, :2])
                         vp = _award_mission(sched, award, leg, prefix, t_route0, options.waypoint_dt_s,
@@ -813,14 +891,40 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                     }
                     return leg, vp, info
 
+                def live_idle(sched: _VehicleSchedule, idle: _Idle, state: LiveState, now: float):
+                    """Plan the idle mission from the vehicle's newest reports: back onto the
+                    simulated track (``rejoin_leg``), then along it. Runs in a thread."""
+                    t_plan = time.monotonic()
+                    t0 = now + upload_estimate_s(timing["idle_items"]) + START_AHEAD_S
+                    q0 = state.predict([t0])[0]
+                    leg = rejoin_leg(world, sched.uav, q0, t0, sched.track, idle.end_s, now)
+                    pre_t = np.unique(np.r_[np.arange(state.t_s, t0, KEEPER_SAMPLE_S), t0])
+                    prefix = (pre_t, state.predict(pre_t)[:, :2])
+                    vp = _idle_mission(sched, idle, leg, prefix, t_route0, options.waypoint_dt_s,
+                                       np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
+                    info = {
+                        "plan_wall_ms": round(1000.0 * (time.monotonic() - t_plan), 1),
+                        "t0_s": round(t0, 3),
+                        "live_pose": [round(float(v), 2) for v in q0],
+                        "rejoin_s": round(float(leg.t[-1]), 3),
+                        "covered_s": round(min(idle.end_s, float(leg.t[-1]) + IDLE_SPAN_S), 3),
+                        "leg_late_s": round(leg.info["late_s"], 3),
+                        "clear": leg.info["clear"],
+                    }
+                    return vp, info
+
                 async def upload(kind: str, sched: _VehicleSchedule, payload) -> None:
-                    e = payload.event if kind == "award" else payload[1]
+                    e = payload.event
                     sysid = sched.uav.sysid
                     entry = {"kind": kind, "uav": e["uav"], "sysid": sysid, "target": e["target"],
                              "task": e["task"], "award_t_s": e["t_s"], "ok": False}  # fmt: skip
                     try:
-                        if kind == "idle":
-                            vp = payload[2]
+                        if kind == "idle" and options.replay_legs:
+                            vp = payload.mission
+                        elif kind == "idle":
+                            state, now = vehicle_state(sched.uav), scenario_now()
+                            vp, info = await asyncio.to_thread(live_idle, sched, payload, state, now)
+                            entry.update(info)
                         elif options.replay_legs:
                             leg = payload.sim_leg
                             vp = _award_mission(
@@ -837,8 +941,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                         await MissionClient(link, sysid, timing=UPLOAD_TIMING).upload(items)
                         per_item = (time.monotonic() - t_up) / len(items)
                         timing["item_wall_s"] = 0.5 * timing["item_wall_s"] + 0.5 * per_item
-                        if kind == "award":
-                            timing["items"] = len(items)
+                        timing["items" if kind == "award" else "idle_items"] = len(items)
                         seq = _first_ahead(items, vp, scenario_now() - t_route0, START_AHEAD_S)
                         await CommandClient(link, sysid).mission_start(seq, len(items) - 1)
                         current[sysid] = vp
@@ -846,6 +949,12 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                         if kind == "award":
                             flown_legs[(e["target"], e["uav"])] = leg
                         entry.update(ok=True, start_seq=seq, items=len(items))
+                        if entry.get("covered_s", math.inf) < payload.end_s - 1.0:  # the next idle chunk
+                            t_next = entry["covered_s"] - IDLE_LEAD_S
+                            due.append(
+                                (t_next, (2, t_next), "idle", sched, _Idle(t_next, e, payload.end_s, None))
+                            )
+                            due.sort(key=lambda d: (d[0], d[1]))
                     except MavlinkError as exc:
                         entry["error"] = str(exc)
                         failures.append(f"{e['uav']}: {kind} upload failed: {exc}")
@@ -873,10 +982,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                     for a in s.awards
                 ]
                 due += [
-                    (idle[0], (2, idle[0]), "idle", s, idle)
-                    for s in schedules
-                    for idle in s.idles
-                    if idle[0] <= t_stop
+                    (i.t_s, (2, i.t_s), "idle", s, i) for s in schedules for i in s.idles if i.t_s <= t_stop
                 ]
                 due.sort(key=lambda d: (d[0], d[1]))
                 events = sorted(replay, key=lambda e: e["t_s"])
