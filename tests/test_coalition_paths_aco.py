@@ -436,3 +436,55 @@ def test_stretch_scan_stops_at_the_last_loop_count_that_can_change_sign():
         ]
         assert len({c[4] for c in full}) >= 2  # several loop counts are exercised
     assert n - 1 not in {c[0] for c in full}  # and a problem without any sign change
+
+
+def _t2_members():
+    threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0)]
+    poses = np.array(
+        [
+            (1198.4071, 1341.8888, 5.474),
+            (1248.8447, 1335.594, 5.3916),
+            (1352.5437, 1529.6002, 4.4161),
+            (1389.1, 1251.0, 5.5),
+            (300.0, 2200.0, -0.4),
+            (2400.0, 300.0, 2.2),
+        ]
+    )
+    goals = paths.entry_poses((1000.0, 500.0), np.radians([90.0, 60.0, 120.0, 150.0, 30.0, 0.0]), 200.0)
+    r = np.array([200.0, 150.0, 200.0, 200.0, 150.0, 200.0])
+    return threats, poses, goals, r
+
+
+def test_lockstep_illinois_of_several_jobs_equals_each_job_alone():
+    """_solve runs the stretch and detour refinements in lockstep (one Dubins call per iteration,
+    14 and 12 iterations): each job's roots and segment lengths equal those of its own run."""
+    threats, poses, goals, r = _t2_members()
+    want = paths.shortest_lengths(poses, goals, r) + np.array([574.0, 420.0, 440.0, 800.0, 300.0, 950.0])
+    stretch = paths._StretchPlan(poses, goals, want, r)
+    routes = [paths.min_route(a, b, x, threats, 1.3) for a, b, x in zip(poses, goals, r)]
+    detour = paths._DetourPlan(routes, list(want))
+    assert stretch.job is not None and detour.job is not None
+    assert stretch.job.iters != detour.job.iters
+    together = paths._solve([stretch.job, None, detour.job])
+    assert together[1] is None
+    for job, got in zip((stretch.job, detour.job), (together[0], together[2])):
+        alone = paths._solve([job])[0]
+        np.testing.assert_array_equal(got[0], alone[0])
+        np.testing.assert_array_equal(got[1], alone[1])
+
+
+def test_formation_timed_paths_equal_member_by_member_timed_routes():
+    """FormationPaths.timed (stretches in one batch, detours of members whose stretch will fail
+    started early and refined with the stretches) gives each member exactly timed_route's result."""
+    threats, poses, goals, r = _t2_members()
+    plans = paths.FormationPaths(poses, goals, r, threats, 1.3, 10.0)
+    assign = np.arange(6)
+    routes = plans.routes(assign)
+    want = np.array([rt.length_m for rt in routes]) + np.array([574.0, 420.0, 440.0, 800.0, 300.0, 950.0])
+    segs, clear = plans.timed(assign, want)
+    alone = [paths.timed_route(rt, w, threats) for rt, w in zip(routes, want)]
+    assert segs == [s for s, _ in alone] and clear == [c for _, c in alone]
+    direct = [k for k, rt in enumerate(routes) if len(rt.poses) == 2 and rt.clear]
+    plan = paths._StretchPlan(poses[direct], goals[direct], want[direct], r[direct])
+    assert plan.likely_none  # some members' detours are started early
+    assert any(len(s) > 1 for s in segs) and any(len(s) == 1 for s in segs)

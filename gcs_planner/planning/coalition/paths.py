@@ -45,6 +45,7 @@ one).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -152,38 +153,124 @@ def stretch_batch(
     refined in the same batch as the coarse candidates; the dense result is used only if the
     coarse ones do not converge, so the results equal a dense pass after the coarse one.
     """
-    q0, q1 = np.atleast_2d(q0).astype(float), np.atleast_2d(q1).astype(float)
-    length_m = np.atleast_1d(length_m).astype(float)
-    r_m = np.broadcast_to(np.asarray(r_m, float), len(q0)).copy()
-    n = len(q0)
-    out: list[DubinsPath | None] = [None] * n
-    cands, jumps, short = _stretch_scan(q0, q1, length_m, r_m, _KS_COARSE, out)
-    open_ = [i for i in range(n) if out[i] is None and length_m[i] >= short[i] - 1e-3]
-    smooth = {c[0] for c, jump in zip(cands, jumps) if not jump}
-    ahead = [i for i in open_ if i not in smooth]
-    dense = _dense_scan(ahead, q0, q1, length_m, r_m, out) if ahead else []
-    dense_out: list[DubinsPath | None] = [None] * n
-    _stretch_refine([(cands, out), (dense, dense_out)], q0, q1, length_m, r_m)
-    for i in ahead:
-        out[i] = out[i] or dense_out[i]
-    late = [i for i in open_ if out[i] is None and i in smooth]
-    if late:
-        _stretch_refine([(_dense_scan(late, q0, q1, length_m, r_m, out), out)], q0, q1, length_m, r_m)
-    return out
+    plan = _StretchPlan(q0, q1, length_m, r_m)
+    return plan.finish(_solve([plan.job])[0])
 
 
 _KS_COARSE = np.geomspace(1.0, K_MAX, 60)
 _KS_DENSE = np.geomspace(1.0, K_MAX, 300)
 
 
-def _dense_scan(idx: list[int], q0, q1, length_m, r_m, out: list) -> list[tuple]:
-    """_stretch_scan of problems idx on the dense k grid; candidates indexed like the full batch."""
+@dataclass
+class _Job:
+    """Illinois root problems in brackets [lo, hi] (n,) whose residual costs one Dubins call.
+
+    pairs(x) gives the (q0, q1, r) rows of ``word_lengths`` at x, resid(x, seg) the residual (n,)
+    from those rows' segment lengths; final: also return the segment lengths at the roots."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    iters: int
+    pairs: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+    resid: Callable[[np.ndarray, np.ndarray], np.ndarray]
+    final: bool = False
+
+
+def _solve(jobs: list[_Job | None]) -> list[tuple[np.ndarray, np.ndarray | None] | None]:
+    """(roots, segment lengths at the roots if job.final) of every job (None for None), by the
+    Illinois (modified regula falsi) method in lockstep: one ``word_lengths`` call per iteration
+    for the rows of all jobs. Every operation is row by row, so each job gets exactly the roots of
+    its own run with its own iteration count (rows of a job with fewer iterations are taken then)."""
+    live = [j for j in jobs if j is not None]
+    if not live:
+        return [None] * len(jobs)
+    sizes = [len(j.lo) for j in live]
+    cuts = np.cumsum(sizes)[:-1]
+
+    def fun(x: np.ndarray) -> np.ndarray:
+        parts = np.split(x, cuts) if len(live) > 1 else [x]
+        return np.concatenate([j.resid(p, s) for j, p, s in zip(live, parts, _dubins_rows(live, parts))])
+
+    both = [j.lo for j in live] + [j.hi for j in live]  # f at lo and at hi: one Dubins call
+    f = [j.resid(p, s) for j, p, s in zip(live + live, both, _dubins_rows(live + live, both))]
+    lo, hi = np.concatenate(both[: len(live)]), np.concatenate(both[len(live) :])
+    f_lo, f_hi = np.concatenate(f[: len(live)]), np.concatenate(f[len(live) :])
+    stop = np.repeat([j.iters for j in live], sizes)
+    roots = hi.copy()
+    for it in range(1, max(j.iters for j in live) + 1):
+        x = hi - f_hi * (hi - lo) / np.where(f_hi != f_lo, f_hi - f_lo, 1.0)  # inside the bracket
+        fx = fun(x)
+        flip = np.sign(fx) != np.sign(f_hi)
+        lo, f_lo = np.where(flip, hi, lo), np.where(flip, f_hi, 0.5 * f_lo)
+        hi, f_hi = x, fx
+        if any(j.iters == it for j in live):
+            roots = np.where(stop == it, hi, roots)
+    parts = np.split(roots, cuts)
+    final = [j for j in live if j.final]
+    segs = iter(_dubins_rows(final, [p for j, p in zip(live, parts) if j.final]) if final else [])
+    solved = iter([(p, next(segs) if j.final else None) for j, p in zip(live, parts)])
+    return [None if j is None else next(solved) for j in jobs]
+
+
+def _dubins_rows(jobs: list[_Job], xs: list[np.ndarray]) -> list[np.ndarray]:
+    """Segment lengths of the ``pairs`` rows of jobs[i] at xs[i], all in one ``word_lengths`` call."""
+    rows = [j.pairs(x) for j, x in zip(jobs, xs)]
+    if len(rows) == 1:
+        return [word_lengths(*rows[0])]
+    seg = word_lengths(*(np.concatenate([r[i] for r in rows]) for i in range(3)))
+    return np.split(seg, np.cumsum([len(r[0]) for r in rows])[:-1])
+
+
+class _StretchPlan:
+    """stretch_batch in steps: the k scans (here), one Illinois job (``job``), then ``finish``.
+
+    ``likely_none``: problems with no smooth sign change on either grid, whose stretch almost
+    surely fails (FormationPaths starts their fallbacks in the same Illinois run)."""
+
+    def __init__(self, q0: np.ndarray, q1: np.ndarray, length_m: np.ndarray, r_m: np.ndarray) -> None:
+        self.q0, self.q1 = np.atleast_2d(q0).astype(float), np.atleast_2d(q1).astype(float)
+        self.length_m = np.atleast_1d(length_m).astype(float)
+        self.r_m = np.broadcast_to(np.asarray(r_m, float), len(self.q0)).copy()
+        args = self.q0, self.q1, self.length_m, self.r_m
+        n = len(self.q0)
+        self.out: list[DubinsPath | None] = [None] * n
+        cands, jumps, short = _stretch_scan(*args, _KS_COARSE, self.out)
+        self.open = [i for i in range(n) if self.out[i] is None and self.length_m[i] >= short[i] - 1e-3]
+        self.smooth = {c[0] for c, jump in zip(cands, jumps) if not jump}
+        self.ahead = [i for i in self.open if i not in self.smooth]
+        dense, dense_jumps = _dense_scan(self.ahead, *args, self.out) if self.ahead else ([], [])
+        self.dense_out: list[DubinsPath | None] = [None] * n
+        self.groups = [(cands, self.out), (dense, self.dense_out)]
+        self.job = _stretch_job(self.groups, *args)
+        smooth_dense = {c[0] for c, jump in zip(dense, dense_jumps) if not jump}
+        self.likely_none = [
+            i
+            for i in range(n)
+            if self.out[i] is None and (i not in self.open or (i in self.ahead and i not in smooth_dense))
+        ]
+
+    def finish(self, solved: tuple[np.ndarray, np.ndarray] | None) -> list[DubinsPath | None]:
+        """The paths, given ``_solve``'s result for ``job``."""
+        args = self.q0, self.q1, self.length_m, self.r_m
+        _stretch_take(self.groups, *args, solved)
+        for i in self.ahead:
+            self.out[i] = self.out[i] or self.dense_out[i]
+        late = [i for i in self.open if self.out[i] is None and i in self.smooth]
+        if late:
+            groups = [(_dense_scan(late, *args, self.out)[0], self.out)]
+            _stretch_take(groups, *args, _solve([_stretch_job(groups, *args)])[0])
+        return self.out
+
+
+def _dense_scan(idx: list[int], q0, q1, length_m, r_m, out: list) -> tuple[list[tuple], list[bool]]:
+    """_stretch_scan of problems idx on the dense k grid; candidates indexed like the full batch,
+    and whether each is a jump."""
     sub: list[DubinsPath | None] = [None] * len(idx)
-    cands, _, _ = _stretch_scan(q0[idx], q1[idx], length_m[idx], r_m[idx], _KS_DENSE, sub)
+    cands, jumps, _ = _stretch_scan(q0[idx], q1[idx], length_m[idx], r_m[idx], _KS_DENSE, sub)
     for j, path in enumerate(sub):
         if path is not None:
             out[idx[j]] = path
-    return [(idx[c[0]], *c[1:]) for c in cands]
+    return [(idx[c[0]], *c[1:]) for c in cands], jumps
 
 
 def _stretch_scan(q0, q1, length_m, r_m, ks, out: list) -> tuple[list[tuple], list[bool], np.ndarray]:
@@ -231,23 +318,34 @@ def _stretch_scan(q0, q1, length_m, r_m, ks, out: list) -> tuple[list[tuple], li
     return cands, jumps, table[:, 0].min(1)
 
 
-def _stretch_refine(groups: list[tuple[list[tuple], list]], q0, q1, length_m, r_m) -> None:
-    """Refine the candidates of all groups together (Illinois); in each group's output list, every
-    problem still without a path takes its smallest converged k."""
+def _stretch_job(groups: list[tuple[list[tuple], list]], q0, q1, length_m, r_m) -> _Job | None:
+    """The Illinois job of all candidates (problem, word, k_lo, k_hi, loops) of all groups."""
     allc = [c for cands, _ in groups for c in cands]
     if not allc:
-        return
+        return None
     c = np.array(allc, dtype=float)
-    pi, w, lo, hi, loops = c[:, 0].astype(int), c[:, 1].astype(int), c[:, 2], c[:, 3], c[:, 4]
+    pi, w, loops = c[:, 0].astype(int), c[:, 1].astype(int), c[:, 4]
     rows = np.arange(len(c))
+    return _Job(
+        c[:, 2],
+        c[:, 3],
+        14,
+        lambda k: (q0[pi], q1[pi], k * r_m[pi]),
+        lambda k, seg: seg[rows, w].sum(1) + loops * TWO_PI * r_m[pi] * k - length_m[pi],
+        final=True,
+    )
 
-    def resid(k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        seg = word_lengths(q0[pi], q1[pi], k * r_m[pi])[rows, w]
-        return seg, seg.sum(1) + loops * TWO_PI * r_m[pi] * k - length_m[pi]
 
-    hi = _illinois(lambda k: resid(k)[1], lo, hi, 14)
-    seg, f = resid(hi)
-    seg = seg.copy()
+def _stretch_take(groups: list[tuple[list[tuple], list]], q0, q1, length_m, r_m, solved) -> None:
+    """In each group's output list, every problem still without a path takes its smallest converged
+    k (solved: ``_solve``'s roots and segment lengths for ``_stretch_job(groups)``)."""
+    if solved is None:
+        return
+    hi, seg_all = solved
+    c = np.array([c for cands, _ in groups for c in cands], dtype=float)
+    pi, w, loops = c[:, 0].astype(int), c[:, 1].astype(int), c[:, 4]
+    seg = seg_all[np.arange(len(c)), w]
+    f = seg.sum(1) + loops * TWO_PI * r_m[pi] * hi - length_m[pi]
     seg[:, 0] += loops * TWO_PI * r_m[pi] * hi
     start = 0
     for cands, dest in groups:
@@ -257,18 +355,6 @@ def _stretch_refine(groups: list[tuple[list[tuple], list]], q0, q1, length_m, r_
             i = pi[j]
             if dest[i] is None and abs(f[j]) < 1e-3:
                 dest[i] = _path(q0[i], w[j], seg[j], hi[j] * r_m[i], hi[j] * r_m[i])
-
-
-def _illinois(fun, lo: np.ndarray, hi: np.ndarray, iters: int) -> np.ndarray:
-    """Roots of fun (vectorised) in brackets [lo, hi] by the Illinois (modified regula falsi) method."""
-    f_lo, f_hi = fun(lo), fun(hi)
-    for _ in range(iters):
-        x = hi - f_hi * (hi - lo) / np.where(f_hi != f_lo, f_hi - f_lo, 1.0)  # inside the bracket
-        fx = fun(x)
-        flip = np.sign(fx) != np.sign(f_hi)
-        lo, f_lo = np.where(flip, hi, lo), np.where(flip, f_hi, 0.5 * f_lo)
-        hi, f_hi = x, fx
-    return hi
 
 
 def clearance_m(xy: np.ndarray, threats: list[Threat]) -> float:
@@ -480,10 +566,16 @@ class FormationPaths:
         todo = [k for k, key in enumerate(keys) if key not in self._timed]
         direct = [k for k in todo if len(routes[k].poses) == 2 and routes[k].clear]
         batch: dict[int, DubinsPath | None] = {}
+        spec, early = [], None
         if direct:
             starts = np.array([routes[k].poses[0] for k in direct]).reshape(-1, 3)
-            found = stretch_batch(starts, self.goals[direct], want_m[direct], self.r_m[assign[direct]])
-            batch = dict(zip(direct, found))
+            plan = _StretchPlan(starts, self.goals[direct], want_m[direct], self.r_m[assign[direct]])
+            # members whose stretch will almost surely fail: their fallbacks' scans now, and all
+            # roots in one lockstep Illinois run (used only if the stretch does fail)
+            spec = [direct[j] for j in plan.likely_none]
+            early = _Fallbacks([routes[k] for k in spec], [want_m[k] for k in spec]) if spec else None
+            solved = _solve([plan.job, *(early.jobs if early else [])])
+            batch = dict(zip(direct, plan.finish(solved[0])))
         stretched = [k for k in direct if batch[k] is not None]
         ok = dict(zip(stretched, chains_clear([[batch[k]] for k in stretched], self.threats, self.ds_m)))
         rest = [k for k in todo if not ok.get(k, False)]
@@ -491,11 +583,17 @@ class FormationPaths:
             if ok.get(k, False):
                 self._timed[keys[k]] = ([batch[k]], True)
         if rest:  # the other members' timing fallbacks, all at once (a direct stretch is passed on)
+            found_early = {}
+            if early:
+                need = [j for j, k in enumerate(spec) if k in rest]
+                found = early.finish(solved[1:], self.threats, 10.0, need)
+                found_early = {rest.index(spec[j]): found[j] for j in need}
             found = timed_routes(
                 [routes[k] for k in rest],
                 [want_m[k] for k in rest],
                 self.threats,
                 stretched=[(batch[k],) if k in batch else None for k in rest],
+                fallen=found_early,
             )
             for k, result in zip(rest, found):
                 self._timed[keys[k]] = result
@@ -531,28 +629,52 @@ def timed_routes(
     threats: list[Threat],
     ds_m: float = 10.0,
     stretched: list[tuple[DubinsPath | None] | None] | None = None,
+    fallen: dict[int, list[DubinsPath] | None] | None = None,
 ) -> list[tuple[list[DubinsPath], bool]]:
     """timed_route for many routes (the members of one formation), with the same results.
 
     The stretching and push steps run route by route. The detour, then the loiter fallback, run
-    once for all routes that still need them, so their Dubins calls are shared.
+    once for all routes that still need them, so their Dubins calls are shared. fallen: the
+    fallbacks' result of some routes (by index), already computed by the caller.
     """
     out: list = [None] * len(routes)
     last_resort: list = [None] * len(routes)
     for i, (route, length_m, given) in enumerate(zip(routes, lengths_m, stretched or [None] * len(routes))):
         out[i], last_resort[i] = _stretch_or_push(route, length_m, threats, ds_m, given)
     pending = [i for i in range(len(routes)) if out[i] is None]
-    for fallback in (_detours, _delays_on_start_circle):
-        if not pending:
-            break
-        found = fallback([routes[i] for i in pending], [lengths_m[i] for i in pending], threats, ds_m)
-        for i, segs in zip(pending, found):
-            if segs is not None:
-                out[i] = (segs, True)
-        pending = [i for i in pending if out[i] is None]
+    found = {i: segs for i, segs in (fallen or {}).items() if i in pending}
+    todo = [i for i in pending if i not in found]
+    if todo:
+        plans = _Fallbacks([routes[i] for i in todo], [lengths_m[i] for i in todo])
+        found.update(zip(todo, plans.finish(_solve(plans.jobs), threats, ds_m)))
     for i in pending:
-        out[i] = (last_resort[i], False)
+        out[i] = (found[i], True) if found[i] is not None else (last_resort[i], False)
     return out
+
+
+class _Fallbacks:
+    """The detour, then the loiter fallback, of some routes. The detour is scanned up front and its
+    Illinois job (``jobs``) solved with other jobs if the caller wishes; ``finish`` gives what
+    ``_detours``, then ``_delays_on_start_circle`` for the routes it leaves without a path, give.
+    (The loiter scan is not started early: on the paper runs it is needed for a third of the
+    detoured routes and costs more than its share of a lockstep run saves.)"""
+
+    def __init__(self, routes: list[Route], lengths_m: list[float]) -> None:
+        self.routes, self.lengths_m = routes, lengths_m
+        self.detour = _DetourPlan(routes, lengths_m)
+        self.jobs = [self.detour.job]
+
+    def finish(self, solved: list, threats: list[Threat], ds_m: float, only=None) -> list:
+        """Segments or None per route (routes in ``only``, default all; None for the others)."""
+        out = self.detour.finish(solved[0], threats, ds_m, only)
+        left = [k for k in (range(len(self.routes)) if only is None else only) if out[k] is None]
+        if left:
+            found = _delays_on_start_circle(
+                [self.routes[k] for k in left], [self.lengths_m[k] for k in left], threats, ds_m
+            )
+            for k, segs in zip(left, found):
+                out[k] = segs
+        return out
 
 
 def _stretch_or_push(route: Route, length_m: float, threats: list[Threat], ds_m: float, stretched):
@@ -603,57 +725,93 @@ def _delays_on_start_circle(
     None for a route where nothing clears the threats. The eight scans of every route share one
     batched Dubins call, all roots are refined together, and the candidates are checked in one
     pass; each route takes its first clear candidate in that order."""
-    owner, leads, starts, targets, kappas = [], [], [], [], []
-    for k, (route, length_m) in enumerate(zip(routes, lengths_m)):
-        r = route.r_m
-        first = _shortest(route.poses[0], route.poses[1], r)
-        for frac in (0.0, 0.25, 0.5, 0.75):
-            lead = _truncate(first, frac * first.length)
-            q0 = np.asarray(lead.end) if lead.length > 0 else route.poses[0]
-            for side in (1.0, -1.0):
-                owner.append(k)
-                leads.append(lead)
-                starts.append(q0)
-                targets.append(length_m - lead.length)
-                kappas.append(side / r)
-    owner, starts, targets, kappas = np.array(owner), np.array(starts), np.array(targets), np.array(kappas)
-    goal = np.array([routes[k].poses[-1] for k in owner])
-    r = np.array([routes[k].r_m for k in owner])
-    a = np.array([np.linspace(0.0, 3 * TWO_PI * routes[k].r_m, 600) for k in owner])  # (combos, 600)
+    plan = _LoiterPlan(routes, lengths_m)
+    return plan.finish(_solve([plan.job])[0], threats, ds_m)
 
-    def f(combo: np.ndarray, x: np.ndarray) -> np.ndarray:
-        pose = _advance_arc(starts[combo], kappas[combo], x)
-        return x + shortest_lengths(pose, goal[combo], r[combo]) - targets[combo]
 
-    grid_combo, grid_a = np.repeat(np.arange(len(starts)), a.shape[1]), a.ravel()
-    pose = _advance_arc(starts[grid_combo], kappas[grid_combo], grid_a)
-    gap = _dubins_lower_bound(pose, goal[grid_combo], r[grid_combo])
-    lower = (grid_a + gap - targets[grid_combo]).reshape(a.shape)
-    F = _scan(lower, lambda i: f(grid_combo[i], grid_a[i]))
-    cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r[:, None])
-    cands = [(b, c) for b in range(len(starts)) for c in np.flatnonzero(cross[b])[:2]]
-    out: list[list[DubinsPath] | None] = [None] * len(routes)
-    if not cands:
+class _LoiterPlan:
+    """_delays_on_start_circle in steps: the scan (here), one Illinois job, then ``finish``."""
+
+    def __init__(self, routes: list[Route], lengths_m: list[float]) -> None:
+        owner, leads, starts, targets, kappas = [], [], [], [], []
+        for k, (route, length_m) in enumerate(zip(routes, lengths_m)):
+            r = route.r_m
+            first = _shortest(route.poses[0], route.poses[1], r)
+            for frac in (0.0, 0.25, 0.5, 0.75):
+                lead = _truncate(first, frac * first.length)
+                q0 = np.asarray(lead.end) if lead.length > 0 else route.poses[0]
+                for side in (1.0, -1.0):
+                    owner.append(k)
+                    leads.append(lead)
+                    starts.append(q0)
+                    targets.append(length_m - lead.length)
+                    kappas.append(side / r)
+        self.n, self.lengths_m, self.leads = len(routes), lengths_m, leads
+        owner, starts, targets, kappas = (
+            np.array(owner),
+            np.array(starts),
+            np.array(targets),
+            np.array(kappas),
+        )
+        goal = np.array([routes[k].poses[-1] for k in owner])
+        r = np.array([routes[k].r_m for k in owner])
+        a = np.array([np.linspace(0.0, 3 * TWO_PI * routes[k].r_m, 600) for k in owner])  # (combos, 600)
+        self.owner, self.starts, self.kappas, self.goal, self.r = owner, starts, kappas, goal, r
+
+        def f(combo: np.ndarray, x: np.ndarray) -> np.ndarray:
+            pose = _advance_arc(starts[combo], kappas[combo], x)
+            return x + shortest_lengths(pose, goal[combo], r[combo]) - targets[combo]
+
+        grid_combo, grid_a = np.repeat(np.arange(len(starts)), a.shape[1]), a.ravel()
+        pose = _advance_arc(starts[grid_combo], kappas[grid_combo], grid_a)
+        lower = _lower_bound(pose, goal[grid_combo], r[grid_combo], grid_a - targets[grid_combo]).reshape(
+            a.shape
+        )
+        F = _scan(lower, lambda i: f(grid_combo[i], grid_a[i]))
+        cross = (np.sign(F[:, :-1]) != np.sign(F[:, 1:])) & (
+            np.abs(F[:, 1:] - F[:, :-1]) < np.pi * r[:, None]
+        )
+        cands = [(b, c) for b in range(len(starts)) for c in np.flatnonzero(cross[b])[:2]]
+        self.job = None
+        if cands:
+            combo, ci = np.array(cands).T
+            self.combo = combo
+            self.job = _Job(
+                a[combo, ci],
+                a[combo, ci + 1],
+                12,
+                lambda x: (_advance_arc(starts[combo], kappas[combo], x), goal[combo], r[combo]),
+                lambda x, seg: x + seg.sum(axis=2).min(axis=1) - targets[combo],
+            )
+
+    def finish(self, solved, threats: list[Threat], ds_m: float, only=None) -> list[list[DubinsPath] | None]:
+        """Each route's first clear candidate (routes in ``only``, default all), given ``_solve``'s
+        result for ``job``."""
+        out: list[list[DubinsPath] | None] = [None] * self.n
+        if solved is None:
+            return out
+        keep = np.ones(len(self.combo), bool) if only is None else np.isin(self.owner[self.combo], list(only))
+        combo, sol = self.combo[keep], solved[0][keep]
+        if not len(combo):
+            return out
+        r, starts, kappas = self.r, self.starts, self.kappas
+        arcs = [
+            DubinsPath(_pose(starts[b]), "LSL" if kappas[b] > 0 else "RSR", (x, 0.0, 0.0), (rb, math.inf, rb))
+            for b, x, rb in zip(combo, sol, r[combo].tolist())
+        ]
+        ends = np.array([arc.end for arc in arcs])
+        lens = word_lengths(ends, self.goal[combo], r[combo])
+        w = lens.sum(2).argmin(1)
+        trials = [
+            [p for p in (self.leads[b], arc, _path(ends[j], w[j], lens[j, w[j]], r[b], r[b])) if p.length > 0]
+            for j, (b, arc) in enumerate(zip(combo, arcs))
+        ]
+        clear = chains_clear(trials, threats, ds_m)
+        for trial, ok, b in zip(trials, clear, combo):
+            k = self.owner[b]
+            if out[k] is None and ok and abs(sum(p.length for p in trial) - self.lengths_m[k]) <= 1e-2:
+                out[k] = trial
         return out
-    combo, ci = np.array(cands).T
-    sol = _illinois(lambda x: f(combo, x), a[combo, ci], a[combo, ci + 1], 12)
-    arcs = [
-        DubinsPath(_pose(starts[b]), "LSL" if kappas[b] > 0 else "RSR", (x, 0.0, 0.0), (rb, math.inf, rb))
-        for b, x, rb in zip(combo, sol, r[combo].tolist())
-    ]
-    ends = np.array([arc.end for arc in arcs])
-    lens = word_lengths(ends, goal[combo], r[combo])
-    w = lens.sum(2).argmin(1)
-    trials = [
-        [p for p in (leads[b], arc, _path(ends[j], w[j], lens[j, w[j]], r[b], r[b])) if p.length > 0]
-        for j, (b, arc) in enumerate(zip(combo, arcs))
-    ]
-    clear = chains_clear(trials, threats, ds_m)
-    for trial, ok, b in zip(trials, clear, combo):
-        k = owner[b]
-        if out[k] is None and ok and abs(sum(p.length for p in trial) - lengths_m[k]) <= 1e-2:
-            out[k] = trial
-    return out
 
 
 def _detours(
@@ -665,71 +823,115 @@ def _detours(
     For every route at once: both links of every grid point / candidate of every route go through
     one batched Dubins call and all candidates are checked for clearance in one pass (the order
     of preference within a route is unchanged)."""
-    prev = np.array([route.poses[-2] for route in routes])
-    goal = np.array([route.poses[-1] for route in routes])
-    r = np.array([route.r_m for route in routes])
-    heads = [[_shortest(a, b, rt.r_m) for a, b in zip(rt.poses[:-2], rt.poses[1:-1])] for rt in routes]
-    need = np.array([length_m - sum(p.length for p in head) for length_m, head in zip(lengths_m, heads)])
-    theta = np.linspace(0, TWO_PI, 48, endpoint=False)
-    rho = np.array([np.linspace(rk, max(nk, 2 * rk), 60) for rk, nk in zip(r, need)])  # (routes, 60)
+    plan = _DetourPlan(routes, lengths_m)
+    return plan.finish(_solve([plan.job])[0], threats, ds_m)
 
-    def via(g: np.ndarray, rho: np.ndarray, th: np.ndarray) -> np.ndarray:
+
+class _DetourPlan:
+    """_detours in steps: the scan (here), one Illinois job, then ``finish``."""
+
+    def __init__(self, routes: list[Route], lengths_m: list[float]) -> None:
+        prev = np.array([route.poses[-2] for route in routes])
+        goal = np.array([route.poses[-1] for route in routes])
+        r = np.array([route.r_m for route in routes])
+        heads = [[_shortest(a, b, rt.r_m) for a, b in zip(rt.poses[:-2], rt.poses[1:-1])] for rt in routes]
+        need = np.array([length_m - sum(p.length for p in head) for length_m, head in zip(lengths_m, heads)])
+        theta = np.linspace(0, TWO_PI, 48, endpoint=False)
+        rho = np.array([np.linspace(rk, max(nk, 2 * rk), 60) for rk, nk in zip(r, need)])  # (routes, 60)
+        self.n, self.lengths_m, self.heads, self.prev, self.goal, self.r = (
+            len(routes),
+            lengths_m,
+            heads,
+            prev,
+            goal,
+            r,
+        )
+
+        def links(g: np.ndarray, v: np.ndarray) -> np.ndarray:
+            """Segment lengths (2, n, 6, 3) of prev -> v and v -> goal."""
+            return word_lengths(*self._pairs(g, v)).reshape(2, len(v), 6, 3)
+
+        def f(g: np.ndarray, rho: np.ndarray, th: np.ndarray) -> np.ndarray:
+            a, b = links(g, self._via(g, rho, th)).sum(3).min(2)
+            return a + b - need[g]
+
+        shape = (len(routes), len(theta), rho.shape[1])
+        G = np.repeat(np.arange(len(routes)), shape[1] * shape[2])
+        RHO = np.broadcast_to(rho[:, None, :], shape).ravel()
+        TH = np.broadcast_to(theta[None, :, None], shape).ravel()
+        v = self._via(G, RHO, TH)
+        lower = _lower_bound(prev[G], v, r[G], RHO - need[G])
+        F = _scan(lower.reshape(-1, shape[2]), lambda i: f(G[i], RHO[i], TH[i])).reshape(shape)
+        cross = (np.sign(F[..., :-1]) != np.sign(F[..., 1:])) & (
+            np.abs(F[..., 1:] - F[..., :-1]) < np.pi * r[:, None, None]
+        )
+        g, ti, ri = [], [], []
+        for k in range(len(routes)):
+            t_k, r_k = np.nonzero(cross[k])
+            first = np.argsort(r_k, kind="stable")[:16]  # the nearest via rings first
+            g += [k] * len(first)
+            ti.append(t_k[first])
+            ri.append(r_k[first])
+        self.job = None
+        if g:
+            g, ti, ri = np.array(g), np.concatenate(ti), np.concatenate(ri)
+            th = theta[ti]
+            self.g, self.th = g, th
+            self.job = _Job(
+                rho[g, ri],
+                rho[g, ri + 1],
+                12,
+                lambda x: self._pairs(g, self._via(g, x, th)),
+                lambda x, seg: (lambda a, b: a + b - need[g])(*seg.reshape(2, len(x), 6, 3).sum(3).min(2)),
+                final=True,
+            )
+
+    def _via(self, g: np.ndarray, rho: np.ndarray, th: np.ndarray) -> np.ndarray:
         """Via poses of route g[i] at rho[i], th[i]."""
+        goal = self.goal
         vx, vy = goal[g, 0] + rho * np.cos(th), goal[g, 1] + rho * np.sin(th)
         return np.column_stack([vx, vy, np.arctan2(goal[g, 1] - vy, goal[g, 0] - vx)])
 
-    def links(g: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Segment lengths (2, n, 6, 3) of prev -> v and v -> goal."""
-        q0, q1 = np.concatenate([prev[g], v]), np.concatenate([v, goal[g]])
-        return word_lengths(q0, q1, np.concatenate([r[g], r[g]])).reshape(2, len(v), 6, 3)
+    def _pairs(self, g: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """word_lengths rows of the links prev -> v, then v -> goal."""
+        return (
+            np.concatenate([self.prev[g], v]),
+            np.concatenate([v, self.goal[g]]),
+            np.concatenate([self.r[g]] * 2),
+        )
 
-    def f(g: np.ndarray, rho: np.ndarray, th: np.ndarray) -> np.ndarray:
-        a, b = links(g, via(g, rho, th)).sum(3).min(2)
-        return a + b - need[g]
-
-    shape = (len(routes), len(theta), rho.shape[1])
-    G = np.repeat(np.arange(len(routes)), shape[1] * shape[2])
-    RHO = np.broadcast_to(rho[:, None, :], shape).ravel()
-    TH = np.broadcast_to(theta[None, :, None], shape).ravel()
-    v = via(G, RHO, TH)
-    lower = _dubins_lower_bound(prev[G], v, r[G]) + RHO - need[G]
-    F = _scan(lower.reshape(-1, shape[2]), lambda i: f(G[i], RHO[i], TH[i])).reshape(shape)
-    cross = (np.sign(F[..., :-1]) != np.sign(F[..., 1:])) & (
-        np.abs(F[..., 1:] - F[..., :-1]) < np.pi * r[:, None, None]
-    )
-    g, ti, ri = [], [], []
-    for k in range(len(routes)):
-        t_k, r_k = np.nonzero(cross[k])
-        first = np.argsort(r_k, kind="stable")[:16]  # the nearest via rings first
-        g += [k] * len(first)
-        ti.append(t_k[first])
-        ri.append(r_k[first])
-    out: list[list[DubinsPath] | None] = [None] * len(routes)
-    if not g:
+    def finish(self, solved, threats: list[Threat], ds_m: float, only=None) -> list[list[DubinsPath] | None]:
+        """Each route's first clear candidate (routes in ``only``, default all), given ``_solve``'s
+        result for ``job``."""
+        out: list[list[DubinsPath] | None] = [None] * self.n
+        if solved is None:
+            return out
+        sol, seg = solved
+        g, r = self.g, self.r
+        lens_all = seg.reshape(2, len(sol), 6, 3)
+        order = []  # per route: the candidates nearest its smallest root first
+        for k in range(self.n) if only is None else sorted(only):
+            idx = np.flatnonzero(g == k)
+            if len(idx):
+                order.append(idx[np.argsort(np.abs(sol[idx] - sol[idx].min()))])
+        if not order:
+            return out
+        order = np.concatenate(order)
+        g, v, lens = g[order], self._via(g[order], sol[order], self.th[order]), lens_all[:, order]
+        w = lens.sum(3).argmin(2)
+        trials = []
+        for j, k in enumerate(g):
+            ends = ((0, self.prev[k]), (1, v[j]))
+            trials.append(
+                [*self.heads[k], *(_path(a, w[h, j], lens[h, j, w[h, j]], r[k], r[k]) for h, a in ends)]
+            )
+        chains = [[p for p in trial if p.length > 0] for trial in trials]
+        clear = chains_clear(chains, threats, ds_m)
+        for j, k in enumerate(g):
+            exact = abs(sum(p.length for p in trials[j]) - self.lengths_m[k]) <= 1e-2
+            if out[k] is None and exact and clear[j]:
+                out[k] = chains[j]
         return out
-    g, ti, ri = np.array(g), np.concatenate(ti), np.concatenate(ri)
-    th = theta[ti]
-    sol = _illinois(lambda x: f(g, x, th), rho[g, ri], rho[g, ri + 1], 12)
-    order = []  # per route: the candidates nearest its smallest root first
-    for k in range(len(routes)):
-        idx = np.flatnonzero(g == k)
-        if len(idx):
-            order.append(idx[np.argsort(np.abs(sol[idx] - sol[idx].min()))])
-    order = np.concatenate(order)
-    g, v = g[order], via(g[order], sol[order], th[order])
-    lens = links(g, v)
-    w = lens.sum(3).argmin(2)
-    trials = []
-    for j, k in enumerate(g):
-        ends = ((0, prev[k]), (1, v[j]))
-        trials.append([*heads[k], *(_path(a, w[h, j], lens[h, j, w[h, j]], r[k], r[k]) for h, a in ends)])
-    chains = [[p for p in trial if p.length > 0] for trial in trials]
-    clear = chains_clear(chains, threats, ds_m)
-    for j, k in enumerate(g):
-        exact = abs(sum(p.length for p in trials[j]) - lengths_m[k]) <= 1e-2
-        if out[k] is None and exact and clear[j]:
-            out[k] = chains[j]
-    return out
 
 
 def _reach_lower_bound(q: np.ndarray, p: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -761,6 +963,15 @@ def _dubins_lower_bound(q0: np.ndarray, q1: np.ndarray, r: np.ndarray) -> np.nda
     reach bounds forwards from q0 to q1's point and backwards (reversed q1 heading) to q0's point."""
     back = np.column_stack([q1[:, 0], q1[:, 1], q1[:, 2] + math.pi])
     return np.maximum(_reach_lower_bound(q0, q1[:, :2], r), _reach_lower_bound(back, q0[:, :2], r))
+
+
+def _lower_bound(q0: np.ndarray, q1: np.ndarray, r: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    """A lower bound of Dubins length (q0 -> q1) + rest (n,): Euclidean, replaced by
+    ``_dubins_lower_bound`` (about 10x the cost) only where the Euclidean one is <= 1 mm."""
+    out = np.hypot(q1[:, 0] - q0[:, 0], q1[:, 1] - q0[:, 1]) + rest
+    m = np.flatnonzero(out <= 1e-3)
+    out[m] = _dubins_lower_bound(q0[m], q1[m], r[m]) + rest[m]
+    return out
 
 
 def _scan(lower: np.ndarray, fun) -> np.ndarray:
