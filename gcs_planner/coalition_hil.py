@@ -146,7 +146,7 @@ IDLE_LEAD_S = 10.0  # the next idle mission is uploaded this long before the las
 REJOIN_MIN_S = 10.0  # an idle mission rejoins the simulated track at least this long after its start [s]
 DEADLINE_HORIZON_S = 30.0  # leg-start deadlines searched this far ahead [s]
 FIT_S = 2.0  # turn rate fitted over this much of the newest course reports [s]
-UPLOAD_SAFETY = 2.0  # upload estimate = measured wall time per item x items x speed-up x this
+UPLOAD_SAFETY = 1.5  # upload estimate = measured wall time per item x items x speed-up x this
 UPLOAD_WORKERS = 4
 SPEED_TRIES = (0.9, 1.1, 0.8, 1.2)  # other speeds / cruise for a live leg that cannot clear the threats
 LEG_SPEED_FACTOR = 1.2  # a live leg short of time may be planned up to this x cruise (mock top: 1.3)
