@@ -488,3 +488,22 @@ def test_formation_timed_paths_equal_member_by_member_timed_routes():
     plan = paths._StretchPlan(poses[direct], goals[direct], want[direct], r[direct])
     assert plan.likely_none  # some members' detours are started early
     assert any(len(s) > 1 for s in segs) and any(len(s) == 1 for s in segs)
+
+
+def test_refinement_early_stop_keeps_every_accepted_root(monkeypatch):
+    """_solve stops once every root has converged (|f| <= SETTLED_M) or is stuck at a jump: the same
+    roots are accepted as with all iterations, at the same place to within micrometres."""
+    threats, poses, goals, r = _t2_members()
+    want = paths.shortest_lengths(poses, goals, r) + np.array([574.0, 420.0, 440.0, 800.0, 300.0, 950.0])
+    routes = [paths.min_route(a, b, x, threats, 1.3) for a, b, x in zip(poses, goals, r)]
+    jobs = [paths._StretchPlan(poses, goals, want, r).job, paths._DetourPlan(routes, list(want)).job]
+    early = paths._solve(jobs)
+    monkeypatch.setattr(paths, "SETTLED_M", -1.0)  # never settled: every job runs all its iterations
+    full = paths._solve(jobs)
+    for job, (x_e, seg_e), (x_f, seg_f) in zip(jobs, early, full):
+        f_e, f_f = job.resid(x_e, seg_e), job.resid(x_f, seg_f)
+        np.testing.assert_array_equal(np.abs(f_e) < 1e-3, np.abs(f_f) < 1e-3)
+        ok = np.abs(f_f) < 1e-3
+        assert ok.any() and (~ok).any()  # converged roots and rejected jumps
+        assert (np.abs(f_e[ok]) <= 1e-6).all()
+        np.testing.assert_allclose(x_e[ok], x_f[ok], rtol=0, atol=1e-6)
