@@ -819,11 +819,12 @@ class _LoiterPlan:
             [p for p in (self.leads[b], arc, _path(ends[j], w[j], lens[j, w[j]], r[b], r[b])) if p.length > 0]
             for j, (b, arc) in enumerate(zip(combo, arcs))
         ]
-        clear = chains_clear(trials, threats, ds_m)
-        for trial, ok, b in zip(trials, clear, combo):
-            k = self.owner[b]
-            if out[k] is None and ok and abs(sum(p.length for p in trial) - self.lengths_m[k]) <= 1e-2:
-                out[k] = trial
+        owner = self.owner[combo]
+        exact = [
+            abs(sum(p.length for p in trial) - self.lengths_m[k]) <= 1e-2 for trial, k in zip(trials, owner)
+        ]
+        for k, j in _first_clear(trials, owner, exact, threats, ds_m).items():
+            out[k] = trials[j]
         return out
 
 
@@ -939,12 +940,29 @@ class _DetourPlan:
                 [*self.heads[k], *(_path(a, w[h, j], lens[h, j, w[h, j]], r[k], r[k]) for h, a in ends)]
             )
         chains = [[p for p in trial if p.length > 0] for trial in trials]
-        clear = chains_clear(chains, threats, ds_m)
-        for j, k in enumerate(g):
-            exact = abs(sum(p.length for p in trials[j]) - self.lengths_m[k]) <= 1e-2
-            if out[k] is None and exact and clear[j]:
-                out[k] = chains[j]
+        exact = [abs(sum(p.length for p in trial) - self.lengths_m[k]) <= 1e-2 for trial, k in zip(trials, g)]
+        for k, j in _first_clear(chains, g, exact, threats, ds_m).items():
+            out[k] = chains[j]
         return out
+
+
+def _first_clear(chains: list[list[DubinsPath]], owner, exact: list[bool], threats, ds_m: float) -> dict:
+    """{owner: index of its first chain (in list order) that is exact and clears the threats}.
+
+    The first exact chain of every owner is checked first, the others only for owners it leaves
+    without one (usually the first candidate clears, so most chains are never sampled)."""
+    cands = [j for j in range(len(chains)) if exact[j]]
+    firsts: dict = {}
+    for j in cands:
+        firsts.setdefault(owner[j], j)
+    pick: dict = {}
+    rest = [j for j in cands if firsts[owner[j]] != j]
+    for batch in (list(firsts.values()), rest):
+        batch = [j for j in batch if owner[j] not in pick]
+        for j, ok in zip(batch, chains_clear([chains[j] for j in batch], threats, ds_m)):
+            if ok and owner[j] not in pick:
+                pick[owner[j]] = j
+    return pick
 
 
 def _reach_lower_bound(q: np.ndarray, p: np.ndarray, r: np.ndarray) -> np.ndarray:
