@@ -223,6 +223,7 @@ class HilResult:
     lag_events: int = 0
     failures: list[str] = field(default_factory=list)
     tracks: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # sysid: t [s], ENU [m]
+    legs: dict[tuple[str, str], Leg] = field(default_factory=dict)  # (target, UAV): the leg flown
 
     @property
     def strikes(self) -> list[TaskRow]:
@@ -1036,7 +1037,9 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
             t, positions = flown[u["sysid"]]
             miss = _pose_at(t, positions[:, :2], u["t0_s"])[:2] - np.asarray(u["live_pose"][:2])
             u["prediction_error_m"] = round(float(np.hypot(*miss)), 2)
-    return HilResult(rows, uploads, mcap_path, t_start, time.monotonic() - t_wall, lag, failures, flown)
+    return HilResult(
+        rows, uploads, mcap_path, t_start, time.monotonic() - t_wall, lag, failures, flown, flown_legs
+    )
 
 
 def _keep(link, recorder, keeper: ScheduleKeeper, current: dict, route_t0: float) -> None:
