@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from gcs_planner.geometry import dubins
 from gcs_planner.geometry.dubins import WORDS, DubinsPath, shortest_path_free_heading, word_lengths
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.aco import CoalitionProblem, evaluate, make_solution, repair, solve_aco
@@ -197,6 +198,15 @@ def test_word_lengths_of_a_batch_equal_row_by_row_calls():
     rows = np.array([word_lengths(a, b, x, y)[0] for a, b, x, y in zip(q0, q1, r0, r1)])
     np.testing.assert_array_equal(batch, rows)
     assert np.isinf(batch).any() and np.isfinite(batch).any()
+    # from 32 problems on, CCC words are computed only where the circles are close enough
+    assert len(q0) >= dubins._CCC_SUBSET_MIN
+    ccc = batch[:, 4:].sum(2)
+    assert np.isfinite(ccc).any(1).any() and (~np.isfinite(ccc).any(1)).any()
+    far = q1.copy()
+    far[:, :2] += 3000.0  # no CCC word anywhere
+    np.testing.assert_array_equal(
+        word_lengths(q0, far, r0, r1), [word_lengths(a, b, x, y)[0] for a, b, x, y in zip(q0, far, r0, r1)]
+    )
 
 
 def test_pruned_root_scan_keeps_every_sign_change_of_the_full_grid():

@@ -72,6 +72,9 @@ _LAST_TURN = (_WORD_SIGNS[:, 2] < 0).astype(int)
 _SIDES = np.array([1.0, -1.0])[:, None, None]  # middle circle of CCC words: left / right of c0 -> c1
 _TWO_PI = 2.0 * math.pi
 _ANGLE_EPS = 1e-9
+# word_lengths: from this many problems on, CCC words are evaluated only for the problems whose end
+# circles are close enough for a middle circle (the others are inf anyway; row-wise the same values)
+_CCC_SUBSET_MIN = 32
 
 
 @dataclass(frozen=True)
@@ -195,9 +198,19 @@ def word_lengths(
     out = np.empty((n, 6, 3))
     csc = _csc(h0, h1, x1[:4] - x0[:4], y1[:4] - y0[:4], r0, r1, first[:4, None], last[:4, None])
     out[:, :4] = csc.transpose(2, 1, 0)
-    a, b = _ccc(h0, h1, x0[4:], y0[4:], x1[4:], y1[4:], r0, r1, rm, first[4:, None])
+    rows = slice(None)
+    if n >= _CCC_SUBSET_MIN:  # CCC words only for rows whose circles may touch a middle circle
+        reach = np.hypot(x1[4:] - x0[4:], y1[4:] - y0[4:]) <= (r0 + rm) + (r1 + rm) + 1e-6
+        rows = np.flatnonzero(reach.any(axis=0))
+        out[:, 4:] = np.inf
+        if not len(rows):
+            return out
+    a, b = _ccc(
+        h0[rows], h1[rows], x0[4:, rows], y0[4:, rows], x1[4:, rows], y1[4:, rows],
+        r0[rows], r1[rows], rm[rows], first[4:, None],
+    )  # fmt: skip
     better_b = b.sum(axis=0) < a.sum(axis=0)
-    out[:, 4:] = np.where(better_b[None], b, a).transpose(2, 1, 0)
+    out[rows, 4:] = np.where(better_b[None], b, a).transpose(2, 1, 0)
     return out
 
 
