@@ -21,6 +21,8 @@ Method (why it is general rather than the textbook normalised formulas):
 - All constructions are numpy-vectorised over a batch of N problems, with the four CSC words and
   the two CCC words each evaluated in one pass (small batches are bound by numpy call overhead:
   the coalition planner makes hundreds of calls per formation); invalid words get length inf.
+  From 32 problems on, CCC words are evaluated only for the problems whose end circles are close
+  enough for a middle circle (far-apart batches, such as the planner's root scans, skip them).
 
 Free terminal heading (shortest path to a point): the optimum is a CS path (or a CC path when the
 point is inside a turning circle). We evaluate the analytic CS tangent headings for both turn

@@ -30,16 +30,23 @@ the result is reported.
 Compute (target 0.05 s per formation; numpy call overhead, not arithmetic, dominates): paths are
 sampled for clearance checks and legs in one ``sample_batch`` call (``chains_clear``,
 ``sample_legs``), with exactly ``DubinsPath.sample_step``'s samples. The detour and loiter
-fallbacks evaluate their whole scan in one Dubins call and refine all roots together. Their scans
-skip points where a lower bound of the Dubins length proves the residual positive (``_scan``):
-the larger of the free-heading reach lengths (turn + tangent, Dubins 1957) forwards from the
-start pose and backwards from the end pose (``_dubins_lower_bound``; Euclidean inside a turning
-circle); it leaves about half of the Euclidean bound's points to evaluate. ``timed_routes`` runs
-these fallbacks for all members of a formation that need them in one batch. The candidates are
-still taken in the same order of preference, so the results equal the one-candidate-at-a-time,
-one-member-at-a-time computation. ``FormationPaths`` memoises a formation's routes and timed
-paths over the leader's attempts (row-independent batches make a memoised path equal a fresh
-one).
+fallbacks evaluate their whole scan in one Dubins call. Their scans skip points where a lower
+bound of the Dubins length proves the residual positive (``_scan``): the Euclidean distance, and
+where that is not enough the larger of the free-heading reach lengths (turn + tangent, Dubins
+1957) forwards from the start pose and backwards from the end pose (``_dubins_lower_bound``); it
+leaves about half of the Euclidean bound's points to evaluate. The stretch scan stops at the
+last loop count that can still change sign. All root refinements of a step run in lockstep
+(``_solve``: one Dubins call per Illinois iteration for the stretches and detours of all
+members), and a root is taken once settled (choice, see ``SETTLED_M``: 2-7 iterations instead of
+12-14; this is the only step that changes results, by < 1e-9 m). Members whose stretch has no
+smooth sign change (it will almost surely fail) have their detour scanned before the stretch
+refinement and refined with it; the loiter fallback runs only for the routes the detour leaves
+without a path. Clearance is checked for each route's first candidate first, the others only
+where it fails. ``timed_routes`` runs the fallbacks for all members of a formation that need
+them in one batch. The candidates are still taken in the same order of preference, so the
+results equal the one-candidate-at-a-time, one-member-at-a-time computation (tested).
+``FormationPaths`` memoises a formation's routes and timed paths over the leader's attempts
+(row-independent batches make a memoised path equal a fresh one).
 """
 
 from __future__ import annotations
