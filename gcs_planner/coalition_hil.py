@@ -78,7 +78,6 @@ import itertools
 import logging
 import math
 import multiprocessing
-import socket
 import time
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -804,11 +803,10 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
     recorder = _TrackRecorder(scenario.origin, True, {s: len(m) - 1 for s, m in missions.items()})
     telemetry = _Telemetry(flying)
     with fleet:
-        link = await MavlinkLink.open(*[f"udpout:{h}:{p}" for h, p in fleet.addresses])
         # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
-        # message lost when it overflows costs a re-send timer (MavlinkLink has no option for this)
-        sock = link._transport.get_extra_info("socket")
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+        # message lost when it overflows costs a re-send timer
+        urls = [f"udpout:{h}:{p}" for h, p in fleet.addresses]
+        link = await MavlinkLink.open(*urls, receive_buffer_bytes=RCVBUF_BYTES)
         try:
             with FlightLogger(mcap_path, scenario.origin, initial, scenario_text) as logger:
                 link.subscribe(logger.on_frame)

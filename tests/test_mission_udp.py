@@ -200,6 +200,24 @@ def test_partial_write_verified_by_download_over_udp():
     run(main())
 
 
+def test_subscriptions_by_sysid_see_only_their_vehicle():
+    async def main():
+        async with MockFleet(count=2, profile="px4") as fleet:
+            link = await connected(fleet)
+            seen: dict[str, set[int]] = {"one": set(), "all": set()}
+            stop_one = link.subscribe(lambda m, raw, t: seen["one"].add(m.get_srcSystem()), sysid=1)
+            link.subscribe(lambda m, raw, t: seen["all"].add(m.get_srcSystem()))
+            await asyncio.sleep(0.5)
+            assert seen == {"one": {1}, "all": {1, 2}}
+            stop_one()
+            seen["one"].clear()
+            await asyncio.sleep(0.3)
+            assert not seen["one"] and not link._by_sysid
+            await link.close()
+
+    run(main())
+
+
 def test_vehicle_reboot_forgets_mission_and_client_sees_it():
     async def main():
         async with MockFleet(count=1, profile="px4") as fleet:

@@ -84,7 +84,7 @@ class CommandClient:
             ):
                 acks.put_nowait(msg)
 
-        unsubscribe = self.link.subscribe(on_frame)
+        unsubscribe = self.link.subscribe(on_frame, self.sysid)
         try:
             for confirmation in range(self.retries + 1):
                 self.link.send(

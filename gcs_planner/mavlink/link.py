@@ -17,6 +17,8 @@ Choices:
   broadcasts (target 0, HEARTBEAT) go to every peer. A system id heard from two addresses within
   DUPLICATE_WINDOW_S is ambiguous: ``vehicles`` reports it and sending to it raises
   DuplicateSysidError (QGC merges such vehicles silently, #14812; we refuse).
+- ``subscribe(callback, sysid=N)`` delivers only that vehicle's frames: a fleet upload's transfers
+  each see their own vehicle, so dispatch stays O(frames), not O(frames x transfers).
 - Subscribers get ``(msg, raw, t_s)``: the exact received frame and the receive time as Unix
   seconds (telemetry logging); MISSION_COUNT/ACK/CURRENT carry their opaque ids (wire.py).
 - The GCS sends HEARTBEAT (MAV_TYPE_GCS) at 1 Hz from open until close: autopilots use it for
@@ -31,6 +33,7 @@ import asyncio
 import contextlib
 import logging
 import os
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -126,7 +129,8 @@ class MavlinkLink:
             enable_signing(self._mav, signing_key, sign_outgoing=True)
         self._parsers: dict[Address, mavlink.MAVLink] = {}
         self._peers: dict[Address, None] = {}  # ordered set of addresses we send broadcasts to
-        self._subscribers: list[Callback] = []
+        self._subscribers: list[Callback] = []  # every frame
+        self._by_sysid: dict[int, list[Callback]] = {}  # one vehicle's frames
         self.vehicles: dict[int, VehicleInfo] = {}
         self._transport: asyncio.DatagramTransport | SerialPort | None = None
         self._heartbeat_task: asyncio.Task | None = None
@@ -143,9 +147,12 @@ class MavlinkLink:
         compid: int = GCS_COMPID,
         heartbeat_period_s: float = HEARTBEAT_PERIOD_S,
         signing_key: bytes | None = None,
+        receive_buffer_bytes: int | None = None,
     ) -> MavlinkLink:
         """Bind one UDP socket: at most one udpin URL (the bind address), any number of udpout remotes;
-        or open one serial port (a serial URL stands alone). ``signing_key``: sign and verify."""
+        or open one serial port (a serial URL stands alone). ``signing_key``: sign and verify.
+        ``receive_buffer_bytes``: the UDP socket's SO_RCVBUF, for bursts from large fleets (the
+        kernel may cap it at net.core.rmem_max)."""
         parsed = [parse_url(u) for u in (url, *more_urls)]
         link = cls(sysid, compid, signing_key)
         if any(kind == "serial" for kind, _ in parsed):
@@ -162,6 +169,9 @@ class MavlinkLink:
         local = binds[0] if binds else ("0.0.0.0", 0)
         loop = asyncio.get_running_loop()
         link._transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(link), local_addr=local)
+        if receive_buffer_bytes is not None:
+            sock = link._transport.get_extra_info("socket")
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
         for remote in remotes:
             link._peers[(_resolve(remote[0]), remote[1])] = None
         link._start_heartbeat(heartbeat_period_s)
@@ -219,12 +229,23 @@ class MavlinkLink:
         return {s: v.live_addresses(now) for s, v in self.vehicles.items() if len(v.live_addresses(now)) > 1}
 
     # ----------------------------------------------------------------- receiving
-    def subscribe(self, callback: Callback) -> Callable[[], None]:
-        """Call ``callback(msg, raw, t_s)`` for every received frame; returns the unsubscribe function."""
-        self._subscribers = [*self._subscribers, callback]
+    def subscribe(self, callback: Callback, sysid: int | None = None) -> Callable[[], None]:
+        """Call ``callback(msg, raw, t_s)`` for every received frame, or only for those from system
+        ``sysid``; returns the unsubscribe function."""
+        if sysid is None:
+            self._subscribers = [*self._subscribers, callback]
+        else:
+            self._by_sysid[sysid] = [*self._by_sysid.get(sysid, ()), callback]
 
         def unsubscribe() -> None:
-            self._subscribers = [c for c in self._subscribers if c is not callback]
+            if sysid is None:
+                self._subscribers = [c for c in self._subscribers if c is not callback]
+                return
+            rest = [c for c in self._by_sysid.get(sysid, ()) if c is not callback]
+            if rest:
+                self._by_sysid[sysid] = rest
+            else:
+                self._by_sysid.pop(sysid, None)
 
         return unsubscribe
 
@@ -271,7 +292,8 @@ class MavlinkLink:
             self._note_source(msg, addr, now)
             attach_extensions(msg, raw)
             self.frames_received += 1
-            for callback in self._subscribers:
+            # the vehicle's own subscribers (transfers) first: their replies leave before logging
+            for callback in (*self._by_sysid.get(msg.get_srcSystem(), ()), *self._subscribers):
                 try:
                     callback(msg, raw, t_s)
                 except Exception:

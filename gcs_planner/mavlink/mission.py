@@ -226,7 +226,7 @@ class MissionClient:
                 wakeup.set_result(None)  # finished, or a timer moved earlier: re-arm
 
         active.add(key)
-        unsubscribe = self.link.subscribe(on_frame)  # the matcher exists before the first send
+        unsubscribe = self.link.subscribe(on_frame, self.sysid)  # exists before the first send
         try:
             for out in transfer.start(loop.time()):
                 send(out)
