@@ -1,10 +1,12 @@
 """Coalition HIL run: fly mock fixed wings and upload each coalition award to them in flight.
 
 Runs the coalition simulation of a scenario (planner "coalition"), starts a mock fixed wing for
-every awarded UAV, and while they fly uploads each award's mission over MAVLink at its award time
-(the simulation's decisions replayed; see gcs_planner/coalition_hil.py). Writes OUT/flight.mcap
-(tenders, bids, awards and uploads as events) and prints each strike's flown arrival time and
-heading against its award. Exits 1 when a strike is more than --max-time-error late or early or
+every awarded UAV, and while they fly uploads each award's mission over MAVLink at its award time.
+Who wins which task, when and at which angle comes from the simulation; the leg flown is planned
+from the vehicle's live telemetry (see gcs_planner/coalition_hil.py; --replay-legs uploads the
+simulation's own legs instead, for comparison). Writes OUT/flight.mcap (tenders, bids, awards and
+uploads as events) and prints each strike's and assessment's flown arrival time and heading
+against its award. Exits 1 when one is more than --max-time-error late or early or
 --max-angle-error off its awarded angle.
 """
 
@@ -14,7 +16,7 @@ import argparse
 import asyncio
 from pathlib import Path
 
-from gcs_planner.coalition_hil import HilOptions, format_strike_report, run_coalition_hil
+from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
 from gcs_planner.errors import UserError
 from gcs_planner.scenario import load_scenario
 
@@ -28,11 +30,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lead", type=float, default=30.0, help="flight before the first award [30 s]")
     p.add_argument("--max-time-error", type=float, default=1.0, metavar="S", help="[1 s]")
     p.add_argument("--max-angle-error", type=float, default=10.0, metavar="DEG", help="[10 deg]")
+    p.add_argument(
+        "--upload-safety",
+        type=float,
+        default=UPLOAD_SAFETY,
+        metavar="X",
+        help=f"a live leg starts after X times the measured upload time (+1 s) [{UPLOAD_SAFETY:g}]",
+    )
+    p.add_argument(
+        "--replay-legs", action="store_true", help="fly the simulation's legs, not live-planned ones"
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     if args.speedup <= 0:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
+    if args.upload_safety <= 0:
+        raise UserError(f"--upload-safety must be > 0, got {args.upload_safety}")
     scenario = load_scenario(args.scenario)
     if scenario.planner.get("name") != "coalition":
         raise UserError(
@@ -47,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
         lead_s=args.lead,
         max_time_error_s=args.max_time_error,
         max_angle_error_deg=args.max_angle_error,
+        upload_safety=args.upload_safety,
+        replay_legs=args.replay_legs,
     )
     result = asyncio.run(run_coalition_hil(scenario, options))
     print(format_strike_report(result.rows))
