@@ -3,7 +3,7 @@
 Runs the coalition simulation of a scenario (planner "coalition"), starts a mock fixed wing for
 every awarded UAV, and while they fly uploads each award's mission over MAVLink at its award time.
 Who wins which task, when and at which angle comes from the simulation; the leg flown is planned
-from the vehicle's live telemetry (see gcs_planner/coalition_hil.py; --replay-legs uploads the
+from the vehicle's live telemetry (see gcs_planner/coalition_hil/; --replay-legs uploads the
 simulation's own legs instead, for comparison). Writes OUT/flight.mcap (tenders, bids, awards and
 uploads as events) and prints each strike's and assessment's flown arrival time and heading
 against its award. Exits 1 when one is more than --max-time-error late or early or
