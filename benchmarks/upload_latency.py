@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import math
-import multiprocessing as mp
 import os
 import statistics
 import sys
@@ -32,6 +31,8 @@ from gcs_planner.mavlink.fleet import upload_fleet  # noqa: E402
 from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
 from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
 from gcs_planner.mavlink.types import MissionItem  # noqa: E402
+from sitl_mock.faults import LinkFaults  # noqa: E402
+from sitl_mock.process import MockFleetProcess  # noqa: E402
 
 CAPACITY = 5000
 
@@ -52,33 +53,11 @@ def items(n: int, shift: int = 0) -> list[MissionItem]:
 
 
 # ----------------------------------------------------------------------------- mock in a child process
-def _serve(conn, count: int, profile: str, faults: dict) -> None:
-    from sitl_mock.faults import LinkFaults
-    from sitl_mock.fleet import MockFleet
-
+def Mock(count: int = 1, profile: str = "px4", **faults: float) -> MockFleetProcess:  # noqa: N802
+    """A MockFleet of ``count`` vehicles in a child process (its own GIL), so every client sees the
+    same vehicle; use as a context manager, then ``.addresses``."""
     vehicles = [{"sysid": s, "capacity": CAPACITY} for s in range(1, count + 1)]
-    with MockFleet(vehicles=vehicles, profile=profile, faults=LinkFaults(**faults), rate_hz=2.0) as fleet:
-        conn.send(fleet.addresses)
-        conn.recv()
-
-
-class Mock:
-    """Context manager: a MockFleet of ``count`` vehicles in a child process; ``.addresses``."""
-
-    def __init__(self, count: int = 1, profile: str = "px4", **faults: float) -> None:
-        self.args = (count, profile, faults)
-
-    def __enter__(self) -> Mock:
-        ctx = mp.get_context("spawn")
-        self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=_serve, args=(child, *self.args), daemon=True)
-        self.proc.start()
-        self.addresses = self.conn.recv()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.conn.send("stop")
-        self.proc.join(10)
+    return MockFleetProcess(vehicles=vehicles, profile=profile, faults=LinkFaults(**faults), rate_hz=2.0)
 
 
 # ----------------------------------------------------------------------------- the three clients

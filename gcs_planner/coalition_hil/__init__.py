@@ -23,14 +23,14 @@ swarm flies. Here the run splits the work in two:
 
 Flow:
 1. Every vehicle awarded a task (of the chosen targets and UAVs) is a mock fixed wing; the fleet
-   runs in its own process (``fleet.FleetProcess``). Its first mission is a straight ``LEAD_IN_S``
-   lead-in to its simulated position at the window start ``t_start`` = first award - ``lead_s``,
-   then its simulated pre-award track (idle loiter, recon) up to its simulated leg start t_e^s,
-   then ``PRE_AWARD_EXTEND_S`` more at the same turn rate (the loiter the bids predicted, flown
-   until the award's mission starts). Its home is south of the lead-in start by the take-off's
+   runs in its own process (``sitl_mock.process.MockFleetProcess``). Its first mission is a straight
+   ``LEAD_IN_S`` lead-in to its simulated position at the window start ``t_start`` = first award -
+   ``lead_s``, then its simulated pre-award track (idle loiter, recon) up to its simulated leg start
+   t_e^s, then ``PRE_AWARD_EXTEND_S`` more at the same turn rate (the loiter the bids predicted,
+   flown until the award's mission starts). Its home is south of the lead-in start by the take-off's
    ground run (the mock climbs heading north), so the climb ends where the route starts.
-   ``HilOptions.offset_m`` moves a vehicle's first mission (tests: its live state then differs
-   from the simulated one).
+   ``HilOptions.offset_m`` moves a vehicle's first mission (tests: its live state then differs from
+   the simulated one).
 2. The fleet takes off (fly._take_off_all) and every route starts at once at route time 0 =
    scenario time ``t_start - LEAD_IN_S`` (fly._start_routes).
 3. At an award's time the award joins a priority queue served by ``UPLOAD_WORKERS`` upload

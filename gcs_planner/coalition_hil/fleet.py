@@ -1,4 +1,4 @@
-"""The mock fleet of a coalition HIL run, in its own process.
+"""The mock fleet of a coalition HIL run (run in its own process by sitl_mock.process).
 
 Every awarded vehicle is a mock fixed wing. Its home is south of its first mission's start by the
 take-off's ground run (the mock climbs heading north), so the climb ends where the route starts.
@@ -10,69 +10,25 @@ cruise), so catching up does not widen turns.
 
 from __future__ import annotations
 
-import multiprocessing
 from dataclasses import replace
 
 import numpy as np
 
 from gcs_planner.coalition_hil.missions import VehicleSchedule
-from gcs_planner.errors import UserError
 from gcs_planner.fly import CATCH_UP_FACTOR, G_MPS2, MAX_WALL_TELEMETRY_HZ, MOCK_TELEMETRY_HZ, _airframe_for
 from gcs_planner.geo import Origin, enu_to_geodetic
 from sitl_mock.flight import ALT_TOL_M, KP_ALT
+from sitl_mock.process import MockFleetProcess
 
-__all__ = ["FleetProcess", "mock_fleet"]
+__all__ = ["mock_fleet"]
 
 TAKEOFF_CLIMB_MPS = 40.0  # mock climb rate for the take-off only
-FLEET_START_S = 30.0  # the mock fleet's process must be serving within this [s]
 
 
-def _serve_fleet(conn, kwargs: dict) -> None:
-    """Child process: run a MockFleet, send its addresses, run until told to stop, send its lag count."""
-    from sitl_mock import MockFleet
-
-    with MockFleet(**kwargs) as fleet:
-        conn.send(fleet.addresses)
-        conn.recv()
-        lag = fleet.lag_events
-    conn.send(lag)
-
-
-class FleetProcess:
-    """The mock fleet in its own process. In the GCS's process the fleet's thread shares the GIL,
-    so the simulation, telemetry parsing, planning and uploads all ran on one core; at speed-up 20
-    with 26 vehicles that core was saturated and an upload of 50 items took 10 s of flight time."""
-
-    def __init__(self, **kwargs) -> None:
-        self.kwargs = kwargs
-        self.addresses: list[tuple[str, int]] = []
-        self.lag_events = 0
-
-    def __enter__(self) -> FleetProcess:
-        ctx = multiprocessing.get_context("spawn")
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve_fleet, args=(child, self.kwargs), daemon=True)
-        self._proc.start()
-        if not self._conn.poll(FLEET_START_S):
-            self._proc.terminate()
-            raise UserError(f"the mock fleet process did not start within {FLEET_START_S} s")
-        self.addresses = self._conn.recv()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        try:
-            self._conn.send("stop")
-            if self._conn.poll(10.0):
-                self.lag_events = int(self._conn.recv())
-        except (BrokenPipeError, EOFError):
-            pass
-        self._proc.join(10.0)
-        if self._proc.is_alive():
-            self._proc.terminate()
-
-
-def mock_fleet(schedules: list[VehicleSchedule], origin: Origin, speedup: float) -> FleetProcess:
-    """The (not yet started) fleet process: one mock fixed wing per schedule, homed for its climb."""
+def mock_fleet(schedules: list[VehicleSchedule], origin: Origin, speedup: float) -> MockFleetProcess:
+    """The (not yet started) fleet process: one mock fixed wing per schedule, homed for its climb.
+    Its own process, because sharing the GCS's core left an upload of 50 items taking 10 s of flight
+    time at speed-up 20."""
     specs = []
     for s in schedules:
         vp = s.initial
@@ -92,7 +48,7 @@ def mock_fleet(schedules: list[VehicleSchedule], origin: Origin, speedup: float)
             )
         )
     rate_hz = min(MOCK_TELEMETRY_HZ * speedup, MAX_WALL_TELEMETRY_HZ)
-    return FleetProcess(vehicles=specs, speedup=speedup, home=origin, rate_hz=rate_hz)
+    return MockFleetProcess(vehicles=specs, speedup=speedup, home=origin, rate_hz=rate_hz)
 
 
 def _climb_run_m(speed_mps: float, climb_mps: float, alt_m: float, dt_s: float = 0.05) -> float:

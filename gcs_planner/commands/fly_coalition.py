@@ -64,7 +64,10 @@ def run(args: argparse.Namespace) -> int:
         upload_safety=args.upload_safety,
         replay_legs=args.replay_legs,
     )
-    result = asyncio.run(run_coalition_hil(scenario, options))
+    try:
+        result = asyncio.run(run_coalition_hil(scenario, options))
+    except TimeoutError as exc:  # the mock fleet's process did not start
+        raise UserError(str(exc)) from None
     print(format_strike_report(result.rows))
     ok = sum(u["ok"] for u in result.uploads)
     print(f"{ok}/{len(result.uploads)} missions (award + idle) uploaded in flight; log {result.mcap_path}; "
