@@ -138,7 +138,7 @@ def mission(
     return [
         MissionItem(
             seq=i,
-            frame=3 if i == 0 else 3,
+            frame=3,
             command=16,
             current=int(i == 0),
             param1=float(i % 3),
