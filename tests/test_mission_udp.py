@@ -218,6 +218,47 @@ def test_subscriptions_by_sysid_see_only_their_vehicle():
     run(main())
 
 
+@pytest.mark.parametrize(
+    ("delay_s", "poll_s", "polls"), [(0.0, 0.002, True), (0.0, 0.0, False), (0.01, 0.002, False)]
+)
+def test_uploads_poll_for_replies_only_on_links_faster_than_the_poll_window(delay_s, poll_s, polls):
+    async def main():
+        async with MockFleet(count=1, profile="px4", faults=LinkFaults(delay_s=delay_s)) as fleet:
+            link = await connected(fleet)
+            windows: list[float] = []
+            keep_awake = link.keep_awake
+            link.keep_awake = lambda s: (windows.append(s), keep_awake(s))  # type: ignore[method-assign]
+            await MissionClient(link, 1, timing=Timing(reply_poll_s=poll_s)).upload(mission(20))
+            assert bool(windows) == polls
+            if polls:  # every reply after the first RTT sample, except the last item's
+                assert len(windows) >= 15 and set(windows) == {poll_s}
+            await link.close()
+
+    run(main())
+
+
+def test_keep_awake_polls_without_starving_other_tasks_then_sleeps_again():
+    async def main():
+        link = await MavlinkLink.open("udpout:127.0.0.1:9", heartbeat_period_s=0)
+        loop = asyncio.get_running_loop()
+        timeouts: list[float | None] = []
+        select = loop._selector.select  # type: ignore[attr-defined]
+        loop._selector.select = lambda timeout=None: (timeouts.append(timeout), select(timeout))[1]  # type: ignore
+        link.keep_awake(0.05)
+        t0 = loop.time()
+        await asyncio.sleep(0.01)  # a timer fires on time while the loop polls
+        assert loop.time() - t0 < 0.03
+        await asyncio.sleep(0.1)
+        polled = sum(t == 0 for t in timeouts)
+        assert polled > 50  # the loop spun instead of sleeping in the selector
+        timeouts.clear()
+        await asyncio.sleep(0.1)
+        assert sum(t == 0 for t in timeouts) <= 2  # and then slept again (0: a timer fell due)
+        await link.close()
+
+    run(main())
+
+
 def test_vehicle_reboot_forgets_mission_and_client_sees_it():
     async def main():
         async with MockFleet(count=1, profile="px4") as fleet:

@@ -108,6 +108,7 @@ class Timing:
     push_rounds: int = 3
     push_timeout_min_s: float = 0.05
     push_timeout_max_s: float = 0.5
+    reply_poll_s: float = 0.002  # links answering faster than this keep the loop polling (mission.py)
 
 
 @dataclass
@@ -176,6 +177,11 @@ class Transfer:
     @property
     def done(self) -> bool:
         return self.phase is Phase.DONE
+
+    @property
+    def rtt_s(self) -> float | None:
+        """Smoothed round trip to the vehicle; None until measured."""
+        return self._srtt_s if self._rtt_measured else None
 
     def accepts(self, msg: mavlink.MAVLink_message) -> bool:
         """True for messages of this transfer: from the target, to us (or broadcast), same mission type."""
