@@ -517,3 +517,41 @@ def test_refinement_early_stop_keeps_every_accepted_root(monkeypatch):
         assert ok.any() and (~ok).any()  # converged roots and rejected jumps
         assert (np.abs(f_e[ok]) <= 1e-6).all()
         np.testing.assert_allclose(x_e[ok], x_f[ok], rtol=0, atol=1e-6)
+
+
+def test_route_links_of_many_routes_equal_one_shortest_call_per_link():
+    """_route_links takes every link of every route from one Dubins call: each link must equal its
+    own ``_shortest`` (same word, segment lengths and radii), for routes of 1 to 4 poses."""
+    rng = np.random.default_rng(5)
+    routes = []
+    for n in (2, 3, 4, 2, 1, 3):
+        poses = [np.array([*rng.uniform(0, 3000, 2), rng.uniform(-3, 3)]) for _ in range(n)]
+        routes.append(paths.Route(poses, float(rng.choice([150.0, 200.0])), 0.0, True))
+    links = paths._route_links(routes)
+    for route, got in zip(routes, links):
+        want = [paths._shortest(a, b, route.r_m) for a, b in zip(route.poses[:-1], route.poses[1:])]
+        assert got == want
+    assert paths._route_links([routes[4]]) == [[]]
+
+
+def test_loiter_fallback_is_skipped_when_every_exact_detour_crosses_a_threat(monkeypatch):
+    """Choice: a route whose exact detours all cross a threat (a T2 member of the paper run that
+    cannot wait 1040 m clear of the threat at (1900, 950)) gets no loiter scan; without threats the
+    same detour clears and nothing is blocked."""
+    threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0)]
+    q0 = np.array([1248.8447478704177, 1335.5940170526558, 5.391630811132146])
+    q1 = paths.entry_poses((1000.0, 500.0), np.radians([60.0]), 200.0)[0]
+    route, want = paths.min_route(q0, q1, 200.0, threats, kappa=1.3), 1772.8361768577583
+    assert (
+        route.clear
+        and paths.stretch_batch(q0[None], q1[None], np.array([want]), np.array([200.0]))[0] is None
+    )
+    calls = []
+    monkeypatch.setattr(paths, "_delays_on_start_circle", lambda *a: calls.append(a) or [None])
+    fb = paths._Fallbacks([route], [want])
+    assert fb.finish(paths._solve(fb.jobs), threats, 10.0) == [None]
+    assert fb.detour.blocked == {0} and not calls
+    fb = paths._Fallbacks([route], [want])
+    segs = fb.finish(paths._solve(fb.jobs), [], 10.0)[0]
+    assert segs is not None and not fb.detour.blocked and not calls
+    assert sum(p.length for p in segs) == pytest.approx(want, abs=1e-2)

@@ -27,6 +27,13 @@ through a via pose (distance to the goal solved per bearing); loiter on a turnin
 circle (after 0-3/4 of the first link). Every returned leg is re-checked against the threats and
 the result is reported.
 
+Choices in the fallbacks (compute; not in the paper):
+- The loiter fallback runs only for a route whose detour found no exact path at all, not for one
+  whose exact detours all cross a threat (``_DetourPlan.blocked``). On the paper runs (seeds 3,
+  1, 7) the loiter never cleared such a route (0 of 3, ~5 ms each); a route it would clear now
+  has its member excluded instead (the leader re-covers the task). Without threats nothing
+  changes (an exact detour always clears).
+
 Compute (target 0.05 s per formation; numpy call overhead, not arithmetic, dominates): paths are
 sampled for clearance checks and legs in one ``sample_batch`` call (``chains_clear``,
 ``sample_legs``), with exactly ``DubinsPath.sample_step``'s samples. The detour and loiter
@@ -38,12 +45,13 @@ leaves about half of the Euclidean bound's points to evaluate. The stretch scan 
 last loop count that can still change sign. All root refinements of a step run in lockstep
 (``_solve``: one Dubins call per Illinois iteration for the stretches and detours of all
 members), and a root is taken once settled (choice, see ``SETTLED_M``: 2-7 iterations instead of
-12-14; this is the only step that changes results, by < 1e-9 m). Members whose stretch has no
-smooth sign change (it will almost surely fail) have their detour scanned before the stretch
-refinement and refined with it; the loiter fallback runs only for the routes the detour leaves
-without a path. Clearance is checked for each route's first candidate first, the others only
-where it fails. ``timed_routes`` runs the fallbacks for all members of a formation that need
-them in one batch. The candidates are still taken in the same order of preference, so the
+12-14; by < 1e-9 m; the loiter choice above may change results too). Members whose
+stretch has no smooth sign change (it will almost surely fail) have their detour scanned before
+the stretch refinement and refined with it; the loiter fallback runs only for the routes the
+detour leaves without a path. Clearance is checked for each route's first candidate first, the
+others only where it fails. ``timed_routes`` runs the fallbacks for all members of a formation
+that need them in one batch, and takes the shortest links of all its routes from one Dubins call
+(``_route_links``). The candidates are still taken in the same order of preference, so the
 results equal the one-candidate-at-a-time, one-member-at-a-time computation (tested).
 ``FormationPaths`` memoises a formation's routes and timed paths over the leader's attempts
 (row-independent batches make a memoised path equal a fresh one).
@@ -448,6 +456,20 @@ def _shortest(q0, q1, r: float) -> DubinsPath:
     return _path(q0, w, lens[w], r, r)
 
 
+def _route_links(routes: list[Route]) -> list[list[DubinsPath]]:
+    """The shortest links of every route (``_shortest`` of each pair of consecutive poses), all
+    in one Dubins call (row by row, so each link equals its own ``_shortest``)."""
+    q0 = np.array([q for rt in routes for q in rt.poses[:-1]]).reshape(-1, 3)
+    q1 = np.array([q for rt in routes for q in rt.poses[1:]]).reshape(-1, 3)
+    r = np.array([rt.r_m for rt in routes for _ in rt.poses[1:]], dtype=float)
+    if not len(r):
+        return [[] for _ in routes]
+    lens = word_lengths(q0, q1, r)
+    w = lens.sum(2).argmin(1)
+    flat = iter([_path(a, wi, seg[wi], ri, ri) for a, wi, seg, ri in zip(q0, w.tolist(), lens, r.tolist())])
+    return [[next(flat) for _ in rt.poses[1:]] for rt in routes]
+
+
 @dataclass
 class Route:
     """A chain of poses (start, safe poses..., goal) whose shortest Dubins links clear the threats."""
@@ -659,8 +681,9 @@ def timed_routes(
     """
     out: list = [None] * len(routes)
     last_resort: list = [None] * len(routes)
-    for i, (route, length_m, given) in enumerate(zip(routes, lengths_m, stretched or [None] * len(routes))):
-        out[i], last_resort[i] = _stretch_or_push(route, length_m, threats, ds_m, given)
+    given = stretched or [None] * len(routes)
+    for i, links in enumerate(_route_links(routes)):
+        out[i], last_resort[i] = _stretch_or_push(routes[i], links, lengths_m[i], threats, ds_m, given[i])
     pending = [i for i in range(len(routes)) if out[i] is None]
     found = {i: segs for i, segs in (fallen or {}).items() if i in pending}
     todo = [i for i in pending if i not in found]
@@ -675,9 +698,10 @@ def timed_routes(
 class _Fallbacks:
     """The detour, then the loiter fallback, of some routes. The detour is scanned up front and its
     Illinois job (``jobs``) solved with other jobs if the caller wishes; ``finish`` gives what
-    ``_detours``, then ``_delays_on_start_circle`` for the routes it leaves without a path, give.
-    (The loiter scan is not started early: on the paper runs it is needed for a third of the
-    detoured routes and costs more than its share of a lockstep run saves.)"""
+    ``_detours``, then ``_delays_on_start_circle`` for the routes it leaves without any exact path
+    (not for routes whose exact detours all cross a threat: choice, see the module docstring),
+    give. (The loiter scan is not started early: it is needed for few detoured routes and costs
+    more than its share of a lockstep run saves.)"""
 
     def __init__(self, routes: list[Route], lengths_m: list[float]) -> None:
         self.routes, self.lengths_m = routes, lengths_m
@@ -687,7 +711,11 @@ class _Fallbacks:
     def finish(self, solved: list, threats: list[Threat], ds_m: float, only=None) -> list:
         """Segments or None per route (routes in ``only``, default all; None for the others)."""
         out = self.detour.finish(solved[0], threats, ds_m, only)
-        left = [k for k in (range(len(self.routes)) if only is None else only) if out[k] is None]
+        left = [
+            k
+            for k in (range(len(self.routes)) if only is None else only)
+            if out[k] is None and k not in self.detour.blocked
+        ]
         if left:
             found = _delays_on_start_circle(
                 [self.routes[k] for k in left], [self.lengths_m[k] for k in left], threats, ds_m
@@ -697,9 +725,11 @@ class _Fallbacks:
         return out
 
 
-def _stretch_or_push(route: Route, length_m: float, threats: list[Threat], ds_m: float, stretched):
-    """The first timing steps: ((segments, clear) or None, the segments to use if every step fails)."""
-    links = [_shortest(a, b, route.r_m) for a, b in zip(route.poses[:-1], route.poses[1:])]
+def _stretch_or_push(
+    route: Route, links: list[DubinsPath], length_m: float, threats: list[Threat], ds_m: float, stretched
+):
+    """The first timing steps: ((segments, clear) or None, the segments to use if every step fails);
+    links: the route's shortest links (``_route_links``)."""
     extra = length_m - sum(p.length for p in links)
     if extra <= 1e-6:
         return (links, route.clear), links
@@ -754,9 +784,8 @@ class _LoiterPlan:
 
     def __init__(self, routes: list[Route], lengths_m: list[float]) -> None:
         owner, leads, starts, targets, kappas = [], [], [], [], []
-        for k, (route, length_m) in enumerate(zip(routes, lengths_m)):
-            r = route.r_m
-            first = _shortest(route.poses[0], route.poses[1], r)
+        firsts = _route_links([Route(rt.poses[:2], rt.r_m, 0.0, True) for rt in routes])
+        for k, (route, length_m, (first,)) in enumerate(zip(routes, lengths_m, firsts)):
             for frac in (0.0, 0.25, 0.5, 0.75):
                 lead = _truncate(first, frac * first.length)
                 q0 = np.asarray(lead.end) if lead.length > 0 else route.poses[0]
@@ -765,7 +794,7 @@ class _LoiterPlan:
                     leads.append(lead)
                     starts.append(q0)
                     targets.append(length_m - lead.length)
-                    kappas.append(side / r)
+                    kappas.append(side / route.r_m)
         self.n, self.lengths_m, self.leads = len(routes), lengths_m, leads
         owner, starts, targets, kappas = (
             np.array(owner),
@@ -855,7 +884,7 @@ class _DetourPlan:
         prev = np.array([route.poses[-2] for route in routes])
         goal = np.array([route.poses[-1] for route in routes])
         r = np.array([route.r_m for route in routes])
-        heads = [[_shortest(a, b, rt.r_m) for a, b in zip(rt.poses[:-2], rt.poses[1:-1])] for rt in routes]
+        heads = _route_links([Route(rt.poses[:-1], rt.r_m, 0.0, True) for rt in routes])
         need = np.array([length_m - sum(p.length for p in head) for length_m, head in zip(lengths_m, heads)])
         theta = np.linspace(0, TWO_PI, 48, endpoint=False)
         rho = np.array([np.linspace(rk, max(nk, 2 * rk), 60) for rk, nk in zip(r, need)])  # (routes, 60)
@@ -925,6 +954,7 @@ class _DetourPlan:
         """Each route's first clear candidate (routes in ``only``, default all), given ``_solve``'s
         result for ``job``."""
         out: list[list[DubinsPath] | None] = [None] * self.n
+        self.blocked: set[int] = set()  # routes whose exact detours all cross a threat
         if solved is None:
             return out
         sol, seg = solved
@@ -950,6 +980,7 @@ class _DetourPlan:
         exact = [abs(sum(p.length for p in trial) - self.lengths_m[k]) <= 1e-2 for trial, k in zip(trials, g)]
         for k, j in _first_clear(chains, g, exact, threats, ds_m).items():
             out[k] = chains[j]
+        self.blocked = {int(k) for k, e in zip(g, exact) if e and out[k] is None}
         return out
 
 
