@@ -101,3 +101,32 @@ def test_plan_round_trip(tmp_path):
     plan.save(tmp_path / "plan.json")
     again = Plan.load(tmp_path / "plan.json")
     assert again.events == plan.events and len(again.vehicles) == 32
+
+
+def test_lookalikes_are_the_candidates_starting_near_the_excluded_pose():
+    """Within the turn radius and 30 deg of the excluded member's pose: near and same heading yes;
+    near but turned, or same heading but far, no; the member itself is never listed."""
+    from gcs_planner.planning.coalition.sim import lookalikes
+
+    poses = np.array(
+        [
+            [1000.0, 1000.0, 0.1],  # the excluded member
+            [1100.0, 1050.0, 0.3],  # 112 m, 11 deg: alike
+            [1000.0, 1000.0, 0.1 + math.radians(60.0)],  # same place, turned 60 deg
+            [1250.0, 1000.0, 0.1],  # 250 m away
+            [900.0, 950.0, 0.1 - 2.0 * math.pi + 0.2],  # 112 m, 11 deg across the wrap
+        ]
+    )
+    assert lookalikes(poses, 0, 200.0) == [1, 4]
+    assert lookalikes(poses, 0, 300.0) == [1, 3, 4]
+    assert lookalikes(poses, 2, 200.0) == []
+
+
+def test_an_excluded_member_takes_its_lookalikes_off_the_task(result):
+    """Seed 3, T2: the member whose timed path cannot clear the threat at 60 deg is excluded with its
+    look-alikes, and none of them gets the 60 deg strike."""
+    excluded = [e for e in _events(result, "member_excluded") if e["target"] == "T2"]
+    assert excluded and all(e["reason"] for e in excluded)
+    off = {excluded[0]["uav"], *excluded[0]["alike"]}
+    award = next(e for e in _events(result, "award") if e["target"] == "T2" and e["angle_deg"] == 60.0)
+    assert award["task"] == "strike" and award["uav"] not in off
