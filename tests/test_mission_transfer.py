@@ -229,43 +229,81 @@ def test_count_first_response_recovers_with_one_resend():
 
 @pytest.mark.parametrize(("profile", "cancel_at_s"), [("ardupilot", 8.0), ("px4", 5.0)])
 def test_request1_no_response_vehicle_cancels_previous_intact(profile, cancel_at_s):
-    """The spec-literal client (no push-ahead) waits for a request that never comes."""
+    """The spec-literal client (no push-ahead, one item in flight) waits for a request that never comes."""
     srv = server(profile)
     old = mission(3)
     preload(srv, old)
     before = srv.items()
     srv.failure = Failure.WRITE_REQUEST1_NO_RESPONSE
     sim = Sim(srv)
-    up = upload(sim, mission(6, base_lat=400_000_000), timing=Timing(push_ahead=False))
+    up = upload(sim, mission(6, base_lat=400_000_000), timing=Timing(push_ahead=False, window=1))
     assert isinstance(up.outcome.error, errors.OperationCancelledError)
     assert sim.now == pytest.approx(cancel_at_s, abs=0.1)
     assert srv.items() == before and not srv.busy()
 
 
 @pytest.mark.parametrize("profile", PROFILE_NAMES)
-def test_request1_no_response_recovered_by_push_ahead(profile):
-    """The default client pushes item 1 when its request is overdue; the vehicle takes it."""
+@pytest.mark.parametrize("window", [1, 2])
+def test_request1_no_response_recovered_by_push_ahead(profile, window):
+    """One item in flight: the client pushes item 1 when its request is overdue and the vehicle takes
+    it. Two in flight: item 1 left with item 0, so nothing is missing."""
     srv = server(profile)
     srv.failure = Failure.WRITE_REQUEST1_NO_RESPONSE
     sim = Sim(srv)
     items = mission(6, base_lat=400_000_000)
-    up = upload(sim, items)
+    up = upload(sim, items, timing=Timing(window=window))
     assert up.outcome.error is None and srv.items() == items
     assert sim.now < 0.2  # the vehicle itself would have waited 5-8 s
-    assert sim.sent("MISSION_ITEM_INT", 0) == 2 and sim.sent("MISSION_ITEM_INT", 1) == 1
+    assert sim.sent("MISSION_ITEM_INT", 0) == 3 - window and sim.sent("MISSION_ITEM_INT", 1) == 1
 
 
 @pytest.mark.parametrize("profile", PROFILE_NAMES)
-@pytest.mark.parametrize("direction", ["item", "request"])
-def test_one_lost_frame_costs_a_push_not_the_vehicle_retry(profile, direction):
-    """Item 3 or the request for item 4 lost on a 20 ms link: recovered in ~2.5 RTT + 1 RTT."""
+@pytest.mark.parametrize("window", [2, 4])
+def test_items_in_flight_divide_a_slow_links_upload_time_and_go_once_in_order(profile, window):
+    items = mission(40)
+    spec = Sim(server(profile), Channel(delay_s=0.05))
+    upload(spec, items, timing=Timing(window=1))
     srv = server(profile)
-    victim = ("MISSION_ITEM_INT", 3) if direction == "item" else ("MISSION_REQUEST", 4)
+    sim = Sim(srv, Channel(delay_s=0.05))
+    up = upload(sim, items, timing=Timing(window=window))
+    assert up.outcome.error is None and srv.items() == items
+    assert [sim.sent("MISSION_ITEM_INT", k) for k in range(40)] == [1] * 40
+    assert up.stats.invalid_sequence_acks == 0  # never ahead of what the vehicle waits for
+    assert sim.now < 1.1 * spec.now / window  # ``window`` items per round trip instead of one
+
+
+def test_a_window_of_no_items_is_refused():
+    with pytest.raises(ValueError, match="Timing.window is 0"):
+        Timing(window=0)
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+@pytest.mark.parametrize("victim", [("MISSION_ITEM_INT", 3), ("MISSION_REQUEST", 4), ("MISSION_ITEM_INT", 9)])
+def test_a_lost_frame_with_items_in_flight_costs_a_push_not_the_vehicle_retry(profile, victim):
+    srv = server(profile)
     sim = DropOnce(srv, Channel(delay_s=0.02), *victim)
     items = mission(10)
     clean = Sim(server(profile), Channel(delay_s=0.02))
     upload(clean, items)
     up = upload(sim, items)
+    assert up.outcome.error is None and srv.items() == items
+    # the vehicle's own re-request: 0.25 s (PX4), 1 s (ArduPilot); the last item has the 0.3 s ACK timer
+    assert sim.now - clean.now < (0.35 if victim[1] == 9 else 0.2)
+    assert sum(sim.sent("MISSION_ITEM_INT", k) for k in range(10)) <= 13
+
+
+@pytest.mark.parametrize("profile", PROFILE_NAMES)
+@pytest.mark.parametrize("direction", ["item", "request"])
+def test_one_lost_frame_costs_a_push_not_the_vehicle_retry(profile, direction):
+    """Item 3 or the request for item 4 lost on a 20 ms link, one item in flight: recovered in
+    ~2.5 RTT + 1 RTT."""
+    srv = server(profile)
+    victim = ("MISSION_ITEM_INT", 3) if direction == "item" else ("MISSION_REQUEST", 4)
+    sim = DropOnce(srv, Channel(delay_s=0.02), *victim)
+    items = mission(10)
+    clean = Sim(server(profile), Channel(delay_s=0.02))
+    upload(clean, items, timing=Timing(window=1))
+    up = upload(sim, items, timing=Timing(window=1))
     assert up.outcome.error is None and srv.items() == items
     assert sim.now - clean.now < 0.2  # the vehicle's own re-request: 0.25 s (PX4), 1 s (ArduPilot)
     assert sim.sent("MISSION_ITEM_INT", 3) == 2  # the push resent 3 ...
@@ -276,15 +314,16 @@ def test_one_lost_frame_costs_a_push_not_the_vehicle_retry(profile, direction):
 @pytest.mark.parametrize(
     "failure", [Failure.WRITE_REQUEST0_INCORRECT_SEQUENCE, Failure.WRITE_REQUEST1_INCORRECT_SEQUENCE]
 )
-def test_incorrect_sequence_requests_are_recovered(profile, failure):
+@pytest.mark.parametrize("window", [1, 2])
+def test_incorrect_sequence_requests_are_recovered(profile, failure, window):
     srv = server(profile)
     srv.failure = failure
     sim = Sim(srv)
     items = mission(5)
-    up = upload(sim, items)
+    up = upload(sim, items, timing=Timing(window=window))
     assert up.outcome.error is None
-    assert len(srv.items()) == 5
-    if profile == "ardupilot":  # ArduPilot answers the skipped item with INVALID_SEQUENCE, which we survive
+    assert srv.items() == items
+    if profile == "ardupilot" and window == 1:  # ArduPilot answers the skipped item with INVALID_SEQUENCE
         assert up.stats.invalid_sequence_acks >= 1
 
 

@@ -24,10 +24,6 @@ Choices:
   seconds (telemetry logging); MISSION_COUNT/ACK/CURRENT carry their opaque ids (wire.py).
 - The GCS sends HEARTBEAT (MAV_TYPE_GCS) at 1 Hz from open until close: autopilots use it for
   GCS failsafe and udpin-style endpoints only talk to peers they have heard from.
-- ``keep_awake(duration_s)``: an expected reply is picked up by a polling event loop instead of one
-  asleep in the selector. On the VMs we measured, waking an idle process costs 100-200 us, the
-  sender's ``sendto`` pays for it, and a loopback round trip is cheaper than that; a mission upload
-  is one such round trip per item. The loop keeps serving every other task while it polls.
 - ``signing_key`` (signing.py): every frame sent is signed and every frame received must carry a
   valid signature; the rest are dropped and counted in ``frames_dropped``.
 """
@@ -140,8 +136,6 @@ class MavlinkLink:
         self.vehicles: dict[int, VehicleInfo] = {}
         self._transport: asyncio.DatagramTransport | SerialPort | None = None
         self._heartbeat_task: asyncio.Task | None = None
-        self._awake_task: asyncio.Task | None = None
-        self._awake_until_s = 0.0  # time.perf_counter() until which the loop polls
         self.frames_received = 0
         self.frames_sent = 0
         self.frames_dropped = 0  # undecodable, bad CRC, or (signing) unsigned / badly signed
@@ -327,16 +321,6 @@ class MavlinkLink:
             info.autopilot, info.mav_type = msg.autopilot, msg.type
             info.custom_mode, info.base_mode = msg.custom_mode, msg.base_mode
 
-    def keep_awake(self, duration_s: float) -> None:
-        """Keep the event loop polling, not sleeping, for the next ``duration_s`` (see module docstring)."""
-        self._awake_until_s = max(self._awake_until_s, time.perf_counter() + duration_s)
-        if self._awake_task is None or self._awake_task.done():
-            self._awake_task = asyncio.get_running_loop().create_task(self._stay_awake())
-
-    async def _stay_awake(self) -> None:
-        while time.perf_counter() < self._awake_until_s:
-            await asyncio.sleep(0)  # one loop pass: the selector is polled with timeout 0
-
     # ----------------------------------------------------------------- lifecycle
     async def _heartbeat_loop(self, period_s: float) -> None:
         beat = mavlink.MAVLink_heartbeat_message(
@@ -348,8 +332,7 @@ class MavlinkLink:
             await asyncio.sleep(period_s)
 
     async def close(self) -> None:
-        """Stop heartbeats and polling, close the socket (idempotent)."""
-        self._awake_until_s = 0.0
+        """Stop heartbeats and close the socket (idempotent)."""
         if self._heartbeat_task is not None:
             self._heartbeat_task.cancel()
             with contextlib.suppress(asyncio.CancelledError):

@@ -2,11 +2,8 @@
 
 A thin wrapper around the I/O-free state machines in transfer.py: the response matcher is
 subscribed before the first message is sent, replies are sent from inside the link's receive
-callback (no task hop), and the only awaits are on the transfer's next deadline. On links that
-answer within ``Timing.reply_poll_s`` (2 ms: loopback, LAN) the loop polls for the answer after each
-reply (``MavlinkLink.keep_awake``), trading up to that much CPU per reply for the wake-up latency.
-One transfer per (link, vehicle, mission type) at a time; a second one raises BusyError instead of
-interleaving.
+callback (no task hop), and the only awaits are on the transfer's next deadline. One transfer per
+(link, vehicle, mission type) at a time; a second one raises BusyError instead of interleaving.
 
 Choices:
 - Lost final ACK: when every item went out but no MISSION_ACK came back (ArduPilot never repeats
@@ -222,15 +219,9 @@ class MissionClient:
         def due_s() -> float:
             return math.inf if transfer.deadline_s is None else transfer.deadline_s
 
-        poll_s = self.timing.reply_poll_s
-
         def on_frame(msg, raw: bytes, t_s: float) -> None:
-            replies = transfer.on_message(msg, loop.time())  # [] for frames of other transfers
-            for out in replies:
+            for out in transfer.on_message(msg, loop.time()):  # [] for frames of other transfers
                 send(out)
-            rtt_s = transfer.rtt_s
-            if replies and rtt_s is not None and rtt_s < poll_s and not transfer.done:
-                self.link.keep_awake(poll_s)  # the answer comes sooner than a wake from idle
             if (transfer.done or due_s() < armed_s) and not wakeup.done():
                 wakeup.set_result(None)  # finished, or a timer moved earlier: re-arm
 

@@ -10,10 +10,18 @@ Choices (where the spec leaves room):
 - MISSION_COUNT is resent every COUNT_RETRY_S = 1.5 s up to COUNT_RETRIES = 5 times until the first
   request (Skybrush); after that the vehicle drives the upload with its own re-requests.
 - Each request is answered once, always with MISSION_ITEM_INT (also legacy MISSION_REQUEST, as
-  ArduPilot sends). A request for an item sent less than DUPLICATE_WINDOW_S ago is a duplicate
-  (link duplication, reordering) and is ignored instead of answered again: this is what keeps slow
-  links from flooding (PX4 #11078). Genuine re-requests come after the vehicle's retry time
-  (>= 250 ms), so they pass.
+  ArduPilot sends). A request for an item sent less than max(DUPLICATE_WINDOW_S, 2 x smoothed RTT)
+  ago is a duplicate (link duplication, reordering, or the request for an item already in flight)
+  and is ignored instead of answered again: this is what keeps slow links from flooding (PX4
+  #11078). Genuine re-requests come after the vehicle's retry time (>= 250 ms), so they pass.
+- Items in flight (``Timing.window``, default 2): the first request for item r also sends the items
+  up to r + window - 1 not sent yet, so the vehicle's next item is already on its way when it asks.
+  That moves ``window`` items per round trip instead of one, and on a fast link the GCS and the
+  vehicle work at the same time instead of taking turns. It rests on the behaviour push-ahead
+  relies on (below): both autopilots store the item they wait for and drop or refuse the others; on
+  an in-order link items arrive in order, so nothing is refused. The final-ACK phase starts once
+  the vehicle asked for the last item (or a push sent it). ``Timing(push_ahead=False, window=1)``
+  is the spec-literal client.
 - Only the last item is resent on our own timer, until MISSION_ACK (lost final ACK, devguide #171);
   its timeout adapts to the measured round trip (4 x smoothed RTT within 0.3..1.5 s).
 - Loss recovery ahead of the vehicle's timer ("push-ahead"): when the next request is overdue
@@ -108,7 +116,11 @@ class Timing:
     push_rounds: int = 3
     push_timeout_min_s: float = 0.05
     push_timeout_max_s: float = 0.5
-    reply_poll_s: float = 0.002  # links answering faster than this keep the loop polling (mission.py)
+    window: int = 2  # items in flight during an upload: 1 = answer each request only (the spec)
+
+    def __post_init__(self) -> None:
+        if self.window < 1:
+            raise ValueError(f"Timing.window is {self.window}: at least one item must be in flight")
 
 
 @dataclass
@@ -177,11 +189,6 @@ class Transfer:
     @property
     def done(self) -> bool:
         return self.phase is Phase.DONE
-
-    @property
-    def rtt_s(self) -> float | None:
-        """Smoothed round trip to the vehicle; None until measured."""
-        return self._srtt_s if self._rtt_measured else None
 
     def accepts(self, msg: mavlink.MAVLink_message) -> bool:
         """True for messages of this transfer: from the target, to us (or broadcast), same mission type."""
@@ -334,22 +341,26 @@ class UploadTransfer(Transfer):
             self._rtt_sample(now_s - self._count_sent_s)
         self._last_request_s = now_s
         self._pushes = 0
+        if i > self._requested and i > 0 and not math.isnan(self._sent_at[i - 1]):
+            self._rtt_sample(now_s - self._sent_at[i - 1])  # the first ask for i answers item i - 1
         self._requested = max(self._requested, i)
-        sent = self._sent_at[i]
-        if now_s - sent < self.timing.duplicate_window_s:
+        recent = now_s - self._sent_at[i] < max(self.timing.duplicate_window_s, 2 * self._srtt_s)
+        ahead = range(i + 1, min(i + self.timing.window, len(self.items)))
+        due = ([] if recent else [i]) + [k for k in ahead if math.isnan(self._sent_at[k])]
+        if not due:
             self.stats.duplicates_ignored += 1
-            return []
-        if i > 0 and not math.isnan(self._sent_at[i - 1]) and math.isnan(sent):
-            self._rtt_sample(now_s - self._sent_at[i - 1])
-        return self._send_from(i, now_s)
+        return self._send(due, now_s)
 
-    def _send_from(self, i: int, now_s: float, extra: int = 0) -> list[mavlink.MAVLink_message]:
-        """Item ``i`` and ``extra`` more unasked (push-ahead), then the timer of the new phase."""
-        sent = list(range(i, min(i + 1 + extra, len(self.items))))
+    def _send(self, sent: list[int], now_s: float) -> list[mavlink.MAVLink_message]:
+        """Items ``sent`` (ascending), then the timer of the phase that follows.
+
+        The final-ACK phase starts once the last item went out in answer to its request or in a
+        push; a last item sent ahead in the window leaves earlier ones to the push timer."""
         for k in sent:
             self._sent_at[k] = now_s
-        self._highest_sent = max(self._highest_sent, sent[-1])
-        if self._highest_sent == len(self.items) - 1:
+        last = len(self.items) - 1
+        self._highest_sent = max(self._highest_sent, *sent) if sent else self._highest_sent
+        if self._highest_sent == last and (self._requested == last or self._pushes > 0):
             self.phase = Phase.FINAL_ACK
             self._retries = 0  # the vehicle is alive: the final-item retries start again
             self.deadline_s = now_s + self._adaptive(
@@ -405,7 +416,8 @@ class UploadTransfer(Transfer):
             and self.timing.push_ahead
         ):
             self._pushes += 1
-            return self._send_from(self._requested, now_s, extra=self._pushes)
+            r = self._requested  # resend it and push ``pushes`` more unasked
+            return self._send(list(range(r, min(r + 1 + self._pushes, len(self.items)))), now_s)
         if idle < self.timing.inactivity_timeout_s:  # pushes spent: wait for the vehicle
             self.deadline_s = self._last_request_s + self.timing.inactivity_timeout_s
             return []
