@@ -112,8 +112,8 @@ class CoalitionParams:
     w2: float = 0.3
     w3: float = 0.5
     time_scale_s: float = 60.0  # J3 normaliser and eq. 31 window width
-    ants: int = 10
-    iterations: int = 15
+    ants: int = 30  # clusters (choice: 30 x 6 instead of 10 x 15, see aco.py)
+    iterations: int = 6
     alpha: float = 1.0
     beta: float = 2.0
     q0: float = 0.9
