@@ -1,6 +1,6 @@
 """Seed-003 experiment timeline (missions/coalition_paper.toml) beside the paper's typical run.
 
-    nice .venv/bin/python benchmarks/coalition_timeline.py [--seed 3] [--events] [--repeat 5]
+    nice .venv/bin/python benchmarks/coalition_timeline.py [--seed 3] [--events] [--repeat 5] [--colony 10 15]
 
 Prints the key events per target (leader time, neighbours / potential members, coalition size,
 strike and assessment times, failed tenders) next to the paper's numbers, and the planning
@@ -19,6 +19,7 @@ import argparse
 import json
 import os
 import statistics
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -136,8 +137,18 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--events", action="store_true", help="also print the whole event log as JSON lines")
     ap.add_argument("--repeat", type=int, default=1, help="run the simulation N times for compute statistics")
+    ap.add_argument(
+        "--colony",
+        type=int,
+        nargs=2,
+        metavar=("CLUSTERS", "ITERATIONS"),
+        help="ACO colony shape instead of the default (e.g. 10 15, the earlier colony: its seed-3 T2"
+        " formation excludes members, the hard case for compute)",
+    )
     args = ap.parse_args()
     world = load_world(load_scenario(MISSION))
+    if args.colony:
+        world = replace(world, params=replace(world.params, ants=args.colony[0], iterations=args.colony[1]))
     load_before, cpu_before = os.getloadavg()[0], _cpu_times()
     results = [simulate(world, np.random.default_rng(args.seed)) for _ in range(max(1, args.repeat))]
     load_after, cpu_after = os.getloadavg()[0], _cpu_times()
