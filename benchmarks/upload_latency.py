@@ -3,8 +3,9 @@
 The mock fleet runs in a child process (its own interpreter and GIL), so every client sees the
 same vehicle. Sections (all on 127.0.0.1):
   loopback  10/100/1000 items, each client, median wall time and client CPU time (all threads of the
-            client process; MAVSDK's C++ threads included); ratio to MAVSDK.
-  delay     20 ms one-way (40 ms RTT) link: time / (items x RTT), target <= 1.2.
+            client process; MAVSDK's C++ threads included); ratio to MAVSDK. ``ours`` is the default
+            client (two items in flight), ``ours_w1`` the one-item-per-request client.
+  delay     20 ms one-way (40 ms RTT) link: time / (items x RTT), target <= 1.2, both windows.
   loss      10 % loss each way (+ 20 ms delay): success over --loss-uploads uploads, slowdown vs no loss.
   fleet     100 vehicles at once (upload_fleet, workers=100 and the default 8) vs one vehicle.
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import functools
 import math
 import os
 import statistics
@@ -30,6 +32,7 @@ from pymavlink import mavutil  # noqa: E402
 from gcs_planner.mavlink.fleet import upload_fleet  # noqa: E402
 from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
 from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
+from gcs_planner.mavlink.transfer import Timing  # noqa: E402
 from gcs_planner.mavlink.types import MissionItem  # noqa: E402
 from sitl_mock.faults import LinkFaults  # noqa: E402
 from sitl_mock.process import MockFleetProcess  # noqa: E402
@@ -70,10 +73,10 @@ async def _connect(addresses) -> MavlinkLink:
     return link
 
 
-def ours(address, sizes: list[int], reps: int) -> dict[int, list[float]]:
+def ours(address, sizes: list[int], reps: int, window: int = Timing.window) -> dict[int, list[float]]:
     async def main():
         link = await _connect([address])
-        client = MissionClient(link, 1)
+        client = MissionClient(link, 1, timing=Timing(window=window))
         out = {}
         for n in sizes:
             times = []
@@ -169,12 +172,17 @@ def loopback(profile: str, sizes: list[int], reps: int, rounds: int = 3) -> None
     """Each client gets a fresh mock (one peer, nothing stale) per round; client order rotates per round,
     so drifting machine load hits all three alike. Medians over rounds x reps uploads."""
     print(f"\n## loopback, profile {profile}: median upload time [ms] over {rounds} x {reps} uploads")
-    clients = {"ours": ours, "pymavlink": pymavlink_loop, "mavsdk": mavsdk_client}
+    clients = {
+        "ours": ours,
+        "ours_w1": functools.partial(ours, window=1),
+        "pymavlink": pymavlink_loop,
+        "mavsdk": mavsdk_client,
+    }
     samples: dict[str, dict[int, list[tuple[float, float]]]] = {
         name: {n: [] for n in sizes} for name in clients
     }
     for r in range(rounds):
-        names = list(clients)[r % 3 :] + list(clients)[: r % 3]
+        names = list(clients)[r % len(clients) :] + list(clients)[: r % len(clients)]
         for name in names:
             with Mock(1, profile) as mock:
                 got = clients[name](mock.addresses[0], sizes, reps)
@@ -194,10 +202,11 @@ def loopback(profile: str, sizes: list[int], reps: int, rounds: int = 3) -> None
 def delayed(profile: str, n: int, reps: int) -> None:
     rtt = 0.04
     print(f"\n## 20 ms one-way delay, profile {profile}, {n} items: time / (items x RTT), target <= 1.2")
-    with Mock(1, profile, delay_s=0.02) as mock:
-        t = med([w for w, _ in ours(mock.addresses[0], [n], reps)[n]])
-    print(f"{'items':>6} {'time_s':>8} {'ratio':>6}")
-    print(f"{n:>6} {t:>8.3f} {t / (n * rtt):>6.2f}")
+    print(f"{'items':>6} {'window':>7} {'time_s':>8} {'ratio':>6}")
+    for window in (Timing.window, 1):
+        with Mock(1, profile, delay_s=0.02) as mock:
+            t = med([w for w, _ in ours(mock.addresses[0], [n], reps, window)[n]])
+        print(f"{n:>6} {window:>7} {t:>8.3f} {t / (n * rtt):>6.2f}")
 
 
 def lossy(profile: str, n: int, uploads: int) -> None:

@@ -279,17 +279,19 @@ def test_a_window_of_no_items_is_refused():
 
 @pytest.mark.parametrize("profile", PROFILE_NAMES)
 @pytest.mark.parametrize("victim", [("MISSION_ITEM_INT", 3), ("MISSION_REQUEST", 4), ("MISSION_ITEM_INT", 9)])
-def test_a_lost_frame_with_items_in_flight_costs_a_push_not_the_vehicle_retry(profile, victim):
+@pytest.mark.parametrize("window", [2, 4])
+def test_a_lost_frame_with_items_in_flight_costs_a_push_not_the_vehicle_retry(profile, victim, window):
+    """The vehicle drops what follows a lost item, so the push resends the window (go-back-N)."""
     srv = server(profile)
     sim = DropOnce(srv, Channel(delay_s=0.02), *victim)
     items = mission(10)
     clean = Sim(server(profile), Channel(delay_s=0.02))
-    upload(clean, items)
-    up = upload(sim, items)
+    upload(clean, items, timing=Timing(window=window))
+    up = upload(sim, items, timing=Timing(window=window))
     assert up.outcome.error is None and srv.items() == items
     # the vehicle's own re-request: 0.25 s (PX4), 1 s (ArduPilot); the last item has the 0.3 s ACK timer
-    assert sim.now - clean.now < (0.35 if victim[1] == 9 else 0.2)
-    assert sum(sim.sent("MISSION_ITEM_INT", k) for k in range(10)) <= 13
+    assert sim.now - clean.now < (0.35 if victim[1] == 9 else 0.1)
+    assert sum(sim.sent("MISSION_ITEM_INT", k) for k in range(10)) <= 10 + 2 * window
 
 
 @pytest.mark.parametrize("profile", PROFILE_NAMES)

@@ -25,15 +25,18 @@ Choices (where the spec leaves room):
 - Only the last item is resent on our own timer, until MISSION_ACK (lost final ACK, devguide #171);
   its timeout adapts to the measured round trip (4 x smoothed RTT within 0.3..1.5 s).
 - Loss recovery ahead of the vehicle's timer ("push-ahead"): when the next request is overdue
-  (2.5 x smoothed RTT within 0.05..0.5 s) the client resends the highest requested item r and
-  pushes r + 1 unasked. Whichever frame was lost (item r, or the request for r + 1), the vehicle
-  then accepts what it expects, because ArduPilot and PX4 both store any item whose seq is the one
-  they wait for; the other copy costs one MISSION_ACK(INVALID_SEQUENCE) on ArduPilot (ignored, see
-  below) and nothing on PX4. If that push goes unanswered too, up to Timing.push_rounds (3) follow,
-  each at twice the previous timeout and one item wider (r .. r + 1 + round), which also covers a
-  lost push. Then the client waits for the vehicle, so a silent vehicle gets a few frames, not the
-  mission. Without push-ahead every lost frame waits for the vehicle's re-request: 1 s on
-  ArduPilot, which made a 10 % loss link 6x slower. ``Timing(push_ahead=False)`` turns it off.
+  (1.5 x smoothed RTT within 0.05..0.5 s; requests normally come every RTT / window) the client
+  resends the highest requested item r and the rest of its window, and pushes one item more
+  unasked (r .. r + window). Whichever frame was lost (item r, or the request for r + 1), the
+  vehicle then accepts what it expects, because ArduPilot and PX4 both store any item whose seq is
+  the one they wait for and drop the rest (go-back-N); a surplus copy costs one
+  MISSION_ACK(INVALID_SEQUENCE) on ArduPilot (ignored, see below) and nothing on PX4. A genuine
+  re-request (item r not sent within the duplicate window) likewise gets the whole window again. If
+  a push goes unanswered too, up to Timing.push_rounds (3) follow, each at twice the previous
+  timeout and one item wider, which also covers a lost push. Then the client waits for the vehicle,
+  so a silent vehicle gets a few frames, not the mission. Without push-ahead every lost frame waits
+  for the vehicle's re-request: 1 s on ArduPilot, which made a 10 % loss link 6x slower.
+  ``Timing(push_ahead=False)`` turns it off.
 - MISSION_ACK(INVALID_SEQUENCE) mid-upload is ignored: ArduPilot sends it for an out-of-order item
   and then re-requests the expected one (QGC PR #6718). Success only on MISSION_ACK(ACCEPTED) after
   the last item was sent; an ACCEPTED before that is stale and ignored.
@@ -116,6 +119,7 @@ class Timing:
     push_rounds: int = 3
     push_timeout_min_s: float = 0.05
     push_timeout_max_s: float = 0.5
+    push_rtts: float = 1.5  # a request this many smoothed RTTs overdue starts a push
     window: int = 2  # items in flight during an upload: 1 = answer each request only (the spec)
 
     def __post_init__(self) -> None:
@@ -344,9 +348,11 @@ class UploadTransfer(Transfer):
         if i > self._requested and i > 0 and not math.isnan(self._sent_at[i - 1]):
             self._rtt_sample(now_s - self._sent_at[i - 1])  # the first ask for i answers item i - 1
         self._requested = max(self._requested, i)
-        recent = now_s - self._sent_at[i] < max(self.timing.duplicate_window_s, 2 * self._srtt_s)
-        ahead = range(i + 1, min(i + self.timing.window, len(self.items)))
-        due = ([] if recent else [i]) + [k for k in ahead if math.isnan(self._sent_at[k])]
+        window = range(i, min(i + self.timing.window, len(self.items)))
+        if now_s - self._sent_at[i] < max(self.timing.duplicate_window_s, 2 * self._srtt_s):
+            due = [k for k in window if math.isnan(self._sent_at[k])]  # i is on its way: extend
+        else:  # i was never sent or was lost; what went after it was dropped: send the window again
+            due = list(window)
         if not due:
             self.stats.duplicates_ignored += 1
         return self._send(due, now_s)
@@ -370,7 +376,9 @@ class UploadTransfer(Transfer):
             self.phase = Phase.ITEMS
             self.deadline_s = now_s + self.timing.inactivity_timeout_s
             if self._pushes < self.timing.push_rounds and self.timing.push_ahead:
-                push_s = self._adaptive(self.timing.push_timeout_min_s, self.timing.push_timeout_max_s, 2.5)
+                push_s = self._adaptive(
+                    self.timing.push_timeout_min_s, self.timing.push_timeout_max_s, self.timing.push_rtts
+                )
                 self.deadline_s = min(self.deadline_s, now_s + push_s * 2**self._pushes)
         return [self._item(k) for k in sent]
 
@@ -416,8 +424,9 @@ class UploadTransfer(Transfer):
             and self.timing.push_ahead
         ):
             self._pushes += 1
-            r = self._requested  # resend it and push ``pushes`` more unasked
-            return self._send(list(range(r, min(r + 1 + self._pushes, len(self.items)))), now_s)
+            r = self._requested  # resend it and what followed it (dropped), and push ``pushes`` more
+            end = min(r + self.timing.window + self._pushes, len(self.items))
+            return self._send(list(range(r, end)), now_s)
         if idle < self.timing.inactivity_timeout_s:  # pushes spent: wait for the vehicle
             self.deadline_s = self._last_request_s + self.timing.inactivity_timeout_s
             return []
