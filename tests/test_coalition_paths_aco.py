@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -555,3 +556,19 @@ def test_loiter_fallback_is_skipped_when_every_exact_detour_crosses_a_threat(mon
     segs = fb.finish(paths._solve(fb.jobs), [], 10.0)[0]
     assert segs is not None and not fb.detour.blocked and not calls
     assert sum(p.length for p in segs) == pytest.approx(want, abs=1e-2)
+
+
+def test_default_colony_shape_finds_as_good_plans_as_the_earlier_10x15_colony():
+    """Choice: 30 clusters x 6 iterations (a step costs the same for 10 or 30 clusters, so it is
+    ~40% of the time of 10 x 15). On larger problems it must find plans at least as good on average."""
+    params = CoalitionParams()
+    assert (params.ants, params.iterations) == (30, 6)
+    old = replace(params, ants=10, iterations=15)
+    kinds, offsets = (STRIKE,) * 7 + (ASSESS,) * 3, (0.0,) * 10
+    new_J, old_J = [], []
+    for seed in range(8):
+        prob = _problem(np.random.default_rng(seed), n=12, kinds=kinds, offsets=offsets)
+        new_J.append(solve_aco(prob, params, np.random.default_rng(100 + seed)).J)
+        old_J.append(solve_aco(prob, old, np.random.default_rng(100 + seed)).J)
+    assert np.mean(new_J) >= np.mean(old_J) - 1e-3
+    assert min(np.subtract(new_J, old_J)) > -0.02
