@@ -65,3 +65,19 @@ def test_40_uav_priority_swarm_plan_flies_with_no_separation_breach(tmp_path):
     assert result.passed, [(r.sysid, r.failures) for r in result.reports if r.failures]
     assert all(r.completed for r in result.reports) and len(result.reports) == 40
     assert min(r.min_separation_m for r in result.reports) >= 8.0
+
+
+def test_fly_flies_a_coalition_scenario_award_by_award(tmp_path, monkeypatch, capsys):
+    """`gcs-planner fly` on the coalition scenario runs the coalition HIL (5x by default), and says
+    which of fly's options do not apply to it."""
+    from gcs_planner import cli
+    from gcs_planner.commands import fly_coalition
+
+    seen = []
+    monkeypatch.setattr(fly_coalition, "run", lambda args: seen.append(args) or 0)
+    scenario = str(SCENARIO.parent / "coalition_paper.toml")
+    assert cli.main(["fly", scenario, "-o", str(tmp_path), "--seed", "7"]) == 0
+    assert (seen[0].scenario, seen[0].out, seen[0].speedup, seen[0].seed) == (scenario, str(tmp_path), 5.0, 7)
+    assert cli.main(["fly", scenario, "--speedup", "10"]) == 0 and seen[1].speedup == 10.0
+    assert cli.main(["fly", scenario, "--plan", "p.json", "--tlog"]) == 2 and len(seen) == 2
+    assert "--plan, --tlog not supported" in capsys.readouterr().err

@@ -3,7 +3,8 @@
 Starts mock vehicles (sitl_mock) unless --connect names real ones or SITL. Writes
 OUT/flight.mcap (open in Foxglove), OUT/flight.rrd (open with `rerun OUT/flight.rrd`) and
 OUT/plan.json, and prints one conformance row per vehicle. Exits 1 when a vehicle fails its
-mission or breaks a separation, obstacle or cross-track bound.
+mission or breaks a separation, obstacle or cross-track bound. A coalition scenario (planner
+"coalition") is flown award by award instead, as `gcs-planner fly-coalition` does.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import argparse
 import asyncio
 from pathlib import Path
 
+from gcs_planner.commands import fly_coalition
 from gcs_planner.conformance import format_report
 from gcs_planner.errors import UserError
 from gcs_planner.fly import FlyOptions, fly
@@ -31,7 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="URL",
         help="real vehicles / SITL (udpout:HOST:PORT or udpin:HOST:PORT; repeatable)",
     )
-    p.add_argument("--speedup", type=float, default=10.0, help="mock simulation speed-up [10]")
+    p.add_argument(
+        "--speedup", type=float, default=None, help="mock simulation speed-up [10; 5 for coalition scenarios]"
+    )
     p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
     p.add_argument("--workers", type=int, default=8, help="concurrent uploads [8]")
     p.add_argument("--seed", type=int, default=None, help="planner seed (default: the file's)")
@@ -60,6 +64,23 @@ def build_parser_defaults(scenario: Path, out: str, speedup: float) -> argparse.
     return parser.parse_args([str(scenario), "--out", out, "--speedup", str(speedup)])
 
 
+def _fly_coalition(args: argparse.Namespace) -> int:
+    """A coalition scenario has no plan to upload up front: its awards are flown as they are made."""
+    given = {"--plan": args.plan, "--connect": args.connect, "--drift": args.drift, "--tlog": args.tlog}
+    unsupported = [flag for flag, value in given.items() if value]
+    if unsupported:
+        raise UserError(
+            f"{args.scenario} is a coalition scenario, flown award by award as `gcs-planner fly-coalition` "
+            f"does; {', '.join(unsupported)} not supported for it"
+        )
+    parser = argparse.ArgumentParser()
+    fly_coalition.add_arguments(parser)
+    argv = [args.scenario, "--out", args.out, "--speedup", str(args.speedup or 5.0)]
+    argv += ["--seed", str(args.seed)] if args.seed is not None else []
+    print("coalition scenario: each award is uploaded to its vehicles in flight (gcs-planner fly-coalition)")
+    return fly_coalition.run(parser.parse_args(argv))
+
+
 def _drift(values: list[str]) -> dict[int, tuple[float, float]]:
     out = {}
     for value in values:
@@ -72,9 +93,12 @@ def _drift(values: list[str]) -> dict[int, tuple[float, float]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.speedup <= 0:
+    if args.speedup is not None and args.speedup <= 0:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
     scenario = load_scenario(args.scenario)
+    if scenario.planner.get("name") == "coalition":
+        return _fly_coalition(args)
+    args.speedup = 10.0 if args.speedup is None else args.speedup
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
