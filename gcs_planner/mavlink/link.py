@@ -10,8 +10,8 @@ Choices:
 - One pymavlink parser per remote address, so interleaved datagrams of different vehicles never
   corrupt each other's parser state; robust parsing drops bad frames instead of raising. A datagram
   holding exactly one MAVLink 2 frame (the usual case) is decoded directly, skipping pymavlink's
-  byte-wise parser, and unsigned frames of plain numeric messages go through codec.py (a third of
-  pymavlink's time). Frames carry a sequence number that advances per frame sent.
+  byte-wise parser, and unsigned frames of plain numeric messages go through codec.py (about two
+  thirds of pymavlink's time). Frames carry a sequence number that advances per frame sent.
 - Frames are dispatched synchronously in ``datagram_received``: a transfer's reply goes out in the
   same callback that received the request (no task hop, no sleep) - the hot path of an upload.
 - Routing: a message with ``target_system`` goes to the address that system was last heard from;

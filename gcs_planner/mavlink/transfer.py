@@ -360,12 +360,14 @@ class UploadTransfer(Transfer):
     def _send(self, sent: list[int], now_s: float) -> list[mavlink.MAVLink_message]:
         """Items ``sent`` (ascending), then the timer of the phase that follows.
 
-        The final-ACK phase starts once the last item went out in answer to its request or in a
-        push; a last item sent ahead in the window leaves earlier ones to the push timer."""
+        The final-ACK phase starts once the vehicle asked for the last item or a push sent it: a
+        last item merely sent ahead in the window may still wait for a lost earlier one, which is
+        the push timer's job, not the final-item timer's."""
         for k in sent:
             self._sent_at[k] = now_s
         last = len(self.items) - 1
-        self._highest_sent = max(self._highest_sent, *sent) if sent else self._highest_sent
+        if sent:
+            self._highest_sent = max(self._highest_sent, sent[-1])
         if self._highest_sent == last and (self._requested == last or self._pushes > 0):
             self.phase = Phase.FINAL_ACK
             self._retries = 0  # the vehicle is alive: the final-item retries start again
