@@ -78,9 +78,11 @@ def test_live_state_fits_the_turn_and_predicts_the_pose_ahead():
 
 
 def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_path):
+    """At the HIL run's default speed-up (5x). At 10x one strike in 10-20 runs came 2-3 s late when
+    the machine was busy: an upload's wall time is then ten times as much flight."""
     scenario = load_scenario(SCENARIO)
     result = asyncio.run(
-        run_coalition_hil(scenario, HilOptions(out_dir=tmp_path, speedup=10.0, targets=("T1",)))
+        run_coalition_hil(scenario, HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",)))
     )
     assert not result.failures, result.failures
     # the 8 strikes of T1's simultaneous attack, each within 1 s and 10 deg of its award
