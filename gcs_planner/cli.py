@@ -27,6 +27,7 @@ COMMANDS = [
     "download",
     "clear",
     "start",
+    "signing-setup",
 ]
 
 

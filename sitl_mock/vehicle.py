@@ -36,6 +36,7 @@ import numpy as np
 
 from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.mavlink.enums import CommandResult, MissionState, px4_custom_mode
+from gcs_planner.mavlink.signing import NO_KEY
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.wire import MissionCurrentMessage
 from sitl_mock import telemetry
@@ -141,6 +142,7 @@ class MockVehicle:
             "COMMAND_LONG": self._on_command,
             "COMMAND_INT": self._on_command,
             "SET_MODE": self._on_set_mode,
+            "SETUP_SIGNING": self._on_setup_signing,
         }
         self._commands = {
             mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
@@ -301,6 +303,12 @@ class MockVehicle:
         handler = self._dispatch.get(mtype)
         if handler is not None:
             handler(msg)
+
+    def _on_setup_signing(self, msg: mavlink.MAVLink_message) -> None:
+        """Take the key (ArduPilot: an all-zero key with timestamp 0 turns signing off). With signing
+        on, only a frame signed with the current key gets here: the link drops the rest."""
+        key = bytes(msg.secret_key)
+        self.link.set_signing_key(None if key == NO_KEY and msg.initial_timestamp == 0 else key)
 
     def _wall_now(self) -> float:
         return asyncio.get_running_loop().time()

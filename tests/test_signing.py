@@ -84,3 +84,36 @@ def test_signing_key_checks():
         key_from_passphrase("")
     with pytest.raises(ValueError, match="32 bytes, got 5"):
         MavlinkLink(signing_key=b"short")
+
+
+def test_signing_setup_gives_a_vehicle_its_key_then_takes_it_away(capsys):
+    """`gcs-planner signing-setup` over UDP: afterwards only a GCS with the key can upload, a wrong
+    current key is refused in one line, and --disable lets an unsigned GCS in again."""
+    from gcs_planner.cli import main
+
+    def upload(fleet: MockFleet, key: bytes | None) -> bool:
+        async def attempt() -> bool:
+            link, _ = await _link(fleet, key)
+            try:
+                fast = Timing(count_retry_s=0.2, count_retries=2)
+                await MissionClient(link, 1, timing=fast).upload(_mission(3))
+                return True
+            except errors.MissionTimeoutError:
+                return False
+            finally:
+                await link.close()
+
+        return asyncio.run(asyncio.wait_for(attempt(), 30))
+
+    with MockFleet(count=1, profile="ardupilot") as fleet:
+        host, port = fleet.addresses[0]
+        base = ["signing-setup", "--connect", f"udpout:{host}:{port}", "--sysid", "1"]
+        assert main([*base, "--new-passphrase", "correct horse battery staple"]) == 0
+        assert "signs with the new key" in capsys.readouterr().out
+        assert upload(fleet, KEY) and not upload(fleet, None)
+        wrong = [*base, "--signing-passphrase", "wrong", "--heartbeat-timeout", "1", "--disable"]
+        assert main(wrong) == 2 and "no HEARTBEAT" in capsys.readouterr().err
+        assert main([*base, "--signing-passphrase", "correct horse battery staple", "--disable"]) == 0
+        assert "signing off" in capsys.readouterr().out
+        assert upload(fleet, None)
+        assert main(base) == 2 and "--new-passphrase" in capsys.readouterr().err

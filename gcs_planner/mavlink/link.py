@@ -46,7 +46,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD, SerialPort  # noqa: E402
-from gcs_planner.mavlink.signing import enable_signing  # noqa: E402
+from gcs_planner.mavlink.signing import enable_signing, set_signing  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = ["DUPLICATE_WINDOW_S", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo", "parse_url"]
@@ -230,6 +230,12 @@ class MavlinkLink:
         """System ids currently heard from more than one address."""
         now = time.monotonic()
         return {s: v.live_addresses(now) for s, v in self.vehicles.items() if len(v.live_addresses(now)) > 1}
+
+    def set_signing_key(self, key: bytes | None) -> None:
+        """Sign and verify with ``key`` from now on (None: neither); e.g. after SETUP_SIGNING."""
+        self._signing_key = key
+        for mav, sign in ((self._mav, True), *((p, False) for p in self._parsers.values())):
+            set_signing(mav, key, sign_outgoing=sign)
 
     # ----------------------------------------------------------------- receiving
     def subscribe(self, callback: Callback, sysid: int | None = None) -> Callable[[], None]:

@@ -5,6 +5,10 @@ A signed link appends to every frame a 13-byte block: link id, a 48-bit timestam
 (ArduPilot, PX4) ignore unsigned commands, so a field GCS must sign. pymavlink's codec does the
 cryptography; this module only derives the key and sets the codec up.
 
+SETUP_SIGNING gives a vehicle its key (``setup_signing_message``); the protocol has no answer, so
+the caller checks that the vehicle's frames come back signed with it. An all-zero key with timestamp
+0 turns signing off, as ArduPilot reads it.
+
 Choices: the 32-byte key is SHA-256 of a passphrase, as MAVProxy's ``signing setup`` and
 QGroundControl derive it, so the same passphrase works across the three. A receiver with a key
 rejects unsigned and wrongly signed frames (no ``allow_unsigned_callback``): accepting them would
@@ -18,9 +22,18 @@ import time
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-__all__ = ["KEY_BYTES", "enable_signing", "key_from_passphrase", "signing_timestamp"]
+__all__ = [
+    "KEY_BYTES",
+    "NO_KEY",
+    "enable_signing",
+    "key_from_passphrase",
+    "set_signing",
+    "setup_signing_message",
+    "signing_timestamp",
+]
 
 KEY_BYTES = 32
+NO_KEY = bytes(KEY_BYTES)  # with timestamp 0 in SETUP_SIGNING: turn signing off (ArduPilot's convention)
 _EPOCH_2015_S = 1_420_070_400  # 2015-01-01T00:00:00Z, the signing timestamp's origin
 
 
@@ -45,3 +58,19 @@ def enable_signing(codec: mavlink.MAVLink, key: bytes, *, sign_outgoing: bool, l
     codec.signing.timestamp = signing_timestamp()
     codec.signing.sign_outgoing = sign_outgoing
     codec.signing.link_id = link_id
+
+
+def set_signing(codec: mavlink.MAVLink, key: bytes | None, *, sign_outgoing: bool) -> None:
+    """``enable_signing``, or with ``key`` None turn signing off (neither sign nor check)."""
+    if key is None:
+        codec.signing.secret_key, codec.signing.sign_outgoing = None, False
+    else:
+        enable_signing(codec, key, sign_outgoing=sign_outgoing)
+
+
+def setup_signing_message(key: bytes, sysid: int, compid: int = 1) -> mavlink.MAVLink_message:
+    """SETUP_SIGNING giving vehicle ``sysid`` the key ``key`` (NO_KEY: signing off), timestamp now."""
+    if len(key) != KEY_BYTES:
+        raise ValueError(f"signing key must be {KEY_BYTES} bytes, got {len(key)}")
+    timestamp = 0 if key == NO_KEY else signing_timestamp()
+    return mavlink.MAVLink_setup_signing_message(sysid, compid, list(key), timestamp)
