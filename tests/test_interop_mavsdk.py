@@ -176,7 +176,7 @@ def test_our_client_uploads_to_mavsdk_mission_raw_server(mavsdk_pair, mission_ty
     """MAVSDK's autopilot side receives exactly our items (mission, rally points) and returns them."""
     from gcs_planner.mavlink.items import rally_items
     from gcs_planner.mavlink.link import MavlinkLink
-    from gcs_planner.mavlink.mission import MissionClient
+    from gcs_planner.mavlink.mission import PIPELINED_AUTOPILOTS, MissionClient
 
     server, _ = mavsdk_pair
     if mission_type == 0:
@@ -192,6 +192,8 @@ def test_our_client_uploads_to_mavsdk_mission_raw_server(mavsdk_pair, mission_ty
             await link.wait_for(
                 lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, timeout_s=5.0
             )
+            # MAVSDK's server stores any item it gets, so the client must not send any unasked
+            assert link.vehicles[1].autopilot not in PIPELINED_AUTOPILOTS
             client = MissionClient(link, 1)
             return await client.upload(items, mission_type=mission_type), await client.download(mission_type)
         finally:

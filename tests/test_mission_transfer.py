@@ -272,6 +272,20 @@ def test_items_in_flight_divide_a_slow_links_upload_time_and_go_once_in_order(pr
     assert sim.now < 1.1 * spec.now / window  # ``window`` items per round trip instead of one
 
 
+@pytest.mark.parametrize(("autopilot", "pipelined"), [(3, True), (12, True), (0, False), (None, False)])
+def test_items_go_unasked_only_to_autopilots_that_drop_unexpected_ones(autopilot, pipelined):
+    """ArduPilot (3) and PX4 (12) drop an item whose seq they do not wait for; MAVSDK's server
+    (generic, 0) stores it, and before a HEARTBEAT the autopilot is unknown."""
+    from gcs_planner.mavlink.link import MavlinkLink, VehicleInfo
+    from gcs_planner.mavlink.mission import MissionClient
+
+    link = MavlinkLink()
+    if autopilot is not None:
+        link.vehicles[1] = VehicleInfo(1, ("127.0.0.1", 14550), autopilot=autopilot)
+    timing = MissionClient(link, 1)._transfer(UploadTransfer, items=mission(3)).timing
+    assert (timing.window, timing.push_ahead) == ((2, True) if pipelined else (1, False))
+
+
 def test_a_window_of_no_items_is_refused():
     with pytest.raises(ValueError, match="Timing.window is 0"):
         Timing(window=0)

@@ -13,6 +13,13 @@ Choices:
   altitude in cm and hold time / radii in whole units, and reports non-_INT frame numbers); on
   ArduPilot-style vehicles (HEARTBEAT autopilot ARDUPILOTMEGA) seq 0 is the vehicle's home and is
   not compared.
+- Items in flight and push-ahead (transfer.py) send items the vehicle has not asked for, relying on
+  the vehicle to drop an item whose seq it does not wait for. ArduPilot and PX4 do (their sources);
+  MAVSDK's MissionRawServer stores every MISSION_ITEM_INT it receives, whatever its seq
+  (``ReceiveIncomingMission::process_mission_item_int``), so a surplus copy on a lossy link would
+  become a second item. The client therefore uses them only with vehicles whose HEARTBEAT says
+  ArduPilot or PX4 (PIPELINED_AUTOPILOTS); with any other, or before a HEARTBEAT, it answers each
+  request once (``Timing(push_ahead=False, window=1)``, the spec-literal client).
 - clear(): MISSION_CLEAR_ALL; when the vehicle answers ERROR or DENIED (ArduPilot in AUTO cannot
   clear) an empty list is uploaded instead, which ArduPilot accepts.
 - set_current(): MAV_CMD_DO_SET_MISSION_CURRENT first; if the vehicle does not support it (or never
@@ -26,7 +33,7 @@ import math
 import time
 import weakref
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from gcs_planner.mavlink.enums import Autopilot, CommandResult, MissionResult
 from gcs_planner.mavlink.errors import (
@@ -50,8 +57,9 @@ from gcs_planner.mavlink.transfer import (
 )
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
-__all__ = ["MissionClient", "Tolerance", "UploadResult", "compare_items"]
+__all__ = ["PIPELINED_AUTOPILOTS", "MissionClient", "Tolerance", "UploadResult", "compare_items"]
 
+PIPELINED_AUTOPILOTS = frozenset({Autopilot.ARDUPILOTMEGA, Autopilot.PX4})  # drop unexpected items
 _FRAME_ALIASES = {5: 0, 6: 3, 11: 10}  # *_INT frame numbers -> the plain ones (same meaning in ITEM_INT)
 _active: weakref.WeakKeyDictionary[MavlinkLink, set[tuple[int, int]]] = weakref.WeakKeyDictionary()
 
@@ -191,12 +199,16 @@ class MissionClient:
 
     # ----------------------------------------------------------------- machinery
     def _transfer(self, cls: type[Transfer], **kwargs) -> Transfer:
+        info = self.link.vehicles.get(self.sysid)
+        timing = self.timing
+        if info is None or info.autopilot not in PIPELINED_AUTOPILOTS:  # see the module docstring
+            timing = replace(timing, push_ahead=False, window=1)
         return cls(
             self.sysid,
             compid=self.compid,
             gcs_sysid=self.link.sysid,
             gcs_compid=self.link.compid,
-            timing=self.timing,
+            timing=timing,
             **kwargs,
         )
 
