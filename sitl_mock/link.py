@@ -18,7 +18,7 @@ from collections.abc import Callable
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.mavlink.signing import enable_signing, set_signing  # noqa: E402
+from gcs_planner.mavlink.signing import enable_signing, set_link_key  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 from sitl_mock.faults import FaultyChannel, LinkFaults  # noqa: E402
 
@@ -79,8 +79,7 @@ class VehicleLink(asyncio.DatagramProtocol):
     def set_signing_key(self, key: bytes | None) -> None:
         """Sign and verify with ``key`` from now on (None: neither), on every peer's parser too."""
         self._signing_key = key
-        for mav, sign in ((self._mav, True), *((p, False) for p in self._parsers.values())):
-            set_signing(mav, key, sign_outgoing=sign)
+        set_link_key(self._mav, self._parsers.values(), key)
 
     def forget_peers(self) -> None:
         self.peers.clear()

@@ -281,9 +281,7 @@ def test_timed_routes_of_a_formation_equal_route_by_route_results():
             assert sum(p.length for p in segs) == pytest.approx(want, abs=1e-2)
 
 
-def test_formation_paths_memo_equals_a_fresh_computation():
-    """The leader's attempts share routes and timed paths by (candidate, task, length): whatever the
-    memo returns must be what a fresh computation gives, and a new length must not hit the memo."""
+def _t2_members():
     threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0)]
     poses = np.array(
         [
@@ -292,8 +290,19 @@ def test_formation_paths_memo_equals_a_fresh_computation():
             (1352.5437, 1529.6002, 4.4161),
             (1389.1, 1251.0, 5.5),
             (300.0, 2200.0, -0.4),
+            (2400.0, 300.0, 2.2),
         ]
     )
+    goals = paths.entry_poses((1000.0, 500.0), np.radians([90.0, 60.0, 120.0, 150.0, 30.0, 0.0]), 200.0)
+    r = np.array([200.0, 150.0, 200.0, 200.0, 150.0, 200.0])
+    return threats, poses, goals, r
+
+
+def test_formation_paths_memo_equals_a_fresh_computation():
+    """The leader's attempts share routes and timed paths by (candidate, task, length): whatever the
+    memo returns must be what a fresh computation gives, and a new length must not hit the memo."""
+    threats, poses, _, _ = _t2_members()
+    poses = poses[:5]
     goals = paths.entry_poses((1000.0, 500.0), np.radians([90.0, 60.0, 120.0]), 200.0)
     r = np.array([200.0, 150.0, 200.0, 200.0, 150.0])
 
@@ -447,23 +456,6 @@ def test_stretch_scan_stops_at_the_last_loop_count_that_can_change_sign():
         ]
         assert len({c[4] for c in full}) >= 2  # several loop counts are exercised
     assert n - 1 not in {c[0] for c in full}  # and a problem without any sign change
-
-
-def _t2_members():
-    threats = [Threat(2600.0, 3450.0, 200.0), Threat(1900.0, 950.0, 150.0), Threat(1500.0, 1000.0, 120.0)]
-    poses = np.array(
-        [
-            (1198.4071, 1341.8888, 5.474),
-            (1248.8447, 1335.594, 5.3916),
-            (1352.5437, 1529.6002, 4.4161),
-            (1389.1, 1251.0, 5.5),
-            (300.0, 2200.0, -0.4),
-            (2400.0, 300.0, 2.2),
-        ]
-    )
-    goals = paths.entry_poses((1000.0, 500.0), np.radians([90.0, 60.0, 120.0, 150.0, 30.0, 0.0]), 200.0)
-    r = np.array([200.0, 150.0, 200.0, 200.0, 150.0, 200.0])
-    return threats, poses, goals, r
 
 
 def test_lockstep_illinois_of_several_jobs_equals_each_job_alone():

@@ -14,6 +14,8 @@ import argparse
 import asyncio
 import os
 
+from pymavlink.dialects.v20.ardupilotmega import MAVLINK_IFLAG_SIGNED
+
 from gcs_planner.commands._mission_cli import add_connection_arguments, vehicle_link
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.link import MavlinkLink
@@ -22,7 +24,6 @@ from gcs_planner.mavlink.signing import NO_KEY, key_from_passphrase, setup_signi
 NEW_SIGNING_ENV = "GCS_PLANNER_NEW_SIGNING_PASSPHRASE"
 SETUP_ATTEMPTS = 3
 HEARTBEAT_WAIT_S = 2.5  # per attempt: autopilots send HEARTBEAT at 1 Hz
-_SIGNED = 0x01  # MAVLink 2 incompat flag: a signature block follows
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,17 +66,15 @@ async def _setup(args: argparse.Namespace, new_key: bytes) -> int:
 async def _heartbeat_with(link: MavlinkLink, sysid: int, *, signed: bool) -> bool:
     """True when a HEARTBEAT of ``sysid`` arrives signed (the link dropped those not signed with its
     key) or, for ``signed=False``, unsigned, within HEARTBEAT_WAIT_S."""
-    future = asyncio.get_running_loop().create_future()
-
-    def on_frame(msg, raw: bytes, t_s: float) -> None:
-        if msg.get_type() == "HEARTBEAT" and bool(raw[2] & _SIGNED) is signed and not future.done():
-            future.set_result(None)
-
-    unsubscribe = link.subscribe(on_frame, sysid)
     try:
-        await asyncio.wait_for(future, HEARTBEAT_WAIT_S)
+        await link.wait_for(
+            lambda m: (
+                m.get_type() == "HEARTBEAT"
+                and m.get_srcSystem() == sysid
+                and bool(m.get_header().incompat_flags & MAVLINK_IFLAG_SIGNED) is signed
+            ),
+            HEARTBEAT_WAIT_S,
+        )
         return True
     except TimeoutError:
         return False
-    finally:
-        unsubscribe()

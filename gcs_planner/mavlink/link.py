@@ -46,7 +46,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD, SerialPort  # noqa: E402
-from gcs_planner.mavlink.signing import enable_signing, set_signing  # noqa: E402
+from gcs_planner.mavlink.signing import enable_signing, set_link_key  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = ["DUPLICATE_WINDOW_S", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo", "parse_url"]
@@ -234,8 +234,7 @@ class MavlinkLink:
     def set_signing_key(self, key: bytes | None) -> None:
         """Sign and verify with ``key`` from now on (None: neither); e.g. after SETUP_SIGNING."""
         self._signing_key = key
-        for mav, sign in ((self._mav, True), *((p, False) for p in self._parsers.values())):
-            set_signing(mav, key, sign_outgoing=sign)
+        set_link_key(self._mav, self._parsers.values(), key)
 
     # ----------------------------------------------------------------- receiving
     def subscribe(self, callback: Callback, sysid: int | None = None) -> Callable[[], None]:

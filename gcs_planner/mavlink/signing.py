@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -27,7 +28,7 @@ __all__ = [
     "NO_KEY",
     "enable_signing",
     "key_from_passphrase",
-    "set_signing",
+    "set_link_key",
     "setup_signing_message",
     "signing_timestamp",
 ]
@@ -60,12 +61,14 @@ def enable_signing(codec: mavlink.MAVLink, key: bytes, *, sign_outgoing: bool, l
     codec.signing.link_id = link_id
 
 
-def set_signing(codec: mavlink.MAVLink, key: bytes | None, *, sign_outgoing: bool) -> None:
-    """``enable_signing``, or with ``key`` None turn signing off (neither sign nor check)."""
-    if key is None:
-        codec.signing.secret_key, codec.signing.sign_outgoing = None, False
-    else:
-        enable_signing(codec, key, sign_outgoing=sign_outgoing)
+def set_link_key(sender: mavlink.MAVLink, receivers: Iterable[mavlink.MAVLink], key: bytes | None) -> None:
+    """Change a link's key in place: ``sender`` signs with it, ``receivers`` (one parser per peer)
+    check it; None turns signing off on all of them."""
+    for codec, sign in ((sender, True), *((r, False) for r in receivers)):
+        if key is None:
+            codec.signing.secret_key, codec.signing.sign_outgoing = None, False
+        else:
+            enable_signing(codec, key, sign_outgoing=sign)
 
 
 def setup_signing_message(key: bytes, sysid: int, compid: int = 1) -> mavlink.MAVLink_message:
