@@ -38,17 +38,18 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.conformance import MovingObstacle, Track, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.mavlink.command import CommandClient
-from gcs_planner.mavlink.enums import MissionState
+from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at, take_off
+from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for, quirks_named
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
-from gcs_planner.mavlink.items import plan_to_items
+from gcs_planner.mavlink.items import AUTOPILOTS, plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.preflight import request_streams
+from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
@@ -59,10 +60,12 @@ __all__ = ["FlyOptions", "FlyResult", "fly"]
 log = logging.getLogger(__name__)
 
 HEARTBEAT_WAIT_S = 10.0
+REAL_HEARTBEAT_WAIT_S = 30.0  # real vehicles / SITL started by hand
+ARM_TIMEOUT_S = 120.0  # vehicle time to pass pre-arm checks (ArduCopter SITL needs ~45 s after boot)
 TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
 LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
 TAKEOFF_ATTEMPTS = 3
-TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" within this distance of its take-off altitude
+TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" once no lower than this below its take-off altitude
 NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
 MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
@@ -95,6 +98,7 @@ class FlyResult:
     rrd_path: Path | None
     tlog_path: Path | None
     wall_time_s: float
+    end_states: dict[int, str] = field(default_factory=dict)  # safe end: sysid -> what was done
 
     @property
     def passed(self) -> bool:
@@ -102,35 +106,20 @@ class FlyResult:
 
 
 class _TrackRecorder:
-    """Collects each vehicle's positions and mission progress from the link's frames."""
+    """Collects each vehicle's positions from the link's frames (completion is VehicleStatus's)."""
 
-    def __init__(self, origin: Origin, sim_clock: bool, last_seq: dict[int, int]) -> None:
+    def __init__(self, origin: Origin, sim_clock: bool, sysids) -> None:
         self.origin = origin
         self.sim_clock = sim_clock
-        self.last_seq = last_seq
-        self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in last_seq}
-        self.completed: set[int] = set()
-        self.started: set[int] = set()
-        self.rel_alt_m: dict[int, float] = {}
+        self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in sysids}
+        self.completed: dict[int, bool] = {}
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
         sysid = msg.get_srcSystem()
-        if sysid not in self.samples:
+        if sysid not in self.samples or msg.get_type() != "GLOBAL_POSITION_INT":
             return
-        kind = msg.get_type()
-        if kind == "GLOBAL_POSITION_INT":
-            t = msg.time_boot_ms / 1000.0 if self.sim_clock else t_s
-            alt_amsl = msg.alt / 1000.0
-            self.samples[sysid].append((t, msg.lat / 1e7, msg.lon / 1e7, alt_amsl))
-            self.rel_alt_m[sysid] = msg.relative_alt / 1000.0
-        elif kind == "MISSION_CURRENT":
-            state = getattr(msg, "mission_state", MissionState.UNKNOWN)
-            if state == MissionState.ACTIVE:
-                self.started.add(sysid)
-            elif state == MissionState.COMPLETE and sysid in self.started:
-                self.completed.add(sysid)
-        elif kind == "MISSION_ITEM_REACHED" and msg.seq == self.last_seq[sysid]:
-            self.completed.add(sysid)
+        t = msg.time_boot_ms / 1000.0 if self.sim_clock else t_s
+        self.samples[sysid].append((t, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
 
     def latest(self, sysid: int) -> tuple[float, np.ndarray] | None:
         """Time [s] and ENU position [m] of the vehicle's newest position report."""
@@ -151,7 +140,9 @@ class _TrackRecorder:
             arr = np.asarray(rows, dtype=float)
             e, n, u = geodetic_to_enu(arr[:, 1], arr[:, 2], arr[:, 3], self.origin)
             order = np.argsort(arr[:, 0], kind="stable")
-            out[sysid] = Track(arr[order, 0], np.column_stack([e, n, u])[order], sysid in self.completed)
+            out[sysid] = Track(
+                arr[order, 0], np.column_stack([e, n, u])[order], self.completed.get(sysid, False)
+            )
         return out
 
 
@@ -230,17 +221,33 @@ def _mock_fleet(plan: Plan, options: FlyOptions):
 
 
 async def _wait_for_vehicles(link: MavlinkLink, sysids: list[int], timeout_s: float) -> None:
+    """Until every vehicle's autopilot sent a HEARTBEAT (any other frame, or a camera's HEARTBEAT,
+    says nothing of what the vehicle is); duplicate system ids are refused."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if all(s in link.vehicles for s in sysids):
+        if all(_heard(link, s) for s in sysids):
             break
         await asyncio.sleep(0.05)
-    missing = [s for s in sysids if s not in link.vehicles]
+    missing = [s for s in sysids if not _heard(link, s)]
     if missing:
-        raise UserError(f"no heartbeat from sysid {missing} within {timeout_s:.0f} s")
+        raise UserError(f"no autopilot HEARTBEAT from sysid {missing} within {timeout_s:.0f} s")
     duplicates = link.duplicates()
     if duplicates:
         raise UserError(f"system ids answer from several addresses (refusing to merge): {duplicates}")
+
+
+def _heard(link: MavlinkLink, sysid: int) -> bool:
+    return getattr(link.vehicles.get(sysid), "autopilot", None) is not None
+
+
+def vehicle_quirks(link: MavlinkLink, sysids: list[int]) -> dict[int, AutopilotQuirks]:
+    """Each vehicle's autopilot entry, from the HEARTBEAT it sent."""
+    return {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in sysids}
+
+
+def build_missions(plan: Plan, quirks: dict[int, AutopilotQuirks]) -> dict[int, list]:
+    """Each vehicle's mission items in its autopilot's conventions (validated)."""
+    return {vp.sysid: plan_to_items(vp, plan.origin, quirks[vp.sysid].conventions) for vp in plan.vehicles}
 
 
 async def fly(
@@ -251,35 +258,42 @@ async def fly(
 ) -> FlyResult:
     """Upload, start and record the whole fleet; return the per-vehicle conformance report.
 
-    ``progress(stage, done, total)`` reports "upload" (vehicles) and "fly" (completed vehicles).
+    ``progress(stage, done, total)`` reports "upload" (vehicles) and "fly" (completed vehicles);
+    ``progress("wait", sysid, 0)`` with a reason while a vehicle is not ready to arm.
     """
     t_wall = time.monotonic()
     sysids = [vp.sysid for vp in plan.vehicles]
     if 0 in sysids or len(set(sysids)) != len(sysids):
         raise UserError(f"every vehicle needs its own MAVLink sysid in 1..255 to fly, got {sysids}")
-    # validate every mission before anything is sent
-    missions = {vp.sysid: plan_to_items(vp, plan.origin, options.autopilot) for vp in plan.vehicles}
+    for conventions in AUTOPILOTS:  # validate every mission before anything is sent
+        build_missions(plan, {s: quirks_named(conventions) for s in sysids})
     options.out_dir.mkdir(parents=True, exist_ok=True)
     mcap_path = options.out_dir / "flight.mcap"
     tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
-    sysids = list(missions)
     route_t0_s = 0.0
     fleet = None if options.connect else _mock_fleet(plan, options)
     speedup = 1.0 if fleet is None else options.speedup
     scenario_text = scenario.path.read_text() if scenario.path else None
+    uploads: dict[int, VehicleResult] = {}
+    end_states: dict[int, str] = {}
+    aborted: BaseException | None = None
     if fleet is not None:
         fleet.__enter__()
     try:
         urls = options.connect or [f"udpout:{h}:{p}" for h, p in fleet.addresses]
         link = await MavlinkLink.open(*urls)
-        recorder = _TrackRecorder(
-            plan.origin, fleet is not None, {s: len(m) - 1 for s, m in missions.items()}
-        )
+        recorder = _TrackRecorder(plan.origin, fleet is not None, sysids)
+        status = VehicleStatus(link, sysids)
+        quirks: dict[int, AutopilotQuirks] = {}
         with FlightLogger(mcap_path, plan.origin, plan, scenario_text, tlog_path) as logger:
             link.subscribe(logger.on_frame)
             link.subscribe(recorder.on_frame)
             try:
-                await _wait_for_vehicles(link, sysids, HEARTBEAT_WAIT_S)
+                await _wait_for_vehicles(link, sysids, HEARTBEAT_WAIT_S if fleet else REAL_HEARTBEAT_WAIT_S)
+                quirks = vehicle_quirks(link, sysids)
+                missions = build_missions(plan, quirks)
+                status.last_seq = {s: len(m) - 1 for s, m in missions.items()}
+                await request_streams(link, sysids)
                 uploads = await upload_fleet(
                     link,
                     missions,
@@ -297,7 +311,7 @@ async def fly(
                     for sysid, drift in options.drift_mps.items():
                         if fleet is not None:
                             fleet.set_drift(sysid, *drift)
-                    await _take_off_all(link, plan, recorder, speedup, options)
+                    await _take_off_all(link, plan, status, speedup, options, quirks, progress)
                     logger.log_event({"event": "airborne", "sysids": sysids})
                     leads = {
                         vp.sysid: _accel_lead_s(
@@ -308,7 +322,7 @@ async def fly(
                     lead_s = max(leads.values())
                     route_t0_s = (recorder.now_s() if fleet is not None else time.time()) + lead_s
                     routes = asyncio.create_task(
-                        _start_routes(link, plan, missions, speedup, logger, lead_s, leads)
+                        _start_routes(link, plan, missions, speedup, logger, lead_s, leads, quirks)
                     )
                     keeper = None
                     if options.keep_schedule:
@@ -316,14 +330,30 @@ async def fly(
                         for vp in plan.vehicles:
                             keeper.add(vp)
                     await _wait_until_done(
-                        link, recorder, plan, speedup, options, progress, keeper, route_t0_s
+                        link, recorder, status, plan, speedup, options, progress, keeper, route_t0_s, quirks
                     )
                     await routes
+            except (UserError, asyncio.CancelledError, KeyboardInterrupt) as exc:
+                aborted = exc
             finally:
+                if quirks and (aborted is not None or not all(t.done for t in status.tracks.values())):
+                    end_states = await asyncio.shield(safe_end(link, status, quirks))
+                    logger.log_event(
+                        {"event": "safe_end", "states": {str(k): v for k, v in end_states.items()}}
+                    )
+                status.close()
                 await link.close()
     finally:
         if fleet is not None:
             fleet.__exit__(None, None, None)
+    if aborted is not None:
+        if end_states:
+            log.error("safe end: %s", _said(end_states))
+        if isinstance(aborted, UserError) and end_states:
+            raise UserError(f"{aborted}; safe end: {_said(end_states)}") from aborted
+        raise aborted
+    for sysid, track in status.tracks.items():
+        recorder.completed[sysid] = track.done
     reports = conformance_report(
         plan,
         recorder.tracks(),
@@ -342,32 +372,49 @@ async def fly(
 
         rrd_path = options.out_dir / "flight.rrd"
         log_flight_to_rerun(read_flight(mcap_path), rrd_path)
-    return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, time.monotonic() - t_wall)
+    return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, time.monotonic() - t_wall, end_states)
+
+
+def _said(end_states: dict[int, str]) -> str:
+    return ", ".join(f"sysid {s} {what}" for s, what in sorted(end_states.items()))
 
 
 async def _take_off_all(
-    link: MavlinkLink, plan: Plan, recorder: _TrackRecorder, speedup: float, options: FlyOptions
+    link: MavlinkLink,
+    plan: Plan,
+    status: VehicleStatus,
+    speedup: float,
+    options: FlyOptions,
+    quirks: dict[int, AutopilotQuirks],
+    progress=None,
 ) -> None:
-    """Arm every vehicle and climb it to its first waypoint's altitude; return when all are there."""
+    """Arm every vehicle once it is ready and climb it to its first waypoint's altitude; return
+    when all are there."""
     gate = asyncio.Semaphore(options.workers)
+
+    def waiting(sysid: int, reason: str) -> None:
+        log.info("sysid %d not ready to arm: %s", sysid, reason)
+        if progress:
+            progress("wait", sysid, reason)
 
     async def one(vp) -> None:
         async with gate:
-            command = CommandClient(link, vp.sysid)
+            q = quirks[vp.sysid]
             for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
                 try:
-                    if options.autopilot == "ardupilot":
-                        await command.set_mode("GUIDED")
-                    await command.arm()
-                    await command.takeoff(float(vp.waypoints[0, 2]))
+                    await take_off(
+                        link, status, vp.sysid, q, float(vp.waypoints[0, 2]), ARM_TIMEOUT_S, speedup, waiting
+                    )
                     return
                 except MavlinkError as exc:
                     # a lost ACK makes the retried command fail (already armed / airborne)
-                    if recorder.rel_alt_m.get(vp.sysid, 0.0) > TAKEOFF_ALT_TOL_M:
+                    if (status.tracks[vp.sysid].rel_alt_m or 0.0) > TAKEOFF_ALT_TOL_M:
                         return
                     if attempt == TAKEOFF_ATTEMPTS:
+                        reason = status.reason(vp.sysid)
                         raise UserError(
                             f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) could not take off: {exc}"
+                            + (f" ({reason})" if reason else "")
                         ) from exc
                     log.warning("sysid %d take-off attempt %d failed: %s", vp.sysid, attempt, exc)
                     await asyncio.sleep(1.0 / speedup)
@@ -376,12 +423,15 @@ async def _take_off_all(
     climb_s = max(float(vp.waypoints[0, 2]) for vp in plan.vehicles) / TAKEOFF_CLIMB_MPS
     deadline = time.monotonic() + climb_s * options.timeout_factor / speedup + 10.0
     targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
-    while time.monotonic() < deadline:
-        if all(abs(recorder.rel_alt_m.get(s, -1e9) - z) <= TAKEOFF_ALT_TOL_M for s, z in targets.items()):
-            return
+
+    def late() -> list[int]:
+        return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - TAKEOFF_ALT_TOL_M]
+
+    while time.monotonic() < deadline and late():
         await asyncio.sleep(0.05)
-    late = [s for s, z in targets.items() if abs(recorder.rel_alt_m.get(s, -1e9) - z) > TAKEOFF_ALT_TOL_M]
-    raise UserError(f"sysid {late} did not reach take-off altitude in time")
+    if late():
+        seen = {s: status.tracks[s].rel_alt_m for s in late()}
+        raise UserError(f"sysid {late()} did not reach take-off altitude in time (relative altitude {seen})")
 
 
 def _accel_lead_s(vp, accel_mps2: float) -> float:
@@ -398,8 +448,9 @@ async def _start_routes(
     logger,
     lead_s: float,
     leads: dict[int, float],
+    quirks: dict[int, AutopilotQuirks],
 ) -> None:
-    """MISSION_START each route (the item after NAV_TAKEOFF) at its planned start time.
+    """Start each route (the item after NAV_TAKEOFF) at its planned start time.
 
     Route time 0 is ``lead_s`` after now; each route starts its own acceleration lead earlier.
     """
@@ -412,10 +463,10 @@ async def _start_routes(
         start_s = lead_s + offset_s - leads[vp.sysid]
         await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
         try:
-            await CommandClient(link, vp.sysid).mission_start(first, len(items) - 1)
+            await start_mission_at(link, vp.sysid, quirks[vp.sysid], first, len(items) - 1)
         except MavlinkError as exc:
             raise UserError(
-                f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) refused MISSION_START: {exc}"
+                f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) refused the mission start: {exc}"
             ) from exc
         logger.log_event({"event": "route_start", "sysid": vp.sysid, "planned_offset_s": offset_s})
 
@@ -425,42 +476,51 @@ async def _start_routes(
 async def _wait_until_done(
     link: MavlinkLink,
     recorder: _TrackRecorder,
+    status: VehicleStatus,
     plan: Plan,
     speedup: float,
     options: FlyOptions,
     progress,
     keeper: ScheduleKeeper | None,
     route_t0_s: float,
+    quirks: dict[int, AutopilotQuirks],
 ) -> None:
     descent_s = max(float(v.waypoints[-1, 2]) for v in plan.vehicles) / LAND_SPEED_MPS
     planned_s = max(float(v.path_times_s[-1]) + v.takeoff_delay_s for v in plan.vehicles) + descent_s
     budget_s = planned_s * options.timeout_factor / speedup + 10.0
     deadline = time.monotonic() + budget_s
     total = len(plan.vehicles)
-    while time.monotonic() < deadline and len(recorder.completed) < total:
+
+    def done() -> set[int]:
+        return {s for s, t in status.tracks.items() if t.done}
+
+    while time.monotonic() < deadline and len(done()) < total:
         if progress:
-            progress("fly", len(recorder.completed), total)
+            progress("fly", len(done()), total)
         if keeper is not None:
-            _keep_schedule(link, recorder, keeper, route_t0_s)
+            _keep_schedule(link, recorder, status, keeper, route_t0_s, quirks)
         await asyncio.sleep(KEEPER_PERIOD_S / speedup)
     if progress:
-        progress("fly", len(recorder.completed), total)
+        progress("fly", len(done()), total)
     # a little more telemetry after the last item (landing) for the log
     await asyncio.sleep(min(1.0, 5.0 / speedup))
 
 
 def _keep_schedule(
-    link: MavlinkLink, recorder: _TrackRecorder, keeper: ScheduleKeeper, route_t0_s: float
+    link: MavlinkLink,
+    recorder: _TrackRecorder,
+    status: VehicleStatus,
+    keeper: ScheduleKeeper,
+    route_t0_s: float,
+    quirks: dict[int, AutopilotQuirks],
 ) -> None:
-    for sysid in recorder.started - recorder.completed:
+    for sysid, track in status.tracks.items():
+        if not track.started or track.done:
+            continue
         latest = recorder.latest(sysid)
         if latest is None:
             continue
         t_s, position = latest
         speed = keeper.speed_command(sysid, t_s - route_t0_s, position)
         if speed is not None:
-            link.send(
-                mavlink.MAVLink_command_long_message(
-                    sysid, 1, mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 1, speed, -1, 0, 0, 0, 0
-                )
-            )
+            change_speed(link, sysid, quirks[sysid], speed)

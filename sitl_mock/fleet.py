@@ -44,6 +44,7 @@ __all__ = ["MockFleet", "VehicleSnapshot"]
 log = logging.getLogger(__name__)
 
 MAX_CATCH_UP_WALL_S = 0.25
+_POSITION, _ATTITUDE = 33, 30  # GLOBAL_POSITION_INT, ATTITUDE message ids
 
 
 @dataclass(frozen=True)
@@ -376,7 +377,8 @@ class MockFleet:
         homes: telemetry.StreamSchedule,
     ) -> None:
         vehicles = self.vehicles
-        idx = [i for i in positions.due(now).tolist() if vehicles[i].link.peers]
+        due = positions.due(now).tolist()
+        idx = [i for i in due if vehicles[i].link.peers and vehicles[i].wants(_POSITION)]
         if idx:
             kin = self.world.kin
             pos = kin.reported_pos()[idx]
@@ -389,10 +391,11 @@ class MockFleet:
                 v = vehicles[i]
                 t_ms = v.time_boot_ms
                 v.send(telemetry.global_position_int(t_ms, lat[k], lon[k], alt[k], rel[k], vel[k], psi[k]))
-                v.send(telemetry.attitude(t_ms, roll[k], pitch[k], psi[k], rate[k]))
+                if v.wants(_ATTITUDE):
+                    v.send(telemetry.attitude(t_ms, roll[k], pitch[k], psi[k], rate[k]))
         for i in status.due(now).tolist():
             if vehicles[i].link.peers:
                 vehicles[i].send_status()
         for i in homes.due(now).tolist():
             if vehicles[i].link.peers:
-                vehicles[i].send_home()
+                vehicles[i].stream_home()

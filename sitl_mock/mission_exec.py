@@ -20,6 +20,9 @@ Choices where the spec or the autopilots differ:
   waypoint and there is no hold time; otherwise it stops at the waypoint. A fixed wing never
   stops, and counts a waypoint reached inside its radius or once past it (ArduPlane).
 - After the last item the vehicle holds (hover / loiter circle) in AUTO; mission_state COMPLETE.
+- Per autopilot (profiles.FlightRules): ArduCopter's final NAV_LAND ends in a disarm that resets
+  the mission (no ITEM_REACHED, no COMPLETE); ArduPlane runs NAV_RETURN_TO_LAUNCH by switching
+  to mode RTL; ArduPlane reads DO_CHANGE_SPEED type 1 as a minimum ground speed.
 - RTL: to home at max(current altitude, ``RTL_ALT_M`` above home), then a multirotor lands and
   disarms, a fixed wing circles home.
 - Item altitudes: frames GLOBAL(_INT) are AMSL, GLOBAL_RELATIVE_ALT(_INT) and the terrain frames
@@ -37,6 +40,7 @@ from gcs_planner.geo import geodetic_to_enu
 from gcs_planner.mavlink.enums import MissionState
 from gcs_planner.mavlink.types import MissionItem
 from sitl_mock.flight import Airframe, Arrival, Guidance
+from sitl_mock.profiles import FlightRules
 from sitl_mock.world import World
 
 __all__ = ["RTL_ALT_M", "Navigator"]
@@ -69,12 +73,15 @@ class Navigator:
         emit_progress: Callable[[], None],
         emit_text: Callable[[str], None],
         landed: Callable[[], None],
+        flight: FlightRules,
+        enter_mode: Callable[[str], bool],
     ) -> None:
         self.world, self.i, self.airframe = world, index, airframe
         self.home_enu_m = np.asarray(home_enu_m, dtype=float)
         self.first_seq = first_seq
         self._emit_reached, self._emit_progress = emit_reached, emit_progress
         self._emit_text, self._landed = emit_text, landed
+        self.flight, self._enter_mode = flight, enter_mode
         self.items: list[MissionItem] = []
         self._targets = np.zeros((0, 3))
         self.seq = 0
@@ -138,6 +145,12 @@ class Navigator:
         self.state = MissionState.ACTIVE
         self._execute()
         self._emit_progress()
+
+    def reset(self) -> None:
+        """Back to the first item, never started (ArduCopter's disarm: AP_Mission::reset)."""
+        self.running = False
+        self.seq = self.first_seq
+        self.state = MissionState.NOT_STARTED if self.has_mission else MissionState.NO_MISSION
 
     def pause(self) -> None:
         """Leave the mission (mode changed away from AUTO): PAUSED if it was running."""
@@ -248,24 +261,34 @@ class Navigator:
             self.takeoff(item.z if item.frame not in AMSL_FRAMES else target[2] - self.home_enu_m[2],
                          done=lambda: self._reached_then(seq, 0.0))  # fmt: skip
         elif cmd in (NAV_LOITER_TIME, NAV_LOITER_UNLIM):
-            radius = abs(item.param3) if item.param3 else af.loiter_radius_m
+            # ArduPilot keeps only the direction of a LOITER_TIME radius (+-1): its WP_LOITER_RAD flies
+            radius = abs(item.param3) if abs(item.param3) > 1.0 else af.loiter_radius_m
             kin.loiter_r[i] = max(radius, 1.0)
             hold_s = max(item.param1, 0.0) if cmd == NAV_LOITER_TIME else np.inf
             arrive_r = max(radius, af.accept_radius_m)
             arrival = Arrival.RADIUS_2D if af.kind == "fixed_wing" else Arrival.RADIUS_3D
             self._wait(lambda: self._reached_then(seq, hold_s))
             kin.command(i, Guidance.GOTO, target, arrival, arrive_r)
+        elif cmd == NAV_LAND and self.flight.final_land_disarms and seq == self.last_seq:
+            self.land(target, done=self._stop)  # the disarm at touchdown resets the mission
         elif cmd == NAV_LAND:
             self.land(target, done=lambda: self._item_done(seq))
+        elif cmd == NAV_RETURN_TO_LAUNCH and self.flight.rtl_item_switches_mode:
+            self._enter_mode("RTL")
         elif cmd == NAV_RETURN_TO_LAUNCH:
             self.rtl(done=lambda: self._item_done(seq))
         elif cmd == DO_CHANGE_SPEED:
-            if item.param2 > 0:
+            if round(item.param1) == 1 and self.flight.groundspeed_is_minimum:
+                pass  # a minimum ground speed: the cruise speed stays
+            elif item.param2 > 0:
                 kin.speed_cmd[i] = float(np.clip(item.param2, af.min_speed_mps, af.max_speed_mps))
             self._item_done(seq)
         else:
             self._emit_text(f"Skipping unsupported mission command {cmd}")
             self._advance()
+
+    def _stop(self) -> None:
+        self.running = False
 
     def _reached_then(self, seq: int, hold_s: float) -> None:
         """Nav item reached: report it, hold/loiter for ``hold_s`` (inf = forever), then advance."""

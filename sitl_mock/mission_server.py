@@ -13,12 +13,14 @@ Choices where the autopilots differ or the spec is open:
   after 8 s without an item, wrong seq -> MISSION_ACK(INVALID_SEQUENCE) and the session continues,
   a second uploader or items from another system -> DENIED, downloads during an upload -> DENIED,
   count over capacity -> NO_SPACE + STATUSTEXT, CLEAR_ALL while receiving or (mission) in AUTO ->
-  ERROR, a repeated final item after completion is dropped (no second ACK), values are rounded as
-  ArduPilot stores them (altitude in cm, whole-second hold time, whole-metre radii, non-_INT
-  frame numbers on read-back).
+  ERROR, CLEAR_ALL of mission_type ALL -> UNSUPPORTED, an item while no upload runs (a repeated
+  final item after completion) -> MISSION_ACK(ERROR) (GCS_MAVLINK::handle_mission_item).
+- Items are stored as the autopilot stores them (the profile's ``storage``, readback.py: AP_Mission
+  for ArduCopter / ArduPlane, PX4's mission_item_s), so a download returns what the real one would.
 - PX4-like: MISSION_REQUEST_INT, 250 ms re-request, 5 s timeout, wrong seq ignored (the timer
   re-requests), a repeated final item is acknowledged again, MISSION_ACK(OPERATION_CANCELLED) from
-  the uploader cancels.
+  the uploader cancels, a positionless command outside MAV_FRAME_MISSION (or a positional one in
+  it) -> UNSUPPORTED (parse_mavlink_mission_item).
 - Both answer MISSION_REQUEST_INT with MISSION_ITEM_INT and legacy MISSION_REQUEST with MISSION_ITEM.
 - opaque_id: CRC-32 of the stored list (never 0, which means "unsupported"), sent in the final
   MISSION_ACK, in MISSION_COUNT on download and in MISSION_CURRENT.
@@ -33,12 +35,13 @@ import math
 import struct
 import zlib
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from enum import StrEnum
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.enums import MissionResult, MissionState
+from gcs_planner.mavlink.readback import has_position
 from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
 from gcs_planner.mavlink.wire import MissionAckMessage, MissionCountMessage, MissionCurrentMessage
 from sitl_mock.profiles import AutopilotProfile
@@ -49,8 +52,6 @@ log = logging.getLogger(__name__)
 
 _LIST_TYPES = (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
 _KNOWN_FRAMES = frozenset({0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21})
-_ARDUPILOT_FRAME_READBACK = {5: 0, 6: 3, 11: 10}  # ArduPilot reports the non-_INT frame numbers
-_NAV_WAYPOINT = 16
 _ITEM_PACK = struct.Struct("<HBHBBffffiifB")
 
 
@@ -124,8 +125,10 @@ class MissionServer:
         *,
         capacity: int | None = None,
         non_atomic: bool = False,
+        vehicle_type: str = "multirotor",
     ) -> None:
         self.sysid = sysid
+        self.storage = profile.storage[vehicle_type]
         self.compid = compid
         self.profile = profile
         self.non_atomic = non_atomic
@@ -308,7 +311,7 @@ class MissionServer:
                 and not self._fails(Failure.WRITE_FINAL_ACK_NO_RESPONSE)
             ):
                 return [self._ack(msg, MissionResult.ACCEPTED, opaque_id=done.opaque_id)]
-            return []
+            return [self._ack(msg, MissionResult.ERROR)] if self.profile.error_on_stray_item else []
         if partner != up.partner:
             return [self._ack(msg, MissionResult.DENIED)]
         if msg.seq != up.next_seq:
@@ -393,9 +396,13 @@ class MissionServer:
                 return item, MissionResult.INVALID_PARAM6_Y
         if not math.isfinite(msg.z):
             return item, MissionResult.INVALID_PARAM7
-        if self.profile.rounds_values:
-            item = _ardupilot_storage(item)
-        return item, MissionResult.ACCEPTED
+        if (
+            self.profile.mission_frame_for_positionless
+            and item.mission_type == MissionType.MISSION
+            and has_position(item.command) == (item.frame == mavlink.MAV_FRAME_MISSION)
+        ):
+            return item, MissionResult.UNSUPPORTED  # PX4: positionless items only in MAV_FRAME_MISSION
+        return self.storage(item), MissionResult.ACCEPTED
 
     # ----------------------------------------------------------------- download
     def _on_request_list(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
@@ -445,6 +452,8 @@ class MissionServer:
         return []
 
     def _on_clear_all(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        if msg.mission_type == MissionType.ALL and not self.profile.clear_all_types:
+            return [self._ack(msg, MissionResult.UNSUPPORTED)]
         types = _LIST_TYPES if msg.mission_type == MissionType.ALL else (msg.mission_type,)
         refuse = any(t in self._uploads for t in types) or (
             MissionType.MISSION in types and self.mission_running and self.profile.clear_denied_while_running
@@ -505,22 +514,6 @@ def _list_id(items: list[MissionItem], mission_type: int) -> int:
         packed = _ITEM_PACK.pack(*it.fields())
         crc = zlib.crc32(packed, crc)
     return crc or 1
-
-
-def _ardupilot_storage(item: MissionItem) -> MissionItem:
-    """What ArduPilot's AP_Mission keeps of an item: cm altitude, integer hold/radii, non-_INT frames."""
-    frame = _ARDUPILOT_FRAME_READBACK.get(item.frame, item.frame)
-    z = round(item.z * 100.0) / 100.0
-    if item.command != _NAV_WAYPOINT:
-        return replace(item, frame=frame, z=z)
-    return replace(
-        item,
-        frame=frame,
-        z=z,
-        param1=float(int(max(item.param1, 0.0))),
-        param2=float(int(item.param2)),
-        param3=float(int(item.param3)),
-    )
 
 
 def _item_message(

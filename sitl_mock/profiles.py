@@ -9,12 +9,108 @@ mission storage on a 16 kB FRAM, PX4's dataman), both overridable per vehicle.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
-from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot
+from gcs_planner.mavlink import readback
+from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot, CommandResult
 from gcs_planner.mavlink.types import MissionType
 
-__all__ = ["PROFILES", "AutopilotProfile"]
+__all__ = [
+    "ARDUCOPTER_FLIGHT",
+    "ARDUPLANE_FLIGHT",
+    "PROFILES",
+    "PX4_FLIGHT",
+    "AutopilotProfile",
+    "FlightRules",
+]
+
+
+@dataclass(frozen=True)
+class FlightRules:
+    """How one autopilot build behaves in flight, beyond the mission protocol.
+
+    Each value is what real ArduCopter / ArduPlane 4.7.0-dev and PX4 main (2026-08) SITL did with
+    stock parameters (measured, issue 12) or what their source says (file and function named in
+    docs/real-autopilots.md):
+
+    arm_ready_s: simulated seconds after boot before pre-arm checks pass (ArduCopter ~40-45 s: the
+        EKF has no position estimate; PX4 ~5 s). Until then SYS_STATUS reports the PREARM_CHECK bit
+        unhealthy and COMPONENT_ARM_DISARM is answered ``arm_refusal`` with ``not_ready_text``.
+    auto_disarm_s: armed on the ground without taking off this long -> disarmed (ArduPilot
+        DISARM_DELAY 10 s, PX4 COM_DISARM_PRFLT 10 s); not while a mission runs in AUTO.
+    takeoff_command: MAV_CMD_NAV_TAKEOFF param7 is "above_home" (ArduCopter), "amsl" (PX4
+        navigator: ``rep->current.alt = cmd.param7``) or "refused" (ArduPlane without QuadPlane:
+        FAILED; it takes off in TAKEOFF mode to parameter ``takeoff_param``).
+    start_range: MISSION_START(first, last) other than (0, 0) accepted; ArduPilot DENIES it
+        (GCS_MAVLink_Copter.cpp / GCS_MAVLink_Plane.cpp) and resumes at the current item.
+    final_land_disarms: a final NAV_LAND ends with a disarm that resets the mission, with neither
+        ITEM_REACHED nor mission_state COMPLETE (ArduCopter: AP_Arming_Copter::disarm).
+    rtl_item_switches_mode: NAV_RETURN_TO_LAUNCH in a mission switches the vehicle to mode RTL
+        (ArduPlane), so the mission stops being ACTIVE.
+    groundspeed_is_minimum: DO_CHANGE_SPEED speed type 1 sets a minimum ground speed, not the
+        cruise speed ("Set groundspeed"; ArduPlane keeps its airspeed).
+    streams_by_request: only HEARTBEAT and STATUSTEXT flow until the GCS asks for messages
+        (stock ArduPilot SRn_* = 0); PX4 streams its default set unasked.
+    rejects_position_before_takeoff: feasibility check after an accepted upload: a positional
+        item before NAV_TAKEOFF -> "Mission rejected: takeoff not first waypoint item", then
+        arming TEMPORARILY_REJECTED and MISSION_START DENIED (PX4 FeasibilityChecker).
+    signing_refused_armed: SETUP_SIGNING ignored while armed (PX4).
+    params: the parameters the mock serves over PARAM_SET / PARAM_REQUEST_READ.
+    """
+
+    name: str
+    arm_ready_s: float
+    arm_refusal: CommandResult
+    not_ready_text: str
+    auto_disarm_s: float
+    takeoff_command: str
+    start_range: bool
+    final_land_disarms: bool = False
+    rtl_item_switches_mode: bool = False
+    groundspeed_is_minimum: bool = False
+    streams_by_request: bool = True
+    rejects_position_before_takeoff: bool = False
+    signing_refused_armed: bool = False
+    takeoff_param: str | None = None
+    params: dict[str, float] = field(default_factory=dict)
+
+
+ARDUCOPTER_FLIGHT = FlightRules(
+    name="ArduCopter",
+    arm_ready_s=40.0,
+    arm_refusal=CommandResult.FAILED,
+    not_ready_text="Arm: Need Position Estimate",
+    auto_disarm_s=10.0,
+    takeoff_command="above_home",
+    start_range=False,
+    final_land_disarms=True,
+)
+ARDUPLANE_FLIGHT = FlightRules(
+    name="ArduPlane",
+    arm_ready_s=40.0,
+    arm_refusal=CommandResult.FAILED,
+    not_ready_text="Arm: Need Position Estimate",
+    auto_disarm_s=math.inf,  # ArduPlane has no ground auto-disarm by default
+    takeoff_command="refused",
+    start_range=False,
+    rtl_item_switches_mode=True,
+    groundspeed_is_minimum=True,
+    takeoff_param="TKOFF_ALT",
+    params={"TKOFF_ALT": 50.0},
+)
+PX4_FLIGHT = FlightRules(
+    name="PX4",
+    arm_ready_s=5.0,
+    arm_refusal=CommandResult.TEMPORARILY_REJECTED,
+    not_ready_text="Arming denied: Resolve system health failures first",
+    auto_disarm_s=10.0,
+    takeoff_command="amsl",
+    start_range=True,
+    streams_by_request=False,
+    rejects_position_before_takeoff=True,
+    signing_refused_armed=True,
+)
 
 
 @dataclass(frozen=True)
@@ -25,11 +121,12 @@ class AutopilotProfile:
     timeout_s: time without any item before the vehicle cancels an upload [s].
     capacity: items per mission type (MISSION, FENCE, RALLY); more -> MISSION_ACK(NO_SPACE).
     modes: vehicle type ("multirotor" / "fixed_wing") -> mode name -> HEARTBEAT custom_mode.
-    rounds_values: emulate ArduPilot's storage (altitude in cm, hold time in whole seconds), so a
-        read-back is close to, not equal to, the upload.
+    storage: what the autopilot stores of an item, per vehicle type (readback.py, from AP_Mission
+        and PX4's mavlink_mission.cpp), so a read-back shows what the real one returns.
     reacks_final_item: a repeated last item after completion is answered with the ACK again
         (PX4 does; ArduPilot drops it, so a lost final ACK is never repeated).
     clear_denied_while_running: MISSION_CLEAR_ALL of the mission in AUTO -> ERROR (ArduPilot).
+    flight: the in-flight behaviour per vehicle type (FlightRules).
     """
 
     name: str
@@ -40,10 +137,14 @@ class AutopilotProfile:
     home_at_seq0: bool
     capacity: dict[int, int]
     modes: dict[str, dict[str, int]]
-    rounds_values: bool
+    storage: dict[str, readback.Model]  # vehicle type -> what the autopilot keeps of an item
     reacks_final_item: bool
     clear_denied_while_running: bool
+    flight: dict[str, FlightRules] = field(default_factory=dict)  # vehicle type -> rules
     supports_partial_write: bool = field(default=True)
+    clear_all_types: bool = True  # MISSION_CLEAR_ALL with mission_type ALL (255) understood
+    error_on_stray_item: bool = False  # an item with no upload running -> MISSION_ACK(ERROR)
+    mission_frame_for_positionless: bool = False  # PX4: positionless commands only in MAV_FRAME_MISSION
 
     def custom_mode(self, mode: str, vehicle_type: str = "multirotor") -> int:
         """HEARTBEAT custom_mode of a mode name; ValueError naming the mode if it does not exist."""
@@ -72,9 +173,12 @@ ARDUPILOT = AutopilotProfile(
     home_at_seq0=True,
     capacity={MissionType.MISSION: 724, MissionType.FENCE: 84, MissionType.RALLY: 10},
     modes={"multirotor": ARDUCOPTER_MODES, "fixed_wing": ARDUPLANE_MODES},
-    rounds_values=True,
+    storage={"multirotor": readback.ARDUCOPTER, "fixed_wing": readback.ARDUPLANE},
     reacks_final_item=False,
     clear_denied_while_running=True,
+    flight={"multirotor": ARDUCOPTER_FLIGHT, "fixed_wing": ARDUPLANE_FLIGHT},
+    clear_all_types=False,  # GCS_Common.cpp: no protocol for MAV_MISSION_TYPE_ALL -> UNSUPPORTED
+    error_on_stray_item=True,  # MissionItemProtocol::handle_mission_item: not receiving -> ERROR
 )
 
 PX4 = AutopilotProfile(
@@ -86,10 +190,12 @@ PX4 = AutopilotProfile(
     home_at_seq0=False,
     capacity={MissionType.MISSION: 2000, MissionType.FENCE: 64, MissionType.RALLY: 32},
     modes={"multirotor": PX4_MODES, "fixed_wing": PX4_MODES},
-    rounds_values=False,
+    storage={"multirotor": readback.PX4, "fixed_wing": readback.PX4},
     reacks_final_item=True,
     clear_denied_while_running=False,
+    flight={"multirotor": PX4_FLIGHT, "fixed_wing": PX4_FLIGHT},
     supports_partial_write=False,
+    mission_frame_for_positionless=True,
 )
 
 PROFILES: dict[str, AutopilotProfile] = {p.name: p for p in (ARDUPILOT, PX4)}

@@ -92,11 +92,15 @@ def vfr_hud(
 
 
 def sys_status(
-    battery_remaining_pct: float, current_a: float, load_pct: float = 10.0
+    battery_remaining_pct: float, current_a: float, load_pct: float = 10.0, prearm_ok: bool = True
 ) -> mavlink.MAVLink_message:
+    """SYS_STATUS; the PREARM_CHECK sensor bit is present and healthy once pre-arm checks pass
+    (ArduPilot GCS_MAVLINK::update_sensor_status_flags, PX4 alike)."""
     voltage_mv = round(_pack_voltage_v(battery_remaining_pct) * 1000.0)
+    present = _SENSORS | mavlink.MAV_SYS_STATUS_PREARM_CHECK
+    health = present if prearm_ok else _SENSORS
     return mavlink.MAVLink_sys_status_message(
-        _SENSORS, _SENSORS, _SENSORS, round(load_pct * 10.0), voltage_mv, round(current_a * 100.0),
+        present, present, health, round(load_pct * 10.0), voltage_mv, round(current_a * 100.0),
         round(battery_remaining_pct), 0, 0, 0, 0, 0, 0,
     )  # fmt: skip
 

@@ -36,6 +36,7 @@ import numpy as np
 
 from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.mavlink.enums import CommandResult, MissionState, px4_custom_mode
+from gcs_planner.mavlink.readback import has_position
 from gcs_planner.mavlink.signing import NO_KEY
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.wire import MissionCurrentMessage
@@ -120,13 +121,18 @@ class MockVehicle:
         self.host, self.port = host, port
         self.persist_mission = persist_mission
         self.mission_server = MissionServer(
-            sysid, COMPID, self.profile, capacity=capacity, non_atomic=non_atomic
+            sysid, COMPID, self.profile, capacity=capacity, non_atomic=non_atomic, vehicle_type=vehicle_type
         )
         self.mission_server.on_change = self._on_list_change
         self.mission_server.on_current = self._on_server_current
         self.link = VehicleLink(
             sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer, signing_key
         )
+        self.flight = self.profile.flight[vehicle_type]
+        self.params = dict(self.flight.params)
+        self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
+        self.mission_rejected = False  # PX4 feasibility check failed on the stored mission
+        self._armed_at_s = math.inf  # sim time of arming while on the ground
         self._modes = self.profile.modes[vehicle_type]
         self._default_mode = next(m for m in ("STABILIZE", "MANUAL") if m in self._modes)
         self.mode = self._default_mode
@@ -143,6 +149,9 @@ class MockVehicle:
             "COMMAND_INT": self._on_command,
             "SET_MODE": self._on_set_mode,
             "SETUP_SIGNING": self._on_setup_signing,
+            "REQUEST_DATA_STREAM": self._on_request_data_stream,
+            "PARAM_SET": self._on_param_set,
+            "PARAM_REQUEST_READ": self._on_param_request_read,
         }
         self._commands = {
             mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
@@ -156,6 +165,7 @@ class MockVehicle:
             mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: self._cmd_reboot,
             mavlink.MAV_CMD_REQUEST_MESSAGE: self._cmd_request_message,
             mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
+            mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_message_interval,
         }
 
     # --- lifecycle ---------------------------------------------------------------------------
@@ -166,7 +176,8 @@ class MockVehicle:
         self.nav = Navigator(
             world, index, self.airframe, self.home_enu_m, 1 if self.profile.home_at_seq0 else 0,
             emit_reached=self._emit_reached, emit_progress=self._emit_progress,
-            emit_text=self.statustext, landed=self._on_landed,
+            emit_text=self.statustext, landed=self._on_landed, flight=self.flight,
+            enter_mode=self._set_mode_name,
         )  # fmt: skip
         if self.profile.home_at_seq0:
             h = self.home
@@ -247,9 +258,25 @@ class MockVehicle:
         self.send(telemetry.statustext(severity, text))
 
     def poll(self, wall_now_s: float) -> None:
-        """Mission-protocol timers (wall clock: the GCS's re-request and timeout clock)."""
+        """Mission-protocol timers (wall clock: the GCS's re-request and timeout clock) and the
+        ground auto-disarm (simulated clock)."""
         for msg in self.mission_server.poll(wall_now_s):
             self.send(msg)
+        if self.armed and self._world.sim_time_s - self._armed_at_s >= self.flight.auto_disarm_s:
+            running = self.mode == "AUTO" and self._nav.running
+            if not running and not self._world.kin.airborne()[self.index]:
+                self.statustext("Disarmed by auto preflight disarming")
+                self._disarm()
+            self._armed_at_s = math.inf
+
+    @property
+    def ready_to_arm(self) -> bool:
+        """Pre-arm checks pass (FlightRules.arm_ready_s after boot)."""
+        return self._world.sim_time_s - self.boot_sim_s >= self.flight.arm_ready_s
+
+    def wants(self, message_id: int) -> bool:
+        """The GCS asked for this message's stream (always true where everything streams unasked)."""
+        return self.streams is None or message_id in self.streams
 
     # --- telemetry ---------------------------------------------------------------------------
     def send_status(self) -> None:
@@ -263,26 +290,35 @@ class MockVehicle:
         ))  # fmt: skip
         battery = float(world.battery_pct[i])
         current = float(world.current_a()[i])
-        self.send(telemetry.sys_status(battery, current))
-        self.send(telemetry.battery_status(battery, current, float(world.consumed_mah[i])))
-        vel = kin.vel[i]
-        gvel = kin.ground_vel()[i]
-        throttle = 0 if not airborne else 50
-        alt = float(kin.reported_pos()[i, 2] + world.frame.alt_m)
-        self.send(telemetry.vfr_hud(
-            float(np.linalg.norm(vel)), float(math.hypot(gvel[0], gvel[1])), float(kin.psi[i]), throttle, alt,
-            float(gvel[2]),
-        ))  # fmt: skip
-        self.send(self._mission_current())
+        if self.wants(mavlink.MAVLINK_MSG_ID_SYS_STATUS):
+            self.send(telemetry.sys_status(battery, current, prearm_ok=self.ready_to_arm))
+        if self.wants(mavlink.MAVLINK_MSG_ID_BATTERY_STATUS):
+            self.send(telemetry.battery_status(battery, current, float(world.consumed_mah[i])))
+        if self.wants(mavlink.MAVLINK_MSG_ID_VFR_HUD):
+            vel = kin.vel[i]
+            gvel = kin.ground_vel()[i]
+            throttle = 0 if not airborne else 50
+            alt = float(kin.reported_pos()[i, 2] + world.frame.alt_m)
+            self.send(telemetry.vfr_hud(
+                float(np.linalg.norm(vel)), float(math.hypot(gvel[0], gvel[1])), float(kin.psi[i]), throttle,
+                alt, float(gvel[2]),
+            ))  # fmt: skip
+        if self.wants(mavlink.MAVLINK_MSG_ID_MISSION_CURRENT):
+            self.send(self._mission_current())
 
     def send_home(self) -> None:
         self.send(telemetry.home_position(self.home.lat_deg, self.home.lon_deg, self.home.alt_m))
+
+    def stream_home(self) -> None:
+        """The periodic HOME_POSITION, when streamed."""
+        if self.wants(mavlink.MAVLINK_MSG_ID_HOME_POSITION):
+            self.send_home()
 
     def _on_new_peer(self, addr: tuple) -> None:
         """Greet a new GCS at once (identity and home) instead of at the next 1 Hz / 0.2 Hz slot."""
         if self.world is not None:
             self.send_status()
-            self.send_home()
+            self.stream_home()
 
     def _mission_current(self) -> MissionCurrentMessage:
         nav, srv = self._nav, self.mission_server
@@ -307,8 +343,39 @@ class MockVehicle:
     def _on_setup_signing(self, msg: mavlink.MAVLink_message) -> None:
         """Take the key (ArduPilot: an all-zero key with timestamp 0 turns signing off). With signing
         on, only a frame signed with the current key gets here: the link drops the rest."""
+        if self.armed and self.flight.signing_refused_armed:
+            self.statustext("Signing setup refused: vehicle armed", mavlink.MAV_SEVERITY_WARNING)
+            return
         key = bytes(msg.secret_key)
         self.link.set_signing_key(None if key == NO_KEY and msg.initial_timestamp == 0 else key)
+
+    def _on_request_data_stream(self, msg: mavlink.MAVLink_message) -> None:
+        """REQUEST_DATA_STREAM (MAVProxy's way): switch a group of streams on or off."""
+        ids = _DATA_STREAMS.get(msg.req_stream_id, ())
+        if msg.req_stream_id == mavlink.MAV_DATA_STREAM_ALL:
+            ids = tuple(i for group in _DATA_STREAMS.values() for i in group)
+        self._set_streams(ids, bool(msg.start_stop) and msg.req_message_rate > 0)
+
+    def _set_streams(self, ids, on: bool) -> None:
+        if self.streams is None:
+            return
+        self.streams = self.streams | set(ids) if on else self.streams - set(ids)
+
+    def _on_param_set(self, msg: mavlink.MAVLink_message) -> None:
+        name = msg.param_id
+        if name in self.params and math.isfinite(msg.param_value):
+            self.params[name] = float(msg.param_value)
+            self._send_param(name)
+
+    def _on_param_request_read(self, msg: mavlink.MAVLink_message) -> None:
+        if msg.param_id in self.params:
+            self._send_param(msg.param_id)
+
+    def _send_param(self, name: str) -> None:
+        index = sorted(self.params).index(name)
+        self.send(mavlink.MAVLink_param_value_message(
+            name.encode(), self.params[name], mavlink.MAV_PARAM_TYPE_REAL32, len(self.params), index
+        ))  # fmt: skip
 
     def _wall_now(self) -> float:
         return asyncio.get_running_loop().time()
@@ -342,8 +409,13 @@ class MockVehicle:
         world, i = self._world, self.index
         if p1 >= 0.5:
             if not self.armed:
+                refusal = self._arming_refusal()
+                if refusal:
+                    self.statustext(refusal, mavlink.MAV_SEVERITY_CRITICAL)
+                    return self.flight.arm_refusal
                 self.armed = True
                 world.armed[i] = True
+                self._armed_at_s = world.sim_time_s
                 self.statustext("Arming motors")
                 self.send_home()
                 if self.mode == "AUTO":
@@ -351,7 +423,7 @@ class MockVehicle:
                     self._pending_start = None
                     self._nav.start(first, last)
                 elif self.mode == "TAKEOFF":
-                    self._nav.takeoff(DEFAULT_TAKEOFF_ALT_M)
+                    self._nav.takeoff(self._takeoff_mode_alt_m())
             return CommandResult.ACCEPTED
         if not self.armed:
             return CommandResult.ACCEPTED
@@ -361,6 +433,18 @@ class MockVehicle:
         self._disarm()
         world.kin.place(i, world.kin.pos[i])
         return CommandResult.ACCEPTED
+
+    def _arming_refusal(self) -> str:
+        """Why arming is refused now ('' when it is not)."""
+        if not self.ready_to_arm:
+            return self.flight.not_ready_text
+        if self.mission_rejected and self.mode == "AUTO":
+            return "Arming denied: Resolve system health failures first"
+        return ""
+
+    def _takeoff_mode_alt_m(self) -> float:
+        name = self.flight.takeoff_param
+        return self.params.get(name, DEFAULT_TAKEOFF_ALT_M) if name else DEFAULT_TAKEOFF_ALT_M
 
     def _cmd_set_mode(self, p1: float, p2: float, p3: float, *_: float) -> CommandResult:
         custom = px4_custom_mode(int(p2), int(p3)) if self.profile.name == "px4" else int(p2)
@@ -374,8 +458,12 @@ class MockVehicle:
         if not nav.has_mission:
             self.statustext("Mission start: no mission", mavlink.MAV_SEVERITY_WARNING)
             return CommandResult.FAILED
-        count = len(nav.items)
+        if self.mission_rejected:
+            return CommandResult.DENIED
         first, last = int(p1), int(p2)
+        if not self.flight.start_range and (first or last):
+            return CommandResult.DENIED  # ArduPilot: only (0, 0), then it resumes at the current item
+        count = len(nav.items)
         first_seq = None if first == 0 else first
         last_seq = None if last == 0 else last
         if not (0 <= first < count) or (
@@ -384,10 +472,12 @@ class MockVehicle:
             return CommandResult.DENIED
         if not self._set_mode_name("AUTO", start=False):
             return CommandResult.FAILED
+        if self.flight.start_range:
+            first_seq = first_seq if first_seq is not None else nav.first_seq
         if self.armed:
-            nav.start(first_seq if first_seq is not None else nav.first_seq, last_seq)
+            nav.start(first_seq, last_seq)
         else:
-            self._pending_start = (first_seq if first_seq is not None else nav.first_seq, last_seq)
+            self._pending_start = (first_seq, last_seq)
         return CommandResult.ACCEPTED
 
     def _cmd_set_current(self, p1: float, p2: float, *_: float) -> CommandResult:
@@ -401,6 +491,9 @@ class MockVehicle:
         return CommandResult.ACCEPTED
 
     def _cmd_takeoff(self, *params: float) -> CommandResult:
+        """NAV_TAKEOFF as a command: param7 read as FlightRules.takeoff_command says."""
+        if self.flight.takeoff_command == "refused":
+            return CommandResult.FAILED
         alt_m = params[6]
         if (
             not self.armed
@@ -408,6 +501,11 @@ class MockVehicle:
             or not (math.isfinite(alt_m) and alt_m > 0)
         ):
             return CommandResult.FAILED
+        if self.flight.takeoff_command == "amsl":
+            alt_m -= self.home.alt_m
+            if alt_m <= 0.0:
+                self.statustext("Already higher than takeoff altitude", mavlink.MAV_SEVERITY_WARNING)
+                return CommandResult.ACCEPTED
         self._set_mode_name("TAKEOFF" if "TAKEOFF" in self._modes else "GUIDED", start=False)
         self._nav.takeoff(alt_m)
         self.statustext(f"Takeoff to {alt_m:.1f} m")
@@ -419,6 +517,9 @@ class MockVehicle:
     def _cmd_change_speed(self, p1: float, p2: float, *_: float) -> CommandResult:
         """DO_CHANGE_SPEED as a command (param2 [m/s]; -1 or NaN: no change), clamped to the airframe."""
         if not math.isfinite(p2) or p2 < 0:
+            return CommandResult.ACCEPTED
+        if round(p1) == 1 and self.flight.groundspeed_is_minimum:
+            self.statustext(f"Set groundspeed {p2:.0f}")  # a minimum ground speed: cruise unchanged
             return CommandResult.ACCEPTED
         af = self.airframe
         self._world.kin.speed_cmd[self.index] = float(np.clip(p2, af.min_speed_mps, af.max_speed_mps))
@@ -446,6 +547,12 @@ class MockVehicle:
             self._after_ack = self.send_home
         else:
             return CommandResult.UNSUPPORTED
+        return CommandResult.ACCEPTED
+
+    def _cmd_message_interval(self, p1: float, p2: float, *_: float) -> CommandResult:
+        """SET_MESSAGE_INTERVAL(message id, interval [us]; -1 = off, 0 = default): on / off only,
+        the fleet streams at its own rate."""
+        self._set_streams((int(p1),), p2 >= 0)
         return CommandResult.ACCEPTED
 
     def _cmd_capabilities(self, *_: float) -> CommandResult:
@@ -510,8 +617,12 @@ class MockVehicle:
     def _on_landed(self) -> None:
         self.statustext("Landed")
         self._disarm()
+        if self.flight.final_land_disarms and not self._nav.running:
+            self._nav.reset()  # AP_Arming_Copter::disarm resets the mission
+            self._emit_progress()
 
     def _disarm(self) -> None:
+        self._armed_at_s = math.inf
         self.armed = False
         self._world.armed[self.index] = False
         self._nav.idle()
@@ -519,7 +630,13 @@ class MockVehicle:
 
     def _on_list_change(self, mission_type: int) -> None:
         if mission_type == MissionType.MISSION:
-            self._nav.load(self.mission_server.items(MissionType.MISSION))
+            items = self.mission_server.items(MissionType.MISSION)
+            rejected = self.flight.rejects_position_before_takeoff and _takeoff_not_first(items)
+            self.mission_rejected = rejected
+            if rejected:
+                text = "Mission rejected: takeoff not first waypoint item"
+                self.statustext(text, mavlink.MAV_SEVERITY_CRITICAL)
+            self._nav.load(items)
 
     def _on_server_current(self, seq: int) -> None:
         if not self._syncing_seq:
@@ -536,3 +653,24 @@ class MockVehicle:
         if self.nav is None:
             raise RuntimeError(f"vehicle {self.sysid} is not part of a running MockFleet")
         return self.nav
+
+
+_DATA_STREAMS = {  # MAV_DATA_STREAM -> the mock's messages in it (ArduPilot's grouping)
+    mavlink.MAV_DATA_STREAM_EXTENDED_STATUS: (
+        mavlink.MAVLINK_MSG_ID_SYS_STATUS, mavlink.MAVLINK_MSG_ID_MISSION_CURRENT,
+        mavlink.MAVLINK_MSG_ID_BATTERY_STATUS,
+    ),
+    mavlink.MAV_DATA_STREAM_POSITION: (
+        mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, mavlink.MAVLINK_MSG_ID_HOME_POSITION,
+    ),
+    mavlink.MAV_DATA_STREAM_EXTRA1: (mavlink.MAVLINK_MSG_ID_ATTITUDE,),
+    mavlink.MAV_DATA_STREAM_EXTRA2: (mavlink.MAVLINK_MSG_ID_VFR_HUD,),
+}  # fmt: skip
+
+
+def _takeoff_not_first(items: list[MissionItem]) -> bool:
+    """PX4's feasibility check: a positional item comes before the NAV_TAKEOFF."""
+    seqs = [k for k, it in enumerate(items) if it.command == mavlink.MAV_CMD_NAV_TAKEOFF]
+    if not seqs:
+        return False
+    return any(has_position(it.command) for it in items[: seqs[0]])

@@ -1,12 +1,13 @@
-"""COMMAND_LONG client with retries and COMMAND_ACK matching: arm, mode, mission start, takeoff, RTL.
+"""COMMAND_LONG client with retries and COMMAND_ACK matching: arm, mode, mission start, takeoff, RTL,
+message intervals.
 
 Choices:
 - COMMAND_LONG is resent every COMMAND_RETRY_S = 1.5 s (COMMAND_RETRIES = 3 times), with
   ``confirmation`` counting the resends as the spec asks; the matcher (COMMAND_ACK from the target
   for this command, addressed to us or broadcast) is subscribed before the first send.
   IN_PROGRESS acks extend the wait; any other result ends it.
-- Mode names are turned into numbers with the autopilot's own table (enums.py), picked from the
-  vehicle's HEARTBEAT (autopilot, and MAV_TYPE for ArduPlane vs ArduCopter). DO_SET_MODE carries
+- Mode names are turned into numbers with the autopilot's own table, picked from the vehicle's
+  HEARTBEAT (autopilots.quirks_for: autopilot, and MAV_TYPE for ArduPlane vs ArduCopter). DO_SET_MODE carries
   MAV_MODE_FLAG_CUSTOM_MODE_ENABLED in param1 and, for ArduPilot, custom_mode in param2; for PX4
   main mode in param2 and sub mode in param3.
 """
@@ -19,13 +20,8 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
-from gcs_planner.mavlink.enums import (
-    ARDUCOPTER_MODES,
-    ARDUPLANE_MODES,
-    PX4_MODES,
-    Autopilot,
-    CommandResult,
-)
+from gcs_planner.mavlink.autopilots import quirks_for
+from gcs_planner.mavlink.enums import Autopilot, CommandResult
 from gcs_planner.mavlink.errors import CommandTimeoutError, command_error
 from gcs_planner.mavlink.link import MavlinkLink
 
@@ -34,16 +30,14 @@ __all__ = ["COMMAND_RETRIES", "COMMAND_RETRY_S", "CommandClient", "mode_table"]
 COMMAND_RETRY_S = 1.5  # wait for COMMAND_ACK before resending [s]
 COMMAND_RETRIES = 3  # resends after the first COMMAND_LONG
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM param2 that forces (ArduPilot, PX4)
-_FIXED_WING_TYPES = frozenset({mavlink.MAV_TYPE_FIXED_WING})
 
 
 def mode_table(autopilot: int | None, mav_type: int | None) -> dict[str, int]:
     """Mode name -> custom_mode for a vehicle, from its HEARTBEAT fields."""
-    if autopilot == Autopilot.PX4:
-        return PX4_MODES
-    if autopilot == Autopilot.ARDUPILOTMEGA:
-        return ARDUPLANE_MODES if mav_type in _FIXED_WING_TYPES else ARDUCOPTER_MODES
-    raise UserError(f"cannot set modes by name on autopilot type {autopilot} (only ArduPilot and PX4)")
+    modes = quirks_for(autopilot, mav_type).modes
+    if modes is None:
+        raise UserError(f"cannot set modes by name on autopilot type {autopilot} (only ArduPilot and PX4)")
+    return modes
 
 
 class CommandClient:
@@ -146,10 +140,16 @@ class CommandClient:
         await self.command_long(mavlink.MAV_CMD_DO_SET_MISSION_CURRENT, seq)
 
     async def takeoff(self, alt_m: float) -> None:
-        """MAV_CMD_NAV_TAKEOFF to ``alt_m`` above home [m] (vehicle armed, in a mode that allows it)."""
+        """MAV_CMD_NAV_TAKEOFF with param7 = ``alt_m``, which ArduCopter reads as metres above home and
+        PX4 as metres AMSL (autopilots.Takeoff); the vehicle must be armed, in a mode that allows it."""
         if not math.isfinite(alt_m) or alt_m <= 0:
             raise UserError(f"takeoff altitude must be a positive number of metres, got {alt_m!r}")
         await self.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, alt_m)
+
+    async def set_message_interval(self, message_id: int, rate_hz: float) -> None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL: stream ``message_id`` at ``rate_hz`` (0: stop it)."""
+        interval_us = 1e6 / rate_hz if rate_hz > 0 else -1.0
+        await self.command_long(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, message_id, interval_us)
 
     async def rtl(self) -> None:
         await self.command_long(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)

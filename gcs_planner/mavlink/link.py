@@ -57,6 +57,7 @@ GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
 DUPLICATE_WINDOW_S = 5.0  # two addresses heard within this time with one sysid = duplicate [s]
 HEARTBEAT_PERIOD_S = 1.0
+_NOT_AUTOPILOT = mavlink.MAV_AUTOPILOT_INVALID  # HEARTBEAT of a camera, gimbal, companion or GCS
 
 Address = tuple[str, int]
 Callback = Callable[[mavlink.MAVLink_message, bytes, float], None]
@@ -64,7 +65,8 @@ Callback = Callable[[mavlink.MAVLink_message, bytes, float], None]
 
 @dataclass
 class VehicleInfo:
-    """What the link knows about one system id (from any of its messages; type fields from HEARTBEAT)."""
+    """What the link knows about one system id (from any of its messages; the type fields from the
+    autopilot's HEARTBEAT: ``autopilot`` is None until the flight controller itself was heard)."""
 
     sysid: int
     address: Address
@@ -73,6 +75,10 @@ class VehicleInfo:
     mav_type: int | None = None  # HEARTBEAT.type (MAV_TYPE)
     custom_mode: int | None = None
     base_mode: int | None = None
+
+    @property
+    def armed(self) -> bool:
+        return bool((self.base_mode or 0) & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
     def live_addresses(self, now_s: float) -> list[Address]:
         return sorted(a for a, t in self.addresses.items() if now_s - t <= DUPLICATE_WINDOW_S)
@@ -322,7 +328,7 @@ class MavlinkLink:
             elif addr not in live and addr not in info.addresses:
                 log.warning("system id %d heard from %s and %s: ambiguous", sysid, info.address, addr)
         info.addresses[addr] = now
-        if msg.get_type() == "HEARTBEAT" and addr == info.address:
+        if msg.get_type() == "HEARTBEAT" and addr == info.address and msg.autopilot != _NOT_AUTOPILOT:
             info.autopilot, info.mav_type = msg.autopilot, msg.type
             info.custom_mode, info.base_mode = msg.custom_mode, msg.base_mode
 

@@ -9,18 +9,21 @@ Choices:
 - Lost final ACK: when every item went out but no MISSION_ACK came back (ArduPilot never repeats
   it), the client downloads the list and reports success only if it matches what was sent
   (``UploadResult.ack_lost``); otherwise the timeout is raised.
-- Verify-by-download compares with :class:`Tolerance` for autopilot rounding (ArduPilot keeps the
-  altitude in cm and hold time / radii in whole units, and reports non-_INT frame numbers); on
-  ArduPilot-style vehicles (HEARTBEAT autopilot ARDUPILOTMEGA) seq 0 is the vehicle's home and is
-  not compared.
+- Verify-by-download compares through the autopilot's read-back model (readback.py: what it
+  stores of each item, e.g. ArduPilot's cm altitude, its frame numbers, the params it drops) and
+  otherwise exactly; on ArduPilot seq 0 is the vehicle's home and is not compared.
+- Lost final ACK: ArduPilot answers a resent last item of a finished upload with
+  MISSION_ACK(ERROR) (no upload in progress); after a resend that ERROR is read back like a
+  missing ACK (transfer.py marks it ``ack_lost``), never reported as a refusal.
 - Items in flight and push-ahead (transfer.py) send items the vehicle has not asked for, relying on
   the vehicle to drop an item whose seq it does not wait for. ArduPilot and PX4 do (their sources);
   MAVSDK's MissionRawServer stores every MISSION_ITEM_INT it receives, whatever its seq
   (``ReceiveIncomingMission::process_mission_item_int``), so a surplus copy on a lossy link would
   become a second item. The client therefore uses them only with vehicles whose HEARTBEAT says
-  ArduPilot or PX4 (PIPELINED_AUTOPILOTS); with any other, or before a HEARTBEAT, it answers each
+  ArduPilot or PX4 (``AutopilotQuirks.pipelined``); with any other, or before a HEARTBEAT, it answers each
   request once (``Timing(push_ahead=False, window=1)``, the spec-literal client).
-- clear(): MISSION_CLEAR_ALL; when the vehicle answers ERROR or DENIED (ArduPilot in AUTO cannot
+- clear(): MISSION_CLEAR_ALL; ALL list by list where the vehicle does not take mission_type 255
+  (ArduPilot: UNSUPPORTED); when the vehicle answers ERROR or DENIED (ArduPilot in AUTO cannot
   clear) an empty list is uploaded instead, which ArduPilot accepts.
 - set_current(): MAV_CMD_DO_SET_MISSION_CURRENT first; if the vehicle does not support it (or never
   answers) the legacy MISSION_SET_CURRENT, confirmed by MISSION_CURRENT.
@@ -35,7 +38,9 @@ import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
-from gcs_planner.mavlink.enums import Autopilot, CommandResult, MissionResult
+from gcs_planner.mavlink import readback
+from gcs_planner.mavlink.autopilots import GENERIC, AutopilotQuirks, quirks_for
+from gcs_planner.mavlink.enums import CommandResult, MissionResult
 from gcs_planner.mavlink.errors import (
     BusyError,
     CommandError,
@@ -57,19 +62,9 @@ from gcs_planner.mavlink.transfer import (
 )
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
-__all__ = ["PIPELINED_AUTOPILOTS", "MissionClient", "Tolerance", "UploadResult", "compare_items"]
+__all__ = ["MissionClient", "UploadResult", "compare_items"]
 
-PIPELINED_AUTOPILOTS = frozenset({Autopilot.ARDUPILOTMEGA, Autopilot.PX4})  # drop unexpected items
-_FRAME_ALIASES = {5: 0, 6: 3, 11: 10}  # *_INT frame numbers -> the plain ones (same meaning in ITEM_INT)
 _active: weakref.WeakKeyDictionary[MavlinkLink, set[tuple[int, int]]] = weakref.WeakKeyDictionary()
-
-
-@dataclass(frozen=True)
-class Tolerance:
-    """Largest differences a read-back may show and still equal the upload."""
-
-    z_m: float = 0.011  # ArduPilot stores altitude in cm
-    param: float = 1.0  # ArduPilot stores hold time / radii as integers
 
 
 @dataclass(frozen=True)
@@ -95,13 +90,11 @@ class MissionClient:
         compid: int = 1,
         *,
         timing: Timing | None = None,
-        tolerance: Tolerance | None = None,
     ) -> None:
         self.link = link
         self.sysid = sysid
         self.compid = compid
         self.timing = timing or Timing()
-        self.tolerance = tolerance or Tolerance()
 
     # ----------------------------------------------------------------- operations
     async def upload(
@@ -170,14 +163,27 @@ class MissionClient:
         return list(outcome.items or []), outcome.opaque_id
 
     async def clear(self, mission_type: int = MissionType.MISSION) -> None:
-        """Empty the list (MissionType.ALL: all three); falls back to an empty upload if refused."""
+        """Empty the list (MissionType.ALL: all three).
+
+        ALL goes list by list to a vehicle that does not take mission_type 255 in one
+        MISSION_CLEAR_ALL (ArduPilot answers UNSUPPORTED); a list the vehicle refuses to clear
+        (ERROR / DENIED: ArduPilot in AUTO) is replaced by an empty upload instead."""
+        types = (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
+        if mission_type == MissionType.ALL and not self.quirks.clear_all_at_once:
+            for t in types:
+                await self.clear(t)
+            return
         outcome = await self._run(self._transfer(ClearTransfer, mission_type=mission_type))
         error = outcome.error
         if error is None:
             return
-        if getattr(error, "result", None) not in (MissionResult.ERROR, MissionResult.DENIED):
+        result = getattr(error, "result", None)
+        if mission_type == MissionType.ALL and result == MissionResult.UNSUPPORTED:
+            for t in types:
+                await self.clear(t)
+            return
+        if result not in (MissionResult.ERROR, MissionResult.DENIED):
             raise error
-        types = (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
         for t in types if mission_type == MissionType.ALL else (mission_type,):
             await self.upload([], mission_type=t)
 
@@ -198,10 +204,15 @@ class MissionClient:
             raise outcome.error
 
     # ----------------------------------------------------------------- machinery
-    def _transfer(self, cls: type[Transfer], **kwargs) -> Transfer:
+    @property
+    def quirks(self) -> AutopilotQuirks:
+        """The vehicle's autopilot entry (GENERIC before its HEARTBEAT)."""
         info = self.link.vehicles.get(self.sysid)
+        return GENERIC if info is None else quirks_for(info.autopilot, info.mav_type)
+
+    def _transfer(self, cls: type[Transfer], **kwargs) -> Transfer:
         timing = self.timing
-        if info is None or info.autopilot not in PIPELINED_AUTOPILOTS:  # see the module docstring
+        if not self.quirks.pipelined:  # see the module docstring
             timing = replace(timing, push_ahead=False, window=1)
         return cls(
             self.sysid,
@@ -272,38 +283,36 @@ class MissionClient:
             raise
 
     def _difference(self, sent: Sequence[MissionItem], got: Sequence[MissionItem]) -> str | None:
-        info = self.link.vehicles.get(self.sysid)
-        skip_home = info is not None and info.autopilot == Autopilot.ARDUPILOTMEGA
-        return compare_items(sent, got, self.tolerance, skip_home=skip_home)
+        q = self.quirks
+        return compare_items(sent, got, q.readback, skip_home=q.home_at_seq0)
 
 
 def compare_items(
     sent: Sequence[MissionItem],
     got: Sequence[MissionItem],
-    tolerance: Tolerance = Tolerance(),
+    model: readback.Model = readback.GENERIC,
     skip_home: bool = False,
 ) -> str | None:
-    """None if ``got`` equals ``sent`` within ``tolerance``, else the first difference in words."""
+    """None if ``got`` is what an autopilot storing items as ``model`` returns for ``sent``, else
+    the first difference in words. Both sides go through ``model``; then every field must be equal
+    (params and altitude to float32 precision: they cross the wire as float32)."""
     home_only = skip_home and not sent and len(got) == 1  # ArduPilot keeps home after an empty upload
     if len(sent) != len(got) and not home_only:
         return f"{len(got)} items, expected {len(sent)}"
     for a, b in zip(sent, got, strict=False):
         if skip_home and a.seq == 0:
             continue
-        for name in ("seq", "command", "x", "y", "autocontinue"):
+        a, b = model(a), model(b)
+        for name in ("seq", "command", "frame", "x", "y", "autocontinue"):
             if getattr(a, name) != getattr(b, name):
                 return f"item {a.seq}: {name} is {getattr(b, name)}, sent {getattr(a, name)}"
-        if _FRAME_ALIASES.get(a.frame, a.frame) != _FRAME_ALIASES.get(b.frame, b.frame):
-            return f"item {a.seq}: frame is {b.frame}, sent {a.frame}"
-        if not _close(a.z, b.z, tolerance.z_m):
-            return f"item {a.seq}: z is {b.z:g}, sent {a.z:g}"
-        for name in ("param1", "param2", "param3", "param4"):
-            if not _close(getattr(a, name), getattr(b, name), tolerance.param):
+        for name in ("param1", "param2", "param3", "param4", "z"):
+            if not _close(getattr(a, name), getattr(b, name)):
                 return f"item {a.seq}: {name} is {getattr(b, name):g}, sent {getattr(a, name):g}"
     return None
 
 
-def _close(a: float, b: float, tol: float) -> bool:
+def _close(a: float, b: float) -> bool:
     if math.isnan(a):
         return True  # NaN means "use the default": the autopilot may store any value
-    return abs(a - b) <= tol + 1e-6 * max(abs(a), abs(b))
+    return abs(a - b) <= 1e-6 + 1.2e-7 * max(abs(a), abs(b))  # float32 has a 6e-8 relative step

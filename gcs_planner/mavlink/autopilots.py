@@ -1,0 +1,147 @@
+"""What differs between the autopilots the tool flies, in one place, chosen from the HEARTBEAT.
+
+``quirks_for(autopilot, mav_type)`` returns the entry for a vehicle from its HEARTBEAT fields
+(MAV_AUTOPILOT, MAV_TYPE), as Skybrush server's autopilot registry does; a command-line flag only
+decides for a vehicle that has not said what it is. The read-back model (what a vehicle returns of
+an uploaded item) is in readback.py. docs/real-autopilots.md has the table with the sources and
+what was measured on SITL.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+from gcs_planner.mavlink import readback
+from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot
+
+__all__ = [
+    "ARDUCOPTER",
+    "ARDUPLANE",
+    "GENERIC",
+    "PX4",
+    "AutopilotQuirks",
+    "Takeoff",
+    "mode_of",
+    "quirks_for",
+    "quirks_named",
+]
+
+# MAV_TYPE values ArduPlane reports: FIXED_WING 1 and the VTOL types 19..25 (QuadPlanes)
+_PLANE_TYPES = frozenset({1, *range(19, 26)})
+SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0
+
+
+class Takeoff(StrEnum):
+    """How a vehicle is taken off outside a mission."""
+
+    COMMAND_ABOVE_HOME = "command_above_home"  # MAV_CMD_NAV_TAKEOFF, param7 [m above home] (ArduCopter)
+    COMMAND_AMSL = "command_amsl"  # MAV_CMD_NAV_TAKEOFF, param7 [m AMSL] (PX4 navigator)
+    TAKEOFF_MODE = "takeoff_mode"  # mode TAKEOFF climbs to parameter TKOFF_ALT (plain ArduPlane)
+
+
+@dataclass(frozen=True)
+class AutopilotQuirks:
+    """One autopilot family's conventions; every field is a difference the tool has to act on."""
+
+    name: str
+    conventions: str  # mission item conventions: "ardupilot" (home at seq 0) or "px4" (none)
+    pipelined: bool  # drops items whose seq it does not wait for: items in flight are safe
+    modes: dict[str, int] | None  # mode name -> HEARTBEAT custom_mode (None: no named modes)
+    arm_mode: str | None  # mode to arm in before a take-off (None: arm in the current mode)
+    takeoff: Takeoff
+    start_with_range: bool  # MISSION_START(first, last) accepted; else DO_SET_MISSION_CURRENT + (0, 0)
+    speed_type: float  # DO_CHANGE_SPEED param1 for schedule keeping
+    clear_all_at_once: bool  # MISSION_CLEAR_ALL with mission_type ALL (255) is understood
+    streams_by_request: bool  # streams telemetry only when asked (stock ArduPilot SRn_* = 0)
+    return_mode: str | None  # the mode that brings a vehicle home (safe end)
+    land_mode: str | None  # the mode that lands it where it is (None: no such mode)
+    readback: readback.Model
+
+    @property
+    def home_at_seq0(self) -> bool:
+        return self.conventions == "ardupilot"
+
+
+ARDUCOPTER = AutopilotQuirks(
+    name="ArduCopter",
+    conventions="ardupilot",
+    pipelined=True,
+    modes=ARDUCOPTER_MODES,
+    arm_mode="GUIDED",
+    takeoff=Takeoff.COMMAND_ABOVE_HOME,
+    start_with_range=False,
+    speed_type=SPEED_GROUNDSPEED,
+    clear_all_at_once=False,
+    streams_by_request=True,
+    return_mode="RTL",
+    land_mode="LAND",
+    readback=readback.ARDUCOPTER,
+)
+ARDUPLANE = AutopilotQuirks(
+    name="ArduPlane",
+    conventions="ardupilot",
+    pipelined=True,
+    modes=ARDUPLANE_MODES,
+    arm_mode="TAKEOFF",
+    takeoff=Takeoff.TAKEOFF_MODE,
+    start_with_range=False,
+    speed_type=SPEED_AIRSPEED,
+    clear_all_at_once=False,
+    streams_by_request=True,
+    return_mode="RTL",
+    land_mode=None,
+    readback=readback.ARDUPLANE,
+)
+PX4 = AutopilotQuirks(
+    name="PX4",
+    conventions="px4",
+    pipelined=True,
+    modes=PX4_MODES,
+    arm_mode=None,
+    takeoff=Takeoff.COMMAND_AMSL,
+    start_with_range=True,
+    speed_type=SPEED_GROUNDSPEED,
+    clear_all_at_once=True,
+    streams_by_request=False,
+    return_mode="RTL",
+    land_mode="LAND",
+    readback=readback.PX4,
+)
+GENERIC = AutopilotQuirks(
+    name="MAVLink",
+    conventions="px4",
+    pipelined=False,  # MAVSDK's MissionRawServer stores every item it gets, whatever its seq
+    modes=None,
+    arm_mode=None,
+    takeoff=Takeoff.COMMAND_ABOVE_HOME,
+    start_with_range=True,
+    speed_type=SPEED_GROUNDSPEED,
+    clear_all_at_once=True,
+    streams_by_request=True,
+    return_mode=None,
+    land_mode=None,
+    readback=readback.GENERIC,
+)
+
+
+def quirks_for(autopilot: int | None, mav_type: int | None = None) -> AutopilotQuirks:
+    """The entry for a vehicle whose HEARTBEAT says ``autopilot`` (MAV_AUTOPILOT) and ``mav_type``."""
+    if autopilot == Autopilot.ARDUPILOTMEGA:
+        return ARDUPLANE if mav_type in _PLANE_TYPES else ARDUCOPTER
+    if autopilot == Autopilot.PX4:
+        return PX4
+    return GENERIC
+
+
+def mode_of(info) -> str | None:
+    """The mode name of a vehicle's last HEARTBEAT (``VehicleInfo``), None when unknown."""
+    modes = quirks_for(info.autopilot, info.mav_type).modes or {}
+    return next((name for name, number in modes.items() if number == info.custom_mode), None)
+
+
+def quirks_named(conventions: str, fixed_wing: bool = False) -> AutopilotQuirks:
+    """The entry for a vehicle not heard yet, from a flag ("ardupilot" / "px4") and its airframe."""
+    if conventions == "ardupilot":
+        return ARDUPLANE if fixed_wing else ARDUCOPTER
+    return PX4

@@ -1,0 +1,135 @@
+"""Getting a vehicle ready to fly: telemetry streams, pre-arm readiness, arming, one parameter.
+
+Choices:
+- Streams: every message a run needs is asked for with MAV_CMD_SET_MESSAGE_INTERVAL (as MAVSDK
+  does), whatever the autopilot: stock ArduPilot streams only HEARTBEAT and STATUSTEXT (SRn_* = 0)
+  until asked, PX4 streams without being asked and accepts the request. A refusal is logged, not
+  fatal: the run's own timeouts say what is missing.
+- Readiness: while the vehicle reports the SYS_STATUS pre-arm bit (ArduPilot and PX4 both do)
+  and it is unhealthy, wait; then arm. An arming refusal (FAILED, TEMPORARILY_REJECTED, DENIED) is
+  retried every ``ARM_RETRY_S`` until the deadline (ArduCopter refuses for ~40-45 s after boot,
+  "Arm: Need Position Estimate"); the error names the autopilot's own last STATUSTEXT.
+- ``set_param``: PARAM_SET, confirmed by the PARAM_VALUE echo (ArduPilot and PX4 answer every
+  PARAM_SET with the parameter's new value), resent like a command.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import Callable, Mapping
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S, CommandClient
+from gcs_planner.mavlink.enums import CommandResult
+from gcs_planner.mavlink.errors import CommandError, MavlinkError
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.vehicle_status import VehicleStatus
+
+__all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "request_streams", "set_param"]
+
+log = logging.getLogger(__name__)
+
+ARM_RETRY_S = 2.0  # between arming attempts while the vehicle is not ready [s of vehicle time]
+_REFUSALS = (CommandResult.FAILED, CommandResult.TEMPORARILY_REJECTED, CommandResult.DENIED)
+M = mavlink
+FLIGHT_STREAMS: dict[int, float] = {  # message id -> rate [Hz] a flight needs
+    M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
+    M.MAVLINK_MSG_ID_ATTITUDE: 10.0,
+    M.MAVLINK_MSG_ID_MISSION_CURRENT: 2.0,
+    M.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
+    M.MAVLINK_MSG_ID_VFR_HUD: 2.0,
+    M.MAVLINK_MSG_ID_BATTERY_STATUS: 1.0,
+    M.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+}
+
+
+async def request_streams(
+    link: MavlinkLink, sysids: list[int], rates: Mapping[int, float] = FLIGHT_STREAMS
+) -> dict[int, list[str]]:
+    """Ask every vehicle for every message in ``rates``; returns sysid -> names it refused."""
+
+    async def one(sysid: int) -> list[str]:
+        command = CommandClient(link, sysid)
+        refused = []
+        for message_id, hz in rates.items():
+            try:
+                await command.set_message_interval(message_id, hz)
+            except MavlinkError as exc:
+                name = mavlink.mavlink_map[message_id].msgname
+                log.warning("vehicle %d: no %s stream (%s)", sysid, name, exc)
+                refused.append(name)
+        return refused
+
+    results = await asyncio.gather(*(one(s) for s in sysids))
+    return dict(zip(sysids, results, strict=True))
+
+
+async def arm_when_ready(
+    link: MavlinkLink,
+    status: VehicleStatus,
+    sysid: int,
+    timeout_s: float,
+    time_scale: float = 1.0,
+    waiting: Callable[[int, str], None] | None = None,
+) -> None:
+    """Wait for the vehicle's pre-arm checks, then arm it; UserError with its reason at the deadline.
+
+    ``time_scale``: vehicle seconds per wall second (a mock's speed-up). ``waiting(sysid, reason)``
+    is called whenever the vehicle is not ready yet (a progress line).
+    """
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout_s / time_scale
+    track = status.tracks[sysid]
+    command = CommandClient(link, sysid, retry_s=COMMAND_RETRY_S, retries=COMMAND_RETRIES)
+    reason = ""
+    while True:
+        if track.prearm_ok is False:  # the vehicle says it is not ready: do not ask yet
+            reason = status.reason(sysid) or "pre-arm checks not passed"
+        else:
+            texts_before = track.text_count
+            try:
+                await command.arm()
+                return
+            except CommandError as exc:
+                if exc.result not in _REFUSALS:
+                    raise
+                await asyncio.sleep(min(0.3, 3.0 / time_scale))  # the reason follows the ACK
+                reason = status.reason(sysid, texts_before) or f"arming {exc.result.name}"
+        if loop.time() >= deadline:
+            raise UserError(f"vehicle {sysid} could not arm within {timeout_s:.0f} s: {reason}")
+        if waiting is not None:
+            waiting(sysid, reason)
+        await asyncio.sleep(min(ARM_RETRY_S / time_scale, max(0.0, deadline - loop.time())))
+
+
+async def set_param(
+    link: MavlinkLink, sysid: int, name: str, value: float, compid: int = 1, retry_s: float = COMMAND_RETRY_S
+) -> float:
+    """Set parameter ``name`` to ``value`` (a REAL32); returns the value the vehicle echoed."""
+    if not math.isfinite(value):
+        raise UserError(f"parameter {name} must be a finite number, got {value!r}")
+    link.check_target(sysid)
+
+    def echoed(msg) -> bool:
+        return msg.get_type() == "PARAM_VALUE" and msg.get_srcSystem() == sysid and msg.param_id == name
+
+    for _ in range(COMMAND_RETRIES + 1):
+        waiting = asyncio.ensure_future(link.wait_for(echoed, timeout_s=retry_s))
+        await asyncio.sleep(0)  # the matcher exists before the request goes out
+        link.send(
+            mavlink.MAVLink_param_set_message(
+                sysid, compid, name.encode(), float(value), mavlink.MAV_PARAM_TYPE_REAL32
+            )
+        )
+        try:
+            reply = await waiting
+        except TimeoutError:
+            continue
+        if abs(reply.param_value - value) > 1e-3 * max(1.0, abs(value)):
+            raise UserError(f"vehicle {sysid} kept {name} = {reply.param_value:g}, asked for {value:g}")
+        return float(reply.param_value)
+    raise UserError(f"vehicle {sysid}: no PARAM_VALUE for {name} after {COMMAND_RETRIES + 1} PARAM_SETs")
