@@ -200,11 +200,19 @@ def _airframe_for(vp):
 
 
 def _mock_fleet(plan: Plan, options: FlyOptions):
+    """One mock per vehicle, home under its first waypoint; a fixed wing's home is its take-off
+    climb run south of it (the mock climbs north), so that it reaches the first waypoint at its
+    altitude and flies on into the route."""
     from sitl_mock import MockFleet
+    from sitl_mock.flight import climb_run_m
 
     specs = []
     for vp in plan.vehicles:
         x, y = vp.waypoints[0, :2]
+        frame = _airframe_for(vp)
+        if vp.vehicle_type == "fixed_wing":
+            frame = replace(frame, climb_rate_mps=TAKEOFF_CLIMB_MPS)
+            y -= climb_run_m(frame.cruise_speed_mps, TAKEOFF_CLIMB_MPS, float(vp.waypoints[0, 2]))
         lat, lon, alt = enu_to_geodetic(x, y, 0.0, plan.origin)
         specs.append(
             dict(
@@ -212,7 +220,7 @@ def _mock_fleet(plan: Plan, options: FlyOptions):
                 home=Origin(lat, lon, alt),
                 vehicle_type=vp.vehicle_type,
                 profile=options.autopilot,
-                airframe=_airframe_for(vp),
+                airframe=frame,
             )
         )
     # position reports at MOCK_TELEMETRY_HZ of flight time, within what one Python process streams
@@ -311,7 +319,8 @@ async def fly(
                     for sysid, drift in options.drift_mps.items():
                         if fleet is not None:
                             fleet.set_drift(sysid, *drift)
-                    await _take_off_all(link, plan, status, speedup, options, quirks, progress)
+                    await _take_off_all(link, plan, status, speedup, options, quirks, progress, missions)
+                    climbed = frozenset(v.sysid for v in plan.vehicles if v.vehicle_type == "fixed_wing")
                     logger.log_event({"event": "airborne", "sysids": sysids})
                     leads = {
                         vp.sysid: _accel_lead_s(
@@ -322,7 +331,7 @@ async def fly(
                     lead_s = max(leads.values())
                     route_t0_s = (recorder.now_s() if fleet is not None else time.time()) + lead_s
                     routes = asyncio.create_task(
-                        _start_routes(link, plan, missions, speedup, logger, lead_s, leads, quirks)
+                        _start_routes(link, plan, missions, speedup, logger, lead_s, leads, quirks, climbed)
                     )
                     keeper = None
                     if options.keep_schedule:
@@ -333,7 +342,7 @@ async def fly(
                         link, recorder, status, plan, speedup, options, progress, keeper, route_t0_s, quirks
                     )
                     await routes
-            except (UserError, asyncio.CancelledError, KeyboardInterrupt) as exc:
+            except BaseException as exc:  # noqa: BLE001 - any failure or Ctrl-C ends safely, then re-raises
                 aborted = exc
             finally:
                 if quirks and (aborted is not None or not all(t.done for t in status.tracks.values())):
@@ -387,10 +396,22 @@ async def _take_off_all(
     options: FlyOptions,
     quirks: dict[int, AutopilotQuirks],
     progress=None,
+    missions: dict | None = None,
 ) -> None:
     """Arm every vehicle once it is ready and climb it to its first waypoint's altitude; return
-    when all are there."""
+    when all are there. With ``missions``, a fixed wing (which cannot wait in place) starts its
+    route as soon as it is up (``_start_routes`` leaves it out)."""
     gate = asyncio.Semaphore(options.workers)
+    targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
+
+    def late() -> list[int]:
+        return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - TAKEOFF_ALT_TOL_M]
+
+    async def climb_into_route(vp) -> None:
+        while vp.sysid in late():
+            await asyncio.sleep(0.02)
+        items = missions[vp.sysid]
+        await start_mission_at(link, vp.sysid, quirks[vp.sysid], _route_seq(items), len(items) - 1)
 
     def waiting(sysid: int, reason: str) -> None:
         log.info("sysid %d not ready to arm: %s", sysid, reason)
@@ -405,7 +426,7 @@ async def _take_off_all(
                     await take_off(
                         link, status, vp.sysid, q, float(vp.waypoints[0, 2]), ARM_TIMEOUT_S, speedup, waiting
                     )
-                    return
+                    break
                 except MavlinkError as exc:
                     # a lost ACK makes the retried command fail (already armed / airborne)
                     if (status.tracks[vp.sysid].rel_alt_m or 0.0) > TAKEOFF_ALT_TOL_M:
@@ -418,17 +439,17 @@ async def _take_off_all(
                         ) from exc
                     log.warning("sysid %d take-off attempt %d failed: %s", vp.sysid, attempt, exc)
                     await asyncio.sleep(1.0 / speedup)
+        if missions is not None and vp.vehicle_type == "fixed_wing":
+            climbs.append(asyncio.create_task(climb_into_route(vp)))
 
+    climbs: list[asyncio.Task] = []
     await asyncio.gather(*(one(vp) for vp in plan.vehicles))
     climb_s = max(float(vp.waypoints[0, 2]) for vp in plan.vehicles) / TAKEOFF_CLIMB_MPS
     deadline = time.monotonic() + climb_s * options.timeout_factor / speedup + 10.0
-    targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
-
-    def late() -> list[int]:
-        return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - TAKEOFF_ALT_TOL_M]
-
     while time.monotonic() < deadline and late():
         await asyncio.sleep(0.05)
+    for task in climbs:
+        task.cancel() if late() else await task
     if late():
         seen = {s: status.tracks[s].rel_alt_m for s in late()}
         raise UserError(f"sysid {late()} did not reach take-off altitude in time (relative altitude {seen})")
@@ -449,8 +470,10 @@ async def _start_routes(
     lead_s: float,
     leads: dict[int, float],
     quirks: dict[int, AutopilotQuirks],
+    started: frozenset[int] = frozenset(),
 ) -> None:
-    """Start each route (the item after NAV_TAKEOFF) at its planned start time.
+    """Start each route (the item after NAV_TAKEOFF) at its planned start time, but those in
+    ``started`` (fixed wings that climbed into theirs).
 
     Route time 0 is ``lead_s`` after now; each route starts its own acceleration lead earlier.
     """
@@ -458,7 +481,9 @@ async def _start_routes(
 
     async def one(vp) -> None:
         items = missions[vp.sysid]
-        first = next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
+        if vp.sysid in started:
+            return
+        first = _route_seq(items)
         offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
         start_s = lead_s + offset_s - leads[vp.sysid]
         await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
@@ -471,6 +496,11 @@ async def _start_routes(
         logger.log_event({"event": "route_start", "sysid": vp.sysid, "planned_offset_s": offset_s})
 
     await asyncio.gather(*(one(vp) for vp in plan.vehicles))
+
+
+def _route_seq(items) -> int:
+    """The route's first item: the one after NAV_TAKEOFF."""
+    return next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
 
 
 async def _wait_until_done(

@@ -35,7 +35,7 @@ from enum import IntEnum
 
 import numpy as np
 
-__all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics"]
+__all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
 
 G_MPS2 = 9.80665
 KP_POS = 1.0  # [1/s] position -> velocity gain near a stop point
@@ -337,3 +337,15 @@ def _rows(mask: np.ndarray) -> np.ndarray | slice:
 def _wrap(angle_rad: np.ndarray) -> np.ndarray:
     """Wrap angles to [-pi, pi)."""
     return (angle_rad + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def climb_run_m(speed_mps: float, climb_mps: float, alt_m: float, dt_s: float = 0.05) -> float:
+    """Ground run [m] of the mock fixed wing's take-off climb (north, at cruise speed, vz = KP_ALT x
+    error clipped to the climb rate and 0.9 v), so that its home can be placed that far south of
+    where the route starts."""
+    z, run = 0.0, 0.0
+    while z < alt_m - ALT_TOL_M:
+        vz = min(KP_ALT * (alt_m - z), climb_mps, 0.9 * speed_mps)
+        z += vz * dt_s
+        run += float(np.sqrt(speed_mps**2 - vz**2)) * dt_s
+    return run

@@ -17,7 +17,7 @@ import numpy as np
 from gcs_planner.coalition_hil.missions import VehicleSchedule
 from gcs_planner.fly import CATCH_UP_FACTOR, G_MPS2, MAX_WALL_TELEMETRY_HZ, MOCK_TELEMETRY_HZ, _airframe_for
 from gcs_planner.geo import Origin, enu_to_geodetic
-from sitl_mock.flight import ALT_TOL_M, KP_ALT
+from sitl_mock.flight import climb_run_m
 from sitl_mock.process import MockFleetProcess
 
 __all__ = ["mock_fleet"]
@@ -33,7 +33,7 @@ def mock_fleet(schedules: list[VehicleSchedule], origin: Origin, speedup: float)
     for s in schedules:
         vp = s.initial
         frame = _airframe_for(vp)
-        run_m = _climb_run_m(float(vp.speeds_mps[0]), TAKEOFF_CLIMB_MPS, float(vp.waypoints[0, 2]))
+        run_m = climb_run_m(float(vp.speeds_mps[0]), TAKEOFF_CLIMB_MPS, float(vp.waypoints[0, 2]))
         lat, lon, alt = enu_to_geodetic(vp.waypoints[0, 0], vp.waypoints[0, 1] - run_m, 0.0, origin)
         fast = CATCH_UP_FACTOR * float(vp.speeds_mps[0])
         bank = float(np.arctan(fast**2 / vp.turn_radius_m / G_MPS2))
@@ -49,15 +49,3 @@ def mock_fleet(schedules: list[VehicleSchedule], origin: Origin, speedup: float)
         )
     rate_hz = min(MOCK_TELEMETRY_HZ * speedup, MAX_WALL_TELEMETRY_HZ)
     return MockFleetProcess(vehicles=specs, speedup=speedup, home=origin, rate_hz=rate_hz)
-
-
-def _climb_run_m(speed_mps: float, climb_mps: float, alt_m: float, dt_s: float = 0.05) -> float:
-    """Ground run [m] of the mock fixed wing's take-off climb (north, at cruise speed, vz = KP_ALT x
-    error clipped to the climb rate and 0.9 v), so that its home can be placed that far south of
-    where the route starts."""
-    z, run = 0.0, 0.0
-    while z < alt_m - ALT_TOL_M:
-        vz = min(KP_ALT * (alt_m - z), climb_mps, 0.9 * speed_mps)
-        z += vz * dt_s
-        run += float(np.sqrt(speed_mps**2 - vz**2)) * dt_s
-    return run

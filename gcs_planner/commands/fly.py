@@ -11,7 +11,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import sys
 from pathlib import Path
+
+from tqdm import tqdm
 
 from gcs_planner.commands import fly_coalition
 from gcs_planner.conformance import format_report
@@ -118,8 +121,14 @@ def run(args: argparse.Namespace) -> int:
         drift_mps=_drift(args.drift),
     )
     bars: dict[str, object] = {}
+    said: dict[int, str] = {}
 
-    def progress(stage: str, done: float, total: float) -> None:
+    def progress(stage: str, done, total) -> None:
+        if stage == "wait":  # done = sysid, total = the vehicle's reason
+            if said.get(done) != total:
+                said[done] = total
+                tqdm.write(f"sysid {done} not ready to arm yet: {total} (waiting)", file=sys.stderr)
+            return
         if stage not in bars:
             bars[stage] = progress_bar(total, {"upload": "uploading", "fly": "flying"}[stage], "vehicle")
         bars[stage].n = done
@@ -131,6 +140,8 @@ def run(args: argparse.Namespace) -> int:
         for bar in bars.values():
             bar.close()
     print(format_report(result.reports))
+    if result.end_states:
+        print("safe end: " + ", ".join(f"sysid {s} {what}" for s, what in sorted(result.end_states.items())))
     print(
         f"log: {result.mcap_path}  (open in Foxglove, or `gcs-planner replay {result.mcap_path} --rrd x.rrd`)"
     )
