@@ -81,7 +81,10 @@ class MockFleet:
         physics_dt_s: float = 0.05,
         tick_s: float = 0.02,
         signing_key: bytes | None = None,
+        flight: dict | None = None,
     ) -> None:
+        """``flight``: FlightRules fields to override for every vehicle (e.g. ``{"arm_ready_s": 0}`` in
+        a test about something else); the profile's real behaviour is the default."""
         if (count is None) == (vehicles is None):
             raise ValueError("MockFleet needs exactly one of count= or vehicles=")
         if count is not None and not (isinstance(count, int) and 1 <= count <= 254):
@@ -104,7 +107,7 @@ class MockFleet:
             port = base_port + k if base_port else 0
             kwargs = {"sysid": k + 1, "profile": profile, "vehicle_type": vehicle_type, "home": home,
                       "port": port, "faults": faults, "host": host, "signing_key": signing_key,
-                      **spec}  # fmt: skip
+                      "flight": flight, **spec}  # fmt: skip
             self.vehicles.append(MockVehicle(**kwargs))
         sysids = [v.sysid for v in self.vehicles]
         if len(set(sysids)) != len(sysids):

@@ -30,7 +30,7 @@ import asyncio
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -104,6 +104,7 @@ class MockVehicle:
         non_atomic: bool = False,
         airframe: Airframe | None = None,
         signing_key: bytes | None = None,
+        flight: dict | None = None,
     ) -> None:
         if not (isinstance(sysid, int) and 1 <= sysid <= 254):
             raise ValueError(f"vehicle sysid must be an integer in 1..254, got {sysid!r}")
@@ -128,7 +129,7 @@ class MockVehicle:
         self.link = VehicleLink(
             sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer, signing_key
         )
-        self.flight = self.profile.flight[vehicle_type]
+        self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may switch rules off
         self.params = dict(self.flight.params)
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission

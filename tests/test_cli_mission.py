@@ -14,9 +14,11 @@ import pytest
 
 from gcs_planner.cli import main
 from gcs_planner.geo import Origin
+from gcs_planner.mavlink import readback
 from gcs_planner.mavlink.files import load_mission_file
-from gcs_planner.mavlink.items import plan_to_items
+from gcs_planner.mavlink.items import deg_to_e7, plan_to_items
 from gcs_planner.mavlink.mission import compare_items
+from gcs_planner.mavlink.types import MissionItem
 from gcs_planner.mavlink.wpl import dumps_wpl
 from gcs_planner.plan import Plan, VehiclePlan
 
@@ -122,14 +124,15 @@ def test_upload_download_start_clear_ardupilot(fleet, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "(ardupilot)" in out and out.count("ACCEPTED") == 3 and out.count(" yes") == 3
     sent = plan_to_items(Plan.load(plan_path).vehicles[0], ORIGIN, "ardupilot")
-    assert compare_items(sent, held(fleet, 1)) is None
+    assert compare_items(sent, held(fleet, 1), readback.ARDUCOPTER, skip_home=True) is None
     assert len(held(fleet, 1, 1)) == 5 and len(held(fleet, 1, 2)) == 1
 
     assert main(["download", *argv, str(tmp_path / "back.plan")]) == 0
     out = capsys.readouterr().out
     assert "NAV_TAKEOFF" in out and "fence: 5 items" in out and "rally: 1 items" in out
     back = load_mission_file(tmp_path / "back.plan")
-    assert compare_items(sent, back.items("ardupilot")) is None and len(back.fence) == 5
+    assert compare_items(sent, back.items("ardupilot"), readback.ARDUCOPTER, skip_home=True) is None
+    assert len(back.fence) == 5
 
     assert main(["start", *argv]) == 0
     assert "mission start" in capsys.readouterr().out
@@ -141,22 +144,22 @@ def test_upload_download_start_clear_ardupilot(fleet, tmp_path, capsys):
     assert held(fleet, 1, 1) == [] and held(fleet, 1, 2) == [] and len(held(fleet, 1)) <= 1  # home may stay
 
 
-def test_wpl_file_is_uploaded_row_for_row_to_px4(fleet, tmp_path, capsys):
+def test_wpl_row_0_is_the_home_and_px4_gets_the_rows_after_it(fleet, tmp_path, capsys):
+    """QGroundControl reads row 0 of every WPL 110 file as the planned home: PX4 gets rows 1.., so
+    its feasibility check finds the take-off first (a home waypoint before it is rejected)."""
     plan = Plan.load(make_plan(tmp_path, sysids=(2,)))
     items = plan_to_items(plan.vehicles[0], ORIGIN, "px4")
-    (tmp_path / "m.waypoints").write_text(dumps_wpl(items))
+    home = MissionItem(0, 0, 16, x=deg_to_e7(ORIGIN.lat_deg).item(), y=deg_to_e7(ORIGIN.lon_deg).item(), z=488.0)
+    (tmp_path / "m.waypoints").write_text(dumps_wpl([home, *items]))
     argv = ["--connect", url(fleet, 2), "--sysid", "2"]
     assert main(["upload", *argv, str(tmp_path / "m.waypoints")]) == 0
     assert "(px4)" in capsys.readouterr().out
-    assert held(fleet, 2) == items
+    assert held(fleet, 2) == [readback.PX4(it) for it in items]
+    assert not fleet.call(lambda: fleet.vehicle(2).mission_rejected)
     assert main(["download", *argv, str(tmp_path / "back.txt")]) == 0
-    assert (tmp_path / "back.txt").read_text() == dumps_wpl(items)
-    assert main(["download", *argv, str(tmp_path / "back.plan")]) == 0
-    back = load_mission_file(tmp_path / "back.plan")
-    assert back.items("px4") == items
-    assert back.home == pytest.approx(
-        (ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3
-    )  # HOME_POSITION
+    back = load_mission_file(tmp_path / "back.txt")
+    assert back.items("px4") == [readback.PX4(it) for it in items]
+    assert back.home == pytest.approx((ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3)  # HOME_POSITION
 
 
 def test_vehicle_refusal_is_one_line_and_keeps_the_old_mission(fleet, tmp_path, capsys):
@@ -172,7 +175,8 @@ def test_vehicle_refusal_is_one_line_and_keeps_the_old_mission(fleet, tmp_path, 
 def bad_file(tmp_path: Path) -> Path:
     items = plan_to_items(Plan.load(make_plan(tmp_path, sysids=(2,))).vehicles[0], ORIGIN, "px4")
     bad = tmp_path / "bad.waypoints"
-    bad.write_text(dumps_wpl([*items[:2], replace(items[2], x=910_000_000), *items[3:]]))  # latitude 91
+    home = MissionItem(0, 0, 16)  # row 0: the planned home
+    bad.write_text(dumps_wpl([home, *items[:2], replace(items[2], x=910_000_000), *items[3:]]))  # latitude 91
     return bad
 
 
@@ -230,8 +234,9 @@ def test_fleet_upload_from_plan_json(fleet, tmp_path, capsys):
         ("3", "mission", "FAILED"),
     ]
     assert "1 of 3 uploads failed; vehicle 3 mission" in captured.err and captured.err.count("\n") == 1
-    assert compare_items(plan_to_items(plan.vehicles[0], ORIGIN, "ardupilot"), held(fleet, 1)) is None
-    assert held(fleet, 2) == plan_to_items(plan.vehicles[1], ORIGIN, "px4")
+    sent = plan_to_items(plan.vehicles[0], ORIGIN, "ardupilot")
+    assert compare_items(sent, held(fleet, 1), readback.ARDUCOPTER, skip_home=True) is None
+    assert held(fleet, 2) == [readback.PX4(it) for it in plan_to_items(plan.vehicles[1], ORIGIN, "px4")]
     assert held(fleet, 3) == before
     assert main(["upload", *connects[:4], "--sysid", "1,2", str(plan_path)]) == 0
     assert capsys.readouterr().out.count("ACCEPTED") == 2
@@ -258,10 +263,10 @@ def test_signed_vehicle_takes_an_upload_signed_from_the_environment(tmp_path, ca
     with sitl_mock.MockFleet(count=1, profile="px4", home=ORIGIN, speedup=20.0, signing_key=key) as signed:
         plan = Plan.load(make_plan(tmp_path, sysids=(1,)))
         items = plan_to_items(plan.vehicles[0], ORIGIN, "px4")
-        (tmp_path / "m.waypoints").write_text(dumps_wpl(items))
+        (tmp_path / "m.waypoints").write_text(dumps_wpl([MissionItem(0, 0, 16), *items]))  # row 0: home
         monkeypatch.setenv("GCS_PLANNER_SIGNING_PASSPHRASE", "field-day")
         assert (
             main(["upload", "--connect", url(signed, 1), "--sysid", "1", str(tmp_path / "m.waypoints")]) == 0
         )
         assert "ACCEPTED" in capsys.readouterr().out
-        assert held(signed, 1) == items
+        assert held(signed, 1) == [readback.PX4(it) for it in items]

@@ -152,10 +152,8 @@ def test_mavsdk_mission_raw_client_uploads_to_and_downloads_from_mock(mock_fleet
         items = plan_to_items(vehicle_plan(n=12, takeoff_delay_s=2.0), ORIGIN, autopilot)
         raw.upload_mission([to_raw(it) for it in items])
         held = stored(mock_fleet, sysid)
-        if autopilot == "ardupilot":  # ArduPilot reads relative-altitude items back in frame 3
-            assert held == [replace(it, frame=file_frame(it.frame)) for it in items]
-        else:
-            assert held == items
+        kept = mock_fleet.vehicle(sysid).mission_server.storage  # what the autopilot keeps (readback.py)
+        assert held == [kept(it) for it in items]
         downloaded = [to_ours(it) for it in raw.download_mission()]
         # `current` in a download marks the vehicle's current item, not the uploaded flag
         assert [replace(it, current=0) for it in downloaded] == [replace(it, current=0) for it in held]
@@ -165,8 +163,8 @@ def test_mavsdk_mission_raw_client_uploads_to_and_downloads_from_mock(mock_fleet
                 for i in range(3)
             ]
             raw.upload_rally_points([to_raw(it) for it in rally])
-            assert stored(mock_fleet, sysid, 2) == rally
-            assert [to_ours(it) for it in raw.download_rallypoints()] == rally
+            assert stored(mock_fleet, sysid, 2) == [kept(it) for it in rally]
+            assert [to_ours(it) for it in raw.download_rallypoints()] == [kept(it) for it in rally]
     finally:
         client.destroy()
 
@@ -174,9 +172,10 @@ def test_mavsdk_mission_raw_client_uploads_to_and_downloads_from_mock(mock_fleet
 @pytest.mark.parametrize("mission_type", [0, 2])
 def test_our_client_uploads_to_mavsdk_mission_raw_server(mavsdk_pair, mission_type):
     """MAVSDK's autopilot side receives exactly our items (mission, rally points) and returns them."""
+    from gcs_planner.mavlink.autopilots import quirks_for
     from gcs_planner.mavlink.items import rally_items
     from gcs_planner.mavlink.link import MavlinkLink
-    from gcs_planner.mavlink.mission import PIPELINED_AUTOPILOTS, MissionClient
+    from gcs_planner.mavlink.mission import MissionClient
 
     server, _ = mavsdk_pair
     if mission_type == 0:
@@ -193,7 +192,7 @@ def test_our_client_uploads_to_mavsdk_mission_raw_server(mavsdk_pair, mission_ty
                 lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, timeout_s=5.0
             )
             # MAVSDK's server stores any item it gets, so the client must not send any unasked
-            assert link.vehicles[1].autopilot not in PIPELINED_AUTOPILOTS
+            assert not quirks_for(link.vehicles[1].autopilot).pipelined
             client = MissionClient(link, 1)
             return await client.upload(items, mission_type=mission_type), await client.download(mission_type)
         finally:

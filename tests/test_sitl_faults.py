@@ -10,6 +10,8 @@ from sitl_mock import LinkFaults, MockFleet
 from sitl_mock.faults import REORDER_HOLD_S, FaultyChannel
 from sitl_mock.probe import Probe
 
+UNGATED = {"arm_ready_s": 0.0, "streams_by_request": False}  # rules these tests are not about
+
 
 def _run_channel(
     faults: LinkFaults, n: int, spacing_s: float = 0.0
@@ -87,7 +89,7 @@ def _both(a: Probe, b: Probe, seconds: float) -> tuple[int, int]:
 
 def test_faults_measured_over_udp():
     """Same fleet, vehicle 1 clean, vehicle 2 lossy then duplicating then reordering (set at run time)."""
-    with MockFleet(count=2, rate_hz=50.0) as fleet:
+    with MockFleet(flight=UNGATED, count=2, rate_hz=50.0) as fleet:
         clean, faulty = Probe(fleet.addresses[0]), Probe(fleet.addresses[1])
         time.sleep(0.1)
         fleet.set_faults(2, LinkFaults(loss=0.5, seed=2))
@@ -109,7 +111,7 @@ def test_faults_measured_over_udp():
 
 
 def test_scripted_drift_moves_the_reported_track():
-    with MockFleet(count=2, speedup=20.0) as fleet:
+    with MockFleet(flight=UNGATED, count=2, speedup=20.0) as fleet:
         fleet.at(1.0, lambda f: f.set_drift(2, 1.0, 0.0))
         for sysid in (1, 2):
             v = fleet.vehicle(sysid)

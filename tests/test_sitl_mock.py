@@ -16,6 +16,9 @@ from gcs_planner.plan import VehiclePlan
 from sitl_mock import DEFAULT_HOME, Failure, MockFleet
 from sitl_mock.probe import Probe
 
+UNGATED = {"arm_ready_s": 0.0, "streams_by_request": False}  # rules these tests are not about
+COMPLETES = {**UNGATED, "final_land_disarms": False}  # a final LAND reports COMPLETE (not ArduCopter)
+
 ARM, TAKEOFF, RTL, SET_MODE, MISSION_START, SET_CURRENT, REBOOT = 400, 22, 20, 176, 300, 224, 246
 ACCEPTED, DENIED, UNSUPPORTED, FAILED = 0, 2, 3, 4
 
@@ -43,7 +46,7 @@ def _mission(home_item: bool) -> tuple[list[MissionItem], np.ndarray]:
 
 @pytest.fixture
 def fleet():
-    with MockFleet(count=1, speedup=25.0) as f:
+    with MockFleet(flight=UNGATED, count=1, speedup=25.0) as f:
         yield f
 
 
@@ -57,7 +60,7 @@ def gcs(fleet):
 
 def test_stream_rates_and_telemetry_fields():
     home = Origin(47.0, 8.0, 500.0)
-    with MockFleet(count=1, speedup=10.0, home=home) as fleet:
+    with MockFleet(flight=UNGATED, count=1, speedup=10.0, home=home) as fleet:
         gcs = Probe(fleet.addresses[0])
         t0 = time.monotonic()
         msgs = gcs.collect(3.0)
@@ -105,7 +108,7 @@ def test_commands_are_acknowledged(fleet, gcs):
 
 
 def test_set_mode_message_and_px4_mode_numbers():
-    with MockFleet(count=1, profile="px4", speedup=10.0) as fleet:
+    with MockFleet(flight=UNGATED, count=1, profile="px4", speedup=10.0) as fleet:
         gcs = Probe(fleet.addresses[0])
         loiter = px4_custom_mode(4, 3)
         assert gcs.command(1, SET_MODE, 1, 4, 3) == ACCEPTED  # PX4: main mode 4 (AUTO), sub 3 (LOITER)
@@ -123,24 +126,29 @@ def test_set_mode_message_and_px4_mode_numbers():
 def test_mission_flown_end_to_end(profile, vehicle_type):
     items, last_target = _mission(home_item=profile == "ardupilot")
     first = 1 if profile == "ardupilot" else 0
-    with MockFleet(count=1, speedup=40.0, profile=profile, vehicle_type=vehicle_type) as fleet:
+    with MockFleet(flight=UNGATED, count=1, speedup=40.0, profile=profile, vehicle_type=vehicle_type) as fleet:
         gcs = Probe(fleet.addresses[0])
         assert gcs.upload(1, items) == 0
         ack_id = fleet.vehicles[0].mission_server.opaque_id(0)
         assert gcs.command(1, ARM, 1) == ACCEPTED
         assert gcs.command(1, MISSION_START, 0, 0) == ACCEPTED
-        reached, current = [], None
+        # ArduCopter's final NAV_LAND ends in a disarm that resets the mission: no ITEM_REACHED of
+        # the LAND, no COMPLETE (AP_Arming_Copter::disarm); the others report both
+        resets = profile == "ardupilot" and vehicle_type == "multirotor"
+        expected = list(range(first, len(items) - int(resets)))
+        reached = []
         deadline = time.monotonic() + 20.0
-        while time.monotonic() < deadline and len(reached) < len(items) - first:
+        while time.monotonic() < deadline and len(reached) < len(expected):
             msg = gcs.recv(["MISSION_ITEM_REACHED", "MISSION_CURRENT"], 1.0)
             if msg is not None and msg.get_type() == "MISSION_ITEM_REACHED":
                 reached.append(msg.seq)
-        assert reached == list(range(first, len(items)))
-        current = gcs.recv("MISSION_CURRENT", 3.0, lambda m: m.mission_state == MissionState.COMPLETE)
+        assert reached == expected
+        state = MissionState.NOT_STARTED if resets else MissionState.COMPLETE
+        current = gcs.recv("MISSION_CURRENT", 5.0, lambda m: m.mission_state == state)
         assert current is not None
         attach_extensions(current, current.get_msgbuf())
         assert current.mission_id == ack_id != 0
-        assert current.total == len(items) - first and current.seq == len(items) - 1
+        assert current.total == len(items) - first and current.seq == (first if resets else len(items) - 1)
         gpi = gcs.recv("GLOBAL_POSITION_INT", 2.0)
         e, n, u = geodetic_to_enu(gpi.lat / 1e7, gpi.lon / 1e7, gpi.alt / 1000, DEFAULT_HOME)
         tolerance = 3.0 if vehicle_type == "multirotor" else 2 * fleet.vehicles[0].airframe.loiter_radius_m
@@ -166,7 +174,7 @@ def test_planner_items_with_delay_fly_close_to_the_plan():
     times = np.array([0.0, 13.0, 26.0, 39.0, 56.0])
     vp = VehiclePlan("a", 1, wps, times, np.array([0, 8, 8, 8, 6.0]), wps, times, takeoff_delay_s=5.0)
     items = plan_to_items(vp, DEFAULT_HOME, "ardupilot")
-    with MockFleet(count=1, speedup=30.0) as fleet:
+    with MockFleet(flight=COMPLETES, count=1, speedup=30.0) as fleet:
         gcs = Probe(fleet.addresses[0])
         assert gcs.upload(1, items) == 0 and gcs.command(1, ARM, 1) == ACCEPTED
         t_before = fleet.sim_time_s
@@ -197,17 +205,15 @@ def test_mission_start_range_and_set_current(fleet, gcs):
     gcs.mav.mission_set_current_send(1, 1, 3)  # the legacy message
     assert gcs.recv("MISSION_CURRENT", 2.0, lambda m: m.seq == 3) is not None
     assert gcs.command(1, ARM, 1) == ACCEPTED
-    assert gcs.command(1, MISSION_START, 2, 3) == ACCEPTED  # run items 2..3 only
+    assert gcs.command(1, MISSION_START, 2, 3) == DENIED  # ArduPilot: only (0, 0) (GCS_MAVLink_Copter.cpp)
+    assert gcs.command(1, MISSION_START, 0, 0) == ACCEPTED  # resumes at the current item, 3
     got = [gcs.recv("MISSION_ITEM_REACHED", 10.0) for _ in range(2)]
-    assert [m.seq for m in got] == [2, 3]
-    done = gcs.recv("MISSION_CURRENT", 3.0, lambda m: m.mission_state == MissionState.COMPLETE)
-    assert done is not None and done.seq == 3
-    assert fleet.vehicles[0].state.airborne  # ended at item 3: holds in the air
+    assert [m.seq for m in got] == [3, 4]
 
 
 def test_reboot_forgets_the_mission_unless_persisted():
     items, _ = _mission(home_item=True)
-    with MockFleet(vehicles=[{"persist_mission": False}, {"persist_mission": True}], speedup=5.0) as fleet:
+    with MockFleet(flight=UNGATED, vehicles=[{"persist_mission": False}, {"persist_mission": True}], speedup=5.0) as fleet:
         for sysid, address in ((1, fleet.addresses[0]), (2, fleet.addresses[1])):
             gcs = Probe(address)
             assert gcs.upload(sysid, items) == 0
@@ -225,7 +231,7 @@ def test_reboot_forgets_the_mission_unless_persisted():
 
 
 def test_sysid_routing_between_vehicles():
-    with MockFleet(count=3, speedup=5.0) as fleet:
+    with MockFleet(flight=UNGATED, count=3, speedup=5.0) as fleet:
         assert len(set(fleet.addresses)) == 3
         gcs = Probe(fleet.addresses[1])
         msgs = gcs.collect(1.2)
@@ -268,7 +274,7 @@ def test_fleet_in_the_callers_loop_with_the_gcs_stack():
             {"profile": "px4"},
             {"profile": "px4", "vehicle_type": "fixed_wing"},
         ]
-        async with MockFleet(vehicles=specs, speedup=60.0) as fleet:
+        async with MockFleet(flight=COMPLETES, vehicles=specs, speedup=60.0) as fleet:
             link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
             try:
                 await link.wait_for(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 3, 3.0)
@@ -294,7 +300,7 @@ def test_fleet_in_the_callers_loop_with_the_gcs_stack():
 
 def test_scripted_mission_failure_and_duplicate_sysids():
     items, _ = _mission(home_item=True)
-    with MockFleet(vehicles=[{"sysid": 7}, {"sysid": 7}], speedup=5.0) as fleet:
+    with MockFleet(flight=UNGATED, vehicles=[{"sysid": 7}, {"sysid": 7}], speedup=5.0) as fleet:
         a, b = Probe(fleet.addresses[0]), Probe(fleet.addresses[1])
         assert {a.recv("HEARTBEAT").get_srcSystem(), b.recv("HEARTBEAT").get_srcSystem()} == {7}
         uids = []

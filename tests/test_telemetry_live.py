@@ -12,6 +12,8 @@ import pytest
 from gcs_planner.geo import geodetic_to_enu
 from gcs_planner.telemetry import FlightLogger, read_flight
 
+UNGATED = {"arm_ready_s": 0.0, "streams_by_request": False}  # rules these tests are not about
+
 fleet_module = pytest.importorskip("sitl_mock.fleet")  # submodule: works with a stale editable install too
 link_module = pytest.importorskip("gcs_planner.mavlink.link")
 
@@ -42,7 +44,7 @@ def test_mock_fleet_over_udp_is_logged_and_shown_live(tmp_path):
     from gcs_planner.telemetry.rerun_views import APPLICATION_ID, LiveRerunLogger
 
     path, rrd = tmp_path / "live.mcap", tmp_path / "live.rrd"
-    with fleet_module.MockFleet(count=len(SYSIDS), speedup=5.0) as fleet:
+    with fleet_module.MockFleet(flight=UNGATED, count=len(SYSIDS), speedup=5.0) as fleet:
         origin = fleet.home
         rec = rr.RecordingStream(APPLICATION_ID, recording_id="live-test")
         rec.save(str(rrd))

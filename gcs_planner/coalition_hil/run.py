@@ -26,7 +26,6 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.coalition_hil.fleet import mock_fleet
 from gcs_planner.coalition_hil.live_legs import (
@@ -61,14 +60,17 @@ from gcs_planner.fly import (
     _take_off_all,
     _TrackRecorder,
     _wait_for_vehicles,
+    vehicle_quirks,
 )
-from gcs_planner.mavlink.command import CommandClient
+from gcs_planner.mavlink.actions import change_speed, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.transfer import Timing
+from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.planning.coalition import load_world, paths, simulate
 from gcs_planner.planning.coalition.track import Leg
@@ -212,7 +214,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
     failures: list[str] = []
     flown_legs: dict[tuple[str, str], Leg] = {}
     fleet = mock_fleet(schedules, scenario.origin, options.speedup)
-    recorder = _TrackRecorder(scenario.origin, True, {s: len(m) - 1 for s, m in missions.items()})
+    recorder = _TrackRecorder(scenario.origin, True, list(missions))
     telemetry = Telemetry(flying)
     with fleet:
         # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
@@ -225,6 +227,9 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                 link.subscribe(recorder.on_frame)
                 link.subscribe(telemetry.on_frame)
                 await _wait_for_vehicles(link, sorted(flying), HEARTBEAT_WAIT_S)
+                quirks = vehicle_quirks(link, sorted(flying))
+                status = VehicleStatus(link, sorted(flying))
+                await request_streams(link, sorted(flying))
                 t_up = time.monotonic()
                 first = await upload_fleet(link, missions, workers=8)
                 bad = [s for s, r in first.items() if not r.ok]
@@ -234,11 +239,11 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                 n_items = sum(len(m) for m in missions.values())
                 timing = {"item_wall_s": (time.monotonic() - t_up) * min(8, len(missions)) / n_items,
                           "plan_wall_s": 0.0, "items": 20, "idle_items": 30}  # fmt: skip
-                await _take_off_all(link, initial, recorder, options.speedup, fly_options)
+                await _take_off_all(link, initial, status, options.speedup, fly_options, quirks)
                 lead_s = 2.0
                 route_t0 = recorder.now_s() + lead_s
                 await _start_routes(
-                    link, initial, missions, options.speedup, logger, lead_s, {s: 0.0 for s in flying}
+                    link, initial, missions, options.speedup, logger, lead_s, {s: 0.0 for s in flying}, quirks
                 )
                 keeper = ScheduleKeeper()
                 current = {vp.sysid: vp for vp in initial.vehicles}
@@ -355,7 +360,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                         timing["item_wall_s"] = 0.5 * timing["item_wall_s"] + 0.5 * per_item
                         timing["items" if kind == "award" else "idle_items"] = len(items)
                         seq = _first_ahead(items, vp, scenario_now() - t_route0, START_AHEAD_S)
-                        await CommandClient(link, sysid).mission_start(seq, len(items) - 1)
+                        await start_mission_at(link, sysid, quirks[sysid], seq, len(items) - 1)
                         current[sysid] = vp
                         keeper.add(vp)
                         if kind == "award":
@@ -410,7 +415,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                             rank = (False, deadline_s(sched.uav, payload.event, now))
                         queue.put_nowait((rank, next(order), kind, sched, payload))
                     if options.keep_schedule:
-                        _keep(link, recorder, keeper, current, route_t0)
+                        _keep(link, recorder, keeper, current, route_t0, quirks)
                     await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
                 try:
                     await asyncio.wait_for(queue.join(), 10.0)
@@ -435,7 +440,7 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
     )
 
 
-def _keep(link, recorder, keeper: ScheduleKeeper, current: dict, route_t0: float) -> None:
+def _keep(link, recorder, keeper: ScheduleKeeper, current: dict, route_t0: float, quirks: dict) -> None:
     """One ScheduleKeeper step: a speed command to each vehicle off its current mission's timing."""
     for sysid, vp in current.items():
         latest = recorder.latest(sysid)
@@ -446,8 +451,4 @@ def _keep(link, recorder, keeper: ScheduleKeeper, current: dict, route_t0: float
             continue
         speed = keeper.speed_command(sysid, t_s - route_t0, position)
         if speed is not None:
-            link.send(
-                mavlink.MAVLink_command_long_message(
-                    sysid, 1, mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 1, speed, -1, 0, 0, 0, 0
-                )
-            )
+            change_speed(link, sysid, quirks[sysid], speed)

@@ -19,7 +19,7 @@ from gcs_planner.commands._mission_cli import (
     vehicle_link,
 )
 from gcs_planner.errors import UserError
-from gcs_planner.mavlink.files import MissionFile, save_mission_file
+from gcs_planner.mavlink.files import MissionFile, save_mission_file, wpl_rows
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.types import MissionType
 from gcs_planner.mavlink.wpl import dumps_wpl
@@ -54,7 +54,7 @@ async def _download(args: argparse.Namespace) -> int:
             lists[mission_type] = await client.download(mission_type=mission_type)
             print_items(lists[mission_type], f"{mission_type.name.lower()}: {len(lists[mission_type])} items")
         home = None
-        if args.file and Path(args.file).suffix.lower() == ".plan" and autopilot != "ardupilot":
+        if args.file and autopilot != "ardupilot":
             home = await home_position(link, args.sysid, args.compid)  # ArduPilot's is item 0
     if args.file and Path(args.file).suffix.lower() == ".plan":
         mf = MissionFile.from_items(
@@ -65,6 +65,9 @@ async def _download(args: argparse.Namespace) -> int:
             rally=lists.get(MissionType.RALLY),
         )
         save_mission_file(args.file, mf, autopilot=autopilot)
+    elif args.file and MISSION_TYPES[args.type] == MissionType.MISSION:
+        mf = MissionFile.from_items(lists[MissionType.MISSION], autopilot, home=home)
+        Path(args.file).write_text(dumps_wpl(wpl_rows(mf)))  # row 0: the home, for every autopilot
     elif args.file:
         Path(args.file).write_text(dumps_wpl(lists[MISSION_TYPES[args.type]]))
     if args.file:

@@ -1,21 +1,27 @@
 """Start a vehicle's mission: optionally upload FILE first, then arm and send MISSION_START.
 
-Order: ArduPilot-style vehicles are armed in GUIDED and then get MISSION_START (which switches
-them to AUTO; ArduCopter refuses to arm in AUTO by default); PX4-style vehicles are armed and then
-get MISSION_START. --no-arm only sends MISSION_START (the vehicle runs the mission once armed).
+Order: ArduCopter is armed in GUIDED and then gets MISSION_START (which switches it to AUTO;
+ArduCopter refuses to arm in AUTO by default); other vehicles are armed and then get
+MISSION_START(0, 0), the only range ArduPilot accepts. Arming waits for the vehicle's pre-arm
+checks (--arm-timeout) and a refusal names the autopilot's own reason. --no-arm only sends
+MISSION_START (the vehicle runs the mission once armed).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import sys
 import time
 
 from gcs_planner.commands._mission_cli import add_connection_arguments, autopilot_of, vehicle_link
 from gcs_planner.commands.upload import prepare
 from gcs_planner.errors import UserError
+from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.preflight import arm_when_ready
+from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,6 +32,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--vehicle", help="vehicle id in plan.json [the one with --sysid]")
     p.add_argument("--scenario", help="scenario file whose fence and rally points to upload too")
     p.add_argument("--no-arm", action="store_true", help="do not arm; only send MISSION_START")
+    p.add_argument(
+        "--arm-timeout",
+        type=float,
+        default=120.0,
+        metavar="S",
+        help="how long to wait for the vehicle's pre-arm checks to pass [120 s]",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -37,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
 async def _start(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
         autopilot = autopilot_of(heartbeat, args.autopilot)
+        quirks = quirks_for(heartbeat.autopilot, heartbeat.type)
+        status = VehicleStatus(link, [args.sysid])
         print(f"vehicle {args.sysid} ({autopilot})")
         print(f"{'step':<16} {'result':<10} {'time_s':>7}")
         steps = []
@@ -48,10 +63,17 @@ async def _start(args: argparse.Namespace) -> int:
                 )
         command = CommandClient(link, args.sysid, args.compid)
         if not args.no_arm:
-            if autopilot == "ardupilot":
-                steps.append(("mode GUIDED", lambda: command.set_mode("GUIDED")))
-            steps.append(("arm", command.arm))
-        steps.append(("mission start", command.mission_start))
+            mode = quirks.start_arm_mode
+            if mode is not None:
+                steps.append((f"mode {mode}", lambda: command.set_mode(mode)))
+
+            def waiting(sysid: int, reason: str) -> None:
+                print(f"  not ready to arm yet: {reason}", file=sys.stderr)
+
+            steps.append(
+                ("arm", lambda: arm_when_ready(link, status, args.sysid, args.arm_timeout, waiting=waiting))
+            )
+        steps.append(("mission start", lambda: command.mission_start(0, 0)))
         for name, step in steps:
             t0 = time.monotonic()
             try:

@@ -49,6 +49,7 @@ class AutopilotQuirks:
     pipelined: bool  # drops items whose seq it does not wait for: items in flight are safe
     modes: dict[str, int] | None  # mode name -> HEARTBEAT custom_mode (None: no named modes)
     arm_mode: str | None  # mode to arm in before a take-off (None: arm in the current mode)
+    start_arm_mode: str | None  # mode to arm in before MISSION_START (ArduCopter refuses to arm in AUTO)
     takeoff: Takeoff
     start_with_range: bool  # MISSION_START(first, last) accepted; else DO_SET_MISSION_CURRENT + (0, 0)
     speed_type: float  # DO_CHANGE_SPEED param1 for schedule keeping
@@ -69,6 +70,7 @@ ARDUCOPTER = AutopilotQuirks(
     pipelined=True,
     modes=ARDUCOPTER_MODES,
     arm_mode="GUIDED",
+    start_arm_mode="GUIDED",
     takeoff=Takeoff.COMMAND_ABOVE_HOME,
     start_with_range=False,
     speed_type=SPEED_GROUNDSPEED,
@@ -84,6 +86,7 @@ ARDUPLANE = AutopilotQuirks(
     pipelined=True,
     modes=ARDUPLANE_MODES,
     arm_mode="TAKEOFF",
+    start_arm_mode=None,
     takeoff=Takeoff.TAKEOFF_MODE,
     start_with_range=False,
     speed_type=SPEED_AIRSPEED,
@@ -99,6 +102,7 @@ PX4 = AutopilotQuirks(
     pipelined=True,
     modes=PX4_MODES,
     arm_mode=None,
+    start_arm_mode=None,
     takeoff=Takeoff.COMMAND_AMSL,
     start_with_range=True,
     speed_type=SPEED_GROUNDSPEED,
@@ -114,6 +118,7 @@ GENERIC = AutopilotQuirks(
     pipelined=False,  # MAVSDK's MissionRawServer stores every item it gets, whatever its seq
     modes=None,
     arm_mode=None,
+    start_arm_mode=None,
     takeoff=Takeoff.COMMAND_ABOVE_HOME,
     start_with_range=True,
     speed_type=SPEED_GROUNDSPEED,

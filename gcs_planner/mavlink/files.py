@@ -35,6 +35,7 @@ __all__ = [
     "plan_mission_file",
     "save_mission_file",
     "select_vehicles",
+    "wpl_rows",
 ]
 
 _TO_FILE = {
@@ -154,7 +155,14 @@ def save_mission_file(path: str | Path, mission_file: MissionFile, autopilot: st
     if path.suffix.lower() == ".plan":
         path.write_text(planfile.dumps_plan(mission_file))
     else:
-        path.write_text(wpl.dumps_wpl(mission_file.items(autopilot)))
+        path.write_text(wpl.dumps_wpl(wpl_rows(mission_file)))
+
+
+def wpl_rows(mission_file: MissionFile) -> list[MissionItem]:
+    """The rows of a WPL file: home at row 0 (zeros when the file has none, as QGroundControl)."""
+    if mission_file.home is None:
+        mission_file = replace(mission_file, home=(0.0, 0.0, 0.0))
+    return mission_file.items("ardupilot")
 
 
 def plan_mission_file(vehicle_plan: VehiclePlan, origin, autopilot: str = "ardupilot") -> MissionFile:

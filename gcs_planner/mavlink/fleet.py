@@ -18,8 +18,9 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
-from gcs_planner.mavlink.enums import Autopilot
 from gcs_planner.mavlink.errors import (
     BusyError,
     DeniedError,
@@ -32,8 +33,10 @@ from gcs_planner.mavlink.errors import (
 )
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.preflight import arm_when_ready
 from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
 __all__ = ["DEFAULT_WORKERS", "RETRYABLE", "VehicleResult", "start_fleet", "upload_fleet"]
 
@@ -131,13 +134,15 @@ async def start_fleet(
     arm: bool = True,
     compid: int = 1,
     workers: int = DEFAULT_WORKERS,
+    arm_timeout_s: float = 120.0,
 ) -> dict[int, VehicleResult]:
-    """Arm (optional) and MAV_CMD_MISSION_START every vehicle, ``workers`` at a time.
+    """Arm (optional, once each vehicle's pre-arm checks pass) and MISSION_START(0, 0) every vehicle.
 
-    ArduPilot-style vehicles are put in GUIDED before arming (ArduCopter refuses to arm in AUTO);
-    MISSION_START then switches them to AUTO. Each command has CommandClient's retries.
+    ArduCopter is put in GUIDED before arming (it refuses to arm in AUTO); MISSION_START then
+    switches it to AUTO. Each command has CommandClient's retries.
     """
     gate = asyncio.Semaphore(workers)
+    status = VehicleStatus(link, list(sysids))
 
     async def one(sysid: int) -> VehicleResult:
         async with gate:
@@ -147,13 +152,20 @@ async def start_fleet(
                 link.check_target(sysid)
                 if arm:
                     info = link.vehicles.get(sysid)
-                    if info is not None and info.autopilot == Autopilot.ARDUPILOTMEGA:
-                        await command.set_mode("GUIDED")
-                    await command.arm()
+                    mode = None if info is None else quirks_for(info.autopilot, info.mav_type).start_arm_mode
+                    if mode is not None:
+                        await command.set_mode(mode)
+                    await arm_when_ready(link, status, sysid, arm_timeout_s)
                 await command.mission_start()
             except MavlinkError as exc:
                 return VehicleResult(sysid, False, 1, time.monotonic() - t0, error=exc)
+            except UserError as exc:  # not ready to arm in time
+                error = MavlinkError(str(exc))
+                return VehicleResult(sysid, False, 1, time.monotonic() - t0, error=error)
             return VehicleResult(sysid, True, 1, time.monotonic() - t0)
 
-    done = await asyncio.gather(*(one(s) for s in sysids))
+    try:
+        done = await asyncio.gather(*(one(s) for s in sysids))
+    finally:
+        status.close()
     return {r.sysid: r for r in done}

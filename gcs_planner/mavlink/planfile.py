@@ -29,7 +29,8 @@ from typing import Any
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.files import MissionFile, MissionFileError, file_frame, item_frame
-from gcs_planner.mavlink.items import e7
+from gcs_planner.mavlink.items import e7, half_away
+from gcs_planner.mavlink.readback import has_position
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
 __all__ = ["dumps_plan", "loads_plan"]
@@ -88,7 +89,8 @@ def _simple_item(it: MissionItem, index: int) -> dict[str, Any]:
         "doJumpId": index + 1,
         "frame": frame,
         "params": [_json_num(p) for p in (it.param1, it.param2, it.param3, it.param4)]
-        + [it.x / 1e7, it.y / 1e7, _json_num(it.z)],
+        + ([it.x / 1e7, it.y / 1e7] if has_position(it.command) else [it.x, it.y])
+        + [_json_num(it.z)],
     }
     if frame in ALTITUDE_MODE:
         d.update(
@@ -228,8 +230,8 @@ def _parse_simple(raw: Any, where: str, path: str) -> MissionItem:
         param2=p[1],
         param3=p[2],
         param4=p[3],
-        x=e7(p[4]),
-        y=e7(p[5]),
+        x=e7(p[4]) if has_position(raw["command"]) else half_away(p[4]),  # params 5/6 raw without a position
+        y=e7(p[5]) if has_position(raw["command"]) else half_away(p[5]),
         z=p[6],
     )
 

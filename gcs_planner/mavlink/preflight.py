@@ -98,7 +98,7 @@ async def arm_when_ready(
                 if exc.result not in _REFUSALS:
                     raise
                 await asyncio.sleep(min(0.3, 3.0 / time_scale))  # the reason follows the ACK
-                reason = status.reason(sysid, texts_before) or f"arming {exc.result.name}"
+                reason = status.reason(sysid, texts_before) or f"arming {CommandResult(exc.result).name}"
         if loop.time() >= deadline:
             raise UserError(f"vehicle {sysid} could not arm within {timeout_s:.0f} s: {reason}")
         if waiting is not None:

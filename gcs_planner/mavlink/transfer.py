@@ -393,9 +393,10 @@ class UploadTransfer(Transfer):
         if result == MissionResult.INVALID_SEQUENCE and self.phase in (Phase.ITEMS, Phase.FINAL_ACK):
             self.stats.invalid_sequence_acks += 1
             return []
-        if result == MissionResult.ERROR and self.phase is Phase.FINAL_ACK and self._retries > 0:
-            # ArduPilot's answer to a resent last item once the upload is complete: the first
-            # ACK was lost, the mission may be stored; mission.py reads it back to know
+        if result == MissionResult.ERROR and self._highest_sent == len(self.items) - 1 >= 0:
+            # ArduPilot's answer to an item that arrives once the upload is complete (the last item
+            # resent after a lost ACK, or a duplicate): the mission may be stored; mission.py reads
+            # it back to know
             error = error_for_result(
                 result, sysid=self.sysid, mission_type=self.mission_type, operation=self.operation
             )

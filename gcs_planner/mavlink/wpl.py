@@ -10,7 +10,11 @@ Choices:
   written as Python's shortest exact float repr. Reading rounds degrees to degE7 half away from
   zero, so any file written here reads back to the same MissionItems.
 - Frames are stored as the float frame numbers Mission Planner uses (see gcs_planner.mavlink.files).
-- Local frames store x/y in metres (MISSION_ITEM_INT holds metres x 1e4).
+- Local frames store x/y in metres (MISSION_ITEM_INT holds metres x 1e4); commands without a
+  position (MAVLink hasLocation="false": DO_DIGICAM_CONTROL, RTL, ...) store params 5/6 as the
+  plain numbers MISSION_ITEM_INT carries, unscaled (MAVProxy sends them so, ArduPilot reads them so).
+- Row 0 is the planned home for every autopilot (QGroundControl's reading); a list written for a
+  vehicle without a home item gets one (the planned home, or zeros when there is none, as QGC).
 - The INDEX column is informational: rows are numbered in file order on reading.
 - The mission type is not in the file: a file of fence commands (5000-5004) reads as a fence,
   of rally points (5100) as rally points, anything else as a mission.
@@ -24,6 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.files import MissionFile, MissionFileError, file_frame, item_frame, mission_type_of
 from gcs_planner.mavlink.items import half_away
+from gcs_planner.mavlink.readback import has_position
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
 __all__ = ["HEADER", "dumps_wpl", "loads_wpl", "loads_wpl_items"]
@@ -44,13 +49,18 @@ LOCAL_FRAMES = frozenset(
 COLUMNS = ("index", "current", "frame", "command", "param1", "param2", "param3", "param4", "x", "y", "z")
 
 
-def _scale(frame: int) -> tuple[float, int]:
-    """(int units per file unit, decimals) for x/y: degE7 in global frames, metres x 1e4 in local ones."""
+def _scale(frame: int, command: int) -> tuple[float, int]:
+    """(int units per file unit, decimals) for x/y: degE7 in global frames, metres x 1e4 in local
+    ones, the plain number for a command without a position (as MAVProxy and ArduPilot read it)."""
+    if not has_position(command):
+        return 1.0, 0
     return (1e4, 4) if frame in LOCAL_FRAMES else (1e7, 7)
 
 
 def _fixed(value: int, decimals: int) -> str:
     """Integer ``value`` x 10^-decimals as an exact decimal string (no float rounding)."""
+    if decimals == 0:
+        return f"{int(value)}.0"
     sign = "-" if value < 0 else ""
     whole, frac = divmod(abs(int(value)), 10**decimals)
     return f"{sign}{whole}.{frac:0{decimals}d}"
@@ -64,7 +74,7 @@ def dumps_wpl(items: list[MissionItem]) -> str:
     """Items (as uploaded: ArduPilot lists include home at seq 0) -> QGC WPL 110 text."""
     lines = [HEADER]
     for i, it in enumerate(items):
-        _, decimals = _scale(it.frame)
+        _, decimals = _scale(it.frame, it.command)
         row = [
             str(i),
             str(int(it.current)),
@@ -101,7 +111,7 @@ def loads_wpl_items(text: str, where: str = "WPL file") -> list[MissionItem]:
     items = []
     for seq, (lineno, f) in enumerate(rows):
         frame = item_frame(_int(f[2], "frame", lineno, where))
-        scale, _ = _scale(frame)
+        scale, _ = _scale(frame, _int(f[3], "command", lineno, where))
         x, y = (_float(f[k], COLUMNS[k], lineno, where) for k in (8, 9))
         if not (math.isfinite(x) and math.isfinite(y)):
             raise MissionFileError(f"{where}: line {lineno}: x/y must be finite, got {f[8]!r}, {f[9]!r}")
@@ -126,14 +136,16 @@ def loads_wpl_items(text: str, where: str = "WPL file") -> list[MissionItem]:
 
 
 def loads_wpl(text: str, autopilot: str = "ardupilot", where: str = "WPL file") -> MissionFile:
-    """QGC WPL 110 text -> MissionFile; for ArduPilot, row 0 is the home position."""
+    """QGC WPL 110 text -> MissionFile; row 0 of a mission is the planned home, whatever the
+    autopilot (QGroundControl's MissionController::_loadTextMissionFile reads every WPL 110 file so),
+    so a PX4 upload leaves it out. ``autopilot`` is kept for callers; it changes nothing."""
     items = loads_wpl_items(text, where)
     kind = items[0].mission_type if items else MissionType.MISSION
     if kind == MissionType.FENCE:
         return MissionFile(fence=items)
     if kind == MissionType.RALLY:
         return MissionFile(rally=items)
-    return MissionFile.from_items(items, autopilot=autopilot)
+    return MissionFile.from_items(items, autopilot="ardupilot")
 
 
 def _int(text: str, name: str, lineno: int, where: str) -> int:
