@@ -347,6 +347,8 @@ async def fly(
             finally:
                 if quirks and (aborted is not None or not all(t.done for t in status.tracks.values())):
                     end_states = await asyncio.shield(safe_end(link, status, quirks))
+                elif quirks:  # every mission done: say where each vehicle ended, command nothing
+                    end_states = {s: _end_state(link, s) for s in sysids}
                     logger.log_event(
                         {"event": "safe_end", "states": {str(k): v for k, v in end_states.items()}}
                     )
@@ -382,6 +384,11 @@ async def fly(
         rrd_path = options.out_dir / "flight.rrd"
         log_flight_to_rerun(read_flight(mcap_path), rrd_path)
     return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, time.monotonic() - t_wall, end_states)
+
+
+def _end_state(link: MavlinkLink, sysid: int) -> str:
+    info = link.vehicles.get(sysid)
+    return "holding (mission complete)" if info is not None and info.armed else "landed (disarmed)"
 
 
 def _said(end_states: dict[int, str]) -> str:

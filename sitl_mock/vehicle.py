@@ -129,7 +129,7 @@ class MockVehicle:
         self.link = VehicleLink(
             sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer, signing_key
         )
-        self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may switch rules off
+        self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
         self.params = dict(self.flight.params)
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission

@@ -149,7 +149,8 @@ def test_wpl_row_0_is_the_home_and_px4_gets_the_rows_after_it(fleet, tmp_path, c
     its feasibility check finds the take-off first (a home waypoint before it is rejected)."""
     plan = Plan.load(make_plan(tmp_path, sysids=(2,)))
     items = plan_to_items(plan.vehicles[0], ORIGIN, "px4")
-    home = MissionItem(0, 0, 16, x=deg_to_e7(ORIGIN.lat_deg).item(), y=deg_to_e7(ORIGIN.lon_deg).item(), z=488.0)
+    lat, lon = deg_to_e7([ORIGIN.lat_deg, ORIGIN.lon_deg]).tolist()
+    home = MissionItem(0, 0, 16, x=lat, y=lon, z=488.0)
     (tmp_path / "m.waypoints").write_text(dumps_wpl([home, *items]))
     argv = ["--connect", url(fleet, 2), "--sysid", "2"]
     assert main(["upload", *argv, str(tmp_path / "m.waypoints")]) == 0
@@ -159,7 +160,9 @@ def test_wpl_row_0_is_the_home_and_px4_gets_the_rows_after_it(fleet, tmp_path, c
     assert main(["download", *argv, str(tmp_path / "back.txt")]) == 0
     back = load_mission_file(tmp_path / "back.txt")
     assert back.items("px4") == [readback.PX4(it) for it in items]
-    assert back.home == pytest.approx((ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3)  # HOME_POSITION
+    assert back.home == pytest.approx(
+        (ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3
+    )
 
 
 def test_vehicle_refusal_is_one_line_and_keeps_the_old_mission(fleet, tmp_path, capsys):

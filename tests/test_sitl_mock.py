@@ -126,7 +126,9 @@ def test_set_mode_message_and_px4_mode_numbers():
 def test_mission_flown_end_to_end(profile, vehicle_type):
     items, last_target = _mission(home_item=profile == "ardupilot")
     first = 1 if profile == "ardupilot" else 0
-    with MockFleet(flight=UNGATED, count=1, speedup=40.0, profile=profile, vehicle_type=vehicle_type) as fleet:
+    with MockFleet(
+        flight=UNGATED, count=1, speedup=40.0, profile=profile, vehicle_type=vehicle_type
+    ) as fleet:
         gcs = Probe(fleet.addresses[0])
         assert gcs.upload(1, items) == 0
         ack_id = fleet.vehicles[0].mission_server.opaque_id(0)
@@ -213,7 +215,9 @@ def test_mission_start_range_and_set_current(fleet, gcs):
 
 def test_reboot_forgets_the_mission_unless_persisted():
     items, _ = _mission(home_item=True)
-    with MockFleet(flight=UNGATED, vehicles=[{"persist_mission": False}, {"persist_mission": True}], speedup=5.0) as fleet:
+    with MockFleet(
+        flight=UNGATED, vehicles=[{"persist_mission": False}, {"persist_mission": True}], speedup=5.0
+    ) as fleet:
         for sysid, address in ((1, fleet.addresses[0]), (2, fleet.addresses[1])):
             gcs = Probe(address)
             assert gcs.upload(sysid, items) == 0

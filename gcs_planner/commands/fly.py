@@ -141,7 +141,7 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
     print(format_report(result.reports))
     if result.end_states:
-        print("safe end: " + ", ".join(f"sysid {s} {what}" for s, what in sorted(result.end_states.items())))
+        print("end: " + ", ".join(f"sysid {s} {what}" for s, what in sorted(result.end_states.items())))
     print(
         f"log: {result.mcap_path}  (open in Foxglove, or `gcs-planner replay {result.mcap_path} --rrd x.rrd`)"
     )

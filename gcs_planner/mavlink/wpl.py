@@ -111,7 +111,11 @@ def loads_wpl_items(text: str, where: str = "WPL file") -> list[MissionItem]:
     items = []
     for seq, (lineno, f) in enumerate(rows):
         frame = item_frame(_int(f[2], "frame", lineno, where))
-        scale, _ = _scale(frame, _int(f[3], "command", lineno, where))
+        command = _int(f[3], "command", lineno, where)
+        global_frame = frame in (0, 3, 5, 6, 10, 11)
+        if not has_position(command) and global_frame and mission_type == MissionType.MISSION:
+            frame = mavlink.MAV_FRAME_MISSION  # a command without a position has no frame (PX4 insists)
+        scale, _ = _scale(frame, command)
         x, y = (_float(f[k], COLUMNS[k], lineno, where) for k in (8, 9))
         if not (math.isfinite(x) and math.isfinite(y)):
             raise MissionFileError(f"{where}: line {lineno}: x/y must be finite, got {f[8]!r}, {f[9]!r}")

@@ -1,0 +1,168 @@
+"""The behaviours of real ArduCopter, ArduPlane and PX4 (docs/real-autopilots.md), as the mock
+plays them by default, and the tool's answer to each: fly, upload --verify, clear, lost ACKs."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import pytest
+
+import sitl_mock
+from gcs_planner.cli import main
+from gcs_planner.fly import FlyOptions, fly
+from gcs_planner.geo import Origin
+from gcs_planner.mavlink.command import CommandClient
+from gcs_planner.mavlink.errors import CommandError
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.preflight import arm_when_ready
+from gcs_planner.mavlink.vehicle_status import VehicleStatus
+from gcs_planner.mavlink.wpl import loads_wpl
+from gcs_planner.planning import plan_scenario
+from gcs_planner.scenario import load_scenario
+from sitl_mock.mission_server import Failure
+
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
+ORIGIN = Origin(47.397742, 8.545594, 488.0)
+# positions, a speed change, yaw (CONDITION_YAW; PX4 has none: a waypoint's yaw), loiter time,
+# a camera shot (DIGICAM_CONTROL x = shooting command 1) and RTL; row 0 is the home
+MIXED = """QGC WPL 110
+0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1
+1\t0\t3\t22\t0\t0\t0\t0\t47.397742\t8.545594\t20.0\t1
+2\t0\t3\t16\t2.5\t3\t0\t45\t47.398742\t8.545594\t25.34567\t1
+3\t0\t3\t178\t1\t8\t-1\t0\t0\t0\t0\t1
+{yaw}
+5\t0\t3\t19\t5\t0\t40\t0\t47.398742\t8.546594\t25\t1
+6\t0\t3\t203\t0\t0\t0\t0\t1\t0\t0\t1
+7\t0\t3\t20\t0\t0\t0\t0\t0\t0\t0\t1
+"""
+YAW = {
+    "ardupilot": "4\t0\t3\t115\t90\t20\t1\t0\t0\t0\t0\t1",
+    "px4": "4\t0\t3\t16\t0\t0\t0\t-90\t47.399\t8.546\t25\t1",
+}
+PROFILES = [("ardupilot", "multirotor"), ("ardupilot", "fixed_wing"), ("px4", "multirotor")]
+
+
+def _fly(scenario_name: str, autopilot: str, out: Path, **kw):
+    scenario = load_scenario(MISSIONS / scenario_name)
+    plan = plan_scenario(scenario)
+    options = FlyOptions(out_dir=out, speedup=20.0, autopilot=autopilot, rrd=False, **kw)
+    return asyncio.run(fly(scenario, plan, options))
+
+
+@pytest.mark.parametrize(
+    ("scenario", "autopilot"),
+    [("straight_4uav.toml", "px4"), ("straight_2fw.toml", "ardupilot"), ("straight_2fw.toml", "px4")],
+)
+def test_fly_passes_against_each_autopilots_real_behaviour(scenario, autopilot, tmp_path):
+    result = _fly(scenario, autopilot, tmp_path)
+    assert result.passed, [(r.sysid, r.failures) for r in result.reports]
+    assert all(r.completed for r in result.reports)
+    assert set(result.end_states.values()) <= {"landed (disarmed)", "holding (mission complete)"}
+
+
+def test_a_failing_fly_leaves_every_vehicle_landed_or_returning_and_says_so(tmp_path):
+    drift = {2: (0.0, 3.0)}
+    result = _fly(
+        "straight_4uav.toml",
+        "ardupilot",
+        tmp_path,
+        drift_mps=drift,
+        max_cross_track_m=5.0,
+        timeout_factor=0.6,
+    )
+    assert not result.passed
+    assert set(result.end_states) == {1, 2, 3, 4}
+    assert all(s in ("landed (disarmed)", "returning (RTL)") for s in result.end_states.values()), (
+        result.end_states
+    )
+
+
+def _fleet(profile: str, vehicle_type: str = "multirotor", **kw):
+    return sitl_mock.MockFleet(
+        count=1, profile=profile, vehicle_type=vehicle_type, home=ORIGIN, speedup=20.0, **kw
+    )
+
+
+def test_arducopter_refuses_to_arm_until_ready_and_the_tool_waits_with_its_reason():
+    async def run():
+        async with _fleet("ardupilot") as fleet:
+            link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
+            try:
+                await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 5.0)
+                with pytest.raises(CommandError, match="FAILED"):
+                    await CommandClient(link, 1, retries=0).arm()
+                status = VehicleStatus(link, [1])
+                reasons = []
+                await arm_when_ready(link, status, 1, 120.0, 20.0, lambda s, r: reasons.append(r))
+                assert "Need Position Estimate" in reasons[0] and fleet.vehicles[0].armed
+                with pytest.raises(CommandError, match="DENIED"):  # ArduPilot: MISSION_START(0, 0) only
+                    await CommandClient(link, 1).mission_start(1, 3)
+            finally:
+                await link.close()
+
+    asyncio.run(run())
+
+
+@pytest.mark.parametrize(("profile", "vehicle_type"), PROFILES)
+def test_upload_verify_passes_on_a_mixed_mission_and_clear_all_clears_all_three(
+    profile, vehicle_type, tmp_path, capsys
+):
+    path = tmp_path / "mixed.waypoints"
+    path.write_text(MIXED.format(yaw=YAW[profile]))
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(_SCENARIO)
+    with _fleet(profile, vehicle_type) as fleet:
+        host, port = fleet.addresses[0]
+        argv = ["--connect", f"udpout:{host}:{port}", "--sysid", "1"]
+        assert main(["upload", *argv, str(path), "--scenario", str(scenario), "--verify"]) == 0
+        out = capsys.readouterr().out
+        assert out.count(" yes") == 3, out
+        server = fleet.vehicle(1).mission_server
+        camera = [it for it in server.items() if it.command == 203]
+        assert [it.x for it in camera] == [1]  # params 5/6 of a positionless command go unscaled
+        assert main(["clear", *argv, "--type", "all"]) == 0
+        assert server.count(1) == 0 and server.count(2) == 0 and server.count(0) <= 1  # ArduPilot keeps home
+
+
+@pytest.mark.parametrize("profile", ["ardupilot", "px4"])
+def test_a_lost_final_ack_ends_in_success_after_a_read_back(profile):
+    items = loads_wpl(MIXED.format(yaw=YAW[profile])).items("ardupilot" if profile == "ardupilot" else "px4")
+
+    async def run():
+        async with _fleet(profile) as fleet:
+            fleet.set_mission_failure(1, Failure.WRITE_FINAL_ACK_NO_RESPONSE)
+            link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
+            try:
+                await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 5.0)
+                result = await MissionClient(link, 1).upload(items)
+                assert result.ack_lost and result.verified
+            finally:
+                await link.close()
+
+    asyncio.run(run())
+
+
+_SCENARIO = """
+name = "fence"
+[origin]
+lat_deg = 47.397742
+lon_deg = 8.545594
+alt_m = 488.0
+[planner]
+name = "straight"
+[[vehicles]]
+id = "a"
+sysid = 1
+start = [0.0, 0.0, 0.0]
+goal = [200.0, 0.0, 20.0]
+[[obstacles.cylinders]]
+x = 100.0
+y = 40.0
+radius_m = 10.0
+z_max_m = 50.0
+[bounds]
+x = [-50.0, 300.0]
+y = [-100.0, 100.0]
+"""
