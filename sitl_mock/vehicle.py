@@ -456,14 +456,14 @@ class MockVehicle:
 
     def _cmd_mission_start(self, p1: float, p2: float, *_: float) -> CommandResult:
         nav = self._nav
+        first, last = int(p1), int(p2)
+        if not self.flight.start_range and (first or last):
+            return CommandResult.DENIED  # ArduPilot: only (0, 0), then it resumes at the current item
         if not nav.has_mission:
             self.statustext("Mission start: no mission", mavlink.MAV_SEVERITY_WARNING)
             return CommandResult.FAILED
         if self.mission_rejected:
             return CommandResult.DENIED
-        first, last = int(p1), int(p2)
-        if not self.flight.start_range and (first or last):
-            return CommandResult.DENIED  # ArduPilot: only (0, 0), then it resumes at the current item
         count = len(nav.items)
         first_seq = None if first == 0 else first
         last_seq = None if last == 0 else last
