@@ -349,9 +349,9 @@ async def fly(
                     end_states = await asyncio.shield(safe_end(link, status, quirks))
                 elif quirks:  # every mission done: say where each vehicle ended, command nothing
                     end_states = {s: _end_state(link, s) for s in sysids}
-                    logger.log_event(
-                        {"event": "safe_end", "states": {str(k): v for k, v in end_states.items()}}
-                    )
+                if end_states:
+                    states = {str(k): v for k, v in end_states.items()}
+                    logger.log_event({"event": "safe_end" if aborted else "end", "states": states})
                 status.close()
                 await link.close()
     finally:
@@ -455,11 +455,12 @@ async def _take_off_all(
     deadline = time.monotonic() + climb_s * options.timeout_factor / speedup + 10.0
     while time.monotonic() < deadline and late():
         await asyncio.sleep(0.05)
-    for task in climbs:
-        task.cancel() if late() else await task
     if late():
+        for task in climbs:
+            task.cancel()
         seen = {s: status.tracks[s].rel_alt_m for s in late()}
         raise UserError(f"sysid {late()} did not reach take-off altitude in time (relative altitude {seen})")
+    await asyncio.gather(*climbs)
 
 
 def _accel_lead_s(vp, accel_mps2: float) -> float:

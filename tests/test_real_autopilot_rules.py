@@ -7,6 +7,7 @@ import asyncio
 from pathlib import Path
 
 import pytest
+from test_cli_mission import SCENARIO
 
 import sitl_mock
 from gcs_planner.cli import main
@@ -112,7 +113,7 @@ def test_upload_verify_passes_on_a_mixed_mission_and_clear_all_clears_all_three(
     path = tmp_path / "mixed.waypoints"
     path.write_text(MIXED.format(yaw=YAW[profile]))
     scenario = tmp_path / "s.toml"
-    scenario.write_text(_SCENARIO)
+    scenario.write_text(SCENARIO)  # bounds and a cylinder: fence and rally lists
     with _fleet(profile, vehicle_type) as fleet:
         host, port = fleet.addresses[0]
         argv = ["--connect", f"udpout:{host}:{port}", "--sysid", "1"]
@@ -142,27 +143,3 @@ def test_a_lost_final_ack_ends_in_success_after_a_read_back(profile):
                 await link.close()
 
     asyncio.run(run())
-
-
-_SCENARIO = """
-name = "fence"
-[origin]
-lat_deg = 47.397742
-lon_deg = 8.545594
-alt_m = 488.0
-[planner]
-name = "straight"
-[[vehicles]]
-id = "a"
-sysid = 1
-start = [0.0, 0.0, 0.0]
-goal = [200.0, 0.0, 20.0]
-[[obstacles.cylinders]]
-x = 100.0
-y = 40.0
-radius_m = 10.0
-z_max_m = 50.0
-[bounds]
-x = [-50.0, 300.0]
-y = [-100.0, 100.0]
-"""

@@ -14,6 +14,7 @@ from enum import StrEnum
 
 from gcs_planner.mavlink import readback
 from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot
+from gcs_planner.mavlink.items import SPEED_AIRSPEED, SPEED_GROUNDSPEED
 
 __all__ = [
     "ARDUCOPTER",
@@ -29,7 +30,6 @@ __all__ = [
 
 # MAV_TYPE values ArduPlane reports: FIXED_WING 1 and the VTOL types 19..25 (QuadPlanes)
 _PLANE_TYPES = frozenset({1, *range(19, 26)})
-SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0
 
 
 class Takeoff(StrEnum):

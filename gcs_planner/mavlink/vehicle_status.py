@@ -36,7 +36,6 @@ class VehicleTrack:
 
     texts: collections.deque = field(default_factory=lambda: collections.deque(maxlen=TEXTS_KEPT))
     prearm_ok: bool | None = None  # None: SYS_STATUS not seen or the bit not reported
-    sys_status_seen: bool = False
     rel_alt_m: float | None = None
     home_amsl_m: float | None = None  # GLOBAL_POSITION_INT alt - relative_alt, or HOME_POSITION
     seq: int | None = None
@@ -75,7 +74,6 @@ class VehicleStatus:
             track.texts.append(msg.text.rstrip("\x00"))
             track.text_count += 1
         elif kind == "SYS_STATUS":
-            track.sys_status_seen = True
             if msg.onboard_control_sensors_present & PREARM_BIT:
                 track.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_BIT)
         elif kind == "HOME_POSITION":
