@@ -100,7 +100,9 @@ def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_pa
     assert len(awards) == 10 and all(u["ok"] for u in result.uploads)
     strike_s = result.strikes[0].awarded_s
     for u in awards:
-        assert u["award_t_s"] <= u["upload_start_s"] < u["upload_end_s"] < u["t0_s"] + 1.0, u
+        # scenario time advances with position reports (~0.1 s apart): a fast upload may start and
+        # end within one report
+        assert u["award_t_s"] <= u["upload_start_s"] <= u["upload_end_s"] < u["t0_s"] + 1.0, u
         assert u["t0_s"] < strike_s - 10.0, u
         assert u["prediction_error_m"] < 60.0, u  # predicted vs flown pose at the leg start
         t, p = result.tracks[u["sysid"]]
