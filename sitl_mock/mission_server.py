@@ -40,8 +40,8 @@ from enum import StrEnum
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.mavlink.dialect import has_position
 from gcs_planner.mavlink.enums import MissionResult, MissionState
-from gcs_planner.mavlink.readback import has_position
 from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
 from gcs_planner.mavlink.wire import MissionAckMessage, MissionCountMessage, MissionCurrentMessage
 from sitl_mock.profiles import AutopilotProfile
@@ -387,7 +387,7 @@ class MissionServer:
         item = MissionItem.from_message(msg)
         if msg.frame not in _KNOWN_FRAMES:
             return item, MissionResult.UNSUPPORTED_FRAME
-        if msg.command not in mavlink.enums["MAV_CMD"]:
+        if msg.command not in mavlink.enums["MAV_CMD"] and msg.command not in self.profile.extra_commands:
             return item, MissionResult.UNSUPPORTED
         if msg.frame in GLOBAL_FRAMES and (item.x or item.y):
             if abs(item.x) > 90 * 10**7:

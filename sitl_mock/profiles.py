@@ -145,6 +145,7 @@ class AutopilotProfile:
     clear_all_types: bool = True  # MISSION_CLEAR_ALL with mission_type ALL (255) understood
     error_on_stray_item: bool = False  # an item with no upload running -> MISSION_ACK(ERROR)
     mission_frame_for_positionless: bool = False  # PX4: positionless commands only in MAV_FRAME_MISSION
+    extra_commands: frozenset[int] = frozenset()  # mission commands it has beyond the pinned dialect
 
     def custom_mode(self, mode: str, vehicle_type: str = "multirotor") -> int:
         """HEARTBEAT custom_mode of a mode name; ValueError naming the mode if it does not exist."""
@@ -179,6 +180,9 @@ ARDUPILOT = AutopilotProfile(
     flight={"multirotor": ARDUCOPTER_FLIGHT, "fixed_wing": ARDUPLANE_FLIGHT},
     clear_all_types=False,  # GCS_Common.cpp: no protocol for MAV_MISSION_TYPE_ALL -> UNSUPPORTED
     error_on_stray_item=True,  # MissionItemProtocol::handle_mission_item: not receiving -> ERROR
+    # ArduPilot master (24a84a47) flies these in its own autotest missions (ConditionLocation,
+    # DO_CHANGE_RADIUS, HomeCircleInclusionFence); pymavlink 2.4.50's ardupilotmega lacks them
+    extra_commands=frozenset({116, 219, 5005}),
 )
 
 PX4 = AutopilotProfile(

@@ -35,8 +35,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.mavlink.dialect import has_position
 from gcs_planner.mavlink.enums import CommandResult, MissionState, px4_custom_mode
-from gcs_planner.mavlink.readback import has_position
 from gcs_planner.mavlink.signing import NO_KEY
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.wire import MissionCurrentMessage

@@ -15,7 +15,7 @@ import pytest
 from gcs_planner.cli import main
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink import readback
-from gcs_planner.mavlink.files import load_mission_file
+from gcs_planner.mavlink.files import in_file_frames, load_mission_file
 from gcs_planner.mavlink.items import deg_to_e7, plan_to_items
 from gcs_planner.mavlink.mission import compare_items
 from gcs_planner.mavlink.types import MissionItem
@@ -69,12 +69,12 @@ def test_export_qgc_and_wpl(tmp_path, capsys):
     assert "uav1" in table and "uav2" in table and "uav1.plan" in table
     plan = Plan.load(plan_path)
     mf = load_mission_file(out / "uav2.plan")
-    assert mf.items("ardupilot") == plan_to_items(plan.vehicles[1], ORIGIN, "ardupilot")
+    assert mf.items("ardupilot") == in_file_frames(plan_to_items(plan.vehicles[1], ORIGIN, "ardupilot"))
     assert len(mf.fence) == 5 and len(mf.rally) == 1  # 4 bound vertices + 1 cylinder; 1 vehicle start
     assert main(["export", str(plan_path), "--format", "wpl", "--autopilot", "px4", "--vehicle", "uav1",
                  "-o", str(out)]) == 0  # fmt: skip
-    assert load_mission_file(out / "uav1.waypoints", autopilot="px4").items("px4") == plan_to_items(
-        plan.vehicles[0], ORIGIN, "px4"
+    assert load_mission_file(out / "uav1.waypoints", autopilot="px4").items("px4") == in_file_frames(
+        plan_to_items(plan.vehicles[0], ORIGIN, "px4")
     )
     assert not (out / "uav2.waypoints").exists()
 
@@ -159,7 +159,7 @@ def test_wpl_row_0_is_the_home_and_px4_gets_the_rows_after_it(fleet, tmp_path, c
     assert not fleet.call(lambda: fleet.vehicle(2).mission_rejected)
     assert main(["download", *argv, str(tmp_path / "back.txt")]) == 0
     back = load_mission_file(tmp_path / "back.txt")
-    assert back.items("px4") == [readback.PX4(it) for it in items]
+    assert back.items("px4") == in_file_frames([readback.PX4(it) for it in items])  # 6 is written as 3
     assert back.home == pytest.approx(
         (ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3
     )
@@ -230,7 +230,10 @@ def test_fleet_upload_from_plan_json(fleet, tmp_path, capsys):
         main(["upload", *connects, "--sysid", "all", str(plan_path)]) == 2
     )  # vehicle 3 has room for 4 items
     captured = capsys.readouterr()
-    rows = [line.split() for line in captured.out.splitlines()[1:]]
+    notes = [line for line in captured.out.splitlines() if line.startswith("note:")]
+    assert notes == [f"note: {t}: not in the file; the vehicle's list is kept (--clear-absent clears it)"
+                     for t in ("fence", "rally")]  # fmt: skip
+    rows = [line.split() for line in captured.out.splitlines()[3:]]
     assert [(r[0], r[1], r[3]) for r in rows] == [
         ("1", "mission", "ACCEPTED"),
         ("2", "mission", "ACCEPTED"),

@@ -22,7 +22,7 @@ from mavsdk.plugins.mission_raw import MissionRaw  # noqa: E402
 from mavsdk.plugins.mission_raw_server import MissionRawServer  # noqa: E402
 
 from gcs_planner.geo import Origin  # noqa: E402
-from gcs_planner.mavlink.files import file_frame, plan_mission_file  # noqa: E402
+from gcs_planner.mavlink.files import in_file_frames, plan_mission_file  # noqa: E402
 from gcs_planner.mavlink.items import plan_to_items  # noqa: E402
 from gcs_planner.mavlink.planfile import dumps_plan  # noqa: E402
 from gcs_planner.mavlink.types import MissionItem  # noqa: E402
@@ -119,10 +119,10 @@ def mavsdk_pair():
 def test_mavsdk_imports_our_plan_and_wpl_files(mavsdk_pair, autopilot):
     _, raw = mavsdk_pair
     vp = vehicle_plan(takeoff_delay_s=5.0, final_action="rtl")
-    items = plan_to_items(vp, ORIGIN, autopilot)
-    as_in_files = [replace(it, frame=file_frame(it.frame)) for it in items]  # MAVSDK keeps the files' frames
+    as_in_files = in_file_frames(plan_to_items(vp, ORIGIN, autopilot))  # MAVSDK keeps the files' frames
     wpl = [
-        to_ours(it) for it in raw.import_mission_planner_mission_from_string(dumps_wpl(items)).mission_items
+        to_ours(it)
+        for it in raw.import_mission_planner_mission_from_string(dumps_wpl(as_in_files)).mission_items
     ]
     assert wpl == as_in_files
     imported = raw.import_qgroundcontrol_mission_from_string(

@@ -176,7 +176,7 @@ def test_valid_lists_pass():
         (3, {"z": math.nan}, "z"),
         (3, {"z": math.inf}, "z"),
         (3, {"param2": math.inf}, "param2"),
-        (3, {"command": 4242}, "command"),  # unknown MAV_CMD
+        (3, {"command": 70000}, "command"),  # not a uint16 (an unknown id is passed through)
         (3, {"frame": 99}, "frame"),
         (3, {"seq": 7}, "seq"),
         (3, {"current": 1}, "current"),  # second current item

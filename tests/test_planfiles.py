@@ -20,14 +20,15 @@ from gcs_planner.geo import Origin  # noqa: E402
 from gcs_planner.mavlink.files import (  # noqa: E402
     MissionFile,
     MissionFileError,
+    in_file_frames,
     load_mission_file,
     plan_mission_file,
     save_mission_file,
 )
 from gcs_planner.mavlink.items import plan_to_items, scenario_fence_items, scenario_rally_items  # noqa: E402
-from gcs_planner.mavlink.planfile import dumps_plan, loads_plan  # noqa: E402
+from gcs_planner.mavlink.planfile import dumps_plan, loads_plan, plan_losses  # noqa: E402
 from gcs_planner.mavlink.types import MissionItem, MissionType  # noqa: E402
-from gcs_planner.mavlink.wpl import dumps_wpl, loads_wpl, loads_wpl_items  # noqa: E402
+from gcs_planner.mavlink.wpl import dumps_wpl, loads_wpl, loads_wpl_items, wpl_losses  # noqa: E402
 from gcs_planner.plan import VehiclePlan  # noqa: E402
 from gcs_planner.scenario import parse_scenario  # noqa: E402
 
@@ -82,13 +83,17 @@ def test_wpl_keeps_odd_values():
     ]
     back = loads_wpl_items(dumps_wpl(items))
     assert back[0] == items[0] and back[2:] == items[2:]
-    assert math.isnan(back[1].param2) and replace(back[1], param2=0.0) == replace(items[1], param2=0.0)
+    # NaN is written as 0 (Mission Planner reads no 'nan', QGC no 'NaN'), and the writer says so
+    assert back[1] == replace(items[1], param2=0.0)
+    (loss,) = wpl_losses(MissionFile.from_items(items))
+    assert loss.fields == ("param2",) and loss.indexes == (0,) and "written as 0" in str(loss)
 
 
 def test_our_wpl_loads_in_pymavlink_mavwp(tmp_path):
-    items = plan_to_items(vehicle_plan(), ORIGIN, "ardupilot")
+    mf = plan_mission_file(vehicle_plan(), ORIGIN, "ardupilot")
+    items = mf.items("ardupilot")
     path = tmp_path / "m.waypoints"
-    path.write_text(dumps_wpl(items))
+    assert [loss.part for loss in save_mission_file(path, mf)] == ["settings"]  # speeds: .plan only
     loader = mavwp.MAVWPLoader()
     assert loader.load(str(path)) == len(items)
     for ours, theirs in zip(items, loader.wpoints, strict=True):
@@ -98,8 +103,7 @@ def test_our_wpl_loads_in_pymavlink_mavwp(tmp_path):
             ours.current,
             ours.autocontinue,
         )
-        # files use the float frame numbers: GLOBAL_RELATIVE_ALT_INT (6) is written as 3
-        assert theirs.frame == {6: 3}.get(ours.frame, ours.frame)
+        assert theirs.frame == ours.frame and ours.frame in (0, 2, 3)  # the numbers files use
         assert round(theirs.x * 1e7) == ours.x and round(theirs.y * 1e7) == ours.y
         assert (theirs.z, theirs.param1, theirs.param2, theirs.param3) == (
             ours.z,
@@ -128,7 +132,7 @@ def test_mavwp_written_wpl_loads_in_ours(tmp_path):
     assert mf.home == pytest.approx((-33.856784, 151.215297, 12.5))
     for it, (frame, cmd, cur, lat, lon, alt) in zip(items, rows, strict=True):
         assert it.command == cmd and it.current == cur and it.z == alt and it.param2 == 2.0
-        assert it.frame == {3: 6}.get(frame, frame)
+        assert it.frame == frame  # as written
         assert it.x == round(lat * 1e7) and it.y == round(lon * 1e7)
 
 
@@ -140,7 +144,11 @@ def test_plan_round_trip_with_fence_rally_and_nan():
     fence = [replace(fence[0], command=mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT, param1=0.0, z=25.0)] + [
         it.with_seq(i + 1) for i, it in enumerate(fence)
     ]
-    mf = MissionFile.from_items(mission, "ardupilot", fence=fence, rally=scenario_rally_items(sc))
+    fence = [*fence[1:], replace(fence[0], frame=3, autocontinue=0)]  # QGC's order and frames
+    fence = [replace(it, seq=i, autocontinue=0) for i, it in enumerate(fence)]
+    rally = [replace(it, frame=3, autocontinue=0) for it in scenario_rally_items(sc)]
+    mf = MissionFile.from_items(in_file_frames(mission), "ardupilot", fence=fence, rally=rally)
+    assert plan_losses(mf) == []
     text = dumps_plan(mf)
     doc = json.loads(text)
     assert doc["fileType"] == "Plan" and doc["mission"]["version"] == 2
@@ -152,16 +160,19 @@ def test_plan_round_trip_with_fence_rally_and_nan():
     assert back.fence == fence and back.rally == mf.rally
     got = back.items("ardupilot")
     assert math.isnan(got[4].param4)
-    assert [replace(it, param4=0.0) for it in got] == [replace(it, param4=0.0) for it in mission]
+    assert [replace(it, param4=0.0) for it in got] == [
+        replace(it, param4=0.0) for it in in_file_frames(mission)
+    ]
     assert dumps_plan(back) == text
 
 
 def test_plan_mission_file_and_save_load_both_formats(tmp_path):
     vp = vehicle_plan()
     mf = plan_mission_file(vp, ORIGIN, "px4")
-    expected = plan_to_items(vp, ORIGIN, "px4")
+    expected = in_file_frames(plan_to_items(vp, ORIGIN, "px4"))
     for name in ("m.plan", "m.waypoints"):
-        save_mission_file(tmp_path / name, mf, autopilot="px4")
+        losses = save_mission_file(tmp_path / name, mf)
+        assert [loss.part for loss in losses] == ([] if name == "m.plan" else ["settings"])
         assert load_mission_file(tmp_path / name, autopilot="px4").items("px4") == expected
 
 
@@ -227,7 +238,7 @@ def test_qgc_plan_with_survey_complex_item():
     items = mf.items("px4")
     assert [it.command for it in items] == [22, 16, 16, 16, 20]
     assert [it.seq for it in items] == [0, 1, 2, 3, 4] and items[0].current == 1
-    assert items[1].x == 473980000 and items[3].x == 473982000 and items[1].frame == 6
+    assert items[1].x == 473980000 and items[3].x == 473982000 and items[1].frame == 3
     assert math.isnan(items[0].param4)
     assert mf.firmware_type == 12 and mf.home == (47.3977419, 8.5455938, 488.1)
     ap = mf.items("ardupilot")
@@ -282,8 +293,8 @@ def test_load_mission_file_errors(tmp_path):
     (tmp_path / "x.txt").write_text("hello")
     with pytest.raises(MissionFileError, match="neither"):
         load_mission_file(tmp_path / "x.txt")
-    with pytest.raises(MissionFileError, match="planned home"):
-        MissionFile(mission=[]).items("ardupilot")
+    # no planned home: ArduPilot gets a home row at 0, 0 (it puts its own home there)
+    assert MissionFile(mission=[]).items("ardupilot") == [MissionItem(0, 0, 16, current=1)]
 
 
 finite = st.floats(allow_nan=False, allow_infinity=False, width=32)
@@ -298,7 +309,7 @@ finite = st.floats(allow_nan=False, allow_infinity=False, width=32)
             finite,
             finite,
             finite,
-            st.sampled_from([0, 2, 6, 11]),  # frames 3, 5, 10 are written as their twins,
+            st.sampled_from([0, 2, 3, 5, 6, 10, 11]),  # every frame is kept as written
         ),
         min_size=1,
         max_size=8,

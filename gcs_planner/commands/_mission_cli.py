@@ -182,6 +182,12 @@ def print_items(items: Sequence[MissionItem], title: str) -> None:
         )
 
 
+def print_losses(losses) -> None:
+    """One 'warning:' line per thing the file format could not carry (files.Loss)."""
+    for loss in losses:
+        print(f"warning: {loss}")
+
+
 def print_table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
     """Right-aligned columns sized to their content; floats with 3 decimals."""
     cells = [[f"{v:.3f}" if isinstance(v, float) else str(v) for v in row] for row in rows]

@@ -1,7 +1,8 @@
 """Download a vehicle's mission (and fence and rally points) and print it; optionally save it to FILE.
 
 FILE ending in .plan is written as QGroundControl JSON with all three lists; any other name as QGC
-WPL 110 (mission only). Without FILE, the items are printed only.
+WPL 110 holding the one list --type names (mission: home at row 0). Frames are written with the
+numbers QGC and Mission Planner use (5 / 6 / 11 as 0 / 3 / 10). Without FILE, the items are printed only.
 """
 
 from __future__ import annotations
@@ -16,13 +17,13 @@ from gcs_planner.commands._mission_cli import (
     autopilot_of,
     home_position,
     print_items,
+    print_losses,
     vehicle_link,
 )
 from gcs_planner.errors import UserError
-from gcs_planner.mavlink.files import MissionFile, save_mission_file, wpl_rows
+from gcs_planner.mavlink.files import MissionFile, in_file_frames, save_mission_file
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.types import MissionType
-from gcs_planner.mavlink.wpl import dumps_wpl
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -56,20 +57,16 @@ async def _download(args: argparse.Namespace) -> int:
         home = None
         if args.file and autopilot != "ardupilot":
             home = await home_position(link, args.sysid, args.compid)  # ArduPilot's is item 0
-    if args.file and Path(args.file).suffix.lower() == ".plan":
+    if args.file:
+        lists = {t: in_file_frames(items) for t, items in lists.items()}
         mf = MissionFile.from_items(
             lists.get(MissionType.MISSION, []),
             autopilot,
             home=home,
             fence=lists.get(MissionType.FENCE),
             rally=lists.get(MissionType.RALLY),
+            lists=frozenset(lists),
         )
-        save_mission_file(args.file, mf, autopilot=autopilot)
-    elif args.file and MISSION_TYPES[args.type] == MissionType.MISSION:
-        mf = MissionFile.from_items(lists[MissionType.MISSION], autopilot, home=home)
-        Path(args.file).write_text(dumps_wpl(wpl_rows(mf)))  # row 0: the home, for every autopilot
-    elif args.file:
-        Path(args.file).write_text(dumps_wpl(lists[MISSION_TYPES[args.type]]))
-    if args.file:
+        print_losses(save_mission_file(args.file, mf))
         print(f"wrote {args.file}")
     return 0

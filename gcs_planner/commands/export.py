@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from gcs_planner.commands._mission_cli import print_losses
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
 from gcs_planner.mavlink.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
@@ -45,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
         mf = plan_mission_file(vp, plan.origin, args.autopilot)
         mf.fence, mf.rally = fence, rally
         path = out_dir / f"{vp.vehicle_id}{SUFFIX[args.format]}"
-        save_mission_file(path, mf, autopilot=args.autopilot)
+        losses = save_mission_file(path, mf)
         n = len(mf.items(args.autopilot))
         print(f"{vp.vehicle_id:<10} {vp.sysid:>5} {n:>6} {len(fence):>6} {len(rally):>6}  {path}")
+        print_losses(losses)
     return 0

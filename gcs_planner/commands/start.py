@@ -15,7 +15,7 @@ import sys
 import time
 
 from gcs_planner.commands._mission_cli import add_connection_arguments, autopilot_of, vehicle_link
-from gcs_planner.commands.upload import prepare
+from gcs_planner.commands.upload import add_clear_absent_argument, prepare
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
@@ -31,6 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--vehicle", help="vehicle id in plan.json [the one with --sysid]")
     p.add_argument("--scenario", help="scenario file whose fence and rally points to upload too")
+    add_clear_absent_argument(p)
     p.add_argument("--no-arm", action="store_true", help="do not arm; only send MISSION_START")
     p.add_argument(
         "--arm-timeout",

@@ -5,6 +5,12 @@ FILE is a QGroundControl .plan (mission, geofence, rally points), a QGC WPL 110 
 one whose sysid is --sysid; --scenario adds that scenario's fence and rally points). Every list is
 validated before anything is sent; an upload succeeds only on the vehicle's MISSION_ACK(ACCEPTED).
 
+Lists: the ones FILE defines are sent, an empty one as an empty list (it clears the vehicle's): a
+.plan defines all three (QGroundControl's PlanMasterController::sendToVehicle sends all three
+every time), a WPL file one (mission, fence or rally), plan.json the mission (+ --scenario's fence
+and rally). A list FILE does not define is left as the vehicle has it, and the table says so;
+--clear-absent clears it instead, as QGroundControl would.
+
 Many vehicles: --sysid 1,2,3 or --sysid all (every vehicle of plan.json), with one --connect per
 vehicle port if they are on several; uploads run concurrently (--workers, default 8) with
 automatic retries (gcs_planner.mavlink.fleet) and one table row per vehicle and list.
@@ -43,33 +49,66 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--workers", type=int, default=DEFAULT_WORKERS, help="concurrent uploads for many vehicles"
     )
     p.add_argument("--retries", type=int, default=2, help="extra attempts per failed vehicle [2]")
+    add_clear_absent_argument(p)
 
 
-def lists_to_upload(mf: MissionFile, autopilot: str) -> list[tuple[MissionType, list[MissionItem]]]:
-    """(mission_type, items) to send, validated: the mission always, fence and rally when present."""
-    lists = [(MissionType.MISSION, mf.items(autopilot))]
-    lists += [
-        (t, items) for t, items in ((MissionType.FENCE, mf.fence), (MissionType.RALLY, mf.rally)) if items
-    ]
+def add_clear_absent_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--clear-absent",
+        action="store_true",
+        help="also clear the lists FILE does not define (QGroundControl sends all three every time)",
+    )
+
+
+def lists_to_upload(
+    mf: MissionFile, autopilot: str, clear_absent: bool = False
+) -> list[tuple[MissionType, list[MissionItem]]]:
+    """(mission_type, items) to send, validated: the lists ``mf`` defines (``clear_absent``: all
+    three, the others empty). A mission without items goes as an empty list, home item or not,
+    as QGroundControl sends it (PlanManager: no possibly bogus home position)."""
+    lists = []
+    for mission_type in (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY):
+        if mission_type in mf.lists:
+            empty = mission_type == MissionType.MISSION and not mf.mission
+            lists.append((mission_type, [] if empty else mf.list_items(mission_type, autopilot)))
+        elif clear_absent:
+            lists.append((mission_type, []))
     for mission_type, items in lists:
         validate_items(items, mission_type=mission_type)
     return lists
 
 
+def absent_lists(mf: MissionFile, clear_absent: bool) -> list[str]:
+    """One line per list the file does not define and the upload leaves alone."""
+    if clear_absent:
+        return []
+    return [
+        f"{t.name.lower()}: not in the file; the vehicle's list is kept (--clear-absent clears it)"
+        for t in (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
+        if t not in mf.lists
+    ]
+
+
+def read_input(args: argparse.Namespace, autopilot: str, sysid: int) -> MissionFile:
+    """FILE (+ --scenario's fence and rally) for vehicle ``sysid`` with ``autopilot``'s conventions."""
+    mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=sysid)
+    if args.scenario:
+        scenario = load_scenario(args.scenario)
+        mf.fence, mf.rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
+        mf.lists = mf.lists | {MissionType.FENCE, MissionType.RALLY}
+    return mf
+
+
 def prepare(
     args: argparse.Namespace, autopilot: str, sysid: int
 ) -> list[tuple[MissionType, list[MissionItem]]]:
-    """Read FILE (+ --scenario) for vehicle ``sysid`` with ``autopilot``'s conventions; validate every list.
+    """Read FILE for vehicle ``sysid`` with ``autopilot``'s conventions; validate every list.
 
     Called once before any network I/O (with --autopilot, or "px4" when it is auto) so bad input
     never reaches a vehicle, and again with the vehicle's autopilot: a WPL file is uploaded row
     for row either way; .plan and plan.json get ArduPilot's home item only for ArduPilot.
     """
-    mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=sysid)
-    if args.scenario:
-        scenario = load_scenario(args.scenario)
-        mf.fence, mf.rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
-    return lists_to_upload(mf, autopilot)
+    return lists_to_upload(read_input(args, autopilot, sysid), autopilot, args.clear_absent)
 
 
 def target_sysids(args: argparse.Namespace) -> list[int]:
@@ -89,6 +128,9 @@ def run(args: argparse.Namespace) -> int:
     sysids = target_sysids(args)
     for sysid in sysids:  # fail on bad input before touching the network
         prepare(args, args.autopilot if args.autopilot != "auto" else "px4", sysid)
+    mf = read_input(args, "ardupilot", sysids[0])
+    for line in mf.notes + absent_lists(mf, args.clear_absent):
+        print(f"note: {line}")
     if len(sysids) == 1:
         args.sysid = sysids[0]
         return asyncio.run(_upload_one(args))

@@ -1,14 +1,16 @@
 """The content of a mission file, independent of its format (.plan JSON or QGC WPL 110 text).
 
-A file holds a mission without its home item plus the planned home, and optionally fence and
-rally lists. ``MissionFile.items(autopilot)`` gives the list to upload: ArduPilot's with the home
-item at seq 0, PX4's without. ``MissionFile.from_items`` does the reverse.
+A MissionFile holds what a file holds, field for field: the mission without its home item, the
+planned home, fence and rally lists, WPL comments, and which lists the file defines. Frames are
+the file's own numbers (QGC and Mission Planner write 0 / 3 / 10; a file saying 5 or 6 keeps it);
+only lists that come from the wire or the planner (``from_items``, ``plan_mission_file``) have
+their MISSION_ITEM_INT aliases 5 / 6 / 11 written as 0 / 3 / 10, the numbers files use.
 
-Frames: MISSION_ITEM_INT lists use the *_INT frame numbers (GLOBAL_RELATIVE_ALT_INT 6,
-GLOBAL_TERRAIN_ALT_INT 11); QGroundControl and Mission Planner files use the float numbers
-(GLOBAL_RELATIVE_ALT 3, GLOBAL_TERRAIN_ALT 10), so writers map 6 -> 3, 11 -> 10, 5 -> 0 and readers
-map 3 -> 6, 10 -> 11. MAV_FRAME_GLOBAL (0) stays 0: it is valid in MISSION_ITEM_INT and is what
-ArduPilot uses for home, so items written and read back are equal field for field.
+DO_JUMP param1 counts as a WPL file and ArduPilot do: the home is item 0, so ``mission[i]`` is
+item i + 1 (= QGroundControl's doJumpId). ``items("px4")`` drops the home and subtracts one.
+
+What a format cannot carry is reported by its writer as ``Loss`` lines, never changed silently;
+what a reader had to interpret is in ``MissionFile.notes``. Details: docs/mission-files.md.
 """
 
 from __future__ import annotations
@@ -19,23 +21,27 @@ from pathlib import Path
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
+from gcs_planner.mavlink.dialect import KNOWN_COMMANDS, has_position
 from gcs_planner.mavlink.items import deg_to_e7
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.plan import Plan, VehiclePlan
 
 __all__ = [
+    "FENCE_COMMANDS",
+    "Loss",
     "MissionFile",
     "MissionFileError",
     "file_frame",
-    "item_frame",
+    "in_file_frames",
     "load_mission_file",
     "load_plan_json",
     "mission_input",
     "mission_type_of",
     "plan_mission_file",
+    "ranges",
     "save_mission_file",
     "select_vehicles",
-    "wpl_rows",
+    "unknown_command_notes",
 ]
 
 _TO_FILE = {
@@ -43,31 +49,69 @@ _TO_FILE = {
     mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
     mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT,
 }
-_FROM_FILE = {
-    mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT: mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-    mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT: mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
-}
-FENCE_COMMANDS = frozenset(range(5000, 5005))
+# 5000-5004 (common.xml) and ArduPilot's NAV_FENCE_HOME_CIRCLE_INCLUSION (5005)
+FENCE_COMMANDS = frozenset(range(5000, 5006))
 RALLY_COMMANDS = frozenset({mavlink.MAV_CMD_NAV_RALLY_POINT})
+DO_JUMP = mavlink.MAV_CMD_DO_JUMP
+LIST_NAMES = {MissionType.MISSION: "mission", MissionType.FENCE: "fence", MissionType.RALLY: "rally"}
 
 
 class MissionFileError(UserError, ValueError):
     """A mission file cannot be read; the message names the file, the place and the value."""
 
 
+@dataclass(frozen=True)
+class Loss:
+    """What a format cannot carry: ``fields`` of items ``indexes`` of list ``part`` and why.
+
+    part: "mission", "home", "fence", "rally", "comments" or "settings" (firmware, vehicle, speeds).
+    """
+
+    part: str
+    fields: tuple[str, ...]
+    indexes: tuple[int, ...]
+    reason: str
+
+    def __str__(self) -> str:
+        where = f"{self.part} item{'s' if len(self.indexes) > 1 else ''} {ranges(self.indexes)}"
+        return f"{where if self.indexes else self.part}: {', '.join(self.fields)} {self.reason}"
+
+
+def ranges(indexes: tuple[int, ...]) -> str:
+    """(0, 1, 2, 5) -> '0-2, 5'."""
+    out: list[str] = []
+    for i in sorted(indexes):
+        if out and i == int(out[-1].split("-")[-1]) + 1:
+            out[-1] = f"{out[-1].split('-')[0]}-{i}"
+        else:
+            out.append(str(i))
+    return ", ".join(out)
+
+
 def file_frame(frame: int) -> int:
-    """MISSION_ITEM_INT frame -> the frame number files store."""
+    """A MISSION_ITEM_INT alias frame (5, 6, 11) -> the number files use (0, 3, 10)."""
     return _TO_FILE.get(frame, frame)
 
 
-def item_frame(frame: int) -> int:
-    """A file's frame number -> the MISSION_ITEM_INT frame."""
-    return _FROM_FILE.get(frame, frame)
+def in_file_frames(items: list[MissionItem]) -> list[MissionItem]:
+    """Items from the wire or the planner with the frame numbers QGC and Mission Planner write."""
+    return [replace(item, frame=file_frame(item.frame)) for item in items]
+
+
+def default_home_item() -> MissionItem:
+    """Row 0 as Mission Planner writes it: NAV_WAYPOINT in MAV_FRAME_GLOBAL, current 1."""
+    return MissionItem(0, mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_CMD_NAV_WAYPOINT, current=1)
 
 
 @dataclass
 class MissionFile:
-    """Mission (no home item), planned home (lat [deg], lon [deg], alt [m AMSL]), fence and rally."""
+    """Mission (no home item), planned home (lat [deg], lon [deg], alt [m AMSL]), fence, rally.
+
+    home_item: a WPL file's row 0 as written (frame, command, params), if any.
+    comments: a WPL file's ``#`` lines as (data rows before it, line).
+    lists: the lists the file defines (a .plan all three, a WPL file one); upload sends these.
+    notes: what the reader interpreted (null params, unknown commands), one line each.
+    """
 
     mission: list[MissionItem] = field(default_factory=list)
     home: tuple[float, float, float] | None = None
@@ -77,23 +121,34 @@ class MissionFile:
     vehicle_type: int = mavlink.MAV_TYPE_QUADROTOR
     cruise_speed_mps: float = 15.0
     hover_speed_mps: float = 5.0
-    home_item: MissionItem | None = None  # a WPL file's row 0 as written (frame, params), if any
+    home_item: MissionItem | None = None
+    comments: list[tuple[int, str]] = field(default_factory=list)
+    lists: frozenset[MissionType] = frozenset(LIST_NAMES)
+    notes: list[str] = field(default_factory=list)
 
     def items(self, autopilot: str = "ardupilot") -> list[MissionItem]:
-        """The mission to upload: home at seq 0 for ArduPilot (needs ``home``), none for PX4."""
+        """The mission to upload. ArduPilot: the home item at seq 0 (row 0 as written, at the
+        planned home if there is one; ArduPilot replaces it with its own home). PX4: no home item,
+        DO_JUMP targets one lower, positionless commands in MAV_FRAME_MISSION (PX4 refuses them
+        in a global frame: mavlink_mission.cpp parse_mavlink_mission_item)."""
         body = [replace(item, current=0) for item in self.mission]
         if autopilot == "ardupilot":
-            if self.home is None:
-                raise MissionFileError(
-                    "the file has no planned home position, which ArduPilot needs at seq 0"
-                )
-            lat, lon, alt = self.home
-            home = self.home_item or MissionItem(0, mavlink.MAV_FRAME_GLOBAL, mavlink.MAV_CMD_NAV_WAYPOINT)
-            home = replace(home, x=int(deg_to_e7(lat)), y=int(deg_to_e7(lon)), z=float(alt))
+            home = self.home_item or default_home_item()
+            if self.home is not None:
+                lat, lon, alt = self.home
+                home = replace(home, x=int(deg_to_e7(lat)), y=int(deg_to_e7(lon)), z=float(alt))
             body.insert(0, home)
-        elif autopilot != "px4":
+        elif autopilot == "px4":
+            body = [_for_px4(item) for item in body]
+        else:
             raise MissionFileError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
         return [replace(item, seq=i, current=int(i == 0)) for i, item in enumerate(body)]
+
+    def list_items(self, mission_type: MissionType, autopilot: str = "ardupilot") -> list[MissionItem]:
+        """The items of one list as uploaded (the mission via ``items``)."""
+        if mission_type == MissionType.MISSION:
+            return self.items(autopilot)
+        return list(self.fence if mission_type == MissionType.FENCE else self.rally)
 
     @classmethod
     def from_items(
@@ -105,19 +160,41 @@ class MissionFile:
         rally: list[MissionItem] | None = None,
         **kwargs,
     ) -> MissionFile:
-        """Split an uploadable list: ArduPilot's seq 0 becomes ``home`` unless one is given."""
+        """An uploadable list -> MissionFile: ArduPilot's seq 0 becomes the home (unless ``home``
+        is given; a seq 0 at 0, 0 is no home), PX4's DO_JUMP targets one higher. Frames are kept."""
         mission = list(items)
         if autopilot == "ardupilot" and mission:
             first, mission = mission[0], mission[1:]
             kwargs.setdefault("home_item", first)
-            if home is None:
+            if home is None and (first.x, first.y) != (0, 0):
                 home = (first.x / 1e7, first.y / 1e7, float(first.z))
-        mission = [replace(item, seq=i) for i, item in enumerate(mission)]
+        elif autopilot == "px4":
+            mission = [_jump_shifted(item, +1) for item in mission]
+        mission = [replace(item, seq=i, current=0) for i, item in enumerate(mission)]
         firmware = (
             mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA if autopilot == "ardupilot" else mavlink.MAV_AUTOPILOT_PX4
         )
         kwargs.setdefault("firmware_type", firmware)
-        return cls(mission=mission, home=home, fence=list(fence or []), rally=list(rally or []), **kwargs)
+        return cls(
+            mission=mission,
+            home=home,
+            fence=list(fence or []),
+            rally=list(rally or []),
+            **kwargs,
+        )
+
+
+def _jump_shifted(item: MissionItem, by: int) -> MissionItem:
+    if item.command != DO_JUMP:
+        return item
+    return replace(item, param1=float(item.param1 + by))
+
+
+def _for_px4(item: MissionItem) -> MissionItem:
+    item = _jump_shifted(item, -1)
+    if not has_position(item.command) and item.frame != mavlink.MAV_FRAME_MISSION:
+        item = replace(item, frame=mavlink.MAV_FRAME_MISSION)
+    return item
 
 
 def mission_type_of(commands: list[int]) -> MissionType:
@@ -129,9 +206,23 @@ def mission_type_of(commands: list[int]) -> MissionType:
     return MissionType.MISSION
 
 
+def unknown_command_notes(items: list[MissionItem], part: str) -> list[str]:
+    """One note per command id the pinned MAVLink dialect lacks: kept and sent as written."""
+    unknown: dict[int, list[int]] = {}
+    for i, item in enumerate(items):
+        if item.command not in KNOWN_COMMANDS:
+            unknown.setdefault(item.command, []).append(i)
+    return [
+        f"{part} items {ranges(tuple(idx))}: command {cmd} is not in the MAVLink dialect gcs-planner"
+        " knows (pymavlink ardupilotmega); kept and sent as written, x/y as latitude/longitude"
+        for cmd, idx in unknown.items()
+    ]
+
+
 def load_mission_file(path: str | Path, autopilot: str = "ardupilot") -> MissionFile:
-    """Read a .plan (QGroundControl) or .waypoints / .txt / .wpl (QGC WPL 110) file."""
-    from gcs_planner.mavlink import planfile, wpl
+    """Read a .plan / .mission (QGroundControl), a QGC WPL 110 file (.waypoints / .txt), or an
+    older MAVProxy / Mission Planner fence or rally list (legacy_files), by content."""
+    from gcs_planner.mavlink import legacy_files, planfile, wpl
 
     path = Path(path)
     try:
@@ -144,38 +235,41 @@ def load_mission_file(path: str | Path, autopilot: str = "ardupilot") -> Mission
         return planfile.loads_plan(text, where=str(path))
     if text.lstrip().startswith("QGC WPL"):
         return wpl.loads_wpl(text, autopilot=autopilot, where=str(path))
-    raise MissionFileError(f"{path}: neither a QGroundControl .plan (JSON) nor a 'QGC WPL 110' file")
+    if legacy_files.is_legacy_fence(text):
+        return legacy_files.loads_legacy_fence(text, where=str(path))
+    if legacy_files.is_legacy_rally(text):
+        return legacy_files.loads_legacy_rally(text, where=str(path))
+    raise MissionFileError(
+        f"{path}: neither a QGroundControl .plan (JSON), a 'QGC WPL 110' file, nor a fence or rally list"
+    )
 
 
-def save_mission_file(path: str | Path, mission_file: MissionFile, autopilot: str = "ardupilot") -> None:
-    """Write ``.plan`` as QGroundControl JSON, anything else as QGC WPL 110 (mission list only)."""
+def save_mission_file(path: str | Path, mission_file: MissionFile) -> list[Loss]:
+    """Write ``.plan`` as QGroundControl JSON, anything else as QGC WPL 110; return what the
+    format could not carry (the caller prints it)."""
     from gcs_planner.mavlink import planfile, wpl
 
     path = Path(path)
     if path.suffix.lower() == ".plan":
-        path.write_text(planfile.dumps_plan(mission_file))
+        text, losses = planfile.dumps_plan(mission_file), planfile.plan_losses(mission_file)
     else:
-        path.write_text(wpl.dumps_wpl(wpl_rows(mission_file)))
-
-
-def wpl_rows(mission_file: MissionFile) -> list[MissionItem]:
-    """The rows of a WPL file: home at row 0 (zeros when the file has none, as QGroundControl)."""
-    if mission_file.home is None:
-        mission_file = replace(mission_file, home=(0.0, 0.0, 0.0))
-    return mission_file.items("ardupilot")
+        text, losses = wpl.dumps_mission_file(mission_file), wpl.wpl_losses(mission_file)
+    path.write_text(text)
+    return losses
 
 
 def plan_mission_file(vehicle_plan: VehiclePlan, origin, autopilot: str = "ardupilot") -> MissionFile:
     """One vehicle of a Plan -> MissionFile (mission items from plan_to_items, home = plan origin)."""
     from gcs_planner.mavlink.items import plan_to_items
 
-    items = plan_to_items(vehicle_plan, origin, autopilot)
+    items = in_file_frames(plan_to_items(vehicle_plan, origin, autopilot))
     fixed_wing = vehicle_plan.vehicle_type == "fixed_wing"
     speeds = vehicle_plan.speeds_mps[1:] if len(vehicle_plan.speeds_mps) > 1 else [15.0]
     cruise = float(max(speeds))
     return MissionFile.from_items(
         items,
         autopilot,
+        lists=frozenset({MissionType.MISSION}),
         home=(origin.lat_deg, origin.lon_deg, origin.alt_m),
         vehicle_type=mavlink.MAV_TYPE_FIXED_WING if fixed_wing else mavlink.MAV_TYPE_QUADROTOR,
         cruise_speed_mps=cruise,

@@ -12,23 +12,17 @@ The rules, with the autopilot source they come from, are in docs/real-autopilots
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import replace
 
+from gcs_planner.mavlink.dialect import has_position
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
-__all__ = ["ARDUCOPTER", "ARDUPLANE", "GENERIC", "POSITIONAL_COMMANDS", "PX4", "Model", "has_position"]
+__all__ = ["ARDUCOPTER", "ARDUPLANE", "GENERIC", "PX4", "Model"]
 
 Model = Callable[[MissionItem], MissionItem]
 
-# MAV_CMDs with hasLocation="true" in MAVLink common.xml (param5/6 latitude/longitude or x/y);
-# every other command carries params 5/6 as plain numbers (x, y of MISSION_ITEM_INT unscaled)
-POSITIONAL_COMMANDS = frozenset(
-    {16, 17, 18, 19, 21, 22, 23, 24, 25, 31, 34, 35, 36, 80, 81, 82, 84, 85, 94, 179, 188, 189, 192, 195}
-    | {201, 252, 611, 4001, 4501, 5100, 30001, 43003}
-    | set(range(5000, 5005))
-    | set(range(31000, 31010))
-)
 # AP_Mission::stored_in_location: the commands ArduPilot keeps a Location for
 _AP_LOCATION = frozenset({16, 17, 18, 19, 21, 22, 30, 31, 82, 84, 85, 92, 94, 179, 188, 189, 191, 195, 201})
 _AP_FRAMES = {
@@ -41,10 +35,6 @@ _AP_FRAMES = {
     11: 10,
 }  # sent -> reported (absolute / relative / terrain)
 _PX4_FRAMES = {0: 5, 5: 5, 3: 6, 6: 6}  # PX4 reports the _INT frame from altitude_is_relative
-
-
-def has_position(command: int) -> bool:
-    return command in POSITIONAL_COMMANDS
 
 
 def _int(v: float, lo: int, hi: int) -> float:
@@ -122,9 +112,14 @@ def _with_params(item: MissionItem, p) -> MissionItem:
     return replace(item, param1=p[0], param2=p[1], param3=p[2], param4=p[3])
 
 
+def _f32(v: float) -> float:
+    return struct.unpack("<f", struct.pack("<f", v))[0]
+
+
 def _cm(z: float) -> float:
-    """ArduPilot's Location altitude: int32 centimetres, truncated toward zero."""
-    return math.trunc(z * 100.0) / 100.0 if math.isfinite(z) else z
+    """ArduPilot's Location altitude: ``packet.z * 100.0f`` in float32 (z crossed the wire as one),
+    truncated toward zero to int32 centimetres; 83.13 is stored as 8312 cm."""
+    return math.trunc(_f32(_f32(z) * 100.0)) / 100.0 if math.isfinite(z) else z
 
 
 def _ardupilot(item: MissionItem, plane: bool) -> MissionItem:

@@ -5,13 +5,14 @@ Rules (each failure names the item's seq and the field):
 - ``seq`` equals the item's index (0..n-1) and every item has the list's ``mission_type``;
 - exactly one item has ``current = 1`` in a MISSION list (MAVSDK enforces this as well); fence and
   rally lists may have none, never two;
-- ``frame`` and ``command`` are known MAVLink values (MAV_FRAME / MAV_CMD of the ardupilotmega
-  dialect, which includes common.xml), ``current`` and ``autocontinue`` are 0 or 1;
+- ``frame`` is a known MAV_FRAME; ``command`` is any uint16: a command the pinned dialect lacks
+  may be one the vehicle has (ArduPilot's 116, 219), so files pass it through with a note
+  (files.unknown_command_notes); ``current`` and ``autocontinue`` are 0 or 1;
 - ``z`` is finite; ``param1..4`` are finite or NaN. NaN is allowed in params because MAVLink defines
   it as "use the default / leave unchanged" (QGroundControl sends NaN yaw and stores it as null in
   .plan files); infinity is never meaningful;
 - in global frames, ``x``/``y`` are integers with latitude in [-90, 90] deg and longitude in
-  [-180, 180] deg (degE7), except for commands that carry no position (DO_*, RTL, NAV_DELAY), whose
+  [-180, 180] deg (degE7), except for commands that carry no position (dialect.has_position), whose
   x/y must still fit int32.
 """
 
@@ -21,46 +22,14 @@ import math
 from collections.abc import Sequence
 from numbers import Integral, Real
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from gcs_planner.errors import UserError
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.dialect import KNOWN_FRAMES, has_position
+from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
 
 __all__ = ["MAX_MISSION_COUNT", "MissionValidationError", "validate_items"]
 
 MAX_MISSION_COUNT = 65535  # MISSION_COUNT.count and seq are uint16
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
-
-KNOWN_COMMANDS = frozenset(k for k, v in mavlink.enums["MAV_CMD"].items() if not v.name.endswith("ENUM_END"))
-KNOWN_FRAMES = frozenset(k for k, v in mavlink.enums["MAV_FRAME"].items() if not v.name.endswith("ENUM_END"))
-GLOBAL_FRAMES = frozenset(
-    {
-        mavlink.MAV_FRAME_GLOBAL,
-        mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-        mavlink.MAV_FRAME_GLOBAL_INT,
-        mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-        mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT,
-        mavlink.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT,
-    }
-)
-# Commands whose x/y are not a position (speed changes, jumps, RTL, a timed delay).
-POSITIONLESS_COMMANDS = frozenset(
-    {
-        mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH,
-        mavlink.MAV_CMD_NAV_DELAY,
-    }
-    | {
-        k
-        for k in KNOWN_COMMANDS
-        if mavlink.enums["MAV_CMD"][k].name.startswith(("MAV_CMD_DO_", "MAV_CMD_CONDITION_"))
-    }
-) - {
-    mavlink.MAV_CMD_DO_SET_HOME,
-    mavlink.MAV_CMD_DO_LAND_START,
-    mavlink.MAV_CMD_DO_SET_ROI,
-    mavlink.MAV_CMD_DO_SET_ROI_LOCATION,
-    mavlink.MAV_CMD_DO_REPOSITION,
-}
 
 
 class MissionValidationError(UserError, ValueError):
@@ -123,8 +92,8 @@ def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
         raise fail("mission_type", f"differs from the list's mission_type {int(mission_type)}")
     if item.frame not in KNOWN_FRAMES:
         raise fail("frame", "is not a known MAV_FRAME")
-    if item.command not in KNOWN_COMMANDS:
-        raise fail("command", "is not a known MAV_CMD")
+    if not _is_integer(item.command) or not 0 <= item.command <= 65535:
+        raise fail("command", "must be a MAV_CMD id 0..65535")
     for field in ("current", "autocontinue"):
         if getattr(item, field) not in (0, 1):
             raise fail(field, "must be 0 or 1")
@@ -138,7 +107,7 @@ def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
         value = getattr(item, field)
         if not _is_integer(value) or not INT32_MIN <= value <= INT32_MAX:
             raise fail(field, "must be an int32 (degE7 in global frames)")
-    if item.frame in GLOBAL_FRAMES and item.command not in POSITIONLESS_COMMANDS:
+    if item.frame in GLOBAL_FRAMES and has_position(item.command):
         if not -900_000_000 <= item.x <= 900_000_000:
             raise fail("x", f"(latitude {item.x / 1e7:.7f} deg) is outside [-90, 90] deg")
         if not -1_800_000_000 <= item.y <= 1_800_000_000:

@@ -1,39 +1,52 @@
 """Mission Planner / MAVProxy "QGC WPL 110" text files.
 
 Format: a first line ``QGC WPL 110``, then one line per item, tab-separated:
-INDEX CURRENT FRAME COMMAND P1 P2 P3 P4 LAT LON ALT AUTOCONTINUE (``#`` lines are comments).
-ArduPilot files hold home as row 0.
+INDEX CURRENT FRAME COMMAND P1 P2 P3 P4 LAT LON ALT AUTOCONTINUE; ``#`` lines are comments.
 
-Choices:
-- Exact round trip: latitude/longitude are written from the integer degE7 with exactly 7 decimals
-  (pymavlink's mavwp writes ``%f``, 6 decimals, losing up to 5.6 cm); params and altitude are
-  written as Python's shortest exact float repr. Reading rounds degrees to degE7 half away from
-  zero, so any file written here reads back to the same MissionItems.
-- Frames are stored as the float frame numbers Mission Planner uses (see gcs_planner.mavlink.files).
-- Local frames store x/y in metres (MISSION_ITEM_INT holds metres x 1e4); commands without a
-  position (MAVLink hasLocation="false": DO_DIGICAM_CONTROL, RTL, ...) store params 5/6 as the
-  plain numbers MISSION_ITEM_INT carries, unscaled (MAVProxy sends them so, ArduPilot reads them so).
-- Row 0 is the planned home for every autopilot (QGroundControl's reading); a list written for a
-  vehicle without a home item gets one (the planned home, or zeros when there is none, as QGC).
+Choices (sources in docs/mission-files.md):
+- Row 0 of a mission is the planned home for every autopilot (QGroundControl's
+  MissionController::_loadTextMissionFile); a row 0 at 0, 0 means "no home" (what this writer and
+  Mission Planner write without one). A file of fence commands (5000-5005) is a fence list, of
+  rally points (5100) a rally list; these have no home row (MAVProxy's fence and rally files).
+- Frames are kept as written. x/y: degE7 in global frames, metres x 1e4 in local ones, the plain
+  number for a command without a position (MAVLink hasLocation="false", as ArduPilot reads it).
+- Exact round trip: latitude/longitude written from the integer degE7 with 7 decimals (pymavlink's
+  mavwp writes ``%f``, 6 decimals, losing up to 5.6 cm); params and altitude as Python's shortest
+  exact float repr. NaN is written as 0 with a warning: no spelling reads everywhere (Mission
+  Planner's double.Parse wants ``NaN``, QGC's toDouble ``nan``); ``nan`` and ``NaN`` are read.
+- ``#`` comment lines are kept in place: read into MissionFile.comments, written back where they were.
 - The INDEX column is informational: rows are numbered in file order on reading.
-- The mission type is not in the file: a file of fence commands (5000-5004) reads as a fence,
-  of rally points (5100) as rally points, anything else as a mission.
+- A WPL file holds one list: a MissionFile with a mission and a fence or rally is written with
+  the mission only, and ``wpl_losses`` says so.
 """
 
 from __future__ import annotations
 
 import math
+import re
+from dataclasses import replace
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.mavlink.files import MissionFile, MissionFileError, file_frame, item_frame, mission_type_of
-from gcs_planner.mavlink.items import half_away
-from gcs_planner.mavlink.readback import has_position
+from gcs_planner.mavlink.dialect import has_position
+from gcs_planner.mavlink.files import (
+    DO_JUMP,
+    LIST_NAMES,
+    Loss,
+    MissionFile,
+    MissionFileError,
+    mission_type_of,
+    unknown_command_notes,
+)
+from gcs_planner.mavlink.items import e7, half_away
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
-__all__ = ["HEADER", "dumps_wpl", "loads_wpl", "loads_wpl_items"]
+__all__ = ["HEADER", "dumps_mission_file", "dumps_wpl", "loads_wpl", "loads_wpl_items", "wpl_losses"]
 
 HEADER = "QGC WPL 110"
+VERSIONS = ("110", "120")  # QGC reads both (MissionController::_loadTextMissionFile)
+NAN_AS_ZERO = "NaN (use the default) written as 0: Mission Planner cannot read nan, QGC cannot read NaN"
+SEPARATORS = re.compile(r"[\t ,]+")  # Mission Planner splits on tab, space and comma
 LOCAL_FRAMES = frozenset(
     {
         mavlink.MAV_FRAME_LOCAL_NED,
@@ -67,18 +80,22 @@ def _fixed(value: int, decimals: int) -> str:
 
 
 def _num(value: float) -> str:
-    return repr(float(value))
+    return "0.0" if math.isnan(value) else repr(float(value))
 
 
-def dumps_wpl(items: list[MissionItem]) -> str:
-    """Items (as uploaded: ArduPilot lists include home at seq 0) -> QGC WPL 110 text."""
+def dumps_wpl(items: list[MissionItem], comments: list[tuple[int, str]] = ()) -> str:
+    """Rows (an ArduPilot-style list: home at seq 0) -> QGC WPL 110 text; ``comments`` as
+    (rows before it, line) go back where they were."""
     lines = [HEADER]
+    pending = sorted(comments, key=lambda c: c[0])
     for i, it in enumerate(items):
+        while pending and pending[0][0] <= i:
+            lines.append(pending.pop(0)[1])
         _, decimals = _scale(it.frame, it.command)
         row = [
             str(i),
             str(int(it.current)),
-            str(file_frame(it.frame)),
+            str(it.frame),
             str(it.command),
             *(_num(p) for p in (it.param1, it.param2, it.param3, it.param4)),
             _fixed(it.x, decimals),
@@ -87,69 +104,145 @@ def dumps_wpl(items: list[MissionItem]) -> str:
             str(int(it.autocontinue)),
         ]
         lines.append("\t".join(row))
+    lines += [line for _, line in pending]
     return "\n".join(lines) + "\n"
+
+
+def _wpl_list(mf: MissionFile) -> MissionType:
+    """The one list a WPL file of ``mf`` holds: the mission, else the fence, else the rally points."""
+    if mf.mission or not (mf.fence or mf.rally):
+        return MissionType.MISSION
+    return MissionType.FENCE if mf.fence else MissionType.RALLY
+
+
+def dumps_mission_file(mf: MissionFile) -> str:
+    """MissionFile -> WPL text of its one list (``_wpl_list``): a mission with its home at row 0,
+    a fence or rally list after its home row only if it was read with one (Mission Planner's)."""
+    kind = _wpl_list(mf)
+    rows = mf.list_items(kind, "ardupilot")
+    if kind != MissionType.MISSION and mf.home_item is not None:
+        rows = [mf.items("ardupilot")[0], *rows]
+    return dumps_wpl(rows, mf.comments)
+
+
+def wpl_losses(mf: MissionFile) -> list[Loss]:
+    """What a WPL file of ``mf`` leaves out: the other lists, the .plan settings, NaN params."""
+    kind = _wpl_list(mf)
+    losses = [
+        Loss(name, ("every item",), tuple(range(len(items))), "not written: a WPL file holds one list")
+        for t, name, items in ((MissionType.FENCE, "fence", mf.fence), (MissionType.RALLY, "rally", mf.rally))
+        if items and t != kind
+    ]
+    defaults = MissionFile()
+    settings = tuple(
+        name
+        for name in ("firmware_type", "vehicle_type", "cruise_speed_mps", "hover_speed_mps")
+        if getattr(mf, name) != getattr(defaults, name)
+    )
+    if settings:
+        losses.append(Loss("settings", settings, (), "are not carried by WPL (a .plan keeps them)"))
+    if mf.home is not None and any(e7(v) / 1e7 != v for v in mf.home[:2]):
+        losses.append(Loss("home", ("position",), (), "rounded to 1e-7 deg (row 0 holds degE7, ~1 cm)"))
+    name = LIST_NAMES[kind]
+    for f in ("param1", "param2", "param3", "param4"):
+        nan = tuple(i for i, it in enumerate(getattr(mf, name)) if math.isnan(getattr(it, f)))
+        if nan:
+            losses.append(Loss(name, (f,), nan, NAN_AS_ZERO))
+    return losses
 
 
 def loads_wpl_items(text: str, where: str = "WPL file") -> list[MissionItem]:
     """QGC WPL 110 text -> items exactly as listed (seq renumbered in file order, type guessed)."""
+    rows, _, _ = _read(text, where)
+    kind, home_row = _list_kind([_int(f[3], "command", ln, where) for ln, f in rows])
+    return [
+        _item(seq, ln, f, MissionType.MISSION if seq == 0 and home_row else kind, where)
+        for seq, (ln, f) in enumerate(rows)
+    ]
+
+
+def _read(text: str, where: str) -> tuple[list[tuple[int, list[str]]], list[tuple[int, str]], str]:
+    """(rows as (line number, 12 fields), comments as (rows before it, line), format version)."""
     lines = text.splitlines()
-    if not lines or lines[0].strip() != HEADER:
+    header = lines[0].split() if lines else []
+    if header not in (["QGC", "WPL", v] for v in VERSIONS):
         first = lines[0].strip() if lines else ""
         raise MissionFileError(f"{where}: line 1 must be {HEADER!r}, got {first[:40]!r}")
-    rows = []
+    rows, comments = [], []
     for lineno, line in enumerate(lines[1:], start=2):
-        line = line.strip()
-        if not line or line.startswith("#"):
+        if line.lstrip().startswith("#"):
+            comments.append((len(rows), line.rstrip("\r\n")))
             continue
-        fields = line.split()
+        fields = SEPARATORS.split(line.strip())
+        if fields == [""]:
+            continue
         if len(fields) != 12:
             raise MissionFileError(
                 f"{where}: line {lineno}: expected 12 tab-separated fields, got {len(fields)}"
             )
         rows.append((lineno, fields))
-    mission_type = mission_type_of([_int(f[3], "command", ln, where) for ln, f in rows])
-    items = []
-    for seq, (lineno, f) in enumerate(rows):
-        frame = item_frame(_int(f[2], "frame", lineno, where))
-        command = _int(f[3], "command", lineno, where)
-        global_frame = frame in (0, 3, 5, 6, 10, 11)
-        if not has_position(command) and global_frame and mission_type == MissionType.MISSION:
-            frame = mavlink.MAV_FRAME_MISSION  # a command without a position has no frame (PX4 insists)
-        scale, _ = _scale(frame, command)
-        x, y = (_float(f[k], COLUMNS[k], lineno, where) for k in (8, 9))
-        if not (math.isfinite(x) and math.isfinite(y)):
-            raise MissionFileError(f"{where}: line {lineno}: x/y must be finite, got {f[8]!r}, {f[9]!r}")
-        items.append(
-            MissionItem(
-                seq=seq,
-                frame=frame,
-                command=_int(f[3], "command", lineno, where),
-                current=_int(f[1], "current", lineno, where),
-                autocontinue=_int(f[11], "autocontinue", lineno, where),
-                param1=_float(f[4], "param1", lineno, where),
-                param2=_float(f[5], "param2", lineno, where),
-                param3=_float(f[6], "param3", lineno, where),
-                param4=_float(f[7], "param4", lineno, where),
-                x=half_away(x * scale),
-                y=half_away(y * scale),
-                z=_float(f[10], "z", lineno, where),
-                mission_type=mission_type,
-            )
-        )
-    return items
+    return rows, comments, header[2]
+
+
+def _list_kind(commands: list[int]) -> tuple[MissionType, bool]:
+    """(list type, whether row 0 is a home row): a fence or rally file is all fence / rally rows
+    (MAVProxy), or a home row and then those (Mission Planner's savewaypoints writes one)."""
+    kind = mission_type_of(commands)
+    if kind == MissionType.MISSION and len(commands) > 1 and commands[0] in (0, mavlink.MAV_CMD_NAV_WAYPOINT):
+        rest = mission_type_of(commands[1:])
+        if rest != MissionType.MISSION:
+            return rest, True
+    return kind, kind == MissionType.MISSION
+
+
+def _item(seq: int, lineno: int, f: list[str], mission_type: MissionType, where: str) -> MissionItem:
+    frame = _int(f[2], "frame", lineno, where)
+    command = _int(f[3], "command", lineno, where)
+    scale, _ = _scale(frame, command)
+    x, y = (_float(f[k], COLUMNS[k], lineno, where) for k in (8, 9))
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise MissionFileError(f"{where}: line {lineno}: x/y must be finite, got {f[8]!r}, {f[9]!r}")
+    return MissionItem(
+        seq=seq,
+        frame=frame,
+        command=command,
+        current=_int(f[1], "current", lineno, where),
+        autocontinue=_int(f[11], "autocontinue", lineno, where),
+        param1=_float(f[4], "param1", lineno, where),
+        param2=_float(f[5], "param2", lineno, where),
+        param3=_float(f[6], "param3", lineno, where),
+        param4=_float(f[7], "param4", lineno, where),
+        x=half_away(x * scale),
+        y=half_away(y * scale),
+        z=_float(f[10], "z", lineno, where),
+        mission_type=mission_type,
+    )
 
 
 def loads_wpl(text: str, autopilot: str = "ardupilot", where: str = "WPL file") -> MissionFile:
-    """QGC WPL 110 text -> MissionFile; row 0 of a mission is the planned home, whatever the
-    autopilot (QGroundControl's MissionController::_loadTextMissionFile reads every WPL 110 file so),
-    so a PX4 upload leaves it out. ``autopilot`` is kept for callers; it changes nothing."""
-    items = loads_wpl_items(text, where)
-    kind = items[0].mission_type if items else MissionType.MISSION
-    if kind == MissionType.FENCE:
-        return MissionFile(fence=items)
-    if kind == MissionType.RALLY:
-        return MissionFile(rally=items)
-    return MissionFile.from_items(items, autopilot="ardupilot")
+    """WPL text -> MissionFile. Row 0 of a mission is the planned home whatever the autopilot, so
+    a PX4 upload leaves it out; ``autopilot`` is kept for callers, it changes nothing. A
+    ``QGC WPL 120`` file (QGC's older format) has no home row and DO_JUMP targets one lower."""
+    rows, comments, version = _read(text, where)
+    kind, home_row = _list_kind([_int(f[3], "command", ln, where) for ln, f in rows])
+    if version == "120":
+        home_row = False
+    items = [
+        _item(seq, ln, f, MissionType.MISSION if seq == 0 and home_row else kind, where)
+        for seq, (ln, f) in enumerate(rows)
+    ]
+    home_item, body = (items[0], items[1:]) if home_row and items else (None, items)
+    if version == "120":
+        body = [replace(it, param1=it.param1 + 1) if it.command == DO_JUMP else it for it in body]
+    name = LIST_NAMES[kind]
+    mf = MissionFile(comments=comments, lists=frozenset({kind}), home_item=home_item)
+    if kind == MissionType.MISSION:
+        body = [replace(it, current=0) for it in body]  # the upload marks seq 0 current
+    setattr(mf, name, [it.with_seq(i) for i, it in enumerate(body)])
+    if home_item is not None and (home_item.x, home_item.y) != (0, 0):
+        mf.home = (home_item.x / 1e7, home_item.y / 1e7, float(home_item.z))
+    mf.notes = unknown_command_notes(body, name)
+    return mf
 
 
 def _int(text: str, name: str, lineno: int, where: str) -> int:
