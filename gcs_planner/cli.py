@@ -23,6 +23,7 @@ COMMANDS = [
     "replay",
     "import-tlog",
     "export",
+    "convert",
     "upload",
     "download",
     "clear",

@@ -264,3 +264,19 @@ def test_start_uploads_the_file_lists_first(fleet, tmp_path, capsys):
     out = capsys.readouterr().out
     assert code in (0, 2) and "upload fence" in out and "upload mission" not in out
     assert len(held(fleet, 1, 1)) == 4
+
+
+def test_convert_says_what_it_interpreted_and_what_the_target_drops(tmp_path, capsys):
+    src = tmp_path / "in.waypoints"
+    src.write_text(wpl("# survey", HOME_ROW, "1 0 3 16 0 0 0 nan 47.398 8.546 30 1"))
+    assert main(["convert", str(src), str(tmp_path / "out.plan")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "warning: comments: every line not carried by a .plan"
+    (back,) = load_mission_file(tmp_path / "out.plan").mission
+    (item,) = loads_wpl(src.read_text()).mission
+    assert math.isnan(back.param4) and replace(back, param4=0.0) == replace(item, param4=0.0)
+    assert main(["convert", str(tmp_path / "out.plan"), str(tmp_path / "back.txt")]) == 0
+    assert "param4 NaN (use the default) written as 0" in capsys.readouterr().out
+    assert main(["convert", str(tmp_path / "missing.plan"), str(tmp_path / "x.plan")]) == 2
+    assert not (tmp_path / "x.plan").exists()
+    assert "no such file" in capsys.readouterr().err

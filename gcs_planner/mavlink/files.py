@@ -213,7 +213,7 @@ def unknown_command_notes(items: list[MissionItem], part: str) -> list[str]:
         if item.command not in KNOWN_COMMANDS:
             unknown.setdefault(item.command, []).append(i)
     return [
-        f"{part} items {ranges(tuple(idx))}: command {cmd} is not in the MAVLink dialect gcs-planner"
+        f"{part} item{'s' if len(idx) > 1 else ''} {ranges(tuple(idx))}: command {cmd} is not in the MAVLink dialect gcs-planner"
         " knows (pymavlink ardupilotmega); kept and sent as written, x/y as latitude/longitude"
         for cmd, idx in unknown.items()
     ]

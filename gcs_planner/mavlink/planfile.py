@@ -260,7 +260,10 @@ class _Notes:
         self.by_kind.setdefault(kind, []).append(index)
 
     def lines(self) -> list[str]:
-        return [f"mission items {ranges(tuple(idx))}: {kind}" for kind, idx in self.by_kind.items()]
+        return [
+            f"mission item{'s' if len(idx) > 1 else ''} {ranges(tuple(idx))}: {kind}"
+            for kind, idx in self.by_kind.items()
+        ]
 
 
 def loads_plan(text: str, where: str = ".plan file") -> MissionFile:

@@ -140,7 +140,7 @@ def wpl_losses(mf: MissionFile) -> list[Loss]:
         if getattr(mf, name) != getattr(defaults, name)
     )
     if settings:
-        losses.append(Loss("settings", settings, (), "are not carried by WPL (a .plan keeps them)"))
+        losses.append(Loss("settings", settings, (), "not carried by WPL (a .plan keeps them)"))
     if mf.home is not None and any(e7(v) / 1e7 != v for v in mf.home[:2]):
         losses.append(Loss("home", ("position",), (), "rounded to 1e-7 deg (row 0 holds degE7, ~1 cm)"))
     name = LIST_NAMES[kind]
