@@ -12,12 +12,15 @@
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import os
+import random
 from pathlib import Path
 
 import pytest
 
+from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.files import (
     LIST_NAMES,
@@ -30,6 +33,7 @@ from gcs_planner.mavlink.files import (
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient, compare_items
 from gcs_planner.mavlink.types import MissionType
+from gcs_planner.mavlink.validate import validate_items
 
 CORPUS = Path(os.environ.get("GCS_PLANNER_CORPUS", Path(__file__).resolve().parents[2] / "shared" / "corpus"))
 pytestmark = pytest.mark.skipif(not (CORPUS / "MANIFEST.tsv").is_file(), reason=f"no corpus at {CORPUS}")
@@ -175,3 +179,46 @@ def test_corpus_uploads_and_downloads_match(mock_fleet, sysid, autopilot):
     assert set(problems) == set(expected), {k: v for k, v in problems.items() if k not in expected}
     for name, (answer, _) in expected.items():
         assert answer in problems[name]
+
+
+def _mutated(text: str, rng: random.Random) -> str:
+    """One field of ``text`` replaced by a bad value: a JSON value, or a WPL / list column."""
+    bad = [None, "x", -1, 1e308, [], {}, [1, 2], True, 2**40, "nan", 3.5]
+    if text.lstrip().startswith("{"):
+        doc = json.loads(text)
+        node = doc
+        while isinstance(node, dict | list) and node:
+            key = rng.choice(list(node)) if isinstance(node, dict) else rng.randrange(len(node))
+            if rng.random() < 0.3 or not isinstance(node[key], dict | list) or not node[key]:
+                node[key] = rng.choice(bad)
+                break
+            node = node[key]
+        return json.dumps(doc)
+    lines = text.splitlines()
+    if len(lines) > 1:
+        i = rng.randrange(1, len(lines))
+        fields = lines[i].split()
+        if fields:
+            fields[rng.randrange(len(fields))] = rng.choice(
+                ["x", "inf", "nan", "1e40", "99999999999", "", "1.5"]
+            )
+            lines[i] = "\t".join(fields)
+    return "\n".join(lines)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_damaged_corpus_files_fail_with_one_line_or_load(seed, tmp_path):
+    """A file with one bad value is refused with a MissionFileError naming it, or read; never a traceback."""
+    rng = random.Random(seed)
+    for name in FILES:
+        path = tmp_path / f"f{Path(name).suffix}"
+        path.write_text(_mutated((CORPUS / name).read_text(), rng))
+        try:
+            mf = load_mission_file(path)
+            for autopilot in ("ardupilot", "px4"):
+                for mission_type in (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY):
+                    validate_items(mf.list_items(mission_type, autopilot), mission_type=mission_type)
+            save_mission_file(tmp_path / "out.plan", mf)
+            save_mission_file(tmp_path / "out.waypoints", mf)
+        except UserError as exc:
+            assert "\n" not in str(exc)

@@ -213,8 +213,9 @@ def unknown_command_notes(items: list[MissionItem], part: str) -> list[str]:
         if item.command not in KNOWN_COMMANDS:
             unknown.setdefault(item.command, []).append(i)
     return [
-        f"{part} item{'s' if len(idx) > 1 else ''} {ranges(tuple(idx))}: command {cmd} is not in the MAVLink dialect gcs-planner"
-        " knows (pymavlink ardupilotmega); kept and sent as written, x/y as latitude/longitude"
+        f"{part} item{'s' if len(idx) > 1 else ''} {ranges(tuple(idx))}: command {cmd} is not in the MAVLink"
+        " dialect gcs-planner knows (pymavlink ardupilotmega); kept and sent as written,"
+        " x/y as latitude/longitude"
         for cmd, idx in unknown.items()
     ]
 
@@ -226,7 +227,7 @@ def load_mission_file(path: str | Path, autopilot: str = "ardupilot") -> Mission
 
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Windows editors) is no content
     except FileNotFoundError:
         raise MissionFileError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:

@@ -219,7 +219,7 @@ def _fence_to_json(items: list[MissionItem]) -> dict[str, Any]:
             fence["breachReturn"] = [it.x / 1e7, it.y / 1e7, float(it.z)]
             i += 1
         elif it.command in POLYGON.values():
-            count = int(it.param1)
+            count = int(it.param1) if math.isfinite(it.param1) else 0
             group = items[i : i + count]
             if count < 3 or len(group) < count or any(g.command != it.command for g in group):
                 raise MissionFileError(
@@ -236,7 +236,7 @@ def _fence_to_json(items: list[MissionItem]) -> dict[str, Any]:
         else:
             circles.append(
                 {
-                    "circle": {"center": [it.x / 1e7, it.y / 1e7], "radius": float(it.param1)},
+                    "circle": {"center": [it.x / 1e7, it.y / 1e7], "radius": _json_num(it.param1)},
                     "inclusion": it.command == CIRCLE[True],
                     "version": 1,
                 }
@@ -293,13 +293,14 @@ def loads_plan(text: str, where: str = ".plan file") -> MissionFile:
         )
     notes = _Notes()
     items, jump_ids = [], []
-    for i, raw in enumerate(mission.get("items", [])):
+    for i, raw in enumerate(_list(mission.get("items", []), where, "mission.items")):
         path = f"mission.items[{i}]"
         kind = _get(raw, "type")
         if kind in ("SimpleItem", "missionItem"):
             subs = [(raw, path)]
         elif kind == "ComplexItem":
             inner = _get(_get(raw, "TransectStyleComplexItem"), "Items")
+            inner = inner if inner is None else _list(inner, where, f"{path}.TransectStyleComplexItem.Items")
             if not isinstance(inner, list):
                 raise MissionFileError(
                     f"{where}: {path}: ComplexItem {_get(raw, 'complexItemType')!r} has no"
@@ -320,13 +321,14 @@ def loads_plan(text: str, where: str = ".plan file") -> MissionFile:
         ("cruiseSpeed", "cruise_speed_mps"),
         ("hoverSpeed", "hover_speed_mps"),
     ):
-        if isinstance(mission.get(key), int | float) and not isinstance(mission.get(key), bool):
-            kwargs[name] = mission[key]
+        value = mission.get(key)
+        if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
+            kwargs[name] = value
     return MissionFile(
         mission=items,
         home=home,
-        fence=_parse_fence(fence or {}, where),
-        rally=_parse_rally(rally or {}, where),
+        fence=_parse_fence(_dict(fence or {}, where, "geoFence"), where),
+        rally=_parse_rally(_dict(rally or {}, where, "rallyPoints"), where),
         lists=lists,
         notes=notes.lines() + unknown_command_notes(items, "mission"),
         **kwargs,
@@ -341,6 +343,7 @@ def _home(value: Any, where: str) -> tuple[float, float, float] | None:
     if isinstance(value, dict):
         value, path = value.get("coordinate"), f"{path}.coordinate"
     lat, lon, alt = _numbers(value, 3, where, path)
+    _check_lat_lon(lat, lon, where, path)
     return None if (lat, lon) == (0.0, 0.0) else (lat, lon, alt)
 
 
@@ -359,6 +362,18 @@ def _resolve_jumps(items: list[MissionItem], jump_ids: list[Any], notes: _Notes)
     return out
 
 
+def _list(value: Any, where: str, path: str) -> list:
+    if not isinstance(value, list):
+        raise MissionFileError(f"{where}: {path} must be a list, got {value!r}")
+    return value
+
+
+def _dict(value: Any, where: str, path: str) -> dict:
+    if not isinstance(value, dict):
+        raise MissionFileError(f"{where}: {path} must be an object, got {value!r}")
+    return value
+
+
 def _get(d: Any, key: str) -> Any:
     return d.get(key) if isinstance(d, dict) else None
 
@@ -369,12 +384,13 @@ def _numbers(value: Any, n: int, where: str, path: str, allow_null: bool = False
     for v in value if ok else []:
         if v is None and allow_null:
             out.append(math.nan)
-        elif isinstance(v, int | float) and not isinstance(v, bool):
+        elif isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v):
             out.append(float(v))
         else:
             ok = False
     if not ok:
-        raise MissionFileError(f"{where}: {path} must be a list of {n} numbers, got {value!r}")
+        kind = "finite numbers or null" if allow_null else "finite numbers"
+        raise MissionFileError(f"{where}: {path} must be a list of {n} {kind}, got {value!r}")
     return out
 
 
@@ -404,11 +420,13 @@ def _parse_simple(raw: Any, where: str, path: str, notes: _Notes, index: int) ->
                 f"{where}: {path}.params[4:6] (latitude, longitude) must be numbers, got {p[4:6]}"
             )
         scale = 1e4 if frame in LOCAL_FRAMES else 1e7
-        x, y = half_away(p[4] * scale), half_away(p[5] * scale)
+        if scale == 1e7:
+            _check_lat_lon(p[4], p[5], where, f"{path}.params[4:6]")
+        x, y = (_int32(half_away(v * scale), where, f"{path}.params[4:6]") for v in p[4:6])
     else:
         if not (math.isfinite(p[4]) and math.isfinite(p[5])):
             notes.add("params 5/6 null, sent as 0 (MISSION_ITEM_INT x/y are integers)", index)
-        x, y = (half_away(v) if math.isfinite(v) else 0 for v in p[4:6])
+        x, y = (_int32(half_away(v), where, f"{path}.params[4:6]") if math.isfinite(v) else 0 for v in p[4:6])
     z = p[6]
     if not math.isfinite(z):
         frame, z = _null_altitude(raw, frame, command, where, path, notes, index)
@@ -447,6 +465,17 @@ def _null_altitude(
     raise MissionFileError(f"{where}: {path}.params[6] (altitude) must be a number, got null")
 
 
+def _check_lat_lon(lat: float, lon: float, where: str, path: str) -> None:
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+        raise MissionFileError(f"{where}: {path}: latitude, longitude {lat!r}, {lon!r} out of range")
+
+
+def _int32(value: int, where: str, path: str) -> int:
+    if not -(2**31) <= value < 2**31:
+        raise MissionFileError(f"{where}: {path}: {value} does not fit MISSION_ITEM_INT's int32 x / y")
+    return value
+
+
 def _fence_item(command: int, lat: float, lon: float, param1: float = 0.0, z: float = 0.0) -> MissionItem:
     frame = RETURN_FRAME if command == RETURN_POINT else FENCE_FRAME
     return MissionItem(
@@ -465,7 +494,7 @@ def _parse_fence(fence: Any, where: str) -> list[MissionItem]:
     if not isinstance(fence, dict):
         raise MissionFileError(f"{where}: geoFence must be an object")
     items = []
-    polygons = list(fence.get("polygons", []))
+    polygons = list(_list(fence.get("polygons", []), where, "geoFence.polygons"))
     if fence.get("polygon"):
         polygons.insert(0, {"polygon": fence["polygon"], "inclusion": True})
     for i, poly in enumerate(polygons):
@@ -476,22 +505,26 @@ def _parse_fence(fence: Any, where: str) -> list[MissionItem]:
         cmd = POLYGON[bool(poly.get("inclusion", True))]
         for j, v in enumerate(vertices):
             lat, lon = _numbers(v, 2, where, f"{path}.polygon[{j}]")
+            _check_lat_lon(lat, lon, where, f"{path}.polygon[{j}]")
             items.append(_fence_item(cmd, lat, lon, float(len(vertices))))
-    for i, circ in enumerate(fence.get("circles", [])):
+    for i, circ in enumerate(_list(fence.get("circles", []), where, "geoFence.circles")):
         path = f"geoFence.circles[{i}]"
         lat, lon = _numbers(_get(_get(circ, "circle"), "center"), 2, where, f"{path}.circle.center")
+        _check_lat_lon(lat, lon, where, f"{path}.circle.center")
         (radius,) = _numbers([_get(_get(circ, "circle"), "radius")], 1, where, f"{path}.circle.radius")
         items.append(_fence_item(CIRCLE[bool(circ.get("inclusion", True))], lat, lon, radius))
     if fence.get("breachReturn") is not None:
         lat, lon, alt = _numbers(fence["breachReturn"], 3, where, "geoFence.breachReturn")
+        _check_lat_lon(lat, lon, where, "geoFence.breachReturn")
         items.append(_fence_item(RETURN_POINT, lat, lon, z=alt))
     return [it.with_seq(k) for k, it in enumerate(items)]
 
 
 def _parse_rally(rally: Any, where: str) -> list[MissionItem]:
-    points = _get(rally, "points") or []
+    points = _list(_get(rally, "points") or [], where, "rallyPoints.points")
     items = []
     for i, pt in enumerate(points):
         lat, lon, alt = _numbers(pt, 3, where, f"rallyPoints.points[{i}]")
+        _check_lat_lon(lat, lon, where, f"rallyPoints.points[{i}]")
         items.append(_rally_item(lat, lon, alt).with_seq(i))
     return items

@@ -199,9 +199,12 @@ def _item(seq: int, lineno: int, f: list[str], mission_type: MissionType, where:
     frame = _int(f[2], "frame", lineno, where)
     command = _int(f[3], "command", lineno, where)
     scale, _ = _scale(frame, command)
-    x, y = (_float(f[k], COLUMNS[k], lineno, where) for k in (8, 9))
-    if not (math.isfinite(x) and math.isfinite(y)):
-        raise MissionFileError(f"{where}: line {lineno}: x/y must be finite, got {f[8]!r}, {f[9]!r}")
+    x, y = (_float(f[k], COLUMNS[k], lineno, where) * scale for k in (8, 9))
+    for k, v in ((8, x), (9, y)):
+        if not -(2**31) <= v < 2**31:
+            raise MissionFileError(
+                f"{where}: line {lineno}: field {COLUMNS[k]} = {f[k]!r} does not fit MISSION_ITEM_INT's int32"
+            )
     return MissionItem(
         seq=seq,
         frame=frame,
@@ -212,8 +215,8 @@ def _item(seq: int, lineno: int, f: list[str], mission_type: MissionType, where:
         param2=_float(f[5], "param2", lineno, where),
         param3=_float(f[6], "param3", lineno, where),
         param4=_float(f[7], "param4", lineno, where),
-        x=half_away(x * scale),
-        y=half_away(y * scale),
+        x=half_away(x),
+        y=half_away(y),
         z=_float(f[10], "z", lineno, where),
         mission_type=mission_type,
     )
@@ -260,6 +263,9 @@ def _int(text: str, name: str, lineno: int, where: str) -> int:
 
 def _float(text: str, name: str, lineno: int, where: str) -> float:
     try:
-        return float(text)
+        value = float(text)
     except ValueError:
-        raise MissionFileError(f"{where}: line {lineno}: field {name} = {text!r} is not a number") from None
+        value = math.inf
+    if math.isinf(value) or (math.isnan(value) and name in ("x", "y", "z")):
+        raise MissionFileError(f"{where}: line {lineno}: field {name} = {text!r} is not a finite number")
+    return value
