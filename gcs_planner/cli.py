@@ -21,6 +21,7 @@ COMMANDS = [
     "fly-coalition",
     "demo",
     "replay",
+    "import-log",
     "import-tlog",
     "export",
     "convert",

@@ -59,6 +59,7 @@ from gcs_planner.telemetry.schemas import (
     GEOJSON_SCHEMA,
     LOCATION_FIX_SCHEMA,
     mavlink_json_schema,
+    record_json_schema,
     schema_bytes,
 )
 
@@ -110,6 +111,7 @@ class FlightLogger:
         self._schema_ids: dict[type, int] = {}
         self._frames_per_sysid: dict[int, int] = {}
         self._event_channel = 0
+        self._record_channels: dict[str, int] = {}
         self._closed = False
         self._stop = threading.Event()
         self._start_ns = time.time_ns()
@@ -146,6 +148,24 @@ class FlightLogger:
         t_ns = self._to_ns(time.time() if t_s is None else t_s)
         with self._write_lock:
             self._writer.add_message(self._event_channel, t_ns, data)
+
+    def log_record(self, topic: str, schema_title: str, fields: dict, t_s: float) -> None:
+        """Record one non-MAVLink record (a DataFlash or ULog message) as JSON on ``topic``; the
+        channel and a schema from the first record's fields are registered on first use."""
+        channel = self._record_channels.get(topic)
+        with self._write_lock:
+            if channel is None:
+                schema = record_json_schema(schema_title, fields)
+                schema_id = self._writer.register_schema(schema_title, "jsonschema", schema_bytes(schema))
+                channel = self._writer.register_channel(topic, "json", schema_id)
+                self._record_channels[topic] = channel
+            data = json.dumps(fields, separators=(",", ":"), default=str).encode()
+            self._writer.add_message(channel, self._to_ns(t_s), data)
+
+    def add_metadata(self, name: str, values: dict[str, str]) -> None:
+        """An MCAP metadata record (string values), e.g. what an import made of its source."""
+        with self._write_lock:
+            self._writer.add_metadata(name, {k: str(v) for k, v in values.items()})
 
     def flush(self) -> None:
         """Encode pending frames and write them as one complete chunk (and to the .tlog)."""

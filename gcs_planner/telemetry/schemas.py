@@ -171,5 +171,23 @@ EVENT_SCHEMA = {
 }
 
 
+def record_json_schema(title: str, fields: dict) -> dict:
+    """JSON schema of a log record (DataFlash, ULog) from one record's fields and their types."""
+
+    def kind(value) -> dict:
+        if isinstance(value, bool):
+            return {"type": "boolean"}
+        if isinstance(value, int):
+            return {"type": "integer"}
+        if isinstance(value, float) or value is None:
+            return {"type": ["number", "null"]}
+        if isinstance(value, list):
+            return {"type": "array"}
+        return {"type": "string"}
+
+    properties = {k: kind(v) for k, v in fields.items()}
+    return {"title": title, "type": "object", "properties": properties}
+
+
 def schema_bytes(schema: dict) -> bytes:
     return json.dumps(schema, separators=(",", ":")).encode()

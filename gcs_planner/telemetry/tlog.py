@@ -2,7 +2,8 @@
 
 A .tlog is what MAVProxy, Mission Planner and QGroundControl write and what mavlogdump and
 MAVExplorer read: for each frame an 8-byte big-endian Unix time [us] followed by the raw frame,
-nothing else. Reading goes through pymavlink's own log reader (``mavutil.mavlink_connection``),
+nothing else. Reading goes through pymavlink's own .tlog reader (``mavutil.mavlogfile``; not
+``mavlink_connection``, which picks a reader by the file's extension),
 which resynchronises on garbage; each frame keeps its exact bytes (``msg.get_msgbuf()``).
 
 Import picks the origin from ``--origin`` or else from the first GLOBAL_POSITION_INT (its
@@ -49,7 +50,8 @@ def iter_tlog(path: str | Path) -> Iterator[tuple[float, object, bytes]]:
     path = Path(path)
     if not path.is_file():
         raise UserError(f"tlog {str(path)!r}: no such file")
-    conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega", robust_parsing=True)
+    mavutil.set_dialect("ardupilotmega")
+    conn = mavutil.mavlogfile(str(path), robust_parsing=True)  # a .tlog whatever its name (not DataFlash)
     try:
         while True:
             msg = conn.recv_msg()

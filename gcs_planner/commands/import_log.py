@@ -1,0 +1,53 @@
+"""Import a flight log into an MCAP flight log: .tlog, raw MAVLink, ArduPilot DataFlash, PX4 ULog.
+
+    gcs-planner import-log FLIGHT.bin -o FLIGHT.mcap [--plan plan.json] [--scenario s.toml]
+
+The format is told by the file's bytes, not its name (telemetry/log_import.py). The result has
+the layout of a log recorded by `fly` (LocationFix per vehicle, JSON channels with schemas,
+events; raw frames where the log has frames), so `replay` and Foxglove read it the same way.
+`import-tlog` is the same command.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from gcs_planner.errors import UserError
+from gcs_planner.geo import Origin
+from gcs_planner.mavlink.files import load_plan_json
+from gcs_planner.telemetry.log_import import import_log
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("log", help="flight log: .tlog, raw MAVLink capture, DataFlash .bin / .log, PX4 .ulg")
+    p.add_argument("-o", "--output", help="MCAP file to write [LOG with .mcap]")
+    p.add_argument("--plan", help="plan.json to attach (also sets the origin)")
+    p.add_argument("--scenario", help="scenario .toml to attach")
+    p.add_argument("--origin", help="LAT,LON,ALT_AMSL of the local frame (default: plan, else home)")
+
+
+def run(args: argparse.Namespace) -> int:
+    output = Path(args.output) if args.output else Path(args.log).with_suffix(".mcap")
+    if not output.parent.is_dir():
+        raise UserError(f"-o {str(output)!r}: folder {str(output.parent)!r} does not exist")
+    if output.resolve() == Path(args.log).resolve():
+        raise UserError(f"-o {str(output)!r} is the log itself")
+    plan = load_plan_json(args.plan) if args.plan else None
+    try:
+        scenario_text = Path(args.scenario).read_text() if args.scenario else None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"--scenario {args.scenario!r}: cannot read: {exc}") from None
+    origin = _parse_origin(args.origin) if args.origin else None
+    result = import_log(args.log, output, origin=origin, plan=plan, scenario_text=scenario_text)
+    records = f", {sum(result.records.values())} records" if result.records else ""
+    print(f"wrote {output}: {result.format}{records}, {result.frames} MAVLink frames")
+    return 0
+
+
+def _parse_origin(text: str) -> Origin:
+    try:
+        lat, lon, alt = (float(v) for v in text.split(","))
+        return Origin(lat, lon, alt)
+    except ValueError as exc:
+        raise UserError(f"--origin must be LAT,LON,ALT_AMSL, got {text!r} ({exc})") from None
