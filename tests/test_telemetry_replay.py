@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+import socket
 import threading
 import time
 
@@ -12,10 +14,11 @@ from telemetry_frames import ORIGIN, SCENARIO_TEXT, flight_frames, make_plan
 from gcs_planner.cli import main
 from gcs_planner.errors import UserError
 from gcs_planner.telemetry import FlightLogger, read_flight, replay_to_mavlink
-from gcs_planner.telemetry.replay import parse_udp_url
+from gcs_planner.telemetry.replay import MAX_RATE_HZ, paced, parse_udp_url
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -144,3 +147,56 @@ def test_log_flight_to_rerun_file_is_complete_and_reopenable(flight_path, tmp_pa
     assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 1  # default blueprint saved
     store = reader.store()  # needs the footer/manifest: the file was finished
     assert "/map/track/1" in store.summary()
+
+
+def _with_ground_station(tmp_path, n_vehicle_samples: int = 20):
+    """A log holding three vehicles and a ground station (sysid 255, HEARTBEAT type GCS)."""
+    gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+    path = tmp_path / "gcs.mcap"
+    with FlightLogger(path, ORIGIN) as logger:
+        for k, (msg, raw, t_s) in enumerate(flight_frames([1, 2, 3], samples=n_vehicle_samples)):
+            logger.on_frame(msg, raw, t_s)
+            if k % 5 == 0:
+                hb = gcs.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                logger.on_frame(hb, bytes(hb.pack(gcs)), t_s)
+    return read_flight(path)
+
+
+def test_ground_station_frames_are_kept_but_never_replayed(tmp_path):
+    flight = _with_ground_station(tmp_path)
+    assert flight.sysids == [1, 2, 3] and flight.gcs_sysids == [255]
+    assert any(f.sysid == 255 for f in flight.frames)  # kept in the log
+    sent = []
+    now = [0.0]
+    for frame in paced(flight, 0.0, sleep=lambda dt: now.__setitem__(0, now[0] + dt), clock=lambda: now[0]):
+        sent.append(frame)
+    assert sent == [f for f in flight.frames if f.sysid != 255] and sent
+
+
+def test_unpaced_replay_is_capped_and_loses_nothing_on_loopback(tmp_path):
+    flight = _with_ground_station(tmp_path, n_vehicle_samples=50)  # fits a default socket buffer
+    now, sleeps = [0.0], []
+
+    def sleep(dt: float) -> None:
+        sleeps.append(dt)
+        now[0] += dt
+
+    replay_to_mavlink(flight, "udpout:127.0.0.1:9", speed=0.0, sleep=sleep, clock=lambda: now[0])
+    n = len(flight.vehicle_frames)
+    assert now[0] == pytest.approx((n - 1) / MAX_RATE_HZ)  # speed 0: as fast as the cap allows
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", 0))
+    sock.settimeout(5.0)
+    got: list[bytes] = []
+
+    def receive() -> None:
+        with contextlib.suppress(TimeoutError):
+            while len(got) < n:
+                got.append(sock.recv(4096))
+
+    listener = threading.Thread(target=receive)
+    listener.start()
+    assert replay_to_mavlink(flight, f"udpout:127.0.0.1:{sock.getsockname()[1]}", speed=0.0) == n
+    listener.join()
+    sock.close()
+    assert got == [f.data for f in flight.vehicle_frames]

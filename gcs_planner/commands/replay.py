@@ -42,11 +42,13 @@ def run(args: argparse.Namespace) -> int:
     except FileNotFoundError:
         raise UserError(f"flight log {args.flight!r}: no such file") from None
     note = f" (truncated log: recovered {flight.recovered_messages} messages)" if flight.truncated else ""
-    print(f"{args.flight}: {len(flight.frames)} frames from vehicles {flight.sysids}{note}")
+    gcs = flight.gcs_sysids
+    kept = f"; ground station {gcs}: frames kept, not replayed" if gcs else ""
+    print(f"{args.flight}: {len(flight.vehicle_frames)} frames from vehicles {flight.sysids}{kept}{note}")
     if args.rrd or args.viewer:
         _to_rerun(flight, args.rrd, args.viewer, args.speed)
     if args.to:
-        with progress_bar(len(flight.frames), f"replaying to {args.to}") as bar:
+        with progress_bar(len(flight.vehicle_frames), f"replaying to {args.to}") as bar:
 
             def progress(sent: int, total: int) -> None:
                 bar.n = sent

@@ -95,9 +95,26 @@ class Flight:
 
     @property
     def sysids(self) -> list[int]:
-        """Vehicles seen in the log (any frame), ascending."""
+        """Vehicles seen in the log (any frame, ground stations excluded), ascending."""
         self.frames_of(0)
-        return sorted(self._by_sysid)
+        return sorted(set(self._by_sysid) - set(self.gcs_sysids))
+
+    @property
+    def gcs_sysids(self) -> list[int]:
+        """Ground stations in the log: systems whose HEARTBEAT says MAV_TYPE_GCS, and system 255
+        (every GCS's default id) when it sent no HEARTBEAT at all. Kept, never replayed."""
+        self.frames_of(0)
+        kinds = {sysid: _heartbeat_type(frames) for sysid, frames in self._by_sysid.items()}
+        gcs = mavlink.MAV_TYPE_GCS
+        return sorted(
+            s for s, kind in kinds.items() if kind == gcs or (kind is None and s == GCS_DEFAULT_SYSID)
+        )
+
+    @property
+    def vehicle_frames(self) -> list[RawFrame]:
+        """The frames of the vehicles, in receive order: what replay sends."""
+        gcs = set(self.gcs_sysids)
+        return self.frames if not gcs else [f for f in self.frames if f.sysid not in gcs]
 
     @property
     def start_time_s(self) -> float:
@@ -158,6 +175,20 @@ class Flight:
         keep = exp > 0
         ends = t[0] + (np.arange(len(rec)) + 1) * window_s
         return ends[keep], 1.0 - rec[keep] / exp[keep]
+
+
+GCS_DEFAULT_SYSID = 255
+
+
+def _heartbeat_type(frames: list[RawFrame]) -> int | None:
+    """MAV_TYPE of a system's first HEARTBEAT frame (payload byte 4), None without one."""
+    for f in frames:
+        raw = f.data
+        if frame_msgid(raw) == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            start = 10 if raw[0] == 0xFD else 6
+            if len(raw) > start + 4:
+                return raw[start + 4]
+    return None
 
 
 def frame_msgid(raw: bytes) -> int:

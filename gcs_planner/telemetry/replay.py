@@ -1,10 +1,13 @@
 """Replay a flight log: re-emit its raw MAVLink frames over UDP, or render it to Rerun.
 
 MAVLink replay sends every recorded frame byte for byte, in receive order, with the recorded
-inter-frame timing divided by ``speed`` (``speed <= 0`` or ``inf``: as fast as possible), so
-another GCS (MAVProxy, QGroundControl) pointed at the address sees the flight again. Frames are
-sent from one UDP socket, like a single router carrying all vehicles. The schedule is absolute
-(time of frame k = start + (t_k - t_0) / speed), so sleep overshoot never accumulates.
+inter-frame timing divided by ``speed`` (``speed <= 0`` or ``inf``: as fast as the rate cap
+allows), so another GCS (MAVProxy, QGroundControl) pointed at the address sees the flight again.
+Frames are sent from one UDP socket, like a single router carrying all vehicles; a ground
+station's own frames are not replayed. The schedule is absolute (frame k at start +
+max((t_k - t_0) / speed, k / max_rate)), so sleep overshoot never accumulates, and never faster
+than ``max_rate`` frames per second (default MAX_RATE_HZ): unpaced, 23,894 frames went out in
+0.1 s and a loopback receiver got 15,401 of them.
 """
 
 from __future__ import annotations
@@ -23,7 +26,9 @@ from gcs_planner.telemetry.reader import Flight, RawFrame
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["parse_udp_url", "paced", "replay_to_mavlink", "replay_to_rerun_live"]
+__all__ = ["MAX_RATE_HZ", "parse_udp_url", "paced", "replay_to_mavlink", "replay_to_rerun_live"]
+
+MAX_RATE_HZ = 2000.0  # frames/s; a GCS's socket buffer (~200 KB) then absorbs a 0.1 s stall
 
 
 def parse_udp_url(url: str) -> tuple[str, int]:
@@ -42,16 +47,17 @@ def replay_to_mavlink(
     progress: Callable[[int, int], None] | None = None,
     sleep: Callable[[float], None] = time.sleep,
     clock: Callable[[], float] = time.monotonic,
+    max_rate: float = MAX_RATE_HZ,
 ) -> int:
-    """Send the flight's raw frames to ``url`` (udpout:HOST:PORT); returns frames sent.
+    """Send the vehicles' raw frames to ``url`` (udpout:HOST:PORT); returns frames sent.
 
     progress(sent, total) is called about every 100 frames.
     """
     host, port = parse_udp_url(url)
-    frames = flight.frames
+    frames = flight.vehicle_frames
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.connect((host, port))
-        for k, frame in enumerate(paced(flight, speed, sleep, clock)):
+        for k, frame in enumerate(paced(flight, speed, sleep, clock, max_rate)):
             with contextlib.suppress(ConnectionRefusedError):  # nobody listening yet: keep going
                 sock.send(frame.data)
             if progress is not None and k % 100 == 0:
@@ -66,19 +72,21 @@ def paced(
     speed: float,
     sleep: Callable[[float], None] = time.sleep,
     clock: Callable[[], float] = time.monotonic,
+    max_rate: float = math.inf,
 ) -> Iterator[RawFrame]:
-    """The flight's frames, each yielded at start + (t_k - t_0) / speed (no pacing if speed is 0/inf)."""
-    frames = flight.frames
+    """The vehicles' frames (a ground station's are not replayed), frame k yielded at
+    start + max((t_k - t_0) / speed, k / max_rate); speed 0 or inf: no recorded timing."""
+    frames = flight.vehicle_frames
     if not frames:
         return
     realtime = speed > 0 and math.isfinite(speed)
     t0_ns = frames[0].t_ns
     start = clock()
-    for frame in frames:
-        if realtime:
-            delay = start + (frame.t_ns - t0_ns) * 1e-9 / speed - clock()
-            if delay > 0:
-                sleep(delay)
+    for k, frame in enumerate(frames):
+        due = max((frame.t_ns - t0_ns) * 1e-9 / speed if realtime else 0.0, k / max_rate)
+        delay = start + due - clock()
+        if delay > 0:
+            sleep(delay)
         yield frame
 
 
