@@ -97,7 +97,12 @@ def point_to_polyline_m(points: np.ndarray, polyline: np.ndarray, chunk: int = 4
     return out
 
 
-def _route_window(track: Track, planned: np.ndarray, acceptance_m: float) -> slice:
+def route_acceptance_m(vp, acceptance_m: float | None = None) -> float:
+    """How near the route's first / last point counts as there: the plan's radius + 1 m."""
+    return vp.acceptance_radius_m + 1.0 if acceptance_m is None else acceptance_m
+
+
+def route_window(track: Track, planned: np.ndarray, acceptance_m: float) -> slice:
     """Samples from leaving the route's first point to reaching its last one.
 
     Leaving is the last sample of the first stay within ``acceptance_m`` of the first point
@@ -199,8 +204,8 @@ def conformance_report(
                 )
             )
             continue
-        accept = vp.acceptance_radius_m + 1.0 if acceptance_m is None else acceptance_m
-        window = _route_window(tr, vp.path, accept)
+        accept = route_acceptance_m(vp, acceptance_m)
+        window = route_window(tr, vp.path, accept)
         xt = point_to_polyline_m(tr.positions[window], vp.path)
         xt_max = float(xt.max()) if len(xt) else np.inf
         xt_mean = float(xt.mean()) if len(xt) else np.inf

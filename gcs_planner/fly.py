@@ -41,6 +41,7 @@ import numpy as np
 
 from gcs_planner.conformance import MovingObstacle, Track, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
+from gcs_planner.flight_report import write_flight_report
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at, take_off
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for, quirks_named
@@ -99,6 +100,7 @@ class FlyResult:
     tlog_path: Path | None
     wall_time_s: float
     end_states: dict[int, str] = field(default_factory=dict)  # safe end: sysid -> what was done
+    report_path: Path | None = None  # the flight report PNG (flight_report.py)
 
     @property
     def passed(self) -> bool:
@@ -377,13 +379,17 @@ async def fly(
     for r in reports:
         if not uploads[r.sysid].ok:
             r.failures.insert(0, f"upload failed: {uploads[r.sysid].error}")
+    report_path = write_flight_report(
+        options.out_dir / "report.png", plan, recorder.tracks(), reports, scenario, options.max_cross_track_m
+    )
     rrd_path = None
     if options.rrd:
         from gcs_planner.telemetry import log_flight_to_rerun, read_flight
 
         rrd_path = options.out_dir / "flight.rrd"
         log_flight_to_rerun(read_flight(mcap_path), rrd_path)
-    return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, time.monotonic() - t_wall, end_states)
+    wall_s = time.monotonic() - t_wall
+    return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, wall_s, end_states, report_path)
 
 
 def _end_state(link: MavlinkLink, sysid: int) -> str:

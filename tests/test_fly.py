@@ -35,6 +35,7 @@ def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_p
     assert flight.origin == plan.origin and flight.scenario_text == SCENARIO.read_text()
     assert {e["sysid"] for _, e in flight.events if e.get("event") == "route_start"} == {1, 2, 3, 4}
     assert result.rrd_path.stat().st_size > 1000 and result.tlog_path.stat().st_size > 1000
+    assert result.report_path == tmp_path / "report.png" and result.report_path.stat().st_size > 20_000
 
 
 def test_fly_fails_when_a_vehicle_drifts(scenario_and_plan, tmp_path):

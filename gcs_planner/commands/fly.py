@@ -1,7 +1,8 @@
 """Plan a scenario and fly it: upload to every vehicle, arm, start, record, check conformance.
 
 Starts mock vehicles (sitl_mock) unless --connect names real ones or SITL. Writes
-OUT/flight.mcap (open in Foxglove), OUT/flight.rrd (open with `rerun OUT/flight.rrd`) and
+OUT/flight.mcap (open in Foxglove), OUT/flight.rrd (open with `rerun OUT/flight.rrd`),
+OUT/report.png (the flight report: map, cross-track and separation over time) and
 OUT/plan.json, and prints one conformance row per vehicle. Exits 1 when a vehicle fails its
 mission or breaks a separation, obstacle or cross-track bound. A coalition scenario (planner
 "coalition") is flown award by award instead, as `gcs-planner fly-coalition` does.
@@ -147,6 +148,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if result.rrd_path:
         print(f"rerun: {result.rrd_path}  (open with `rerun {result.rrd_path}`)")
+    if result.report_path:
+        print(f"report: {result.report_path}  (map, cross-track and separation over time, conformance)")
     if result.tlog_path:
         print(f"tlog: {result.tlog_path}  (mavlogdump.py, MAVExplorer, QGroundControl)")
     verdict = "PASS" if result.passed else "FAIL"
