@@ -89,6 +89,7 @@ class FlyOptions:
     drift_mps: dict[int, tuple[float, float]] = field(default_factory=dict)  # mock fault injection
     timeout_factor: float = 2.0
     keep_schedule: bool = True
+    live: object | None = None  # a rerun.RecordingStream: the Rerun views streamed while flying
 
 
 @dataclass
@@ -298,6 +299,8 @@ async def fly(
         with FlightLogger(mcap_path, plan.origin, plan, scenario_text, tlog_path) as logger:
             link.subscribe(logger.on_frame)
             link.subscribe(recorder.on_frame)
+            if options.live is not None:
+                link.subscribe(_live_views(options.live, plan, scenario).on_frame)
             try:
                 await _wait_for_vehicles(link, sysids, HEARTBEAT_WAIT_S if fleet else REAL_HEARTBEAT_WAIT_S)
                 quirks = vehicle_quirks(link, sysids)
@@ -390,6 +393,15 @@ async def fly(
         log_flight_to_rerun(read_flight(mcap_path), rrd_path)
     wall_s = time.monotonic() - t_wall
     return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, wall_s, end_states, report_path)
+
+
+def _live_views(rec, plan: Plan, scenario: Scenario):
+    """The views of a log (telemetry.rerun_views), fed frame by frame while flying."""
+    from gcs_planner.telemetry.rerun_views import LiveRerunLogger
+
+    live = LiveRerunLogger(rec, plan.origin, time.time())
+    live.start(plan, scenario)
+    return live
 
 
 def _end_state(link: MavlinkLink, sysid: int) -> str:

@@ -13,7 +13,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import sys
+import time
 from pathlib import Path
+from urllib.parse import quote
 
 from tqdm import tqdm
 
@@ -45,6 +47,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=None, help="planner seed (default: the file's)")
     p.add_argument("--tlog", action="store_true", help="also write OUT/flight.tlog")
     p.add_argument("--no-rrd", action="store_true", help="skip the Rerun .rrd")
+    p.add_argument("--live", action="store_true", help="show the Rerun views while flying (spawns a viewer)")
+    p.add_argument(
+        "--serve-web",
+        action="store_true",
+        help="stream the Rerun views while flying to Rerun's web viewer (prints the URL to open)",
+    )
     p.add_argument(
         "--max-cross-track",
         type=float,
@@ -96,6 +104,31 @@ def _drift(values: list[str]) -> dict[int, tuple[float, float]]:
     return out
 
 
+WEB_VIEWER_PORT = 9090
+
+
+def _live_recording(spawn: bool, serve_web: bool):
+    """A Rerun recording streaming to a spawned viewer and/or the web viewer, or None."""
+    if not (spawn or serve_web):
+        return None
+    import rerun as rr
+
+    from gcs_planner.telemetry.rerun_views import flight_blueprint
+
+    rec = rr.RecordingStream("gcs-planner", recording_id=f"fly-{time.time_ns()}")
+    try:
+        if spawn:
+            rec.spawn(default_blueprint=flight_blueprint())
+        if serve_web:
+            uri = rec.serve_grpc(default_blueprint=flight_blueprint())
+            rr.serve_web_viewer(web_port=WEB_VIEWER_PORT, connect_to=uri, open_browser=False)
+            url = f"http://localhost:{WEB_VIEWER_PORT}/?url={quote(uri, safe='')}"
+            print(f"live view: {url}  (Rerun web viewer)")
+    except Exception as exc:  # noqa: BLE001 - rerun raises RuntimeError / OSError variants
+        raise UserError(f"cannot start the live Rerun view ({exc}); fly without --live/--serve-web") from None
+    return rec
+
+
 def run(args: argparse.Namespace) -> int:
     if args.speedup is not None and args.speedup <= 0:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
@@ -120,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
         rrd=not args.no_rrd,
         max_cross_track_m=args.max_cross_track,
         drift_mps=_drift(args.drift),
+        live=_live_recording(args.live, args.serve_web),
     )
     bars: dict[str, object] = {}
     said: dict[int, str] = {}
