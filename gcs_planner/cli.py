@@ -21,6 +21,7 @@ COMMANDS = [
     "fly-coalition",
     "demo",
     "replay",
+    "watch",
     "import-log",
     "import-tlog",
     "export",
