@@ -13,6 +13,7 @@ import contextlib
 import os
 import signal
 import subprocess
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -39,11 +40,15 @@ def group_alive(pgid: int) -> bool:
 
 
 def kill_group(proc: subprocess.Popen) -> None:
-    """SIGKILL the child's process group (its session: the child and all it started), reap the child."""
+    """SIGKILL the child's process group (its session: the child and all it started), reap the child
+    and wait (up to 10 s) until nothing of the group runs any more."""
     with contextlib.suppress(ProcessLookupError, PermissionError):
         os.killpg(proc.pid, signal.SIGKILL)
     with contextlib.suppress(subprocess.TimeoutExpired):
         proc.wait(timeout=10.0)
+    deadline = time.monotonic() + 10.0  # SIGKILL is delivered asynchronously: wait for the others too
+    while group_alive(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.01)
     for pipe in (proc.stdin, proc.stdout, proc.stderr):
         if pipe is not None:
             with contextlib.suppress(OSError):
