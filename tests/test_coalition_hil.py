@@ -77,6 +77,26 @@ def test_live_state_fits_the_turn_and_predicts_the_pose_ahead():
         assert (leg.info["speed_mps"] > 50.0) is fast and np.allclose(leg.xy[0], q0[:2])
 
 
+def test_upload_end_is_stamped_at_the_first_report_after_the_upload():
+    """The run's clock only moves when a position report arrives. An upload that starts and ends
+    between two reports gets the next report's time as its end, so start < end by construction
+    (96d891a had loosened the HIL test's order to <= after an upload fell within one report)."""
+    from gcs_planner.coalition_hil.run import next_report_after
+
+    reads = iter([12.3, 12.3, 12.3, 12.3, 12.4, 12.5])
+    calls = []
+
+    def clock() -> float:
+        calls.append(1)
+        return next(reads)
+
+    start = clock()
+    assert asyncio.run(next_report_after(clock, clock())) == 12.4 > start
+    assert len(calls) == 5  # polled until the clock moved, not a fixed wait
+    frozen = asyncio.run(next_report_after(lambda: 7.0, 7.0, timeout_s=0.05))
+    assert frozen == 7.0  # no report at all: gives up after the timeout
+
+
 def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_path):
     """At the HIL run's default speed-up (5x). At 10x one strike in 10-20 runs came 2-3 s late when
     the machine was busy: an upload's wall time is then ten times as much flight."""
@@ -100,9 +120,9 @@ def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_pa
     assert len(awards) == 10 and all(u["ok"] for u in result.uploads)
     strike_s = result.strikes[0].awarded_s
     for u in awards:
-        # scenario time advances with position reports (~0.1 s apart): a fast upload may start and
-        # end within one report
-        assert u["award_t_s"] <= u["upload_start_s"] <= u["upload_end_s"] < u["t0_s"] + 1.0, u
+        # scenario time advances with position reports (~0.1 s apart); an upload's end is the first
+        # report after it, so the order is strict even for an upload that fits between two reports
+        assert u["award_t_s"] <= u["upload_start_s"] < u["upload_end_s"] < u["t0_s"] + 1.0, u
         assert u["t0_s"] < strike_s - 10.0, u
         assert u["prediction_error_m"] < 60.0, u  # predicted vs flown pose at the leg start
         t, p = result.tracks[u["sysid"]]

@@ -1,11 +1,15 @@
 """The mock fleet over real UDP, with a pymavlink ``udpout`` connection as the GCS."""
 
+import queue
+import signal
 import subprocess
 import sys
+import threading
 import time
 
 import numpy as np
 import pytest
+from child_process import child, group_alive
 
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, MissionState, px4_custom_mode
@@ -247,22 +251,49 @@ def test_sysid_routing_between_vehicles():
         gcs.close()
 
 
-def test_cli_starts_vehicles_and_stops_on_interrupt():
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sitl_mock.cli", "--vehicles", "3", "--base-port", "0", "--speedup", "5"],
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        lines = [proc.stderr.readline() for _ in range(4)]
-        assert [f"sysid {k}: udp 127.0.0.1:" in line for k, line in enumerate(lines[:3], 1)] == [True] * 3
-        port = int(lines[0].split("127.0.0.1:")[1].split()[0])
-        gcs = Probe(("127.0.0.1", port))
-        assert gcs.recv("HEARTBEAT", 3.0) is not None
-        gcs.close()
-    finally:
-        proc.send_signal(2)
+CLI = [sys.executable, "-m", "sitl_mock.cli", "--vehicles", "3", "--base-port", "0", "--speedup", "5"]
+
+
+def _cli_session(check) -> subprocess.Popen:
+    """Start the sitl-mock CLI, wait for its 3 start lines, call ``check(port, proc)``, then Ctrl-C it and
+    expect exit status 0. The CLI runs in its own process group, killed on the way out whatever
+    happens (a failed check, a timeout); its stderr is drained by a thread, so that a chatty child
+    never blocks on a full pipe instead of handling the SIGINT."""
+    with child(CLI, stderr=subprocess.PIPE, text=True) as proc:
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: [lines.put(line) for line in proc.stderr], daemon=True).start()
+        first = [lines.get(timeout=60) for _ in range(3)]
+        assert [f"sysid {k}: udp 127.0.0.1:" in line for k, line in enumerate(first, 1)] == [True] * 3, first
+        check(int(first[0].split("127.0.0.1:")[1].split()[0]), proc)
+        proc.send_signal(signal.SIGINT)
         assert proc.wait(timeout=30) == 0  # generous: a loaded 2-core CI machine
+    return proc
+
+
+def test_cli_starts_vehicles_and_stops_on_interrupt():
+    def heartbeat(port: int, proc: subprocess.Popen) -> None:
+        gcs = Probe(("127.0.0.1", port))
+        try:
+            assert gcs.recv("HEARTBEAT", 3.0) is not None
+        finally:
+            gcs.close()
+
+    proc = _cli_session(heartbeat)
+    assert not group_alive(proc.pid)
+
+
+def test_cli_child_is_killed_when_the_interrupt_test_fails():
+    """A failing check never reaches the Ctrl-C: the CLI and its process group are killed anyway."""
+    started = []
+
+    def fail(port: int, proc: subprocess.Popen) -> None:
+        started.append(proc)
+        raise AssertionError("check failed")
+
+    with pytest.raises(AssertionError, match="check failed"):
+        _cli_session(fail)
+    (proc,) = started
+    assert proc.returncode == -signal.SIGKILL and not group_alive(proc.pid)
 
 
 def test_fleet_in_the_callers_loop_with_the_gcs_stack():

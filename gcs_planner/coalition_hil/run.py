@@ -94,6 +94,8 @@ UPLOAD_WORKERS = 4
 RCVBUF_BYTES = 4 << 20  # GCS socket receive buffer (Linux caps it at net.core.rmem_max)
 # Mission transfers in flight: the defaults' 1.5 s COUNT re-send is 30 s of flight at speed-up 20
 UPLOAD_TIMING = Timing(count_retry_s=0.25, count_retries=12, ack_timeout_max_s=0.5, item_timeout_max_s=0.5)
+NEXT_REPORT_POLL_S = 0.005  # upload end stamped at the next position report, polled this often [s wall]
+NEXT_REPORT_TIMEOUT_S = 2.0
 LOGGED_EVENTS = ("tender", "bid", "not_bidding", "late_bid_ignored", "formed", "formation_failed", "award")
 
 
@@ -375,7 +377,10 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
                     except MavlinkError as exc:
                         entry["error"] = str(exc)
                         failures.append(f"{e['uav']}: {kind} upload failed: {exc}")
-                    entry["upload_end_s"] = scenario_now()
+                    # the fleet's clock moves in steps of one position report: the upload ended
+                    # after the newest report and before the next one, which is its end time (so
+                    # start < end even when a fast upload fits between two reports)
+                    entry["upload_end_s"] = await next_report_after(scenario_now, scenario_now())
                     if "t0_s" in entry:
                         entry["landed_before_leg_s"] = round(entry["t0_s"] - entry["upload_end_s"], 3)
                     uploads.append(entry)
@@ -438,6 +443,18 @@ async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResul
     return HilResult(
         rows, uploads, mcap_path, t_start, time.monotonic() - t_wall, lag, failures, flown, flown_legs
     )
+
+
+async def next_report_after(clock, t_s: float, timeout_s: float = NEXT_REPORT_TIMEOUT_S) -> float:
+    """The first value of ``clock`` (a telemetry clock: it moves only when a report arrives) above
+    ``t_s``, polled every ``NEXT_REPORT_POLL_S`` [s wall]; after ``timeout_s`` of wall time without a
+    report, the clock's value then (the fleet has stopped reporting: the run fails anyway)."""
+    deadline = time.monotonic() + timeout_s
+    now = clock()
+    while now <= t_s and time.monotonic() < deadline:
+        await asyncio.sleep(NEXT_REPORT_POLL_S)
+        now = clock()
+    return now
 
 
 def _keep(link, recorder, keeper: ScheduleKeeper, current: dict, route_t0: float, quirks: dict) -> None:

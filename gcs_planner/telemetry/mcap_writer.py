@@ -14,8 +14,16 @@ Choices:
 - No message index records: they cost 16 uncompressed bytes per message (more than a
   compressed MAVLink frame). Chunk indexes are written, and MCAP readers (mcap Python, Foxglove)
   read the messages of a chunk without message indexes.
-- ``flush()`` closes the open chunk, compresses it (zstd) and flushes the stream: whatever was
-  flushed survives a SIGKILL of the writer as complete chunks.
+- ``flush()`` closes the open chunk, compresses it (zstd) and writes it together with every
+  record added since the last flush, followed by a *provisional end*: Data End, a Footer without
+  summary (``summary_start`` 0) and the closing magic. Between flushes nothing is written, so the
+  file on disk is always a complete, valid MCAP stream without summary, and a SIGKILLed writer
+  leaves a file that the stock ``mcap.reader.make_reader(f).iter_messages()`` reads to the last
+  flush (its seeking reader finds the footer, sees no summary and reads the stream linearly). The
+  next flush writes over that provisional end (``_commit``): first everything past its length,
+  then its bytes, so that the file also stays valid between the two writes (a linear reader then
+  stops at the old footer, one flush earlier). ``finish()`` replaces it with the real summary.
+  A stream that cannot seek (a pipe) is written append-only, without provisional end.
 """
 
 from __future__ import annotations
@@ -64,12 +72,20 @@ class ChunkedMcapWriter:
 
     def __init__(self, output: str | Path | IO[bytes], zstd_level: int = 3, library: str = "") -> None:
         if isinstance(output, str | Path):
-            self._stream: IO[bytes] = open(output, "wb")  # noqa: SIM115 - closed in finish()
+            # unbuffered: every byte goes out in _commit's writes, in the order that keeps the file valid
+            self._stream: IO[bytes] = open(output, "wb", buffering=0)  # noqa: SIM115 - closed in finish()
             self._owns_stream = True
         else:
             self._stream = output
             self._owns_stream = False
-        self._offset = 0
+        try:
+            self._seekable = bool(self._stream.seekable())
+        except (AttributeError, OSError, ValueError):
+            self._seekable = False
+        self._base = self._stream.tell() if self._seekable else 0  # where this MCAP starts in the stream
+        self._offset = 0  # MCAP offset of the next record (records not yet committed included)
+        self._pending = bytearray()  # records added since the last commit, not yet in the stream
+        self._tail_len = 0  # length of the provisional end in the stream after the committed bytes
         self._compressor = zstandard.ZstdCompressor(level=zstd_level)
         self._schemas: list[Schema] = []
         self._channels: list[Channel] = []
@@ -193,7 +209,7 @@ class ChunkedMcapWriter:
             self._message_count += self._chunk_messages
             self._chunk = bytearray()
             self._chunk_messages = 0
-        self._stream.flush()
+        self._commit(_PROVISIONAL_END if self._seekable else b"")
 
     # -- attachments and metadata ----------------------------------------------------------------
     def add_attachment(self, name: str, media_type: str, data: bytes, log_time_ns: int) -> None:
@@ -269,9 +285,43 @@ class ChunkedMcapWriter:
             Footer(summary_start=summary_start, summary_offset_start=summary_offset_start, summary_crc=crc)
         )
         self._write(MCAP0_MAGIC)
-        self._stream.flush()
+        self._commit(b"")
         if self._owns_stream:
             self._stream.close()
+
+    def _commit(self, tail: bytes) -> None:
+        """Write the pending records followed by ``tail`` (the provisional end, or nothing) over the
+        previous provisional end, and flush the stream.
+
+        Order: the bytes beyond the old tail's length first, then the first ``_tail_len`` bytes. Until
+        the second write the old provisional end still stands whole and the new one is at the end of
+        the file, so a reader sees a valid file (up to the previous flush) after each write."""
+        if not self._pending and self._tail_len == len(tail):
+            return  # nothing new: the file on disk already ends this way
+        blob = bytes(self._pending) + tail
+        self._pending = bytearray()
+        if not self._seekable:
+            self._stream.write(blob)
+            self._stream.flush()
+            return
+        start = self._base + self._offset - len(blob) + len(tail)  # where the pending records begin
+        old = self._tail_len
+        if old and len(blob) - len(tail) >= old:
+            self._write_at(start + old, blob[old:])
+            self._write_at(start, blob[:old])
+        elif blob:
+            self._write_at(start, blob)
+        self._tail_len = len(tail)
+        self._stream.flush()
+
+    def _write_at(self, position: int, data: bytes) -> None:
+        self._stream.seek(position)
+        view = memoryview(data)
+        while view:
+            n = self._stream.write(view)
+            if n is None:  # a non-blocking raw stream that took nothing: try again
+                continue
+            view = view[n:]
 
     def _write_record(self, record) -> int:
         builder = RecordBuilder()
@@ -281,5 +331,16 @@ class ChunkedMcapWriter:
         return len(data)
 
     def _write(self, data: bytes) -> None:
-        self._stream.write(data)
+        self._pending += data
         self._offset += len(data)
+
+
+def _provisional_end() -> bytes:
+    """Data End, a Footer without summary and the magic: the end of a valid summary-less MCAP."""
+    builder = RecordBuilder()
+    DataEnd(data_section_crc=0).write(builder)
+    Footer(summary_start=0, summary_offset_start=0, summary_crc=0).write(builder)
+    return builder.end() + MCAP0_MAGIC
+
+
+_PROVISIONAL_END = _provisional_end()

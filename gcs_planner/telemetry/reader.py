@@ -4,7 +4,10 @@ The file is read sequentially (``mcap.stream_reader.StreamReader``), not through
 so a file whose writer was killed is read up to its last complete chunk: reading stops quietly
 at the first incomplete or corrupt record, ``Flight.truncated`` is set and
 ``Flight.recovered_messages`` says how many messages were read. A complete file gives the same
-result as an indexed read.
+result as an indexed read. Our writer ends the file with a footer without summary after every
+flush (mcap_writer) and with the summary only at close, so a log of ours that ends in a
+summary-less footer is one whose writer did not close it: ``truncated`` too (another writer's
+summary-less file is complete).
 
 Positions, ground speed and mission progress are decoded from the raw frames (the lossless
 channel) with pymavlink's own payload structs, so they do not depend on the JSON channels; the
@@ -24,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import zstandard
 from mcap.opcode import Opcode
-from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata
+from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from gcs_planner.geo import Origin
@@ -244,6 +247,7 @@ class _Collector:
         self.event_channel = -1
         self.json_rows: dict[tuple[int, str], list[tuple[int, bytes]]] = defaultdict(list)
         self.complete = False
+        self.ours = False  # written by gcs-planner's ChunkedMcapWriter (summary written at close)
 
     def message(self, channel_id: int, log_time: int, data: bytes) -> None:
         flight = self.flight
@@ -275,8 +279,11 @@ class _Collector:
             self.flight.attachments[record.name] = record.data
         elif isinstance(record, Metadata):
             self.flight.metadata.setdefault(record.name, {}).update(record.metadata)
+        elif isinstance(record, Header):
+            self.ours = record.library.startswith("gcs-planner")
         elif isinstance(record, Footer):
-            self.complete = True
+            # ours without summary: the provisional end of a log whose writer was killed
+            self.complete = record.summary_start != 0 or not self.ours
 
 
 _RECORD_HEAD = struct.Struct("<BQ")  # opcode, record length
