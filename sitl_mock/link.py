@@ -4,8 +4,20 @@ Behaves like ArduPilot's ``udpin``: the vehicle binds its own port and sends to 
 has heard from (up to ``MAX_PEERS``, oldest forgotten first), so a GCS must send first (its
 heartbeat). Frames are MAVLink 2 with srcSystem = the vehicle's system id, srcComponent = 1.
 Outgoing and incoming datagrams each pass through their own `FaultyChannel`; a datagram lost
-on the way in teaches the vehicle nothing (not even the peer's address). With a signing key the
-vehicle signs every frame and drops unsigned or badly signed ones, as ArduPilot does with signing on.
+on the way in teaches the vehicle nothing (not even the peer's address).
+
+Receiving: each datagram is framed on its own (gcs_planner/mavlink/framing.py; no bytes carried
+to the next datagram), each frame decoded by one keyless pymavlink decoder. An address becomes a
+peer only once a frame from it decoded and, with signing on, verified: junk or forged frames from
+any number of ports cannot push the GCS out of the peer table. That is a choice, not a claim:
+ArduPilot's UDP drivers learn a peer address below the MAVLink parser, from whatever arrives; a
+mock whose peer table junk can flush would make every GCS test behind it depend on its neighbours.
+
+Signing (signing.py, signing_streams.py): with a key the vehicle signs every frame with a
+timestamp that follows the wall clock and drops unsigned, badly signed and replayed frames, as
+ArduPilot does with signing on (``GCS_Signing.cpp``: one ``signing_streams`` replay table for all
+channels, here for all peer addresses; ``mavlink_signature_check`` checks the signature before it
+looks at or stores the timestamp).
 """
 
 from __future__ import annotations
@@ -18,7 +30,8 @@ from collections.abc import Callable
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.mavlink.signing import enable_signing, set_link_key  # noqa: E402
+from gcs_planner.mavlink.framing import frames  # noqa: E402
+from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 from sitl_mock.faults import FaultyChannel, LinkFaults  # noqa: E402
 
@@ -45,12 +58,10 @@ class VehicleLink(asyncio.DatagramProtocol):
         self.sysid = sysid
         self._on_message = on_message
         self._on_new_peer = on_new_peer
-        self._signing_key = signing_key
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        if signing_key is not None:
-            enable_signing(self._mav, signing_key, sign_outgoing=True)
-        self.rejected = 0  # frames dropped: undecodable, or unsigned / badly signed
-        self._parsers: dict[tuple, mavlink.MAVLink] = {}
+        self.signing = LinkSigning(self._mav, signing_key)
+        self._decoder = mavlink.MAVLink(None)  # keyless: signatures are checked by self.signing
+        self.rejected = 0  # frames dropped: undecodable, or unsigned / badly signed / replayed
         self.peers: list[tuple] = []
         self.out = FaultyChannel(self._sendto, faults, (sysid, 0))
         self.inbound = FaultyChannel(self._receive, faults, (sysid, 1))
@@ -76,14 +87,20 @@ class VehicleLink(asyncio.DatagramProtocol):
         self.out.set_faults(faults)
         self.inbound.set_faults(faults)
 
-    def set_signing_key(self, key: bytes | None) -> None:
-        """Sign and verify with ``key`` from now on (None: neither), on every peer's parser too."""
-        self._signing_key = key
-        set_link_key(self._mav, self._parsers.values(), key)
+    @property
+    def signing_key(self) -> bytes | None:
+        return self.signing.key
+
+    def set_signing_key(self, key: bytes | None, initial_timestamp: int = 0) -> None:
+        """Sign and verify with ``key`` from now on (None: neither). ``initial_timestamp`` (from
+        SETUP_SIGNING) is a floor for the timestamps sent, as ArduPilot's ``load_signing_key``."""
+        self.signing.set_key(key)
+        self.signing.clock.observe(initial_timestamp)
 
     def forget_peers(self) -> None:
+        """Reboot: peers forgotten. The replay table is kept: ArduPilot loses it with RAM but restarts
+        its clock 60 s past the stored timestamp (``load_signing_key``), closing the same window."""
         self.peers.clear()
-        self._parsers.clear()
 
     # --- asyncio protocol ----------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -100,7 +117,7 @@ class VehicleLink(asyncio.DatagramProtocol):
         """Encode ``msg`` (one sequence number) and send it to every peer."""
         if not self.peers:
             return
-        data = msg.pack(self._mav)
+        data = self.signing.pack(msg)
         self._mav.seq = (self._mav.seq + 1) % 256
         for peer in self.peers:
             self.out.send(data, peer)
@@ -111,33 +128,32 @@ class VehicleLink(asyncio.DatagramProtocol):
             self.transport.sendto(data, addr)
 
     def _receive(self, data: bytes, addr: tuple) -> None:
-        parser = self._parsers.get(addr)
-        if parser is None:
-            parser = self._add_peer(addr)
-            if self._on_new_peer is not None:
-                self._on_new_peer(addr)
-        try:
-            msgs = parser.parse_buffer(data) or []
-        except mavlink.MAVError as exc:
-            log.debug("vehicle %d: undecodable datagram from %s: %s", self.sysid, addr, exc)
-            self.rejected += 1
-            return
-        for msg in msgs:
-            if msg.get_type() == "BAD_DATA":
+        found, junk = frames(data)
+        self.rejected += junk
+        for frame in found:
+            msg = self._decode(frame)
+            if msg is None or not self.signing.accept(frame):
                 self.rejected += 1
                 continue
-            attach_extensions(msg, msg.get_msgbuf())
+            if addr not in self.peers:
+                self._add_peer(addr)
+                if self._on_new_peer is not None:
+                    self._on_new_peer(addr)
+            msg._signed = self.signing.key is not None  # verified above
+            attach_extensions(msg, frame)
             self._on_message(msg, addr)
 
-    def _add_peer(self, addr: tuple) -> mavlink.MAVLink:
+    def _decode(self, frame: bytes) -> mavlink.MAVLink_message | None:
+        if frame[0] == 0xFD and frame[2] & ~mavlink.MAVLINK_IFLAG_SIGNED:
+            return None
+        try:
+            return self._decoder.decode(bytearray(frame))
+        except mavlink.MAVError as exc:
+            log.debug("vehicle %d: undecodable frame: %s", self.sysid, exc)
+            return None
+
+    def _add_peer(self, addr: tuple) -> None:
         if len(self.peers) >= MAX_PEERS:
-            oldest = self.peers.pop(0)
-            self._parsers.pop(oldest, None)
-        parser = mavlink.MAVLink(None)
-        parser.robust_parsing = True
-        if self._signing_key is not None:
-            enable_signing(parser, self._signing_key, sign_outgoing=False)
-        self._parsers[addr] = parser
+            self.peers.pop(0)
         self.peers.append(addr)
         log.info("vehicle %d: GCS peer %s:%d", self.sysid, *addr[:2])
-        return parser

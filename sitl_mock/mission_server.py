@@ -396,6 +396,10 @@ class MissionServer:
                 return item, MissionResult.INVALID_PARAM6_Y
         if not math.isfinite(msg.z):
             return item, MissionResult.INVALID_PARAM7
+        if self.profile.nan_params_rejected:
+            bad = _bad_param(msg)
+            if bad:
+                return item, MissionResult(MissionResult.INVALID_PARAM1 + bad - 1)
         if (
             self.profile.mission_frame_for_positionless
             and item.mission_type == MissionType.MISSION
@@ -539,3 +543,22 @@ def _item_message(
     return mavlink.MAVLink_mission_item_int_message(
         *target, seq, *common, item.x, item.y, item.z, request.mission_type
     )
+
+
+# AP_Mission::sanity_check_params: the params (1-4) that may be NaN, per command; inf never may
+_NAN_ALLOWED = {
+    mavlink.MAV_CMD_NAV_WAYPOINT: {4},
+    mavlink.MAV_CMD_NAV_LAND: {4},
+    mavlink.MAV_CMD_NAV_TAKEOFF: {4},
+    mavlink.MAV_CMD_NAV_VTOL_TAKEOFF: {4},
+    mavlink.MAV_CMD_NAV_VTOL_LAND: {3, 4},
+}
+
+
+def _bad_param(msg: mavlink.MAVLink_message) -> int:
+    """The first of params 1-4 ArduPilot refuses (NaN where not allowed, or inf); 0 when none."""
+    allowed = _NAN_ALLOWED.get(msg.command, set())
+    for k, value in enumerate((msg.param1, msg.param2, msg.param3, msg.param4), start=1):
+        if math.isinf(value) or (math.isnan(value) and k not in allowed):
+            return k
+    return 0

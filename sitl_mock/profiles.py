@@ -146,6 +146,10 @@ class AutopilotProfile:
     error_on_stray_item: bool = False  # an item with no upload running -> MISSION_ACK(ERROR)
     mission_frame_for_positionless: bool = False  # PX4: positionless commands only in MAV_FRAME_MISSION
     extra_commands: frozenset[int] = frozenset()  # mission commands it has beyond the pinned dialect
+    # AP_Mission::sanity_check_params: NaN/inf in params 1-4 of an item -> INVALID_PARAMn (NaN
+    # allowed only where the command gives it a meaning, e.g. yaw of NAV_WAYPOINT / LAND / TAKEOFF)
+    nan_params_rejected: bool = False
+    sysid_enforce_params: bool = False  # SYSID_ENFORCE / SYSID_MYGCS (GCS_MAVLINK_*::accept_packet)
 
     def custom_mode(self, mode: str, vehicle_type: str = "multirotor") -> int:
         """HEARTBEAT custom_mode of a mode name; ValueError naming the mode if it does not exist."""
@@ -183,6 +187,8 @@ ARDUPILOT = AutopilotProfile(
     # ArduPilot master (24a84a47) flies these in its own autotest missions (ConditionLocation,
     # DO_CHANGE_RADIUS, HomeCircleInclusionFence); pymavlink 2.4.50's ardupilotmega lacks them
     extra_commands=frozenset({116, 219, 5005}),
+    nan_params_rejected=True,
+    sysid_enforce_params=True,
 )
 
 PX4 = AutopilotProfile(

@@ -131,6 +131,9 @@ class MockVehicle:
         )
         self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
         self.params = dict(self.flight.params)
+        if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
+            self.params.setdefault("SYSID_ENFORCE", 0.0)
+            self.params.setdefault("SYSID_MYGCS", 255.0)
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission
         self._armed_at_s = math.inf  # sim time of arming while on the ground
@@ -330,7 +333,7 @@ class MockVehicle:
     # --- receive -----------------------------------------------------------------------------
     def _on_message(self, msg: mavlink.MAVLink_message, addr: tuple) -> None:
         target = getattr(msg, "target_system", 0)
-        if target not in (0, self.sysid):
+        if target not in (0, self.sysid) or self._refuses_sender(msg):
             return
         mtype = msg.get_type()
         if mtype.startswith("MISSION_"):
@@ -341,14 +344,33 @@ class MockVehicle:
         if handler is not None:
             handler(msg)
 
+    def _refuses_sender(self, msg: mavlink.MAVLink_message) -> bool:
+        """SYSID_ENFORCE = 1: only the GCS system id SYSID_MYGCS (and radios) are heard
+        (ArduPilot ``GCS_MAVLINK_Copter::accept_packet``, the same in Plane and Rover)."""
+        if not self.params.get("SYSID_ENFORCE"):
+            return False
+        radio = msg.get_type() in ("RADIO", "RADIO_STATUS")
+        return not radio and msg.get_srcSystem() != round(self.params.get("SYSID_MYGCS", 255.0))
+
     def _on_setup_signing(self, msg: mavlink.MAVLink_message) -> None:
-        """Take the key (ArduPilot: an all-zero key with timestamp 0 turns signing off). With signing
-        on, only a frame signed with the current key gets here: the link drops the rest."""
+        """Take the key (ArduPilot: an all-zero key with timestamp 0 turns signing off) and its
+        timestamp as the floor of the vehicle's own (``GCS_MAVLINK::load_signing_key``).
+
+        With signing on, only a frame that verified with the current key is taken (the link drops
+        the rest; checked again here). With signing off the key is taken from any system, as
+        ArduPilot does: ``GCS_MAVLINK::handle_setup_signing`` checks neither the sender nor the link
+        (its ``accept_unsigned_callback`` lets unsigned frames in on channel 0, USB, only once
+        signing is on), and PX4 takes the first key on any link (``MavlinkSignControl``, "trust on
+        first contact"). ArduPilot's defence is SYSID_ENFORCE (``_refuses_sender``); else provision
+        keys over a trusted link."""
+        if self.link.signing_key is not None and not getattr(msg, "_signed", False):
+            return
         if self.armed and self.flight.signing_refused_armed:
             self.statustext("Signing setup refused: vehicle armed", mavlink.MAV_SEVERITY_WARNING)
             return
         key = bytes(msg.secret_key)
-        self.link.set_signing_key(None if key == NO_KEY and msg.initial_timestamp == 0 else key)
+        off = key == NO_KEY and msg.initial_timestamp == 0
+        self.link.set_signing_key(None if off else key, msg.initial_timestamp)
 
     def _on_request_data_stream(self, msg: mavlink.MAVLink_message) -> None:
         """REQUEST_DATA_STREAM (MAVProxy's way): switch a group of streams on or off."""
@@ -389,7 +411,12 @@ class MockVehicle:
         else:
             params = (msg.param1, msg.param2, msg.param3, msg.param4, msg.param5, msg.param6, msg.param7)
         handler = self._commands.get(msg.command)
-        result = CommandResult.UNSUPPORTED if handler is None else handler(*params)
+        if handler is None:
+            result = CommandResult.UNSUPPORTED
+        elif _invalid_param(msg.command, params):
+            result = CommandResult.DENIED
+        else:
+            result = handler(*params)
         self.send(mavlink.MAVLink_command_ack_message(
             msg.command, int(result), 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
         ))  # fmt: skip
@@ -675,3 +702,33 @@ def _takeoff_not_first(items: list[MissionItem]) -> bool:
     if not seqs:
         return False
     return any(has_position(it.command) for it in items[: seqs[0]])
+
+
+# The params (1-based) each command handler reads; NaN or inf in one of them -> COMMAND_ACK DENIED
+# (MAV_RESULT_DENIED: "supported but one or more parameter values are invalid"). The MAVLink spec
+# gives NaN a meaning in a few (DO_CHANGE_SPEED speed / throttle: "no change"; NAV_TAKEOFF yaw),
+# allowed below. ArduPilot's handlers compare (``is_equal(param1, 1)``, ``is_zero``) and refuse
+# what matches nothing; PX4's Commander checks ``PX4_ISFINITE`` where it reads a value. Neither
+# crashes, and the mock must not either.
+_READS = {
+    mavlink.MAV_CMD_COMPONENT_ARM_DISARM: (1, 2),
+    mavlink.MAV_CMD_DO_SET_MODE: (1, 2, 3),
+    mavlink.MAV_CMD_MISSION_START: (1, 2),
+    mavlink.MAV_CMD_DO_SET_MISSION_CURRENT: (1, 2),
+    mavlink.MAV_CMD_NAV_TAKEOFF: (7,),
+    mavlink.MAV_CMD_DO_CHANGE_SPEED: (1, 2),
+    mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: (1,),
+    mavlink.MAV_CMD_REQUEST_MESSAGE: (1,),
+    mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: (1, 2),
+}
+_NAN_MEANS_DEFAULT = {mavlink.MAV_CMD_DO_CHANGE_SPEED: (2,)}
+
+
+def _invalid_param(command: int, params: tuple[float, ...]) -> bool:
+    """A param the command reads is inf, or NaN where NaN has no meaning."""
+    nan_ok = _NAN_MEANS_DEFAULT.get(command, ())
+    for k in _READS.get(command, ()):
+        value = params[k - 1]
+        if math.isinf(value) or (math.isnan(value) and k not in nan_ok):
+            return True
+    return False

@@ -14,7 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
-from gcs_planner.mavlink.signing import enable_signing  # noqa: E402
+from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
 
 _RANGES = {
     "uint8_t": (0, 2**8),
@@ -84,7 +84,7 @@ def test_frames_it_does_not_cover_are_left_to_pymavlink():
     v1 = mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3).pack(mav, force_mavlink1=True)
     assert codec.decode(v1) is None
     signed = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
-    enable_signing(signed, b"k" * 32, sign_outgoing=True)
+    LinkSigning(signed, b"k" * 32)
     beat = mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3)
     assert codec.encode(beat, signed) is None
     assert codec.decode(beat.pack(signed)) is None

@@ -7,11 +7,11 @@ fleet (one port per vehicle). ``udpin:0.0.0.0:14550`` listens and answers every 
 autopilot's USB port instead (serial_port.py); everything above the transport is the same.
 
 Choices:
-- One pymavlink parser per remote address, so interleaved datagrams of different vehicles never
-  corrupt each other's parser state; robust parsing drops bad frames instead of raising. A datagram
-  holding exactly one MAVLink 2 frame (the usual case) is decoded directly, skipping pymavlink's
-  byte-wise parser, and unsigned frames of plain numeric messages go through codec.py (about two
-  thirds of pymavlink's time). Frames carry a sequence number that advances per frame sent.
+- Each UDP datagram is framed on its own (framing.py): no bytes are carried from one datagram to
+  the next, so a malformed datagram costs only itself. A serial port is a byte stream and keeps its
+  incomplete tail. Frames are decoded without pymavlink's byte-wise parser: unsigned frames of plain
+  numeric messages by codec.py (about two thirds of pymavlink's time), the rest by one keyless
+  pymavlink decoder. Frames carry a sequence number that advances per frame sent.
 - Frames are dispatched synchronously in ``datagram_received``: a transfer's reply goes out in the
   same callback that received the request (no task hop, no sleep) - the hot path of an upload.
 - Routing: a message with ``target_system`` goes to the address that system was last heard from;
@@ -24,8 +24,12 @@ Choices:
   seconds (telemetry logging); MISSION_COUNT/ACK/CURRENT carry their opaque ids (wire.py).
 - The GCS sends HEARTBEAT (MAV_TYPE_GCS) at 1 Hz from open until close: autopilots use it for
   GCS failsafe and udpin-style endpoints only talk to peers they have heard from.
-- ``signing_key`` (signing.py): every frame sent is signed and every frame received must carry a
-  valid signature; the rest are dropped and counted in ``frames_dropped``.
+- ``signing_key`` (signing.py, signing_streams.py): every frame sent is signed with a timestamp
+  that follows the clock; every frame received must carry a valid signature and a timestamp newer
+  than the last of its (link id, sysid, compid) stream, whichever address it came from (one replay
+  table per link, so a captured frame replayed from a new port is refused). The signature is
+  checked before anything is learnt from a frame (peer address, stream timestamp, vehicle table).
+  The rest are dropped and counted in ``frames_dropped``.
 """
 
 from __future__ import annotations
@@ -45,8 +49,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
+from gcs_planner.mavlink.framing import StreamFramer, frames  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD, SerialPort  # noqa: E402
-from gcs_planner.mavlink.signing import enable_signing, set_link_key  # noqa: E402
+from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = ["DUPLICATE_WINDOW_S", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo", "parse_url"]
@@ -131,11 +136,10 @@ class MavlinkLink:
     ) -> None:
         self.sysid = sysid
         self.compid = compid
-        self._signing_key = signing_key
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
-        if signing_key is not None:
-            enable_signing(self._mav, signing_key, sign_outgoing=True)
-        self._parsers: dict[Address, mavlink.MAVLink] = {}
+        self.signing = LinkSigning(self._mav, signing_key)
+        self._decoder = mavlink.MAVLink(None)  # keyless: signatures are checked by self.signing
+        self._stream: StreamFramer | None = None  # serial: bytes of a frame split across reads
         self._peers: dict[Address, None] = {}  # ordered set of addresses we send broadcasts to
         self._subscribers: list[Callback] = []  # every frame
         self._by_sysid: dict[int, list[Callback]] = {}  # one vehicle's frames
@@ -166,6 +170,7 @@ class MavlinkLink:
         if any(kind == "serial" for kind, _ in parsed):
             if len(parsed) > 1:
                 raise ValueError("a serial URL cannot share a link with other URLs")
+            link._stream = StreamFramer()
             link._transport = SerialPort.open(*parsed[0][1], link._on_datagram)
             link._peers[parsed[0][1]] = None
             link._start_heartbeat(heartbeat_period_s)
@@ -210,7 +215,7 @@ class MavlinkLink:
         if self._transport is None or self._transport.is_closing():
             raise ConnectionError("MAVLink link is closed")
         target = getattr(msg, "target_system", 0)
-        raw = codec.encode(msg, self._mav) or msg.pack(self._mav)
+        raw = codec.encode(msg, self._mav) or self.signing.pack(msg)
         self._mav.seq = (self._mav.seq + 1) % 256
         info = self.vehicles.get(target) if target else None
         if info is None:
@@ -239,8 +244,7 @@ class MavlinkLink:
 
     def set_signing_key(self, key: bytes | None) -> None:
         """Sign and verify with ``key`` from now on (None: neither); e.g. after SETUP_SIGNING."""
-        self._signing_key = key
-        set_link_key(self._mav, self._parsers.values(), key)
+        self.signing.set_key(key)
 
     # ----------------------------------------------------------------- receiving
     def subscribe(self, callback: Callback, sysid: int | None = None) -> Callable[[], None]:
@@ -280,32 +284,20 @@ class MavlinkLink:
             unsubscribe()
 
     def _on_datagram(self, data: bytes, addr: Address) -> None:
-        parser = self._parsers.get(addr)
-        if parser is None:
-            parser = self._parsers[addr] = mavlink.MAVLink(None)
-            parser.robust_parsing = True
-            if self._signing_key is not None:
-                enable_signing(parser, self._signing_key, sign_outgoing=False)
-            if addr not in self._peers:
-                self._peers[addr] = None  # udpin: answer whoever talks to us
-        whole = _single_v2_frame(data) and parser.buf_len() == 0
-        try:
-            if whole:  # fast path: one whole frame per datagram, decoded without the byte-wise parser
-                msg = None if self._signing_key else codec.decode(data)
-                msgs = [msg if msg is not None else parser.decode(bytearray(data))]
-            else:
-                msgs = parser.parse_buffer(data) or []
-        except mavlink.MAVError as exc:
-            log.debug("bad frame from %s: %s", addr, exc)
-            self.frames_dropped += 1
-            return
+        """One datagram (or serial read): its frames, each decoded, verified, then delivered."""
+        found, junk = frames(data) if self._stream is None else self._stream.feed(data)
+        self.frames_dropped += junk
         t_s = time.time()
         now = time.monotonic()
-        for msg in msgs:
-            if isinstance(msg, mavlink.MAVLink_bad_data):
+        for frame in found:
+            msg = self._decode(frame, addr)
+            if msg is None or not self.signing.accept(frame):
                 self.frames_dropped += 1
                 continue
-            raw = data if whole else bytes(msg.get_msgbuf())
+            raw = frame
+            msg._signed = self.signing.key is not None  # verified above
+            if addr not in self._peers:
+                self._peers[addr] = None  # udpin: answer whoever talks to us (once a frame verified)
             self._note_source(msg, addr, now)
             attach_extensions(msg, raw)
             self.frames_received += 1
@@ -315,6 +307,16 @@ class MavlinkLink:
                     callback(msg, raw, t_s)
                 except Exception:
                     log.exception("MAVLink subscriber %r failed", callback)
+
+    def _decode(self, frame: bytes, addr: Address) -> mavlink.MAVLink_message | None:
+        """The message of one whole frame; None when its CRC, length or flags are bad."""
+        if frame[0] == 0xFD and frame[2] & ~mavlink.MAVLINK_IFLAG_SIGNED:
+            return None  # an incompatibility flag we do not know: the spec says drop
+        try:
+            return codec.decode(frame) or self._decoder.decode(bytearray(frame))
+        except mavlink.MAVError as exc:
+            log.debug("bad frame from %s: %s", addr, exc)
+            return None
 
     def _note_source(self, msg: mavlink.MAVLink_message, addr: Address, now: float) -> None:
         sysid = msg.get_srcSystem()
@@ -357,13 +359,6 @@ class MavlinkLink:
 
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
-
-
-def _single_v2_frame(data: bytes) -> bool:
-    """True when ``data`` is exactly one MAVLink 2 frame (header 10 + payload + CRC 2 [+ signature 13])."""
-    if len(data) < 12 or data[0] != 0xFD:
-        return False
-    return len(data) == 12 + data[1] + (13 if data[2] & 0x01 else 0)
 
 
 def _resolve(host: str) -> str:

@@ -2,8 +2,9 @@
 
 A signed link appends to every frame a 13-byte block: link id, a 48-bit timestamp (10 us units since
 2015-01-01) and the first 6 bytes of SHA-256(key + frame). Autopilots with signing enabled
-(ArduPilot, PX4) ignore unsigned commands, so a field GCS must sign. pymavlink's codec does the
-cryptography; this module only derives the key and sets the codec up.
+(ArduPilot, PX4) ignore unsigned commands, so a field GCS must sign. pymavlink packs the signed
+frames; the timestamps and the checks on receipt are signing_streams.py's (pymavlink's own check
+has the flaws listed there). ``LinkSigning`` is one link's signing: key, clock, replay table.
 
 SETUP_SIGNING gives a vehicle its key (``setup_signing_message``); the protocol has no answer, so
 the caller checks that the vehicle's frames come back signed with it. An all-zero key with timestamp
@@ -18,24 +19,22 @@ let anyone on the radio channel spoof the vehicle or the GCS.
 from __future__ import annotations
 
 import hashlib
-import time
-from collections.abc import Iterable
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.mavlink.signing_streams import SignatureVerifier, SigningClock, signing_timestamp
 
 __all__ = [
     "KEY_BYTES",
     "NO_KEY",
-    "enable_signing",
+    "LinkSigning",
     "key_from_passphrase",
-    "set_link_key",
     "setup_signing_message",
     "signing_timestamp",
 ]
 
 KEY_BYTES = 32
 NO_KEY = bytes(KEY_BYTES)  # with timestamp 0 in SETUP_SIGNING: turn signing off (ArduPilot's convention)
-_EPOCH_2015_S = 1_420_070_400  # 2015-01-01T00:00:00Z, the signing timestamp's origin
 
 
 def key_from_passphrase(passphrase: str) -> bytes:
@@ -45,35 +44,53 @@ def key_from_passphrase(passphrase: str) -> bytes:
     return hashlib.sha256(passphrase.encode()).digest()
 
 
-def signing_timestamp(now_s: float | None = None) -> int:
-    """Signing timestamp for Unix time ``now_s`` [10 us units since 2015-01-01]."""
-    return int(((time.time() if now_s is None else now_s) - _EPOCH_2015_S) * 100_000)
-
-
-def enable_signing(codec: mavlink.MAVLink, key: bytes, *, sign_outgoing: bool, link_id: int = 0) -> None:
-    """Give a pymavlink codec the key: it then signs what it packs (``sign_outgoing``) and rejects
-    unsigned or badly signed frames it decodes."""
+def _check_key(key: bytes) -> None:
     if len(key) != KEY_BYTES:
         raise ValueError(f"signing key must be {KEY_BYTES} bytes, got {len(key)}")
-    codec.signing.secret_key = key
-    codec.signing.timestamp = signing_timestamp()
-    codec.signing.sign_outgoing = sign_outgoing
-    codec.signing.link_id = link_id
 
 
-def set_link_key(sender: mavlink.MAVLink, receivers: Iterable[mavlink.MAVLink], key: bytes | None) -> None:
-    """Change a link's key in place: ``sender`` signs with it, ``receivers`` (one parser per peer)
-    check it; None turns signing off on all of them."""
-    for codec, sign in ((sender, True), *((r, False) for r in receivers)):
+class LinkSigning:
+    """The signing of one link: ``codec`` (the link's sending pymavlink object) signs with the key
+    and a timestamp from ``clock``; ``accept`` checks received frames against one replay table for
+    all the link's peers. No key: frames go out unsigned and every frame is accepted."""
+
+    def __init__(self, codec: mavlink.MAVLink, key: bytes | None = None, link_id: int = 0) -> None:
+        self.codec = codec
+        self.link_id = link_id
+        self.clock = SigningClock()
+        self.verifier: SignatureVerifier | None = None
+        self._streams: dict[tuple[int, int, int], int] = {}  # kept across key changes
+        self.set_key(key)
+
+    @property
+    def key(self) -> bytes | None:
+        return None if self.verifier is None else self.verifier.key
+
+    def set_key(self, key: bytes | None) -> None:
+        """Sign and verify with ``key`` from now on (None: neither)."""
+        signing = self.codec.signing
         if key is None:
-            codec.signing.secret_key, codec.signing.sign_outgoing = None, False
-        else:
-            enable_signing(codec, key, sign_outgoing=sign)
+            self.verifier = None
+            signing.secret_key, signing.sign_outgoing = None, False
+            return
+        _check_key(key)
+        self.verifier = SignatureVerifier(key, self.clock)
+        self.verifier.streams = self._streams
+        signing.secret_key, signing.sign_outgoing, signing.link_id = key, True, self.link_id
+
+    def pack(self, msg: mavlink.MAVLink_message) -> bytes:
+        """``msg`` packed by the codec, signed with the next timestamp when there is a key."""
+        if self.verifier is not None:
+            self.codec.signing.timestamp = self.clock.next()
+        return msg.pack(self.codec)
+
+    def accept(self, frame: bytes) -> bool:
+        """True when no key is set, or ``frame`` verifies and is newer than its stream."""
+        return self.verifier is None or self.verifier.accept(frame)
 
 
-def setup_signing_message(key: bytes, sysid: int, compid: int = 1) -> mavlink.MAVLink_message:
+def setup_signing_message(key: bytes, sysid: int, compid: int = 1) -> mavlink.MAVLink_setup_signing_message:
     """SETUP_SIGNING giving vehicle ``sysid`` the key ``key`` (NO_KEY: signing off), timestamp now."""
-    if len(key) != KEY_BYTES:
-        raise ValueError(f"signing key must be {KEY_BYTES} bytes, got {len(key)}")
+    _check_key(key)
     timestamp = 0 if key == NO_KEY else signing_timestamp()
     return mavlink.MAVLink_setup_signing_message(sysid, compid, list(key), timestamp)
