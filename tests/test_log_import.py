@@ -83,6 +83,7 @@ def test_tlog_frames_match_mavutil(tmp_path, name):
     out, _ = imported(tmp_path, LOGS / name, "capture.bin")
     raw = sum(n for t, n in channel_counts(out).items() if t.endswith("/raw"))
     assert raw == expected > 0
+    assert main(["replay", str(out), "--rrd", str(tmp_path / "t.rrd")]) == 0
 
 
 @pytest.mark.parametrize(
