@@ -5,10 +5,13 @@ The mock vehicle feeds every MISSION_* message to :meth:`MissionServer.handle` a
 objects, targeted at the partner). One server holds the three lists (mission, fence, rally).
 
 Choices where the autopilots differ or the spec is open:
-- Atomic by default: the stored list is replaced only when an upload completes, so a failed upload
-  leaves the previous mission intact. Real ArduPilot writes items as they arrive (a failed upload
-  leaves a mix of old and new); ``non_atomic=True`` emulates that so a client's failure reporting
-  can be tested against it.
+- Storage as the profile says (``AutopilotProfile.stores_as_received``, issue 14): ArduPilot's
+  mission and rally lists are truncated at MISSION_COUNT and written as items arrive, so a failed
+  upload leaves a mix of old and new; its fence and every PX4 list are replaced only when an upload
+  completes. ``non_atomic=True`` writes every list in place, ``non_atomic=False`` none.
+- An upload session belongs to the ids of its MISSION_COUNT (profile: second_uploader_result,
+  same_partner_restarts, foreign_item_denied, with the sources): ArduPilot DENIES other ids and lets
+  the same ids restart; PX4 answers other ids ERROR and the same ids, once items flow, ERROR.
 - ArduPilot-like: MISSION_REQUEST, re-request after 1 s, cancel with MISSION_ACK(OPERATION_CANCELLED)
   after 8 s without an item, wrong seq -> MISSION_ACK(INVALID_SEQUENCE) and the session continues,
   a second uploader or items from another system -> DENIED, downloads during an upload -> DENIED,
@@ -78,6 +81,8 @@ class Failure(StrEnum):
     WRITE_REQUEST1_ERROR_ACK = "write_request1_error_ack"
     WRITE_FINAL_ACK_NO_RESPONSE = "write_final_ack_no_response"
     WRITE_FINAL_ACK_ERROR_ACK = "write_final_ack_error_ack"
+    # not QGC's: a vehicle stuck asking for item 0 whatever it gets (issue 14, the client's deadline)
+    WRITE_REQUEST0_REPEAT = "write_request0_repeat"
 
 
 _ONE_SHOT = frozenset(f for f in Failure if f.value.endswith("first_response"))
@@ -124,14 +129,17 @@ class MissionServer:
         profile: AutopilotProfile,
         *,
         capacity: int | None = None,
-        non_atomic: bool = False,
+        non_atomic: bool | None = None,
         vehicle_type: str = "multirotor",
     ) -> None:
         self.sysid = sysid
         self.storage = profile.storage[vehicle_type]
         self.compid = compid
         self.profile = profile
-        self.non_atomic = non_atomic
+        if non_atomic is None:  # as the autopilot stores each list
+            self.in_place = frozenset(profile.stores_as_received)
+        else:
+            self.in_place = frozenset(_LIST_TYPES) if non_atomic else frozenset()
         self.capacity = dict(profile.capacity)
         if capacity is not None:
             self.capacity[MissionType.MISSION] = capacity
@@ -263,8 +271,15 @@ class MissionServer:
         partner = (msg.get_srcSystem(), msg.get_srcComponent())
         up = self._uploads.get(mission_type)
         if up is not None and up.partner != partner:
-            return [self._ack(msg, MissionResult.DENIED)]
-        self._uploads.pop(mission_type, None)  # the same GCS may restart
+            return [self._ack(msg, self.profile.second_uploader_result)]
+        if up is not None and not self.profile.same_partner_restarts:
+            if up.next_seq == up.first:  # PX4: "looks like our MISSION_REQUEST was lost, try again"
+                up.last_receive_s = now_s
+                return [self._request(up, mission_type, up.next_seq, now_s)]
+            busy = mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_CRITICAL, b"WPM: REJ. CMD: Busy")
+            up.last_receive_s = now_s
+            return [busy, MissionAckMessage(*up.partner, MissionResult.ERROR, mission_type)]
+        self._uploads.pop(mission_type, None)  # ArduPilot: the same GCS may restart
         capacity = self.capacity[mission_type]
         if msg.count > capacity:
             text = f"Only {capacity} items are supported"
@@ -274,7 +289,7 @@ class MissionServer:
             return [self._ack(msg, self.failure_result)]
         if msg.count == 0:
             return [self._complete(partner, mission_type, 0, [], -1)]
-        if self.non_atomic:
+        if mission_type in self.in_place:
             del self._lists[mission_type][msg.count :]  # ArduPilot truncates at MISSION_COUNT
         up = _Upload(partner, 0, msg.count - 1, 0, now_s, now_s)
         self._uploads[mission_type] = up
@@ -312,18 +327,24 @@ class MissionServer:
             ):
                 return [self._ack(msg, MissionResult.ACCEPTED, opaque_id=done.opaque_id)]
             return [self._ack(msg, MissionResult.ERROR)] if self.profile.error_on_stray_item else []
-        if partner != up.partner:
-            return [self._ack(msg, MissionResult.DENIED)]
+        if partner != up.partner and not self.profile.foreign_item_denied:
+            text = b"REJ. MIS ITEM: partner id mismatch"
+            return [mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_CRITICAL, text)]
         if msg.seq != up.next_seq:
             return (
                 [self._ack(msg, MissionResult.INVALID_SEQUENCE)] if self.profile.uses_legacy_request else []
             )
+        if partner != up.partner:
+            return [self._ack(msg, MissionResult.DENIED)]
+        if self._fails(Failure.WRITE_REQUEST0_REPEAT):
+            up.last_receive_s = now_s
+            return [self._request(up, mission_type, up.first, now_s)]
         item, result = self._decode_item(msg)
         if result != MissionResult.ACCEPTED:
             del self._uploads[mission_type]
             return [self._ack(msg, result)]
         up.received.append(item)
-        if self.non_atomic:
+        if mission_type in self.in_place and not up.partial:
             self._store_in_place(mission_type, item)
         up.next_seq += 1
         up.last_receive_s = now_s

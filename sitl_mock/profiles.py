@@ -13,7 +13,14 @@ import math
 from dataclasses import dataclass, field
 
 from gcs_planner.mavlink import readback
-from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot, CommandResult
+from gcs_planner.mavlink.enums import (
+    ARDUCOPTER_MODES,
+    ARDUPLANE_MODES,
+    PX4_MODES,
+    Autopilot,
+    CommandResult,
+    MissionResult,
+)
 from gcs_planner.mavlink.types import MissionType
 
 __all__ = [
@@ -127,6 +134,29 @@ class AutopilotProfile:
         (PX4 does; ArduPilot drops it, so a lost final ACK is never repeated).
     clear_denied_while_running: MISSION_CLEAR_ALL of the mission in AUTO -> ERROR (ArduPilot).
     flight: the in-flight behaviour per vehicle type (FlightRules).
+
+    A second uploader (issue 14; an upload session belongs to the sysid/compid of its MISSION_COUNT):
+    second_uploader_result: the answer to a MISSION_COUNT from other ids during an upload. ArduPilot
+        DENIED (MissionItemProtocol::handle_mission_count: ``msg.sysid != dest_sysid || msg.compid !=
+        dest_compid`` -> MAV_MISSION_DENIED); PX4 ERROR, sent to the newcomer, the upload goes on
+        (MavlinkMissionManager::handle_mission_count, GETLIST state: "Request from another partner").
+    same_partner_restarts: a MISSION_COUNT from the uploader's own ids restarts the upload at any
+        point (ArduPilot: ``free_upload_resources()`` and a new session, so two GCSs sharing ids merge);
+        False = PX4: before the first item it re-requests item 0, after it it answers ERROR to the
+        partner with STATUSTEXT "WPM: REJ. CMD: Busy" and keeps receiving (handle_mission_count).
+    foreign_item_denied: an item from other ids during an upload -> DENIED, checked after the seq
+        (ArduPilot MissionItemProtocol::handle_mission_item: INVALID_SEQUENCE first, then DENIED);
+        False = PX4: STATUSTEXT "REJ. MIS ITEM: partner id mismatch", no ACK (handle_mission_item_both).
+    stores_as_received: the list types written in place as items arrive, after a truncation to the
+        new count at MISSION_COUNT, so a failed upload leaves a mix of new and old items. ArduPilot's
+        mission (MissionItemProtocol_Waypoints::truncate / replace_item -> AP_Mission::truncate /
+        replace_cmd) and rally points (MissionItemProtocol_Rally::replace_item); its fence is
+        collected and written on completion (MissionItemProtocol_Fence::complete). PX4 writes every
+        list into the inactive dataman slot and switches on the last item (handle_mission_item_both:
+        ``_transfer_dataman_id``, update_active_mission), so a failed upload changes nothing.
+    ArduPilot ignores a GCS's MISSION_ACK during an upload (MissionItemProtocol has no handler for it:
+    a session ends by completion, an item error or its 8 s timeout in ``update()``); PX4 ends it on
+    MISSION_ACK(OPERATION_CANCELLED) from the partner (handle_mission_ack).
     """
 
     name: str
@@ -150,6 +180,10 @@ class AutopilotProfile:
     # allowed only where the command gives it a meaning, e.g. yaw of NAV_WAYPOINT / LAND / TAKEOFF)
     nan_params_rejected: bool = False
     sysid_enforce_params: bool = False  # SYSID_ENFORCE / SYSID_MYGCS (GCS_MAVLINK_*::accept_packet)
+    second_uploader_result: MissionResult = MissionResult.DENIED
+    same_partner_restarts: bool = True
+    foreign_item_denied: bool = True
+    stores_as_received: frozenset[int] = frozenset()
 
     def custom_mode(self, mode: str, vehicle_type: str = "multirotor") -> int:
         """HEARTBEAT custom_mode of a mode name; ValueError naming the mode if it does not exist."""
@@ -189,6 +223,7 @@ ARDUPILOT = AutopilotProfile(
     extra_commands=frozenset({116, 219, 5005}),
     nan_params_rejected=True,
     sysid_enforce_params=True,
+    stores_as_received=frozenset({MissionType.MISSION, MissionType.RALLY}),
 )
 
 PX4 = AutopilotProfile(
@@ -206,6 +241,9 @@ PX4 = AutopilotProfile(
     flight={"multirotor": PX4_FLIGHT, "fixed_wing": PX4_FLIGHT},
     supports_partial_write=False,
     mission_frame_for_positionless=True,
+    second_uploader_result=MissionResult.ERROR,
+    same_partner_restarts=False,
+    foreign_item_denied=False,
 )
 
 PROFILES: dict[str, AutopilotProfile] = {p.name: p for p in (ARDUPILOT, PX4)}

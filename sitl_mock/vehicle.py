@@ -101,7 +101,7 @@ class MockVehicle:
         *,
         host: str = "127.0.0.1",
         persist_mission: bool = False,
-        non_atomic: bool = False,
+        non_atomic: bool | None = None,  # None: as the profile stores each list
         airframe: Airframe | None = None,
         signing_key: bytes | None = None,
         flight: dict | None = None,

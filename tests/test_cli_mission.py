@@ -139,8 +139,17 @@ def test_upload_download_start_clear_ardupilot(fleet, tmp_path, capsys):
     state = fleet.call(lambda: fleet.vehicle(1).state)
     assert state.armed and state.mode == "AUTO"
 
-    assert main(["clear", *argv, "--type", "all"]) == 0
-    assert "CLEARED" in capsys.readouterr().out
+    # armed and flying the mission in AUTO (issue 14): upload and clear ask for --force
+    flying = held(fleet, 1)
+    for command in (["upload", *argv, str(plan_path)], ["clear", *argv, "--type", "all"]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert "armed and flying its mission in AUTO" in err and "--force" in err and err.count("\n") == 1
+    assert held(fleet, 1) == flying and len(held(fleet, 1, 1)) == 5
+    assert main(["clear", *argv, "--type", "all", "--force"]) == 0
+    out = capsys.readouterr().out
+    assert "CLEARED" in out  # ArduPilot refused MISSION_CLEAR_ALL in AUTO; --force uploaded an empty list
+    assert "note: mission: MISSION_CLEAR_ALL refused (ERROR); cleared by uploading an empty list" in out
     assert held(fleet, 1, 1) == [] and held(fleet, 1, 2) == [] and len(held(fleet, 1)) <= 1  # home may stay
 
 
@@ -160,9 +169,7 @@ def test_wpl_row_0_is_the_home_and_px4_gets_the_rows_after_it(fleet, tmp_path, c
     assert main(["download", *argv, str(tmp_path / "back.txt")]) == 0
     back = load_mission_file(tmp_path / "back.txt")
     assert back.items("px4") == in_file_frames([readback.PX4(it) for it in items])  # 6 is written as 3
-    assert back.home == pytest.approx(
-        (ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3
-    )
+    assert back.home == pytest.approx((ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m), abs=1e-3)
 
 
 def test_vehicle_refusal_is_one_line_and_keeps_the_old_mission(fleet, tmp_path, capsys):
@@ -227,8 +234,8 @@ def test_fleet_upload_from_plan_json(fleet, tmp_path, capsys):
     connects = [a for s in (1, 2, 3) for a in ("--connect", url(fleet, s))]
     before = held(fleet, 3)
     assert (
-        main(["upload", *connects, "--sysid", "all", str(plan_path)]) == 2
-    )  # vehicle 3 has room for 4 items
+        main(["upload", *connects, "--sysid", "all", "--force", str(plan_path)]) == 2
+    )  # vehicle 3 has room for 4 items; --force: vehicle 1 may still be armed in AUTO (test above)
     captured = capsys.readouterr()
     notes = [line for line in captured.out.splitlines() if line.startswith("note:")]
     assert notes == [f"note: {t}: not in the file; the vehicle's list is kept (--clear-absent clears it)"
@@ -244,7 +251,7 @@ def test_fleet_upload_from_plan_json(fleet, tmp_path, capsys):
     assert compare_items(sent, held(fleet, 1), readback.ARDUCOPTER, skip_home=True) is None
     assert held(fleet, 2) == [readback.PX4(it) for it in plan_to_items(plan.vehicles[1], ORIGIN, "px4")]
     assert held(fleet, 3) == before
-    assert main(["upload", *connects[:4], "--sysid", "1,2", str(plan_path)]) == 0
+    assert main(["upload", *connects[:4], "--sysid", "1,2", "--force", str(plan_path)]) == 0
     assert capsys.readouterr().out.count("ACCEPTED") == 2
 
 
@@ -276,3 +283,76 @@ def test_signed_vehicle_takes_an_upload_signed_from_the_environment(tmp_path, ca
         )
         assert "ACCEPTED" in capsys.readouterr().out
         assert held(signed, 1) == [readback.PX4(it) for it in items]
+
+
+# ----------------------------------------------------------------- issue 14: who uploads, what is left
+
+
+class RawGcs:
+    """A second GCS as bare pymavlink over its own UDP socket: it opens an upload and goes silent."""
+
+    def __init__(self, address, sysid: int, compid: int) -> None:
+        from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+        self.mavlink = mavlink
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(2.0)
+        self.address = address
+        self.mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
+        self.parser = mavlink.MAVLink(None)
+
+    def send(self, msg) -> None:
+        self.sock.sendto(msg.pack(self.mav), self.address)
+
+    def wait(self, name: str):
+        while True:
+            for msg in self.parser.parse_buffer(self.sock.recv(4096)) or []:
+                if msg.get_type() == name:
+                    return msg
+
+
+def test_a_second_gcs_with_its_own_sysid_is_denied_and_told_what_the_vehicle_holds(tmp_path, capsys):
+    """Failure 1: the first GCS opened an upload (ArduPilot keeps it 8 s); ours, with --gcs-sysid
+    254, is DENIED (MissionItemProtocol::handle_mission_count) and changes nothing."""
+    sitl_mock = pytest.importorskip("sitl_mock")
+    with sitl_mock.MockFleet(count=1, profile="ardupilot", home=ORIGIN, speedup=20.0) as one:
+        other = RawGcs(one.vehicle(1).address, 255, 190)
+        try:
+            other.send(other.mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3))
+            other.send(other.mavlink.MAVLink_mission_count_message(1, 1, 6, 0))
+            assert other.wait("MISSION_REQUEST").seq == 0  # the vehicle is inside the other upload
+            plan_path = make_plan(tmp_path, sysids=(1,))
+            argv = ["upload", "--connect", url(one, 1), "--sysid", "1", "--gcs-sysid", "254", str(plan_path)]
+            assert main(argv) == 2
+            captured = capsys.readouterr()
+            assert "FAILED" in captured.out and captured.err.count("\n") == 1
+            assert "refused the mission upload: DENIED" in captured.err
+            assert "the vehicle's list is unchanged" in captured.err
+            assert one.call(lambda: one.vehicle(1).mission_server.busy())  # still the other GCS's upload
+        finally:
+            other.sock.close()
+
+
+def test_a_rejected_upload_says_what_an_ardupilot_vehicle_now_holds(tmp_path, capsys):
+    """Failure 7: ArduPilot truncates at MISSION_COUNT and stores items as they arrive, so a refusal
+    mid-upload leaves a mix; the one error line says so after reading the list back."""
+    sitl_mock = pytest.importorskip("sitl_mock")
+    from sitl_mock.mission_server import Failure
+
+    with sitl_mock.MockFleet(count=1, profile="ardupilot", home=ORIGIN, speedup=20.0) as one:
+        plan = Plan.load(make_plan(tmp_path, sysids=(1,)))
+        items = plan_to_items(plan.vehicles[0], ORIGIN, "ardupilot")
+        first, second = tmp_path / "first.waypoints", tmp_path / "second.waypoints"
+        first.write_text(dumps_wpl(items))
+        second.write_text(dumps_wpl([replace(it, z=it.z + 7.0) for it in items]))
+        argv = ["upload", "--connect", url(one, 1), "--sysid", "1"]
+        assert main([*argv, str(first)]) == 0
+        capsys.readouterr()
+        one.set_mission_failure(1, Failure.WRITE_REQUEST1_ERROR_ACK)  # refuses item 1 with ERROR
+        assert main([*argv, str(second)]) == 2
+        err = capsys.readouterr().err
+        assert "refused the mission upload: ERROR" in err and "; the vehicle now holds a mixed list" in err
+        assert err.count("\n") == 1 and "Traceback" not in err
+        back = one.call(lambda: one.vehicle(1).mission_server.items())
+        assert len(back) == len(items) and back[1].z == pytest.approx(items[1].z, abs=0.01)  # the old item 1

@@ -238,10 +238,15 @@ def test_request1_no_response_vehicle_cancels_previous_intact(profile, cancel_at
     before = srv.items()
     srv.failure = Failure.WRITE_REQUEST1_NO_RESPONSE
     sim = Sim(srv)
-    up = upload(sim, mission(6, base_lat=400_000_000), timing=Timing(push_ahead=False, window=1))
+    new = mission(6, base_lat=400_000_000)
+    up = upload(sim, new, timing=Timing(push_ahead=False, window=1))
     assert isinstance(up.outcome.error, errors.OperationCancelledError)
     assert sim.now == pytest.approx(cancel_at_s, abs=0.1)
-    assert srv.items() == before and not srv.busy()
+    assert not srv.busy()
+    if profile == "px4":
+        assert srv.items() == before  # PX4 switches lists on completion only
+    else:  # ArduPilot stored item 0 in place: a mix (mission.py reads it back and says so)
+        assert srv.items() == [srv.storage(new[0]), *before[1:]]
 
 
 @pytest.mark.parametrize("profile", PROFILE_NAMES)
@@ -341,7 +346,9 @@ def test_incorrect_sequence_requests_are_recovered(profile, failure, window):
     up = upload(sim, items, timing=Timing(window=window))
     assert up.outcome.error is None
     assert srv.items() == kept(srv, items)
-    if profile == "ardupilot" and window == 1:  # ArduPilot answers the skipped item with INVALID_SEQUENCE
+    if profile == "ardupilot" and window == 1 and failure == Failure.WRITE_REQUEST1_INCORRECT_SEQUENCE:
+        # ArduPilot answers the skipped item with INVALID_SEQUENCE (a first request for item 1 is
+        # ignored: a session starts at item 0, so it answers someone else's MISSION_COUNT)
         assert up.stats.invalid_sequence_acks >= 1
 
 
@@ -354,7 +361,7 @@ def test_incorrect_sequence_requests_are_recovered(profile, failure, window):
     ],
 )
 def test_error_acks_become_typed_errors_and_keep_previous(failure, result, error):
-    srv = server()
+    srv = server("px4")  # PX4 keeps the previous list; ArduPilot stores in place (test below)
     preload(srv, mission(3))
     before, before_id = srv.items(), srv.opaque_id()
     srv.failure, srv.failure_result = failure, result

@@ -21,8 +21,9 @@ from collections.abc import AsyncIterator, Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
+from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.command import CommandClient
-from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink
 from gcs_planner.mavlink.signing import key_from_passphrase
 from gcs_planner.mavlink.types import MissionItem, MissionType
 
@@ -58,6 +59,16 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
             "--sysid", required=True, type=_sysid, help="target vehicle's MAVLink system id (1..255)"
         )
     p.add_argument("--compid", type=int, default=1, help="target component id [1 = autopilot]")
+    p.add_argument(
+        "--gcs-sysid",
+        type=_sysid,
+        default=GCS_SYSID,
+        help=f"our own MAVLink system id [{GCS_SYSID}]: give each GCS on a vehicle its own, an autopilot"
+        " tells uploaders apart by it",
+    )
+    p.add_argument(
+        "--gcs-compid", type=_sysid, default=GCS_COMPID, help=f"our own MAVLink component id [{GCS_COMPID}]"
+    )
     p.add_argument(
         "--signing-passphrase",
         metavar="TEXT",
@@ -103,7 +114,8 @@ def _sysids(text: str) -> list[int] | None:
 async def open_link(args: argparse.Namespace) -> MavlinkLink:
     try:
         key = key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None
-        return await MavlinkLink.open(*args.connect, signing_key=key)
+        sysid, compid = getattr(args, "gcs_sysid", GCS_SYSID), getattr(args, "gcs_compid", GCS_COMPID)
+        return await MavlinkLink.open(*args.connect, signing_key=key, sysid=sysid, compid=compid)
     except (OSError, ValueError) as exc:
         raise UserError(f"cannot open --connect {' '.join(args.connect)!r}: {exc}") from None
 
@@ -160,6 +172,26 @@ async def vehicle_link(args: argparse.Namespace) -> AsyncIterator[tuple[MavlinkL
         yield link, heartbeat
     finally:
         await link.close()
+
+
+def add_force_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="act on a vehicle that is armed and flying its mission in AUTO (it changes the mission it"
+        " flies); without it that is refused",
+    )
+
+
+def check_not_flying_mission(link: MavlinkLink, sysid: int, force: bool, what: str) -> None:
+    """UserError when ``sysid`` is armed in its mission mode (AUTO) and ``force`` is not given."""
+    info = link.vehicles.get(sysid)
+    if info is None or not info.armed or mode_of(info) != "AUTO" or force:
+        return
+    raise UserError(
+        f"vehicle {sysid} is armed and flying its mission in AUTO: {what} changes the mission it flies;"
+        " add --force to do it anyway"
+    )
 
 
 def command_name(command: int) -> str:

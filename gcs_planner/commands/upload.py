@@ -24,7 +24,9 @@ import time
 
 from gcs_planner.commands._mission_cli import (
     add_connection_arguments,
+    add_force_argument,
     autopilot_of,
+    check_not_flying_mission,
     fleet_link,
     vehicle_link,
 )
@@ -50,6 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--retries", type=int, default=2, help="extra attempts per failed vehicle [2]")
     add_clear_absent_argument(p)
+    add_force_argument(p)
 
 
 def add_clear_absent_argument(p: argparse.ArgumentParser) -> None:
@@ -141,6 +144,7 @@ async def _upload_one(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
         autopilot = autopilot_of(heartbeat, args.autopilot)
         lists = prepare(args, autopilot, args.sysid)
+        check_not_flying_mission(link, args.sysid, args.force, "an upload")
         client = MissionClient(link, args.sysid, args.compid)
         print(f"vehicle {args.sysid} ({autopilot})")
         print(f"{'list':<8} {'items':>6} {'result':<10} {'opaque_id':>10} {'time_s':>7} verified")
@@ -164,6 +168,7 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int]) -> int:
     async with fleet_link(args, sysids) as link:
         by_type: dict[MissionType, dict[int, list[MissionItem]]] = {}
         for sysid in sysids:
+            check_not_flying_mission(link, sysid, args.force, "an upload")
             autopilot = autopilot_of(link.vehicles[sysid], args.autopilot)
             for mission_type, items in prepare(args, autopilot, sysid):
                 by_type.setdefault(mission_type, {})[sysid] = items

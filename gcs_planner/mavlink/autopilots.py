@@ -58,6 +58,10 @@ class AutopilotQuirks:
     return_mode: str | None  # the mode that brings a vehicle home (safe end)
     land_mode: str | None  # the mode that lands it where it is (None: no such mode)
     readback: readback.Model
+    # list types (mission_type) written in place as items arrive: a failed upload leaves a mix, so
+    # the client reads the list back to say what the vehicle holds (ArduPilot's mission and rally:
+    # MissionItemProtocol_Waypoints / _Rally replace_item; PX4 switches lists on completion only)
+    stores_as_received: frozenset[int] = frozenset({0, 1, 2})
 
     @property
     def home_at_seq0(self) -> bool:
@@ -79,6 +83,7 @@ ARDUCOPTER = AutopilotQuirks(
     return_mode="RTL",
     land_mode="LAND",
     readback=readback.ARDUCOPTER,
+    stores_as_received=frozenset({0, 2}),
 )
 ARDUPLANE = AutopilotQuirks(
     name="ArduPlane",
@@ -95,6 +100,7 @@ ARDUPLANE = AutopilotQuirks(
     return_mode="RTL",
     land_mode=None,
     readback=readback.ARDUPLANE,
+    stores_as_received=frozenset({0, 2}),
 )
 PX4 = AutopilotQuirks(
     name="PX4",
@@ -111,6 +117,7 @@ PX4 = AutopilotQuirks(
     return_mode="RTL",
     land_mode="LAND",
     readback=readback.PX4,
+    stores_as_received=frozenset(),
 )
 GENERIC = AutopilotQuirks(
     name="MAVLink",
@@ -126,7 +133,7 @@ GENERIC = AutopilotQuirks(
     streams_by_request=True,
     return_mode=None,
     land_mode=None,
-    readback=readback.GENERIC,
+    readback=readback.GENERIC,  # stores_as_received: unknown, so every list is read back
 )
 
 

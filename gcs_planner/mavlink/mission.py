@@ -24,7 +24,10 @@ Choices:
   request once (``Timing(push_ahead=False, window=1)``, the spec-literal client).
 - clear(): MISSION_CLEAR_ALL; ALL list by list where the vehicle does not take mission_type 255
   (ArduPilot: UNSUPPORTED); when the vehicle answers ERROR or DENIED (ArduPilot in AUTO cannot
-  clear) an empty list is uploaded instead, which ArduPilot accepts.
+  clear) that is raised, and only ``force=True`` uploads an empty list instead (ArduPilot accepts it).
+- A failed upload's error ends with what the vehicle holds now (issue 14): unchanged when it refused
+  the MISSION_COUNT, its previous list on an autopilot that switches lists on completion (PX4),
+  otherwise what a read-back shows (ArduPilot writes items as they arrive).
 - set_current(): MAV_CMD_DO_SET_MISSION_CURRENT first; if the vehicle does not support it (or never
   answers) the legacy MISSION_SET_CURRENT, confirmed by MISSION_CURRENT.
 """
@@ -46,6 +49,7 @@ from gcs_planner.mavlink.errors import (
     CommandError,
     CommandTimeoutError,
     MissionError,
+    MissionInputError,
     VerifyError,
     mission_type_name,
 )
@@ -123,10 +127,10 @@ class MissionClient:
         written = slice(transfer.first, transfer.first + len(items)) if partial else slice(None)
         if outcome.error is not None:
             if not outcome.ack_lost:
-                raise outcome.error
-            back, opaque_id = await self._read_back(mission_type, outcome.error)
-            if self._difference(items, back[written]) is not None:
-                raise outcome.error
+                raise await self._what_it_holds(outcome.error, transfer, items, written)
+            back, opaque_id, problem = await self._try_read_back(mission_type)
+            if back is None or self._difference(items, back[written]) is not None:
+                raise await self._what_it_holds(outcome.error, transfer, items, written, back, problem)
             ack_lost = verified = True
         if verify and not verified:
             back, _ = await self._read_back(mission_type, None)
@@ -162,30 +166,40 @@ class MissionClient:
             raise outcome.error
         return list(outcome.items or []), outcome.opaque_id
 
-    async def clear(self, mission_type: int = MissionType.MISSION) -> None:
-        """Empty the list (MissionType.ALL: all three).
+    async def clear(self, mission_type: int = MissionType.MISSION, *, force: bool = False) -> list[str]:
+        """Empty the list (MissionType.ALL: all three); returns one note per list that needed the
+        fallback below ([] when MISSION_CLEAR_ALL did it).
 
         ALL goes list by list to a vehicle that does not take mission_type 255 in one
-        MISSION_CLEAR_ALL (ArduPilot answers UNSUPPORTED); a list the vehicle refuses to clear
-        (ERROR / DENIED: ArduPilot in AUTO) is replaced by an empty upload instead."""
+        MISSION_CLEAR_ALL (ArduPilot answers UNSUPPORTED). A refusal (ERROR / DENIED: ArduPilot
+        in AUTO) is raised, naming it; only with ``force`` is the list replaced by an empty upload
+        instead (which ArduPilot accepts in AUTO), and the note says so."""
         types = (MissionType.MISSION, MissionType.FENCE, MissionType.RALLY)
         if mission_type == MissionType.ALL and not self.quirks.clear_all_at_once:
-            for t in types:
-                await self.clear(t)
-            return
+            return [note for t in types for note in await self.clear(t, force=force)]
         outcome = await self._run(self._transfer(ClearTransfer, mission_type=mission_type))
         error = outcome.error
         if error is None:
-            return
+            return []
         result = getattr(error, "result", None)
         if mission_type == MissionType.ALL and result == MissionResult.UNSUPPORTED:
-            for t in types:
-                await self.clear(t)
-            return
+            return [note for t in types for note in await self.clear(t, force=force)]
         if result not in (MissionResult.ERROR, MissionResult.DENIED):
             raise error
+        if not force:
+            error.args = (
+                f"{error}; the list is unchanged (e.g. ArduPilot refuses MISSION_CLEAR_ALL while it"
+                " flies the mission in AUTO); --force uploads an empty list instead",
+            )
+            raise error
+        notes = []
         for t in types if mission_type == MissionType.ALL else (mission_type,):
             await self.upload([], mission_type=t)
+            notes.append(
+                f"{mission_type_name(t)}: MISSION_CLEAR_ALL refused ({result.name}); cleared by uploading"
+                " an empty list (--force)"
+            )
+        return notes
 
     async def set_current(self, seq: int) -> None:
         """Make mission item ``seq`` current (DO_SET_MISSION_CURRENT, else MISSION_SET_CURRENT)."""
@@ -272,6 +286,46 @@ class MissionClient:
         assert transfer.outcome is not None
         return transfer.outcome
 
+    async def _try_read_back(
+        self, mission_type: int, attempts: int = 2
+    ) -> tuple[list[MissionItem] | None, int, str | None]:
+        """(items, opaque_id, None), or (None, 0, why) when every attempt failed."""
+        problem = None
+        for _ in range(attempts):
+            try:
+                items, opaque_id = await self.download_with_id(mission_type)
+                return items, opaque_id, None
+            except MissionError as exc:
+                problem = str(exc)
+        return None, 0, problem
+
+    async def _what_it_holds(
+        self,
+        error: MissionError,
+        transfer: UploadTransfer,
+        items: Sequence[MissionItem],
+        written: slice,
+        back: list[MissionItem] | None = None,
+        problem: str | None = None,
+    ) -> MissionError:
+        """``error`` with what the vehicle holds now appended (issue 14): never a silent mix."""
+        if isinstance(error, MissionInputError):
+            return error
+        q = self.quirks
+        result = getattr(error, "result", None)
+        if transfer.never_requested and result not in (None, MissionResult.OPERATION_CANCELLED):
+            # both autopilots check a MISSION_COUNT before they truncate or store anything
+            holds = "the vehicle's list is unchanged (it refused before asking for an item)"
+        elif transfer.mission_type not in q.stores_as_received and not transfer.ack_lost_possible:
+            holds = f"the vehicle keeps its previous list ({q.name} replaces a list only on completion)"
+        else:
+            if back is None and problem is None:
+                back, _, problem = await self._try_read_back(transfer.mission_type)
+            holds = _describe(items, None if back is None else back[written], q, problem)
+        error.args = (f"{error}; {holds}",)
+        error.holds = holds  # type: ignore[attr-defined]
+        return error
+
     async def _read_back(
         self, mission_type: int, original: MissionError | None
     ) -> tuple[list[MissionItem], int]:
@@ -285,6 +339,31 @@ class MissionClient:
     def _difference(self, sent: Sequence[MissionItem], got: Sequence[MissionItem]) -> str | None:
         q = self.quirks
         return compare_items(sent, got, q.readback, skip_home=q.home_at_seq0)
+
+
+def _describe(
+    sent: Sequence[MissionItem], got: Sequence[MissionItem] | None, q: AutopilotQuirks, problem: str | None
+) -> str:
+    """What the vehicle holds, in words, from a read-back ``got`` of the upload ``sent``."""
+    if got is None:
+        return f"what the vehicle holds is unknown: the read-back failed ({problem})"
+    if compare_items(sent, got, q.readback, skip_home=q.home_at_seq0) is None:
+        return f"the vehicle holds this upload's {len(sent)} items (it stores items as they arrive)"
+    real = [it for it in got if not (q.home_at_seq0 and it.seq == 0)]
+    if not real:
+        return "the vehicle now holds no items" + (" (only its home at seq 0)" if got else "")
+    same = 0
+    for a, b in zip(sent, got, strict=False):
+        if compare_items([a], [b], q.readback, skip_home=q.home_at_seq0) is not None:
+            break
+        same += 1
+    home = 1 if q.home_at_seq0 and sent and sent[0].seq == 0 else 0
+    start = sent[0].seq if sent else 0
+    if same - home > 0:
+        kept = f"seq {start + home}-{start + same - 1} as sent, {len(got) - same} not from this upload"
+    else:
+        kept = "none of them from this upload"
+    return f"the vehicle now holds a mixed list of {len(got)} items: {kept} (it stores items as they arrive)"
 
 
 def compare_items(

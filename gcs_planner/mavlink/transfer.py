@@ -42,6 +42,22 @@ Choices (where the spec leaves room):
   the last item was sent; an ACCEPTED before that is stale and ignored.
 - After the final-item retries the outcome is a timeout with ``ack_lost=True``: the vehicle may hold
   the new mission (ArduPilot never repeats a final ACK). mission.py then verifies by download.
+- Overall deadline (issue 14): an upload ends after DEADLINE_BASE_S + DEADLINE_PER_ITEM_S x items
+  (20 s + 1 s per item: 1000 items on a 0.5 s round-trip radio with two in flight take ~250 s) however
+  busy the vehicle keeps it, e.g. one that re-requests item 0 for ever (each request resets the
+  inactivity timer). Giving up sends MISSION_ACK(OPERATION_CANCELLED).
+- The transfer is bound to its peer: it takes only frames addressed to our sysid *and* compid (or
+  broadcast), of its mission type. A request that goes back to an item the vehicle asked for long
+  ago (more than max(RESTART_WINDOW_S, 4 x smoothed RTT): no delayed duplicate is that late) means
+  the vehicle started another session: both autopilots only ever (re-)request the item they wait
+  for, which never decreases within one session (ArduPilot ``request_i``, PX4 ``_transfer_seq``), and
+  ArduPilot lets a MISSION_COUNT from the same sysid/compid restart an upload
+  (MissionItemProtocol::handle_mission_count). That is another GCS using our ids: the upload ends
+  with MissionProtocolError and sends nothing more, so it never feeds items into the other session.
+  Likewise, before the first request a request for any item but the first answers someone else's
+  MISSION_COUNT (a session starts at item 0, or start_index) and is ignored. Two GCSs with the same
+  ids that start within one round trip of each other cannot be told apart on the wire: the fix is
+  distinct ids (``--gcs-sysid``), with which both autopilots refuse the second uploader.
 - Inactivity timeout INACTIVITY_TIMEOUT_S = 10 s (> ArduPilot's 8 s, so the vehicle's own
   OPERATION_CANCELLED normally arrives first and is reported as such). On any timeout we send
   MISSION_ACK(OPERATION_CANCELLED) so the vehicle drops its half of the session.
@@ -64,6 +80,7 @@ from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.errors import (
     MissionError,
     MissionInputError,
+    MissionProtocolError,
     MissionTimeoutError,
     OperationCancelledError,
     error_for_result,
@@ -74,6 +91,8 @@ from gcs_planner.mavlink.types import MissionItem, MissionType
 __all__ = [
     "COUNT_RETRIES",
     "COUNT_RETRY_S",
+    "DEADLINE_BASE_S",
+    "DEADLINE_PER_ITEM_S",
     "DOWNLOAD_RETRIES",
     "DUPLICATE_WINDOW_S",
     "FINAL_ITEM_RETRIES",
@@ -95,6 +114,9 @@ DUPLICATE_WINDOW_S = 0.15  # a request for an item sent more recently than this 
 FINAL_ITEM_RETRIES = 5  # resends of the last item while waiting for MISSION_ACK
 INACTIVITY_TIMEOUT_S = 10.0  # no message from the vehicle for this long ends the transfer [s]
 DOWNLOAD_RETRIES = 8  # re-requests of one item during a download
+DEADLINE_BASE_S = 20.0  # an upload ends after this [s] ...
+DEADLINE_PER_ITEM_S = 1.0  # ... plus this per item [s], however busy the vehicle keeps it
+RESTART_WINDOW_S = 0.25  # a request this much older than its first copy is a new session [s]
 INITIAL_RTT_S = 0.1  # round-trip guess before the first measurement [s]
 _REQUESTS = frozenset({"MISSION_REQUEST_INT", "MISSION_REQUEST"})
 _ITEMS = frozenset({"MISSION_ITEM_INT", "MISSION_ITEM"})
@@ -121,6 +143,9 @@ class Timing:
     push_timeout_max_s: float = 0.5
     push_rtts: float = 1.5  # a request this many smoothed RTTs overdue starts a push
     window: int = 2  # items in flight during an upload: 1 = answer each request only (the spec)
+    deadline_base_s: float = DEADLINE_BASE_S
+    deadline_per_item_s: float = DEADLINE_PER_ITEM_S
+    restart_window_s: float = RESTART_WINDOW_S
 
     def __post_init__(self) -> None:
         if self.window < 1:
@@ -202,6 +227,8 @@ class Transfer:
             return False
         if getattr(msg, "target_system", 0) not in (0, self.gcs[0]):
             return False
+        if getattr(msg, "target_component", 0) not in (0, self.gcs[1]):
+            return False  # another GCS with our sysid: its requests and ACKs are not ours
         return getattr(msg, "mission_type", self.mission_type) == self.mission_type
 
     def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
@@ -312,18 +339,50 @@ class UploadTransfer(Transfer):
                 f"{len(self.items)} items: MISSION_COUNT holds at most 65535", sysid=sysid
             )
         self._sent_at = [math.nan] * len(self.items)
+        self._first_request_s = [math.nan] * len(self.items)
+        self._give_up_s = math.inf  # the overall deadline, set by start()
         self._last_request_s = 0.0
         self._count_sent_s = 0.0
         self._highest_sent = -1  # indexes into items from here on
         self._requested = -1  # the highest item the vehicle asked for
         self._pushes = 0  # push-ahead rounds since the last request
 
+    @property
+    def never_requested(self) -> bool:
+        """The vehicle never asked for an item of this upload (it stored nothing of it)."""
+        return self._requested < 0
+
+    @property
+    def ack_lost_possible(self) -> bool:
+        """Every item went out: the vehicle may have completed the upload (the ACK went missing)."""
+        return self._highest_sent == len(self.items) - 1 >= 0
+
     def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
         self.phase = Phase.COUNT
         self._retries = 0
-        self.deadline_s = now_s + self.timing.count_retry_s
+        self._give_up_s = now_s + self.give_up_after_s
+        self.deadline_s = min(now_s + self.timing.count_retry_s, self._give_up_s)
         self._count_sent_s = now_s
         return self.stats.count([self._count()])
+
+    @property
+    def give_up_after_s(self) -> float:
+        """The overall deadline: Timing.deadline_base_s + deadline_per_item_s per item [s]."""
+        return self.timing.deadline_base_s + self.timing.deadline_per_item_s * len(self.items)
+
+    def on_message(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
+        out = super().on_message(msg, now_s)
+        self._clamp()
+        return out
+
+    def on_timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        out = super().on_timeout(now_s)
+        self._clamp()
+        return out
+
+    def _clamp(self) -> None:
+        if not self.done and self.deadline_s is not None:
+            self.deadline_s = min(self.deadline_s, self._give_up_s)
 
     def _count(self) -> mavlink.MAVLink_message:
         if self.partial:
@@ -341,6 +400,20 @@ class UploadTransfer(Transfer):
         if not 0 <= i < len(self.items):
             log.warning("vehicle %d requested item %d, not in this upload: ignored", self.sysid, msg.seq)
             return []
+        if self.phase is Phase.COUNT and i != 0:
+            return []  # a session starts at its first item: this request answers someone else's COUNT
+        first_s = self._first_request_s[i]
+        if i < self._requested and now_s - first_s > max(self.timing.restart_window_s, 4 * self._srtt_s):
+            what = mission_type_name(self.mission_type)
+            msg = (
+                f"vehicle {self.sysid} went back to item {msg.seq} after asking for item"
+                f" {self._requested + self.first}: another GCS with our ids ({self.gcs[0]}/{self.gcs[1]})"
+                f" restarted the {what} upload; give each GCS its own --gcs-sysid / --gcs-compid"
+            )
+            self._finish(MissionProtocolError(msg, sysid=self.sysid, mission_type=self.mission_type))
+            return []  # not ours any more: feed nothing into the other GCS's session
+        if math.isnan(first_s):
+            self._first_request_s[i] = now_s
         if self.phase is Phase.COUNT and self._retries == 0:  # unambiguous: COUNT went out once
             self._rtt_sample(now_s - self._count_sent_s)
         self._last_request_s = now_s
@@ -390,7 +463,7 @@ class UploadTransfer(Transfer):
             if self.phase is Phase.FINAL_ACK or (not self.items and self.phase is Phase.COUNT):
                 self._finish(None, opaque_id=getattr(msg, "opaque_id", 0))
             return []  # stale ACCEPTED (e.g. a re-ack of an earlier upload)
-        if result == MissionResult.INVALID_SEQUENCE and self.phase in (Phase.ITEMS, Phase.FINAL_ACK):
+        if result == MissionResult.INVALID_SEQUENCE:  # before our first item it is not about ours
             self.stats.invalid_sequence_acks += 1
             return []
         if result == MissionResult.ERROR and self._highest_sent == len(self.items) - 1 >= 0:
@@ -403,9 +476,18 @@ class UploadTransfer(Transfer):
             self._finish(error, ack_lost=True)
             return []
         self._fail_result(result)
+        if self._requested >= 0 and result != MissionResult.OPERATION_CANCELLED:
+            # the vehicle may still be inside the session (PX4 answers a second MISSION_COUNT of the
+            # same ids with ERROR and keeps receiving): end it
+            return [self._ack(MissionResult.OPERATION_CANCELLED)]
         return []
 
     def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
+        if now_s >= self._give_up_s:
+            return self._fail_timeout(
+                f"not done within {self.give_up_after_s:g} s, the bound for {len(self.items)} items"
+                f" ({self.timing.deadline_base_s:g} s + {self.timing.deadline_per_item_s:g} s per item)"
+            )
         if self.phase is Phase.COUNT:
             if self._retries >= self.timing.count_retries:
                 what = "MISSION_WRITE_PARTIAL_LIST" if self.partial else "MISSION_COUNT"
@@ -420,7 +502,7 @@ class UploadTransfer(Transfer):
                 self._finish(
                     MissionTimeoutError(msg, sysid=self.sysid, mission_type=self.mission_type), ack_lost=True
                 )
-                return []
+                return [self._ack(MissionResult.OPERATION_CANCELLED)]  # in case it still waits for it
             self._retries += 1
             last = len(self.items) - 1
             self._sent_at[last] = now_s
