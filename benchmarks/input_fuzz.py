@@ -14,6 +14,7 @@ import argparse
 import logging
 import random
 import shutil
+import signal
 import sys
 import tempfile
 from collections import Counter
@@ -24,11 +25,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import input_mutations as im  # noqa: E402
 
 
+class Hang(BaseException):
+    """An input that kept one command busy for --hang-after seconds."""
+
+
+def _hang(signum, frame):
+    raise Hang()
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=4000, help="mutated inputs in all [4000]")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--show", type=int, default=15, help="distinct problems to print [15]")
+    ap.add_argument("--hang-after", type=int, default=20, help="seconds before an input counts as a hang")
     args = ap.parse_args()
     logging.disable(logging.CRITICAL)
     rng = random.Random(args.seed)
@@ -42,26 +52,48 @@ def main() -> int:
                 folder = root / str(i)
                 folder.mkdir()
                 argv = im.CASES[name](rng, folder)
-                outcome = im.run_case(argv, folder)
+                signal.signal(signal.SIGALRM, _hang)
+                signal.alarm(args.hang_after)
+                try:
+                    outcome = im.run_case(argv, folder)
+                finally:
+                    signal.alarm(0)
                 row = rows[name]
                 row["inputs"] += 1
                 row[f"exit {outcome.code}" if outcome.exception is None else "traceback"] += 1
+                if outcome.exception and "Hang" in outcome.exception.strip().splitlines()[-1]:
+                    row["hang"] += 1
                 for problem in im.problems(outcome):
-                    kind = problem.split(":")[0].split(" ")[0]
-                    row[{"traceback": "traceback!", "exit": "bad exit"}.get(kind, kind)] += 1
+                    kind = next(
+                        k for k in ("traceback", "exit code", "stderr lines", "left behind") if k in problem
+                    )
+                    row[
+                        {"exit code": "bad exit", "stderr lines": "stderr", "left behind": "left"}.get(
+                            kind, kind
+                        )
+                    ] += 1
                     key = f"{name}: {problem[:160]}"
                     seen.setdefault(key, argv)
                 shutil.rmtree(folder, ignore_errors=True)
     finally:
         shutil.rmtree(root, ignore_errors=True)
-    cols = ["inputs", "exit 0", "exit 2", "traceback", "bad exit", "stderr", "left", "1", "2"]
-    labels = ["inputs", "exit 0", "exit 2", "traceback", "other exit", "multi-line", "leftover", "", ""]
-    print(f"{'reader':<22}" + "".join(f"{h:>11}" for h in labels[:7]))
+    cols = ["inputs", "exit 0", "exit 2", "traceback", "hang", "bad exit", "stderr", "left"]
+    labels = [
+        "inputs",
+        "exit 0",
+        "exit 2",
+        "traceback",
+        "(of which hang)",
+        "other exit",
+        "multi-line",
+        "leftover",
+    ]
+    print(f"{'reader':<22}" + "".join(f"{h:>11}" for h in labels))
     total = Counter()
     for name, row in rows.items():
         total.update(row)
-        print(f"{name:<22}" + "".join(f"{row[c]:>11}" for c in cols[:7]))
-    print(f"{'all':<22}" + "".join(f"{total[c]:>11}" for c in cols[:7]))
+        print(f"{name:<22}" + "".join(f"{row[c]:>11}" for c in cols))
+    print(f"{'all':<22}" + "".join(f"{total[c]:>11}" for c in cols))
     for key in list(seen)[: args.show]:
         print(f"- {key}")
     broken = total["traceback"] + total["bad exit"] + total["stderr"] + total["left"]

@@ -7,6 +7,7 @@ radii in [0, MAX_RADIUS_M], times in [0, MAX_DURATION_S] and never decreasing.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -124,8 +125,10 @@ def _points(value: Any, field: str, max_len: int) -> np.ndarray:
         raise InputError(f"{field} must be a list of 1..{max_len} [x, y, z] points")
     for i, p in enumerate(value):
         if not (isinstance(p, list) and len(p) == 3):
-            raise InputError(f"{field}[{i}] must be [x, y, z] in metres, got {p!r}")
-    arr = _numbers([c for p in value for c in p], field).reshape(-1, 3)
+            raise InputError(f"{field}[{i}] must be [x, y, z] in metres, got {_short(p)}")
+        if not all(_finite(c) for c in p):
+            raise InputError(f"{field}[{i}] must be 3 finite numbers, got {_short(p)}")
+    arr = np.asarray(value, dtype=float)
     far = np.flatnonzero(np.abs(arr[:, :2]).max(axis=1) > MAX_RANGE_M)
     if far.size:
         raise InputError(f"{field}[{far[0]}] = {value[far[0]]} is over {MAX_RANGE_M:g} m from the origin")
@@ -135,6 +138,21 @@ def _points(value: Any, field: str, max_len: int) -> np.ndarray:
             f"{field}[{alt[0]}] altitude {value[alt[0]][2]!r} is outside [{MIN_ALT_M:g}, {MAX_ALT_M:g}] m"
         )
     return arr
+
+
+def _finite(c: Any) -> bool:
+    """A real number (not bool) that is finite as a float."""
+    if isinstance(c, bool) or not isinstance(c, int | float):
+        return False
+    try:
+        return math.isfinite(c)
+    except OverflowError:  # an int too large for a float
+        return False
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _series(value: Any, field: str, n: int, lo: float, hi: float) -> np.ndarray:
