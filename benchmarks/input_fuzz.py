@@ -68,9 +68,12 @@ def main() -> int:
                         k for k in ("traceback", "exit code", "stderr lines", "left behind") if k in problem
                     )
                     row[
-                        {"exit code": "bad exit", "stderr lines": "stderr", "left behind": "left"}.get(
-                            kind, kind
-                        )
+                        {
+                            "traceback": "counted",
+                            "exit code": "bad exit",
+                            "stderr lines": "stderr",
+                            "left behind": "left",
+                        }.get(kind, kind)
                     ] += 1
                     key = f"{name}: {problem[:160]}"
                     seen.setdefault(key, argv)
@@ -96,7 +99,7 @@ def main() -> int:
     print(f"{'all':<22}" + "".join(f"{total[c]:>11}" for c in cols))
     for key in list(seen)[: args.show]:
         print(f"- {key}")
-    broken = total["traceback"] + total["bad exit"] + total["stderr"] + total["left"]
+    broken = total["traceback"] + total["bad exit"] + total["stderr"] + total["left"]  # per input and kind
     print(f"{len(seen)} distinct problems; {broken} rule breaks in {total['inputs']} inputs")
     return 1 if broken else 0
 
