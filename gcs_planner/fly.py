@@ -102,6 +102,7 @@ class FlyResult:
     wall_time_s: float
     end_states: dict[int, str] = field(default_factory=dict)  # safe end: sysid -> what was done
     report_path: Path | None = None  # the flight report PNG (flight_report.py)
+    log_error: str | None = None  # the flight log could not be written (full disk); the report stands
 
     @property
     def passed(self) -> bool:
@@ -261,6 +262,33 @@ def build_missions(plan: Plan, quirks: dict[int, AutopilotQuirks]) -> dict[int, 
     return {vp.sysid: plan_to_items(vp, plan.origin, quirks[vp.sysid].conventions) for vp in plan.vehicles}
 
 
+def check_flight(plan: Plan) -> None:
+    """What must hold before anything is sent: one sysid in 1..255 per vehicle, and every
+    vehicle's mission valid in both autopilots' conventions."""
+    sysids = [vp.sysid for vp in plan.vehicles]
+    if 0 in sysids or len(set(sysids)) != len(sysids):
+        raise UserError(f"every vehicle needs its own MAVLink sysid in 1..255 to fly, got {sysids}")
+    for conventions in AUTOPILOTS:
+        build_missions(plan, {s: quirks_named(conventions) for s in sysids})
+
+
+class _KeptLog:
+    """Closes a FlightLogger on exit; an OSError (full disk) is kept in ``errors``, not raised,
+    so the flight still ends safely and gets its report."""
+
+    def __init__(self, logger: FlightLogger, errors: list[str]) -> None:
+        self.logger, self.errors = logger, errors
+
+    def __enter__(self) -> FlightLogger:
+        return self.logger
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self.logger.close()
+        except OSError as err:
+            self.errors.append(f"could not be written completely: {err.strerror or err}")
+
+
 async def fly(
     scenario: Scenario,
     plan: Plan,
@@ -274,10 +302,11 @@ async def fly(
     """
     t_wall = time.monotonic()
     sysids = [vp.sysid for vp in plan.vehicles]
-    if 0 in sysids or len(set(sysids)) != len(sysids):
-        raise UserError(f"every vehicle needs its own MAVLink sysid in 1..255 to fly, got {sysids}")
-    for conventions in AUTOPILOTS:  # validate every mission before anything is sent
-        build_missions(plan, {s: quirks_named(conventions) for s in sysids})
+    check_flight(plan)  # before anything is sent
+    unknown = sorted(set(options.drift_mps) - set(sysids))
+    if unknown:
+        raise UserError(f"drift for sysid {unknown[0]}, which is not in the plan {sorted(sysids)}")
+    log_errors: list[str] = []
     options.out_dir.mkdir(parents=True, exist_ok=True)
     mcap_path = options.out_dir / "flight.mcap"
     tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
@@ -296,7 +325,11 @@ async def fly(
         recorder = _TrackRecorder(plan.origin, fleet is not None, sysids)
         status = VehicleStatus(link, sysids)
         quirks: dict[int, AutopilotQuirks] = {}
-        with FlightLogger(mcap_path, plan.origin, plan, scenario_text, tlog_path) as logger:
+        try:
+            flight_log = FlightLogger(mcap_path, plan.origin, plan, scenario_text, tlog_path)
+        except OSError as exc:
+            raise UserError(f"cannot write the flight log {mcap_path}: {exc.strerror or exc}") from None
+        with _KeptLog(flight_log, log_errors) as logger:
             link.subscribe(logger.on_frame)
             link.subscribe(recorder.on_frame)
             if options.live is not None:
@@ -386,13 +419,16 @@ async def fly(
         options.out_dir / "report.png", plan, recorder.tracks(), reports, scenario, options.max_cross_track_m
     )
     rrd_path = None
-    if options.rrd:
+    if options.rrd and not log_errors:
         from gcs_planner.telemetry import log_flight_to_rerun, read_flight
 
         rrd_path = options.out_dir / "flight.rrd"
         log_flight_to_rerun(read_flight(mcap_path), rrd_path)
     wall_s = time.monotonic() - t_wall
-    return FlyResult(reports, uploads, mcap_path, rrd_path, tlog_path, wall_s, end_states, report_path)
+    log_error = log_errors[0] if log_errors else None
+    return FlyResult(
+        reports, uploads, mcap_path, rrd_path, tlog_path, wall_s, end_states, report_path, log_error
+    )
 
 
 def _live_views(rec, plan: Plan, scenario: Scenario):

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from gcs_planner.geo import Origin
+from gcs_planner.validation import InputError, load_json, read_text, unique, write_text_atomic
 
 __all__ = ["Plan", "VehiclePlan"]
 
@@ -87,7 +88,10 @@ class VehiclePlan:
 
     @classmethod
     def from_dict(cls, d: dict) -> VehiclePlan:
-        return cls(**d)
+        """One entry of plan.json's ``vehicles``, every field checked (plan_checks)."""
+        from gcs_planner.plan_checks import vehicle_fields
+
+        return cls(**vehicle_fields(d))
 
 
 @dataclass
@@ -125,20 +129,32 @@ class Plan:
 
     @classmethod
     def from_dict(cls, d: dict) -> Plan:
-        return cls(
-            origin=Origin(**d["origin"]),
-            planner=d["planner"],
-            vehicles=[VehiclePlan.from_dict(v) for v in d["vehicles"]],
-            metrics=d.get("metrics", {}),
-            events=d.get("events", []),
-        )
+        """plan.json's content -> Plan; InputError (one line) for any bad field (plan_checks)."""
+        from gcs_planner.plan_checks import plan_fields
+
+        origin, planner, rows, metrics, events = plan_fields(d)
+        vehicles = []
+        for i, row in enumerate(rows):
+            try:
+                vehicles.append(VehiclePlan.from_dict(row))
+            except InputError as exc:
+                raise InputError(f"vehicles[{i}]: {exc}") from None
+        unique([v.vehicle_id for v in vehicles], "vehicle_id")
+        unique([v.sysid for v in vehicles if v.sysid], "sysid")
+        return cls(origin=origin, planner=planner, vehicles=vehicles, metrics=metrics, events=events)
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), separators=(",", ":"))
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(self.to_json())
+        """Write plan.json atomically (a failed write leaves the old file, or none)."""
+        write_text_atomic(path, self.to_json())
 
     @classmethod
     def load(cls, path: str | Path) -> Plan:
-        return cls.from_dict(json.loads(Path(path).read_text()))
+        """Read and check plan.json; every problem is one InputError line naming the file."""
+        data = load_json(read_text(path, "plan"), str(path))
+        try:
+            return cls.from_dict(data)
+        except InputError as exc:
+            raise InputError(f"{path}: {exc}") from None

@@ -19,19 +19,33 @@ that reads them. Every error names the file, the field and the bad value.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
+from gcs_planner.validation import (
+    MAX_ALT_M,
+    MAX_RADIUS_M,
+    MAX_RANGE_M,
+    MAX_SPEED_MPS,
+    MIN_ALT_M,
+    InputError,
+    integer,
+    items_of,
+    load_toml,
+    name,
+    number,
+    read_text,
+    table,
+    unique,
+)
 
 __all__ = ["Cylinder", "Hemisphere", "Scenario", "ScenarioError", "Vehicle", "load_scenario"]
 
 VEHICLE_TYPES = ("multirotor", "fixed_wing")
+MAX_SEED = 2**63 - 1
 
 
 class ScenarioError(UserError, ValueError):
@@ -100,61 +114,64 @@ class Scenario:
 
 def load_scenario(path: str | Path) -> Scenario:
     path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise ScenarioError(f"{path}: no such scenario file") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    data = load_toml(read_text(path, "scenario"), str(path))
     scenario = parse_scenario(data, where=str(path))
     scenario.path = path
     return scenario
 
 
 def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
-    origin_d = _table(data, "origin", where)
+    """A scenario's TOML tables -> Scenario; every value is checked (gcs_planner.validation)."""
+    try:
+        return _parse(table(data, "scenario"), where)
+    except InputError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+
+
+def _parse(data: dict[str, Any], where: str) -> Scenario:
+    origin_d = table(data.get("origin"), "[origin]")
     try:
         origin = Origin(
-            lat_deg=_number(origin_d, "lat_deg", f"{where}: origin"),
-            lon_deg=_number(origin_d, "lon_deg", f"{where}: origin"),
-            alt_m=_number(origin_d, "alt_m", f"{where}: origin", default=0.0),
+            lat_deg=number(origin_d.get("lat_deg"), "origin.lat_deg", -90.0, 90.0),
+            lon_deg=number(origin_d.get("lon_deg"), "origin.lon_deg", -180.0, 180.0),
+            alt_m=number(origin_d.get("alt_m", 0.0), "origin.alt_m", MIN_ALT_M, MAX_ALT_M),
         )
     except ValueError as exc:
-        raise ScenarioError(f"{where}: {exc}") from None
-    planner = dict(_table(data, "planner", where))
+        raise InputError(str(exc)) from None
+    planner = dict(table(data.get("planner"), "[planner]"))
     if not isinstance(planner.get("name"), str):
-        raise ScenarioError(f"{where}: planner.name must be a string, got {planner.get('name')!r}")
-    vehicles = [_vehicle(v, f"{where}: vehicles[{i}]") for i, v in enumerate(data.get("vehicles", []))]
-    _unique([v.id for v in vehicles], "id", where)
-    _unique([v.sysid for v in vehicles if v.sysid], "sysid", where)
-    obstacles = data.get("obstacles", {})
+        raise InputError(f"planner.name must be a string, got {planner.get('name')!r}")
+    if "seed" in planner:
+        planner["seed"] = integer(planner["seed"], "planner.seed", 0, MAX_SEED)
+    rows = items_of(data.get("vehicles", []), "vehicles")
+    if not rows:
+        raise InputError("the scenario has no [[vehicles]]; at least one is needed")
+    vehicles = [_vehicle(v, f"vehicles[{i}]") for i, v in enumerate(rows)]
+    unique([v.id for v in vehicles], "vehicle id")
+    unique([v.sysid for v in vehicles if v.sysid], "vehicle sysid")
+    obstacles = table(data.get("obstacles", {}), "[obstacles]")
     cylinders = [
-        Cylinder(
-            x=_number(c, "x", f"{where}: obstacles.cylinders[{i}]"),
-            y=_number(c, "y", f"{where}: obstacles.cylinders[{i}]"),
-            radius_m=_number(c, "radius_m", f"{where}: obstacles.cylinders[{i}]", positive=True),
-            z_max_m=_number(c, "z_max_m", f"{where}: obstacles.cylinders[{i}]", default=math.inf),
-            z_min_m=_number(c, "z_min_m", f"{where}: obstacles.cylinders[{i}]", default=0.0),
-            buffer_m=_number(c, "buffer_m", f"{where}: obstacles.cylinders[{i}]", default=0.0),
-        )
-        for i, c in enumerate(obstacles.get("cylinders", []))
+        _cylinder(c, f"obstacles.cylinders[{i}]")
+        for i, c in enumerate(items_of(obstacles.get("cylinders", []), "obstacles.cylinders"))
     ]
     hemispheres = [
-        Hemisphere(
-            x=_number(h, "x", f"{where}: obstacles.hemispheres[{i}]"),
-            y=_number(h, "y", f"{where}: obstacles.hemispheres[{i}]"),
-            radius_m=_number(h, "radius_m", f"{where}: obstacles.hemispheres[{i}]", positive=True),
-            z=_number(h, "z", f"{where}: obstacles.hemispheres[{i}]", default=0.0),
-        )
-        for i, h in enumerate(obstacles.get("hemispheres", []))
+        _hemisphere(h, f"obstacles.hemispheres[{i}]")
+        for i, h in enumerate(items_of(obstacles.get("hemispheres", []), "obstacles.hemispheres"))
     ]
     bounds = {}
-    for axis, rng in data.get("bounds", {}).items():
-        if not (isinstance(rng, list) and len(rng) == 2 and rng[0] < rng[1]):
-            raise ScenarioError(f"{where}: bounds.{axis} must be [min, max] with min < max, got {rng!r}")
-        bounds[axis] = (float(rng[0]), float(rng[1]))
+    for axis, rng in table(data.get("bounds", {}), "[bounds]").items():
+        if axis not in ("x", "y", "z") or not (isinstance(rng, list) and len(rng) == 2):
+            raise InputError(f"bounds.{axis} must be x, y or z = [min, max], got {rng!r}")
+        limit = MAX_RANGE_M if axis != "z" else MAX_ALT_M
+        lo, hi = (number(r, f"bounds.{axis}", -limit, limit) for r in rng)
+        if not lo < hi:
+            raise InputError(f"bounds.{axis} must be [min, max] with min < max, got {rng!r}")
+        bounds[axis] = (lo, hi)
+    name = data.get("name", where)
+    if not isinstance(name, str):
+        raise InputError(f"name must be a string, got {name!r}")
     return Scenario(
-        name=str(data.get("name", where)),
+        name=name,
         origin=origin,
         planner=planner,
         vehicles=vehicles,
@@ -168,63 +185,60 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
 def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
     vtype = d.get("type", "multirotor")
     if vtype not in VEHICLE_TYPES:
-        raise ScenarioError(f"{where}: type must be one of {VEHICLE_TYPES}, got {vtype!r}")
+        raise InputError(f"{where}.type must be one of {VEHICLE_TYPES}, got {vtype!r}")
     sysid = d.get("sysid", 0)
-    if not isinstance(sysid, int) or not 0 <= sysid <= 255:
-        raise ScenarioError(
-            f"{where}: sysid must be an integer in 1..255 (0 or absent: planning only), got {sysid!r}"
+    if isinstance(sysid, bool) or not isinstance(sysid, int) or not 0 <= sysid <= 255:
+        raise InputError(
+            f"{where}.sysid must be an integer in 1..255 (0 or absent: planning only), got {sysid!r}"
         )
     if "id" not in d and sysid == 0:
-        raise ScenarioError(f"{where}: a vehicle needs an id or a sysid")
+        raise InputError(f"{where}: a vehicle needs an id or a sysid")
+    vid = name(d.get("id", f"uav{sysid}"), f"{where}.id")
+    min_alt = number(d.get("min_alt_m", 10.0), f"{where}.min_alt_m", MIN_ALT_M, MAX_ALT_M)
+    max_alt = number(d.get("max_alt_m", 120.0), f"{where}.max_alt_m", MIN_ALT_M, MAX_ALT_M)
+    if min_alt > max_alt:
+        raise InputError(f"{where}: min_alt_m {min_alt:g} is above max_alt_m {max_alt:g}")
     return Vehicle(
-        id=str(d.get("id", f"uav{sysid}")),
+        id=vid,
         sysid=sysid,
         type=vtype,
-        start=_point(d, "start", where),
-        goal=_point(d, "goal", where),
-        speed_mps=_number(d, "speed_mps", where, default=10.0, positive=True),
-        turn_radius_m=_number(d, "turn_radius_m", where, default=20.0),
-        min_alt_m=_number(d, "min_alt_m", where, default=10.0),
-        max_alt_m=_number(d, "max_alt_m", where, default=120.0),
-        separation_m=_number(d, "separation_m", where, default=5.0),
-        priority=_number(d, "priority", where, default=1.0),
+        start=_point(d.get("start"), f"{where}.start"),
+        goal=_point(d.get("goal"), f"{where}.goal"),
+        speed_mps=number(d.get("speed_mps", 10.0), f"{where}.speed_mps", 0, MAX_SPEED_MPS, lo_open=True),
+        turn_radius_m=number(d.get("turn_radius_m", 20.0), f"{where}.turn_radius_m", 0, MAX_RADIUS_M),
+        min_alt_m=min_alt,
+        max_alt_m=max_alt,
+        separation_m=number(d.get("separation_m", 5.0), f"{where}.separation_m", 0, MAX_RADIUS_M),
+        priority=number(d.get("priority", 1.0), f"{where}.priority"),
     )
 
 
-def _table(data: dict[str, Any], key: str, where: str) -> dict[str, Any]:
-    value = data.get(key)
-    if not isinstance(value, dict):
-        raise ScenarioError(f"{where}: missing [{key}] table")
-    return value
+def _cylinder(c: dict[str, Any], where: str) -> Cylinder:
+    z_min = number(c.get("z_min_m", 0.0), f"{where}.z_min_m", MIN_ALT_M, MAX_ALT_M)
+    z_max = number(c.get("z_max_m", math.inf), f"{where}.z_max_m", z_min, finite=False)
+    return Cylinder(
+        x=number(c.get("x"), f"{where}.x", -MAX_RANGE_M, MAX_RANGE_M),
+        y=number(c.get("y"), f"{where}.y", -MAX_RANGE_M, MAX_RANGE_M),
+        radius_m=number(c.get("radius_m"), f"{where}.radius_m", 0, MAX_RADIUS_M, lo_open=True),
+        z_max_m=z_max,
+        z_min_m=z_min,
+        buffer_m=number(c.get("buffer_m", 0.0), f"{where}.buffer_m", 0, MAX_RADIUS_M),
+    )
 
 
-def _number(
-    d: dict[str, Any], key: str, where: str, default: float | None = None, positive: bool = False
-) -> float:
-    value = d.get(key, default)
-    if value is None:
-        raise ScenarioError(f"{where}: missing {key}")
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ScenarioError(f"{where}: {key} must be a number, got {value!r}")
-    value = float(value)
-    if math.isnan(value) or (positive and not value > 0):
-        raise ScenarioError(f"{where}: {key} must be {'> 0' if positive else 'a number'}, got {value!r}")
-    return value
+def _hemisphere(h: dict[str, Any], where: str) -> Hemisphere:
+    return Hemisphere(
+        x=number(h.get("x"), f"{where}.x", -MAX_RANGE_M, MAX_RANGE_M),
+        y=number(h.get("y"), f"{where}.y", -MAX_RANGE_M, MAX_RANGE_M),
+        radius_m=number(h.get("radius_m"), f"{where}.radius_m", 0, MAX_RADIUS_M, lo_open=True),
+        z=number(h.get("z", 0.0), f"{where}.z", MIN_ALT_M, MAX_ALT_M),
+    )
 
 
-def _point(d: dict[str, Any], key: str, where: str) -> tuple[float, float, float]:
-    value = d.get(key)
+def _point(value: Any, field: str) -> tuple[float, float, float]:
+    """[x, y, z] in local ENU metres within MAX_RANGE_M of the origin and the altitude limits."""
     if not (isinstance(value, list) and len(value) == 3):
-        raise ScenarioError(f"{where}: {key} must be [x, y, z] in metres, got {value!r}")
-    arr = np.asarray(value, dtype=float)
-    if not np.all(np.isfinite(arr)):
-        raise ScenarioError(f"{where}: {key} must be finite, got {value!r}")
-    return tuple(float(v) for v in arr)
-
-
-def _unique(values: list, name: str, where: str) -> None:
-    seen = set()
-    for v in values:
-        if v in seen:
-            raise ScenarioError(f"{where}: vehicles have duplicate {name} {v!r}")
-        seen.add(v)
+        raise InputError(f"{field} must be [x, y, z] in metres, got {value!r}")
+    x = number(value[0], f"{field} x", -MAX_RANGE_M, MAX_RANGE_M)
+    y = number(value[1], f"{field} y", -MAX_RANGE_M, MAX_RANGE_M)
+    return x, y, number(value[2], f"{field} z", MIN_ALT_M, MAX_ALT_M)

@@ -26,6 +26,7 @@ from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink
 from gcs_planner.mavlink.signing import key_from_passphrase
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.validation import number_flag
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +59,12 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
         p.add_argument(
             "--sysid", required=True, type=_sysid, help="target vehicle's MAVLink system id (1..255)"
         )
-    p.add_argument("--compid", type=int, default=1, help="target component id [1 = autopilot]")
+    p.add_argument(
+        "--compid",
+        type=number_flag(0, 255, whole=True),
+        default=1,
+        help="target component id [1 = autopilot]",
+    )
     p.add_argument(
         "--gcs-sysid",
         type=_sysid,
@@ -84,7 +90,7 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
     )
     p.add_argument(
         "--heartbeat-timeout",
-        type=float,
+        type=number_flag(0, 3600, lo_open=True),
         default=HEARTBEAT_TIMEOUT_S,
         metavar="S",
         help=f"how long to wait for the vehicle's first HEARTBEAT [{HEARTBEAT_TIMEOUT_S:g} s]",

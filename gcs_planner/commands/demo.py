@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 
 from gcs_planner.commands import fly as fly_command
+from gcs_planner.commands.fly import SPEEDUP
 from gcs_planner.errors import UserError
 
 DEMO_SCENARIO = Path(__file__).resolve().parents[2] / "missions" / "swarm_small.toml"
@@ -18,7 +19,7 @@ DEMO_SCENARIO = Path(__file__).resolve().parents[2] / "missions" / "swarm_small.
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--out", default="out/demo", help="output folder [out/demo]")
-    p.add_argument("--speedup", type=float, default=10.0, help="mock simulation speed-up [10]")
+    p.add_argument("--speedup", type=SPEEDUP, default=10.0, help="mock simulation speed-up [10]")
 
 
 def run(args: argparse.Namespace) -> int:

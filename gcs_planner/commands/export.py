@@ -8,13 +8,13 @@ gcs_planner.mavlink.items). With --scenario, the .plan files also carry the scen
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from gcs_planner.commands._mission_cli import print_losses
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
 from gcs_planner.mavlink.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
 from gcs_planner.scenario import load_scenario
+from gcs_planner.validation import atomic_write, output_dir, unique
 
 SUFFIX = {"qgc": ".plan", "wpl": ".waypoints"}
 
@@ -31,6 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    out_dir = output_dir(args.output_dir, "-o")
     plan = load_plan_json(args.plan)
     vehicles = select_vehicles(plan, args.vehicle)
     fence, rally = [], []
@@ -39,14 +40,20 @@ def run(args: argparse.Namespace) -> int:
             raise UserError("--scenario (fence and rally points) needs --format qgc; WPL holds one list")
         scenario = load_scenario(args.scenario)
         fence, rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
-    out_dir = Path(args.output_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    print(f"{'vehicle':<10} {'sysid':>5} {'items':>6} {'fence':>6} {'rally':>6}  file")
+    files = []  # every vehicle's file is built (and validated) before the first is written
     for vp in vehicles:
         mf = plan_mission_file(vp, plan.origin, args.autopilot)
         mf.fence, mf.rally = fence, rally
-        path = out_dir / f"{vp.vehicle_id}{SUFFIX[args.format]}"
-        losses = save_mission_file(path, mf)
+        files.append((vp, mf, out_dir / f"{vp.vehicle_id}{SUFFIX[args.format]}"))
+    unique([path.name for _, _, path in files], "output file")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"-o {str(out_dir)!r}: cannot make the folder: {exc.strerror or exc}") from None
+    print(f"{'vehicle':<10} {'sysid':>5} {'items':>6} {'fence':>6} {'rally':>6}  file")
+    for vp, mf, path in files:
+        with atomic_write(path) as tmp:
+            losses = save_mission_file(tmp, mf)
         n = len(mf.items(args.autopilot))
         print(f"{vp.vehicle_id:<10} {vp.sysid:>5} {n:>6} {len(fence):>6} {len(rally):>6}  {path}")
         print_losses(losses)

@@ -20,12 +20,17 @@ from urllib.parse import quote
 from tqdm import tqdm
 
 from gcs_planner.commands import fly_coalition
+from gcs_planner.commands.fly_coalition import SPEEDUP
+from gcs_planner.commands.plan import SEED
 from gcs_planner.conformance import format_report
 from gcs_planner.errors import UserError
-from gcs_planner.fly import FlyOptions, fly
+from gcs_planner.fly import FlyOptions, check_flight, fly
 from gcs_planner.plan import Plan
 from gcs_planner.progress import plan_with_progress, progress_bar
 from gcs_planner.scenario import load_scenario
+from gcs_planner.validation import MAX_RADIUS_M, MAX_SPEED_MPS, InputError, number, number_flag, output_dir
+
+WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -40,11 +45,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="real vehicles / SITL (udpout:HOST:PORT or udpin:HOST:PORT; repeatable)",
     )
     p.add_argument(
-        "--speedup", type=float, default=None, help="mock simulation speed-up [10; 5 for coalition scenarios]"
+        "--speedup",
+        type=SPEEDUP,
+        default=None,
+        help="mock simulation speed-up [10; 5 for coalition scenarios]",
     )
     p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
-    p.add_argument("--workers", type=int, default=8, help="concurrent uploads [8]")
-    p.add_argument("--seed", type=int, default=None, help="planner seed (default: the file's)")
+    p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
+    p.add_argument("--seed", type=SEED, default=None, help="planner seed (default: the file's)")
     p.add_argument("--tlog", action="store_true", help="also write OUT/flight.tlog")
     p.add_argument("--no-rrd", action="store_true", help="skip the Rerun .rrd")
     p.add_argument("--live", action="store_true", help="show the Rerun views while flying (spawns a viewer)")
@@ -55,7 +63,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--max-cross-track",
-        type=float,
+        type=number_flag(0, MAX_RADIUS_M, lo_open=True),
         default=15.0,
         metavar="M",
         help="cross-track bound for the conformance report [15 m]",
@@ -93,14 +101,20 @@ def _fly_coalition(args: argparse.Namespace) -> int:
     return fly_coalition.run(parser.parse_args(argv))
 
 
-def _drift(values: list[str]) -> dict[int, tuple[float, float]]:
+def _drift(values: list[str], sysids: list[int]) -> dict[int, tuple[float, float]]:
+    """--drift SYSID:EAST:NORTH [m/s] values; each sysid must be one of the plan's ``sysids``."""
     out = {}
     for value in values:
         try:
             sysid, east, north = value.split(":")
-            out[int(sysid)] = (float(east), float(north))
+            sysid, east, north = int(sysid), float(east), float(north)
         except ValueError:
             raise UserError(f"--drift must be SYSID:EAST:NORTH, got {value!r}") from None
+        if sysid not in sysids:
+            raise InputError(f"--drift {value!r}: sysid {sysid} is not one of the plan's {sorted(sysids)}")
+        for v in (east, north):
+            number(v, f"--drift {value!r}: speed", -MAX_SPEED_MPS, MAX_SPEED_MPS)
+        out[sysid] = (east, north)
     return out
 
 
@@ -130,15 +144,18 @@ def _live_recording(spawn: bool, serve_web: bool):
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.speedup is not None and args.speedup <= 0:
-        raise UserError(f"--speedup must be > 0, got {args.speedup}")
+    out = output_dir(args.out, "-o")
     scenario = load_scenario(args.scenario)
     if scenario.planner.get("name") == "coalition":
         return _fly_coalition(args)
     args.speedup = 10.0 if args.speedup is None else args.speedup
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
+    drift = _drift(args.drift, [v.sysid for v in plan.vehicles])
+    check_flight(plan)  # every mission, before anything is written or sent
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"-o {str(out)!r}: cannot make the folder: {exc.strerror or exc}") from None
     plan.save(out / "plan.json")
     if not plan.feasible:
         bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]
@@ -152,7 +169,7 @@ def run(args: argparse.Namespace) -> int:
         tlog=args.tlog,
         rrd=not args.no_rrd,
         max_cross_track_m=args.max_cross_track,
-        drift_mps=_drift(args.drift),
+        drift_mps=drift,
         live=_live_recording(args.live, args.serve_web),
     )
     bars: dict[str, object] = {}
@@ -191,4 +208,6 @@ def run(args: argparse.Namespace) -> int:
         f"{verdict}: {sum(r.passed for r in result.reports)}/{len(result.reports)} vehicles conform"
         f" ({result.wall_time_s:.1f} s wall)"
     )
+    if result.log_error:  # the flight was flown and reported; its log is incomplete
+        raise UserError(f"flight log {result.mcap_path}: {result.log_error}")
     return 0 if result.passed else 1

@@ -17,22 +17,35 @@ import asyncio
 from pathlib import Path
 
 from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
+from gcs_planner.commands.plan import SEED
 from gcs_planner.errors import UserError
 from gcs_planner.scenario import load_scenario
+from gcs_planner.validation import MAX_DURATION_S, number_flag, output_dir
+
+SPEEDUP = number_flag(0, 1000, lo_open=True)  # mock simulation speed-up
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="coalition scenario (e.g. missions/coalition_paper.toml)")
     p.add_argument("-o", "--out", default="out", help="output folder [out]")
-    p.add_argument("--speedup", type=float, default=5.0, help="mock simulation speed-up [5]")
-    p.add_argument("--seed", type=int, default=None, help="simulation seed (default: the file's)")
+    p.add_argument("--speedup", type=SPEEDUP, default=5.0, help="mock simulation speed-up [5]")
+    p.add_argument("--seed", type=SEED, default=None, help="simulation seed (default: the file's)")
     p.add_argument("--targets", default="", help="comma-separated target ids whose awards are flown [all]")
-    p.add_argument("--lead", type=float, default=30.0, help="flight before the first award [30 s]")
-    p.add_argument("--max-time-error", type=float, default=1.0, metavar="S", help="[1 s]")
-    p.add_argument("--max-angle-error", type=float, default=10.0, metavar="DEG", help="[10 deg]")
+    p.add_argument(
+        "--lead",
+        type=number_flag(0, MAX_DURATION_S),
+        default=30.0,
+        help="flight before the first award [30 s]",
+    )
+    p.add_argument(
+        "--max-time-error", type=number_flag(0, MAX_DURATION_S), default=1.0, metavar="S", help="[1 s]"
+    )
+    p.add_argument(
+        "--max-angle-error", type=number_flag(0, 180), default=10.0, metavar="DEG", help="[10 deg]"
+    )
     p.add_argument(
         "--upload-safety",
-        type=float,
+        type=number_flag(0, 100, lo_open=True),
         default=UPLOAD_SAFETY,
         metavar="X",
         help=f"a live leg starts after X times the measured upload time (+1 s) [{UPLOAD_SAFETY:g}]",
@@ -47,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
     if args.upload_safety <= 0:
         raise UserError(f"--upload-safety must be > 0, got {args.upload_safety}")
+    output_dir(args.out, "-o")
     scenario = load_scenario(args.scenario)
     if scenario.planner.get("name") != "coalition":
         raise UserError(

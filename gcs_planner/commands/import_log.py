@@ -16,7 +16,9 @@ from pathlib import Path
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.files import load_plan_json
+from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry.log_import import import_log
+from gcs_planner.validation import MAX_ALT_M, MIN_ALT_M, InputError, number, output_file, read_text
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -28,16 +30,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    output = Path(args.output) if args.output else Path(args.log).with_suffix(".mcap")
-    if not output.parent.is_dir():
-        raise UserError(f"-o {str(output)!r}: folder {str(output.parent)!r} does not exist")
+    output = output_file(args.output or Path(args.log).with_suffix(".mcap"), "-o")
     if output.resolve() == Path(args.log).resolve():
-        raise UserError(f"-o {str(output)!r} is the log itself")
+        raise InputError(f"-o {str(output)!r} is the log itself")
     plan = load_plan_json(args.plan) if args.plan else None
-    try:
-        scenario_text = Path(args.scenario).read_text() if args.scenario else None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"--scenario {args.scenario!r}: cannot read: {exc}") from None
+    scenario_text = None
+    if args.scenario:  # attached as it is, but it must be a scenario
+        scenario_text = read_text(args.scenario, "scenario")
+        load_scenario(args.scenario)
     origin = _parse_origin(args.origin) if args.origin else None
     result = import_log(args.log, output, origin=origin, plan=plan, scenario_text=scenario_text)
     records = f", {sum(result.records.values())} records" if result.records else ""
@@ -48,6 +48,10 @@ def run(args: argparse.Namespace) -> int:
 def _parse_origin(text: str) -> Origin:
     try:
         lat, lon, alt = (float(v) for v in text.split(","))
-        return Origin(lat, lon, alt)
-    except ValueError as exc:
-        raise UserError(f"--origin must be LAT,LON,ALT_AMSL, got {text!r} ({exc})") from None
+    except ValueError:
+        raise UserError(f"--origin must be LAT,LON,ALT_AMSL, got {text!r}") from None
+    return Origin(
+        number(lat, "--origin latitude", -90.0, 90.0),
+        number(lon, "--origin longitude", -180.0, 180.0),
+        number(alt, "--origin altitude", MIN_ALT_M, MAX_ALT_M),
+    )

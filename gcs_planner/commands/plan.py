@@ -12,17 +12,23 @@ import numpy as np
 
 from gcs_planner.errors import UserError
 from gcs_planner.progress import plan_with_progress
-from gcs_planner.scenario import load_scenario
+from gcs_planner.scenario import MAX_SEED, load_scenario
+from gcs_planner.validation import number_flag, output_file
+
+SEED = number_flag(0, MAX_SEED, whole=True)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file (missions/*.toml)")
     p.add_argument("-o", "--output", default="plan.json", help="plan file to write [plan.json]")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: the file's)")
+    p.add_argument("--seed", type=SEED, default=None, help="random seed (default: the file's)")
     p.add_argument("--convergence", metavar="PNG", help="also plot the optimiser's best cost per iteration")
 
 
 def run(args: argparse.Namespace) -> int:
+    output_file(args.output, "-o")
+    if args.convergence:
+        output_file(args.convergence, "--convergence")
     scenario = load_scenario(args.scenario)
     plan = plan_with_progress(scenario, args.seed)
     plan.save(args.output)

@@ -18,6 +18,9 @@ from gcs_planner.errors import UserError
 from gcs_planner.progress import progress_bar
 from gcs_planner.telemetry.reader import read_flight
 from gcs_planner.telemetry.replay import parse_udp_url, replay_to_mavlink, replay_to_rerun_live
+from gcs_planner.validation import number_flag, output_file
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -26,7 +29,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--viewer", action="store_true", help="show the views in a spawned Rerun viewer")
     p.add_argument("--to", metavar="udpout:HOST:PORT", help="re-emit the raw MAVLink frames to this address")
     p.add_argument(
-        "--speed", type=float, default=1.0, help="replay speed factor for --to / --viewer (0 = max) [1]"
+        "--speed",
+        type=number_flag(0, 1000),
+        default=1.0,
+        help="replay speed factor for --to / --viewer (0 = max) [1]",
     )
 
 
@@ -37,10 +43,13 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--speed must be >= 0, got {args.speed}")
     if args.to:
         parse_udp_url(args.to)
-    try:
-        flight = read_flight(args.flight)
-    except FileNotFoundError:
-        raise UserError(f"flight log {args.flight!r}: no such file") from None
+    if args.rrd:
+        output_file(args.rrd, "--rrd")
+    _check_mcap(args.flight)
+    flight = read_flight(args.flight)
+    if not flight.frames:
+        why = f" ({flight.error})" if flight.error else ""
+        raise UserError(f"flight log {args.flight!r}: no MAVLink frames in it{why}")
     note = f" (truncated log: recovered {flight.recovered_messages} messages)" if flight.truncated else ""
     gcs = flight.gcs_sysids
     kept = f"; ground station {gcs}: frames kept, not replayed" if gcs else ""
@@ -58,6 +67,19 @@ def run(args: argparse.Namespace) -> int:
             sent = replay_to_mavlink(flight, args.to, speed=args.speed, progress=progress)
         print(f"sent {sent} frames to {args.to} in {time.monotonic() - start:.1f} s")
     return 0
+
+
+def _check_mcap(path: str) -> None:
+    """UserError unless ``path`` is a readable file that starts with the MCAP magic."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(len(MCAP_MAGIC))
+    except FileNotFoundError:
+        raise UserError(f"flight log {path!r}: no such file") from None
+    except OSError as exc:
+        raise UserError(f"flight log {path!r}: cannot read: {exc.strerror or exc}") from None
+    if head != MCAP_MAGIC:
+        raise UserError(f"flight log {path!r} is not an MCAP file (it does not start with the MCAP magic)")
 
 
 def _to_rerun(flight, rrd_path: str | None, viewer: bool, speed: float) -> None:

@@ -22,6 +22,7 @@ from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.preflight import arm_when_ready
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
+from gcs_planner.validation import MAX_DURATION_S, number_flag
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-arm", action="store_true", help="do not arm; only send MISSION_START")
     p.add_argument(
         "--arm-timeout",
-        type=float,
+        type=number_flag(0, MAX_DURATION_S),
         default=120.0,
         metavar="S",
         help="how long to wait for the vehicle's pre-arm checks to pass [120 s]",

@@ -39,6 +39,7 @@ from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import validate_items
 from gcs_planner.progress import progress_bar
 from gcs_planner.scenario import load_scenario
+from gcs_planner.validation import number_flag
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -48,9 +49,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scenario", help="scenario file whose fence and rally points to upload too")
     p.add_argument("--verify", action="store_true", help="download each list again and compare")
     p.add_argument(
-        "--workers", type=int, default=DEFAULT_WORKERS, help="concurrent uploads for many vehicles"
+        "--workers",
+        type=number_flag(1, 255, whole=True),
+        default=DEFAULT_WORKERS,
+        help="concurrent uploads for many vehicles",
     )
-    p.add_argument("--retries", type=int, default=2, help="extra attempts per failed vehicle [2]")
+    p.add_argument(
+        "--retries",
+        type=number_flag(0, 100, whole=True),
+        default=2,
+        help="extra attempts per failed vehicle [2]",
+    )
     add_clear_absent_argument(p)
     add_force_argument(p)
 

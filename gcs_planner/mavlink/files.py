@@ -282,6 +282,8 @@ def load_plan_json(path: str | Path) -> Plan:
     """plan.json (from `gcs-planner plan`) -> Plan, with one-line errors."""
     try:
         return Plan.load(path)
+    except UserError:  # already one line naming the file and the field
+        raise
     except FileNotFoundError:
         raise MissionFileError(f"{path}: no such file") from None
     except (ValueError, KeyError, TypeError) as exc:

@@ -8,6 +8,13 @@ Rules (each failure names the item's seq and the field):
 - ``frame`` is a known MAV_FRAME; ``command`` is any uint16: a command the pinned dialect lacks
   may be one the vehicle has (ArduPilot's 116, 219), so files pass it through with a note
   (files.unknown_command_notes); ``current`` and ``autocontinue`` are 0 or 1;
+- ``z`` and ``param1..4`` fit a MAVLink float32 (|v| <= 3.4e38, else the pack fails mid-upload);
+  ``z`` of a positioned item in a global frame is an altitude in [MIN_ALT_M, MAX_ALT_M]
+  (gcs_planner.validation, docs/input-validation.md);
+- physical limits of the commands that carry them: DO_CHANGE_SPEED speed (param2) in
+  [0, MAX_SPEED_MPS] or -1 / -2 (no change / default), a waypoint's acceptance radius (param2) in
+  [0, MAX_RADIUS_M], a fence circle's radius (param1) in (0, MAX_RADIUS_M], a loiter radius
+  (signed: the sign is the direction) within MAX_RADIUS_M;
 - ``z`` is finite; ``param1..4`` are finite or NaN. NaN is allowed in params because MAVLink defines
   it as "use the default / leave unchanged" (QGroundControl sends NaN yaw and stores it as null in
   .plan files); infinity is never meaningful;
@@ -25,11 +32,15 @@ from numbers import Integral, Real
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.dialect import KNOWN_FRAMES, has_position
 from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
+from gcs_planner.validation import FLOAT32_MAX, MAX_ALT_M, MAX_RADIUS_M, MAX_SPEED_MPS, MIN_ALT_M
 
 __all__ = ["MAX_MISSION_COUNT", "MissionValidationError", "validate_items"]
 
 MAX_MISSION_COUNT = 65535  # MISSION_COUNT.count and seq are uint16
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+DO_CHANGE_SPEED, NAV_WAYPOINT = 178, 16
+FENCE_CIRCLES = (5003, 5004)  # MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION / _EXCLUSION: param1 = radius
+LOITER_RADIUS = {17: "param3", 18: "param3", 19: "param3", 31: "param2"}  # UNLIM, TURNS, TIME, TO_ALT
 
 
 class MissionValidationError(UserError, ValueError):
@@ -99,10 +110,11 @@ def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
             raise fail(field, "must be 0 or 1")
     for field in ("param1", "param2", "param3", "param4"):
         value = getattr(item, field)
-        if not _is_real(value) or math.isinf(value):
-            raise fail(field, "must be a finite number (or NaN for 'default')")
-    if not _is_real(item.z) or not math.isfinite(item.z):
-        raise fail("z", "must be a finite altitude [m]")
+        if not _is_real(value) or math.isinf(value) or abs(value) > FLOAT32_MAX:
+            raise fail(field, "must be a finite float32 number (or NaN for 'default')")
+    if not _is_real(item.z) or not math.isfinite(item.z) or abs(item.z) > FLOAT32_MAX:
+        raise fail("z", "must be a finite float32 altitude [m]")
+    _check_physical(item, fail)
     for field in ("x", "y"):
         value = getattr(item, field)
         if not _is_integer(value) or not INT32_MIN <= value <= INT32_MAX:
@@ -112,6 +124,26 @@ def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
             raise fail("x", f"(latitude {item.x / 1e7:.7f} deg) is outside [-90, 90] deg")
         if not -1_800_000_000 <= item.y <= 1_800_000_000:
             raise fail("y", f"(longitude {item.y / 1e7:.7f} deg) is outside [-180, 180] deg")
+
+
+def _check_physical(item: MissionItem, fail) -> None:
+    """Altitude, speed and radius limits of the commands that carry them (module docstring)."""
+    if item.frame in GLOBAL_FRAMES and has_position(item.command) and not MIN_ALT_M <= item.z <= MAX_ALT_M:
+        raise fail("z", f"is outside the altitude limits [{MIN_ALT_M:g}, {MAX_ALT_M:g}] m")
+    if item.command == DO_CHANGE_SPEED:
+        speed = item.param2
+        if not (math.isnan(speed) or speed in (-1.0, -2.0) or 0.0 <= speed <= MAX_SPEED_MPS):
+            raise fail("param2", f"(speed) must be in [0, {MAX_SPEED_MPS:g}] m/s, or -1 / -2")
+    elif item.command == NAV_WAYPOINT:
+        if not (math.isnan(item.param2) or 0.0 <= item.param2 <= MAX_RADIUS_M):
+            raise fail("param2", f"(acceptance radius) must be in [0, {MAX_RADIUS_M:g}] m")
+    elif item.command in FENCE_CIRCLES:
+        if not 0.0 < item.param1 <= MAX_RADIUS_M:
+            raise fail("param1", f"(circle radius) must be in (0, {MAX_RADIUS_M:g}] m")
+    elif item.command in LOITER_RADIUS:
+        field = LOITER_RADIUS[item.command]
+        if abs(getattr(item, field)) > MAX_RADIUS_M:
+            raise fail(field, f"(loiter radius) must be within +-{MAX_RADIUS_M:g} m")
 
 
 def _is_real(value: object) -> bool:

@@ -126,7 +126,12 @@ class SwarmConfig:
                     f"planner.{key} must be {'an integer' if kind is int else 'a number'}, got {value!r}"
                 )
             kwargs[key] = kind(value)
+            if not math.isfinite(kwargs[key]) or kwargs[key] < 0:
+                raise UserError(f"planner.{key} must be a finite number >= 0, got {value!r}")
         cfg = cls(**kwargs)
+        for key in ("rrt_step_m", "delay_step_s"):
+            if not getattr(cfg, key) > 0:
+                raise UserError(f"planner.{key} must be > 0, got {getattr(cfg, key)!r}")
         for key in ("waypoints", "particles", "iterations", "rounds"):
             if getattr(cfg, key) < 1:
                 raise UserError(f"planner.{key} must be >= 1, got {getattr(cfg, key)!r}")

@@ -9,16 +9,24 @@ from __future__ import annotations
 import numpy as np
 
 from gcs_planner.plan import Plan, VehiclePlan
-from gcs_planner.scenario import Scenario
+from gcs_planner.scenario import Scenario, ScenarioError
+from gcs_planner.validation import MAX_WAYPOINTS, number
 
 
 def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
     del rng  # deterministic
-    spacing_m = float(scenario.planner.get("waypoint_spacing_m", 100.0))
+    unknown = sorted(set(scenario.planner) - {"name", "seed", "waypoint_spacing_m"})
+    if unknown:
+        raise ScenarioError(f"planner.{unknown[0]} is not a straight parameter (known: waypoint_spacing_m)")
+    spacing_m = number(scenario.planner.get("waypoint_spacing_m", 100.0), "planner.waypoint_spacing_m", 1.0)
     vehicles = []
     for v in scenario.vehicles:
         start, goal = np.asarray(v.start), np.asarray(v.goal)
         legs = max(1, int(np.ceil(np.linalg.norm(goal - start) / spacing_m)))
+        if legs > MAX_WAYPOINTS:
+            raise ScenarioError(
+                f"planner.waypoint_spacing_m = {spacing_m:g} gives {v.id} {legs} legs (max {MAX_WAYPOINTS})"
+            )
         waypoints = start + np.linspace(0.0, 1.0, legs + 1)[:, None] * (goal - start)
         seg = np.linalg.norm(np.diff(waypoints, axis=0), axis=1)
         times = np.concatenate([[0.0], np.cumsum(seg) / v.speed_mps])

@@ -30,8 +30,10 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
 
+from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.plan import Plan
+from gcs_planner.validation import load_json
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
@@ -228,12 +230,24 @@ def read_flight(path: str | Path) -> Flight:
         )
     flight.frames.sort(key=lambda f: f.t_ns)
     flight._json = dict(collector.json_rows)
-    if "plan.json" in flight.attachments:
-        flight.plan = Plan.from_dict(json.loads(flight.attachments["plan.json"]))
-    if "scenario.toml" in flight.attachments:
-        flight.scenario_text = flight.attachments["scenario.toml"].decode()
+    _read_attachments(flight)
     _decode_positions(flight)
     return flight
+
+
+def _read_attachments(flight: Flight) -> None:
+    """The plan and scenario attachments; a damaged one is left out with a warning, not raised."""
+    if "plan.json" in flight.attachments:
+        try:
+            text = flight.attachments["plan.json"].decode("utf-8")
+            flight.plan = Plan.from_dict(load_json(text, "plan.json attachment"))
+        except (UnicodeDecodeError, UserError) as exc:
+            log.warning("%s: plan.json attachment ignored: %s", flight.path, exc)
+    if "scenario.toml" in flight.attachments:
+        try:
+            flight.scenario_text = flight.attachments["scenario.toml"].decode("utf-8")
+        except UnicodeDecodeError:
+            log.warning("%s: scenario.toml attachment ignored: not UTF-8", flight.path)
 
 
 class _Collector:

@@ -12,6 +12,7 @@ position at altitude ``alt - relative_alt``, i.e. home AMSL), so the map and ENU
 
 from __future__ import annotations
 
+import logging
 import os
 import struct
 from collections.abc import Iterable, Iterator
@@ -28,6 +29,8 @@ from pymavlink import mavutil  # noqa: E402
 __all__ = ["import_tlog", "iter_tlog", "write_tlog"]
 
 _TIME = struct.Struct(">Q")
+MAX_TIME_S = 4_102_444_800.0  # 2100-01-01: a later tlog timestamp is damage
+log = logging.getLogger(__name__)
 
 
 def write_tlog(frames: Iterable[RawFrame | tuple[int, bytes]], path: str | Path) -> int:
@@ -51,17 +54,30 @@ def iter_tlog(path: str | Path) -> Iterator[tuple[float, object, bytes]]:
     if not path.is_file():
         raise UserError(f"tlog {str(path)!r}: no such file")
     mavutil.set_dialect("ardupilotmega")
-    conn = mavutil.mavlogfile(str(path), robust_parsing=True)  # a .tlog whatever its name (not DataFlash)
+    # the streaming .tlog reader whatever the file's name: mavlink_connection picks a reader by
+    # extension (a .bin becomes DataFlash), and its default for files (mavmmaplog) indexes the
+    # whole file on open and fails on damaged frames instead of skipping them
+    conn = mavutil.mavlogfile(str(path), robust_parsing=True)
+    skipped = 0
     try:
         while True:
-            msg = conn.recv_msg()
+            try:
+                msg = conn.recv_msg()
+            except Exception as exc:  # noqa: BLE001 - pymavlink raises many kinds on damaged bytes
+                raise UserError(f"tlog {str(path)!r}: unreadable at byte {conn.f.tell()}: {exc}") from None
             if msg is None:
                 break
             if msg.get_type() == "BAD_DATA":
                 continue
-            yield msg._timestamp, msg, bytes(msg.get_msgbuf())
+            t_s = msg._timestamp
+            if not 0.0 <= t_s <= MAX_TIME_S:  # a damaged timestamp: the frame cannot be placed
+                skipped += 1
+                continue
+            yield t_s, msg, bytes(msg.get_msgbuf())
     finally:
         conn.close()
+        if skipped:
+            log.warning("tlog %s: %d frames with a timestamp outside 1970..2100 skipped", path, skipped)
 
 
 def import_tlog(

@@ -38,6 +38,7 @@ from gcs_planner.planning.deconflict4d.manned import (
 from gcs_planner.planning.deconflict4d.planner import Outcome, Problem, Settings, UavSpec, full_polyline, run
 from gcs_planner.planning.deconflict4d.trajectory import DYNAMICS
 from gcs_planner.scenario import Scenario, ScenarioError
+from gcs_planner.validation import number
 
 __all__ = ["build_problem", "plan", "to_plan"]
 
@@ -68,7 +69,7 @@ def _settings(scenario: Scenario) -> tuple[Settings, dict[str, float]]:
         if key in ("name", "seed"):
             continue
         if key in zone:
-            zone[key] = float(value)
+            zone[key] = number(value, f"{scenario.name}: planner.{key}", 0.0)
             continue
         if key not in fields:
             raise ScenarioError(
@@ -79,6 +80,8 @@ def _settings(scenario: Scenario) -> tuple[Settings, dict[str, float]]:
             raise ScenarioError(f"{scenario.name}: planner.{key} must be like {default!r}, got {value!r}")
         if isinstance(default, int) and not isinstance(default, bool) and value != int(value):
             raise ScenarioError(f"{scenario.name}: planner.{key} must be an integer, got {value!r}")
+        if not isinstance(value, bool):
+            number(value, f"{scenario.name}: planner.{key}", 0.0)
         kwargs[key] = type(default)(value)
     return Settings(**kwargs), zone
 

@@ -1,0 +1,229 @@
+"""Input checks shared by every reader: types, ranges, physical limits, unique ids, safe files.
+
+Every check raises InputError with one line naming the field and the bad value; the CLI prints it
+and exits 2. Readers check everything before they send or write anything, and outputs are
+written atomically (:func:`atomic_write`), so a bad input loses nothing. The physical limits
+(docs/input-validation.md) are deliberately loose: they reject nonsense, not unusual missions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import os
+import tempfile
+import tomllib
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+from gcs_planner.errors import UserError
+
+__all__ = [
+    "FLOAT32_MAX", "MAX_ALT_M", "MAX_DURATION_S", "MAX_RADIUS_M", "MAX_RANGE_M", "MAX_SPEED_MPS",
+    "MAX_WAYPOINTS", "MIN_ALT_M", "InputError", "atomic_write", "integer", "items_of", "load_json",
+    "load_toml", "name", "number", "number_flag", "output_dir", "output_file", "read_text", "table", "unique",
+    "write_text_atomic",
+]  # fmt: skip
+
+FLOAT32_MAX = 3.4028234663852886e38  # MAVLink float fields (z, param1..4)
+MAX_SPEED_MPS = 340.0  # speed of sound at sea level: no UAV mission is faster
+MIN_ALT_M = -11_000.0  # deeper than the deepest ocean trench (relative altitude below a mountain home)
+MAX_ALT_M = 100_000.0  # the Karman line
+MAX_RANGE_M = 1_000_000.0  # east / north from the scenario origin (local ENU stays accurate)
+MAX_RADIUS_M = 100_000.0  # turn, acceptance, loiter, separation, obstacle and fence radii
+MAX_DURATION_S = 7 * 86_400.0  # times, delays, timeouts: one week
+MAX_WAYPOINTS = 10_000  # per vehicle (a mission holds at most 65535 items)
+
+
+class InputError(UserError, ValueError):
+    """A value in an input (file, flag) is invalid; the message names the field and the value."""
+
+
+def number(
+    value: Any,
+    field: str,
+    lo: float | None = None,
+    hi: float | None = None,
+    *,
+    lo_open: bool = False,
+    finite: bool = True,
+) -> float:
+    """``value`` as a float, checked: a real number (not bool), finite, within [lo, hi] (lo
+    excluded when ``lo_open``); otherwise InputError naming ``field``."""
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise InputError(f"{field} must be a number, got {value!r}")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise InputError(f"{field} = {value!r} is out of range") from None
+    if math.isnan(x) or (finite and math.isinf(x)):
+        raise InputError(f"{field} must be a finite number, got {value!r}")
+    if lo is not None and (x <= lo if lo_open else x < lo):
+        raise InputError(f"{field} must be {'>' if lo_open else '>='} {lo:g}, got {value!r}")
+    if hi is not None and x > hi:
+        raise InputError(f"{field} must be <= {hi:g}, got {value!r}")
+    return x
+
+
+def integer(value: Any, field: str, lo: int | None = None, hi: int | None = None) -> int:
+    """``value`` as an int (a whole float such as 3.0 is accepted), within [lo, hi]."""
+    if isinstance(value, float) and value.is_integer():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(f"{field} must be an integer, got {value!r}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        if lo is not None and hi is not None:
+            span = f"{lo}..{hi}"
+        else:
+            span = f">= {lo}" if lo is not None else f"<= {hi}"
+        raise InputError(f"{field} must be an integer {span}, got {value!r}")
+    return value
+
+
+def name(value: Any, field: str) -> str:
+    """An id: a printable string of 1..64 characters."""
+    if not isinstance(value, str) or not 1 <= len(value) <= 64 or not value.isprintable():
+        raise InputError(f"{field} must be a printable name of 1..64 characters, got {_short(value)}")
+    return value
+
+
+def table(value: Any, field: str) -> dict[str, Any]:
+    """``value`` if it is a table (dict), else InputError."""
+    if not isinstance(value, dict):
+        raise InputError(f"{field} must be a table, got {_short(value)}")
+    return value
+
+
+def items_of(value: Any, field: str, kind: type = dict) -> list:
+    """``value`` if it is a list whose entries are all ``kind`` (a list of tables by default)."""
+    if not isinstance(value, list):
+        raise InputError(f"{field} must be a list, got {_short(value)}")
+    for i, entry in enumerate(value):
+        if not isinstance(entry, kind):
+            what = "a table" if kind is dict else f"a {kind.__name__}"
+            raise InputError(f"{field}[{i}] must be {what}, got {_short(entry)}")
+    return value
+
+
+def unique(values: Iterable, field: str) -> None:
+    """InputError naming the first value that repeats."""
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise InputError(f"{field} {v!r} appears twice; each must be unique")
+        seen.add(v)
+
+
+def read_text(path: str | Path, what: str) -> str:
+    """A UTF-8 text file (a leading byte-order mark is dropped), with one-line errors."""
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
+        raise InputError(f"{what} {str(path)!r}: no such file") from None
+    except IsADirectoryError:
+        raise InputError(f"{what} {str(path)!r} is a folder, not a file") from None
+    except OSError as exc:
+        raise InputError(f"{what} {str(path)!r}: cannot read: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8").removeprefix("\ufeff")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{what} {str(path)!r}: not UTF-8 text (byte {exc.start})") from None
+
+
+def load_json(text: str, what: str) -> Any:
+    """JSON text -> value; syntax errors and deep nesting are one line. NaN / Infinity are read
+    (our own metrics may hold them); fields that must be finite are checked where they are used."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{what}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise InputError(f"{what}: nested too deeply") from None
+
+
+def load_toml(text: str, what: str) -> dict[str, Any]:
+    """TOML text -> dict; syntax errors and deep nesting are one line."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{what}: not valid TOML: {exc}") from None
+    except RecursionError:
+        raise InputError(f"{what}: nested too deeply") from None
+
+
+def output_file(path: str | Path, flag: str) -> Path:
+    """An output file path whose folder exists and which is not itself a folder."""
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{flag} {str(path)!r} is a folder; give a file name")
+    parent = path.parent
+    if not parent.is_dir():
+        state = "is a file" if parent.exists() else "does not exist"
+        raise InputError(f"{flag} {str(path)!r}: folder {str(parent)!r} {state}")
+    return path
+
+
+def output_dir(path: str | Path, flag: str) -> Path:
+    """An output folder that exists or can be made (no file in its place); not created here."""
+    path = Path(path)
+    for p in (path, *path.parents):
+        if p.exists():
+            if not p.is_dir():
+                raise InputError(f"{flag} {str(path)!r}: {str(p)!r} is a file, not a folder")
+            break
+    return path
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path next to ``path`` (same suffix, so writers that pick the format by
+    suffix still do); on success it replaces ``path``, on any error it
+    is removed, so ``path`` is either the old file or the complete new one, never half written.
+    An OSError (full disk, no permission) becomes a one-line UserError."""
+    path = Path(path)
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    except OSError as exc:
+        raise UserError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise UserError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (see atomic_write)."""
+    with atomic_write(path) as tmp:
+        tmp.write_text(text)
+
+
+def number_flag(
+    lo: float | None = None, hi: float | None = None, *, lo_open: bool = False, whole: bool = False
+):
+    """An argparse ``type``: the flag's text as a finite float (``whole``: an int) within [lo, hi]."""
+
+    def parse(text: str) -> float | int:
+        try:
+            if whole:
+                return integer(int(text), "value", lo, hi)
+            return number(float(text), "value", lo, hi, lo_open=lo_open)
+        except (ValueError, InputError) as exc:
+            problem = str(exc).removeprefix("value ") if isinstance(exc, InputError) else None
+            kind = "an integer" if whole else "a number"
+            raise argparse.ArgumentTypeError(problem or f"must be {kind}, got {text!r}") from None
+
+    parse.__name__ = "integer" if whole else "number"
+    return parse
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
