@@ -178,13 +178,16 @@ def _import_tlog(path, mcap_path, origin, plan, scenario_text) -> ImportResult:
     from gcs_planner.telemetry.tlog import import_tlog
 
     data = path.read_bytes()
-    first = next(_tlog_records(data, ">"))[0]
-    if UNIX_2000_US <= first <= UNIX_2100_US:
+    sample = [t for t, _, _ in _first(_tlog_records(data, ">"), 20)]
+    big = sum(_unix(t) for t in sample)
+    little = sum(_unix(_swapped(t)) for t in sample)
+    if big and big >= little:
         frames = import_tlog(path, mcap_path, origin=origin, plan=plan, scenario_text=scenario_text)
         return ImportResult("tlog", frames=frames)
-    little = UNIX_2000_US <= struct.unpack_from("<Q", data)[0] <= UNIX_2100_US
+    little = little > 0
     rows = list(_tlog_records(data, "<" if little else ">"))
-    records = [(t * 1e-6, msg, raw) for t, msg, raw in rows if msg is not None]
+    usable = _unix if little else (lambda t: t < UNIX_2000_US)  # since boot: under 30 years
+    records = [(t * 1e-6, msg, raw) for t, msg, raw in rows if msg is not None and usable(t)]
     if origin is None and plan is None:
         origin = _origin_from_frames(records)
     with _logger(mcap_path, origin, plan, scenario_text) as logger:
@@ -200,7 +203,24 @@ def _import_tlog(path, mcap_path, origin, plan, scenario_text) -> ImportResult:
         )
         for t, msg, raw in records:
             logger.on_frame(msg, raw, t)
-    return ImportResult("tlog", {"dropped_bad_crc": dropped} if dropped else {}, frames=len(records))
+    return ImportResult("tlog", frames=len(records))
+
+
+def _unix(t_us: int) -> bool:
+    return UNIX_2000_US <= t_us <= UNIX_2100_US
+
+
+def _swapped(t: int) -> int:
+    return int.from_bytes(t.to_bytes(8, "big"), "little")
+
+
+def _first(rows, n: int) -> list:
+    out = []
+    for row in rows:
+        out.append(row)
+        if len(out) == n:
+            break
+    return out
 
 
 def _import_capture(path, mcap_path, origin, plan, scenario_text) -> ImportResult:
