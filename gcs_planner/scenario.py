@@ -34,6 +34,7 @@ from gcs_planner.validation import (
     InputError,
     integer,
     items_of,
+    known_keys,
     load_toml,
     name,
     number,
@@ -112,6 +113,30 @@ class Scenario:
         raise KeyError(f"no vehicle {vehicle_id!r} in scenario {self.name!r}")
 
 
+# Top-level sections; the planner-specific ones ([acmpso], [coalition], [terrain], [[manned]]) are
+# read by their planners from Scenario.raw.
+SECTIONS = (
+    "name",
+    "origin",
+    "planner",
+    "vehicles",
+    "obstacles",
+    "bounds",
+    "manned",
+    "coalition",
+    "terrain",
+    "acmpso",
+)
+# [[vehicles]] keys: the common ones, the 4-D planner's timing and dynamics (deconflict4d), the
+# coalition planner's (coalition/model.py)
+VEHICLE_KEYS = (
+    ("id", "sysid", "type", "start", "goal", "speed_mps", "min_alt_m", "max_alt_m", "turn_radius_m")
+    + ("separation_m", "priority", "takeoff_s", "arrival_s")
+    + ("v_max_mps", "a_max_mps2", "climb_mps", "takeoff_settle_s", "descent_mps", "min_turn_radius_m")
+    + ("max_time_error_s", "limit", "capabilities", "munitions", "heading_deg", "range_m")
+)
+
+
 def load_scenario(path: str | Path) -> Scenario:
     path = Path(path)
     data = load_toml(read_text(path, "scenario"), str(path))
@@ -129,7 +154,8 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
 
 
 def _parse(data: dict[str, Any], where: str) -> Scenario:
-    origin_d = table(data.get("origin"), "[origin]")
+    known_keys(data, SECTIONS, "top level")
+    origin_d = known_keys(table(data.get("origin"), "[origin]"), ("lat_deg", "lon_deg", "alt_m"), "[origin]")
     try:
         origin = Origin(
             lat_deg=number(origin_d.get("lat_deg"), "origin.lat_deg", -90.0, 90.0),
@@ -149,7 +175,9 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
     vehicles = [_vehicle(v, f"vehicles[{i}]") for i, v in enumerate(rows)]
     unique([v.id for v in vehicles], "vehicle id")
     unique([v.sysid for v in vehicles if v.sysid], "vehicle sysid")
-    obstacles = table(data.get("obstacles", {}), "[obstacles]")
+    obstacles = known_keys(
+        table(data.get("obstacles", {}), "[obstacles]"), ("cylinders", "hemispheres"), "[obstacles]"
+    )
     cylinders = [
         _cylinder(c, f"obstacles.cylinders[{i}]")
         for i, c in enumerate(items_of(obstacles.get("cylinders", []), "obstacles.cylinders"))
@@ -183,6 +211,7 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
 
 
 def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
+    known_keys(d, VEHICLE_KEYS, where)
     vtype = d.get("type", "multirotor")
     if vtype not in VEHICLE_TYPES:
         raise InputError(f"{where}.type must be one of {VEHICLE_TYPES}, got {vtype!r}")
@@ -214,6 +243,7 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
 
 
 def _cylinder(c: dict[str, Any], where: str) -> Cylinder:
+    known_keys(c, ("x", "y", "radius_m", "z_min_m", "z_max_m", "buffer_m"), where)
     z_min = number(c.get("z_min_m", 0.0), f"{where}.z_min_m", MIN_ALT_M, MAX_ALT_M)
     z_max = number(c.get("z_max_m", math.inf), f"{where}.z_max_m", z_min, finite=False)
     return Cylinder(
@@ -227,6 +257,7 @@ def _cylinder(c: dict[str, Any], where: str) -> Cylinder:
 
 
 def _hemisphere(h: dict[str, Any], where: str) -> Hemisphere:
+    known_keys(h, ("x", "y", "radius_m", "z"), where)
     return Hemisphere(
         x=number(h.get("x"), f"{where}.x", -MAX_RANGE_M, MAX_RANGE_M),
         y=number(h.get("y"), f"{where}.y", -MAX_RANGE_M, MAX_RANGE_M),

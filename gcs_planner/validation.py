@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import difflib
 import json
 import math
 import os
@@ -94,6 +95,18 @@ def table(value: Any, field: str) -> dict[str, Any]:
     """``value`` if it is a table (dict), else InputError."""
     if not isinstance(value, dict):
         raise InputError(f"{field} must be a table, got {_short(value)}")
+    return value
+
+
+def known_keys(value: dict[str, Any], allowed: Iterable[str], field: str) -> dict[str, Any]:
+    """``value`` if every key is in ``allowed``; else InputError naming the key and the nearest
+    known one (a misspelt ``[obstacle]`` must not silently drop every obstacle)."""
+    allowed = sorted(allowed)
+    for key in value:
+        if key not in allowed:
+            near = difflib.get_close_matches(str(key), allowed, n=1)
+            hint = f"; did you mean {near[0]!r}?" if near else f"; known: {', '.join(allowed)}"
+            raise InputError(f"{field}: unknown key {key!r}{hint}")
     return value
 
 
