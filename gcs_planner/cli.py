@@ -41,12 +41,17 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())}\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The parser; ``only``: import just that command's module (the others are listed without
+    their arguments), so a short command does not pay for the planners' imports."""
     parser = OneLineParser(prog="gcs-planner", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"gcs-planner {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
+        if only is not None and name != only:
+            sub.add_parser(name)
+            continue
         module = import_module(f"gcs_planner.commands.{name.replace('-', '_')}")
         help_text = (module.__doc__ or name).strip().splitlines()[0]
         p = sub.add_parser(name, help=help_text, description=module.__doc__)
@@ -55,9 +60,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _command_in(argv: list[str]) -> str | None:
+    """The subcommand ``argv`` names (its first word that is not an option), if it is one."""
+    words = [a for a in argv if not a.startswith("-")]
+    return words[0] if words and words[0] in COMMANDS else None
+
+
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser(_command_in(argv)).parse_args(argv)
     except SystemExit as exc:  # --help, --version (0) or a usage error already printed (2)
         return exc.code if isinstance(exc.code, int) else 2
     logging.basicConfig(
