@@ -28,6 +28,7 @@ from gcs_planner.validation import (
     number,
     table,
 )
+from gcs_planner.validation import origin as checked_origin
 
 __all__ = ["plan_fields", "vehicle_fields"]
 
@@ -42,15 +43,7 @@ OPTIONAL = ("vehicle_type", "turn_radius_m", "takeoff_delay_s", "final_action", 
 def plan_fields(d: Any) -> tuple[Origin, str, list[dict], dict, list]:
     """(origin, planner, vehicle rows, metrics, events) of a plan.json document, checked."""
     d = table(d, "plan")
-    o = table(d.get("origin"), "origin")
-    try:
-        origin = Origin(
-            lat_deg=number(o.get("lat_deg"), "origin.lat_deg", -90.0, 90.0),
-            lon_deg=number(o.get("lon_deg"), "origin.lon_deg", -180.0, 180.0),
-            alt_m=number(o.get("alt_m", 0.0), "origin.alt_m", MIN_ALT_M, MAX_ALT_M),
-        )
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
+    origin = checked_origin(d.get("origin"), "origin")
     planner = d.get("planner")
     if not isinstance(planner, str):
         raise InputError(f"planner must be a string, got {planner!r}")

@@ -42,6 +42,9 @@ from gcs_planner.validation import (
     table,
     unique,
 )
+from gcs_planner.validation import (
+    origin as checked_origin,
+)
 
 __all__ = ["Cylinder", "Hemisphere", "Scenario", "ScenarioError", "Vehicle", "load_scenario"]
 
@@ -155,15 +158,7 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
 
 def _parse(data: dict[str, Any], where: str) -> Scenario:
     known_keys(data, SECTIONS, "top level")
-    origin_d = known_keys(table(data.get("origin"), "[origin]"), ("lat_deg", "lon_deg", "alt_m"), "[origin]")
-    try:
-        origin = Origin(
-            lat_deg=number(origin_d.get("lat_deg"), "origin.lat_deg", -90.0, 90.0),
-            lon_deg=number(origin_d.get("lon_deg"), "origin.lon_deg", -180.0, 180.0),
-            alt_m=number(origin_d.get("alt_m", 0.0), "origin.alt_m", MIN_ALT_M, MAX_ALT_M),
-        )
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
+    origin = checked_origin(data.get("origin"), "[origin]")
     planner = dict(table(data.get("planner"), "[planner]"))
     if not isinstance(planner.get("name"), str):
         raise InputError(f"planner.name must be a string, got {planner.get('name')!r}")

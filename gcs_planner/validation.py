@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs_planner.errors import UserError
+from gcs_planner.geo import Origin
 
 __all__ = [
     "FLOAT32_MAX", "MAX_ALT_M", "MAX_DURATION_S", "MAX_RADIUS_M", "MAX_RANGE_M", "MAX_SPEED_MPS",
@@ -96,6 +97,19 @@ def table(value: Any, field: str) -> dict[str, Any]:
     if not isinstance(value, dict):
         raise InputError(f"{field} must be a table, got {_short(value)}")
     return value
+
+
+def origin(value: Any, field: str) -> Origin:
+    """A local frame's origin table {lat_deg, lon_deg, alt_m [AMSL, default 0]}, checked."""
+    o = known_keys(table(value, field), ("lat_deg", "lon_deg", "alt_m"), field)
+    try:
+        return Origin(
+            lat_deg=number(o.get("lat_deg"), "origin.lat_deg", -90.0, 90.0),
+            lon_deg=number(o.get("lon_deg"), "origin.lon_deg", -180.0, 180.0),
+            alt_m=number(o.get("alt_m", 0.0), "origin.alt_m", MIN_ALT_M, MAX_ALT_M),
+        )
+    except ValueError as exc:
+        raise InputError(str(exc)) from None
 
 
 def known_keys(value: dict[str, Any], allowed: Iterable[str], field: str) -> dict[str, Any]:

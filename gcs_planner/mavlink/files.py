@@ -25,6 +25,7 @@ from gcs_planner.mavlink.dialect import KNOWN_COMMANDS, has_position
 from gcs_planner.mavlink.items import deg_to_e7
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.validation import write_text_atomic
 
 __all__ = [
     "FENCE_COMMANDS",
@@ -255,7 +256,7 @@ def save_mission_file(path: str | Path, mission_file: MissionFile) -> list[Loss]
         text, losses = planfile.dumps_plan(mission_file), planfile.plan_losses(mission_file)
     else:
         text, losses = wpl.dumps_mission_file(mission_file), wpl.wpl_losses(mission_file)
-    path.write_text(text)
+    write_text_atomic(path, text)  # a failed write leaves no half file
     return losses
 
 
