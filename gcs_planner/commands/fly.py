@@ -121,7 +121,7 @@ def _drift(values: list[str], sysids: list[int]) -> dict[int, tuple[float, float
 WEB_VIEWER_PORT = 9090
 
 
-def _live_recording(spawn: bool, serve_web: bool):
+def live_recording(spawn: bool, serve_web: bool):
     """A Rerun recording streaming to a spawned viewer and/or the web viewer, or None."""
     if not (spawn or serve_web):
         return None
@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
         rrd=not args.no_rrd,
         max_cross_track_m=args.max_cross_track,
         drift_mps=drift,
-        live=_live_recording(args.live, args.serve_web),
+        live=live_recording(args.live, args.serve_web),
     )
     bars: dict[str, object] = {}
     said: dict[int, str] = {}

@@ -38,14 +38,14 @@ def run(args: argparse.Namespace) -> int:
     if args.scenario:  # attached as it is, but it must be a scenario
         scenario_text = read_text(args.scenario, "scenario")
         load_scenario(args.scenario)
-    origin = _parse_origin(args.origin) if args.origin else None
+    origin = parse_origin(args.origin) if args.origin else None
     result = import_log(args.log, output, origin=origin, plan=plan, scenario_text=scenario_text)
     records = f", {sum(result.records.values())} records" if result.records else ""
     print(f"wrote {output}: {result.format}{records}, {result.frames} MAVLink frames")
     return 0
 
 
-def _parse_origin(text: str) -> Origin:
+def parse_origin(text: str) -> Origin:
     try:
         lat, lon, alt = (float(v) for v in text.split(","))
     except ValueError:

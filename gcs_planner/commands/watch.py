@@ -20,8 +20,8 @@ from pathlib import Path
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.commands._mission_cli import open_link
-from gcs_planner.commands.fly import _live_recording
-from gcs_planner.commands.import_log import _parse_origin
+from gcs_planner.commands.fly import live_recording
+from gcs_planner.commands.import_log import parse_origin
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.preflight import request_streams
@@ -55,8 +55,8 @@ def run(args: argparse.Namespace) -> int:
             raise UserError(f"--{name} must be > 0, got {value}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    rec = _live_recording(args.live, args.serve_web)
-    origin = _parse_origin(args.origin) if args.origin else None
+    rec = live_recording(args.live, args.serve_web)
+    origin = parse_origin(args.origin) if args.origin else None
     with contextlib.suppress(KeyboardInterrupt):
         positions = asyncio.run(_watch(args, out / "watch.mcap", origin, rec))
         print(f"watched: {positions} position reports")
