@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import logging
+import signal
 import sys
 
 from gcs_planner.geo import Origin
@@ -80,12 +81,17 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"sitl-mock: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        log.info("stopped")
     return 0
 
 
 async def _serve(fleet: MockFleet, args: argparse.Namespace) -> None:
+    """Serve until SIGINT (Ctrl-C) or SIGTERM, then close every socket. The handlers are installed
+    here, so the mock also stops when started where SIGINT is inherited as ignored (a background
+    job of a non-interactive shell, nohup)."""
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
     await fleet.start()
     try:
         for v in fleet.vehicles:
@@ -96,7 +102,8 @@ async def _serve(fleet: MockFleet, args: argparse.Namespace) -> None:
                 v.home.lat_deg, v.home.lon_deg, v.home.alt_m,
             )  # fmt: skip
         log.info("%d vehicles, speed-up %g; Ctrl-C to stop", len(fleet.vehicles), fleet.speedup)
-        await asyncio.Event().wait()
+        await stop.wait()
+        log.info("stopped")
     finally:
         await fleet.stop()
 

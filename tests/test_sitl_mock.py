@@ -1,5 +1,6 @@
 """The mock fleet over real UDP, with a pymavlink ``udpout`` connection as the GCS."""
 
+import contextlib
 import queue
 import signal
 import subprocess
@@ -254,23 +255,41 @@ def test_sysid_routing_between_vehicles():
 CLI = [sys.executable, "-m", "sitl_mock.cli", "--vehicles", "3", "--base-port", "0", "--speedup", "5"]
 
 
-def _cli_session(check) -> subprocess.Popen:
-    """Start the sitl-mock CLI, wait for its 3 start lines, call ``check(port, proc)``, then Ctrl-C it and
-    expect exit status 0. The CLI runs in its own process group, killed on the way out whatever
-    happens (a failed check, a timeout); its stderr is drained by a thread, so that a chatty child
-    never blocks on a full pipe instead of handling the SIGINT."""
-    with child(CLI, stderr=subprocess.PIPE, text=True) as proc:
+def _ignore_interrupts() -> None:
+    """In the child before exec: SIGINT and SIGTERM ignored, as a background job of a
+    non-interactive shell (or nohup) inherits them."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+def _cli_session(check, stop_signal: int = signal.SIGINT) -> subprocess.Popen:
+    """Start the sitl-mock CLI (interrupts inherited as ignored), wait for its 3 start lines, call
+    ``check(port, proc)``, then send ``stop_signal`` and expect exit status 0. The CLI runs in its
+    own process group, killed on the way out whatever happens (a failed check, a timeout); its
+    stderr is drained by a thread, so that a chatty child never blocks on a full pipe instead of
+    handling the signal."""
+    with child(CLI, stderr=subprocess.PIPE, text=True, preexec_fn=_ignore_interrupts) as proc:
         lines: queue.Queue[str] = queue.Queue()
         threading.Thread(target=lambda: [lines.put(line) for line in proc.stderr], daemon=True).start()
         first = [lines.get(timeout=60) for _ in range(3)]
         assert [f"sysid {k}: udp 127.0.0.1:" in line for k, line in enumerate(first, 1)] == [True] * 3, first
         check(int(first[0].split("127.0.0.1:")[1].split()[0]), proc)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(stop_signal)
         assert proc.wait(timeout=30) == 0  # generous: a loaded 2-core CI machine
+        assert any("stopped" in line for line in _drained(lines)), "no clean stop logged"
     return proc
 
 
-def test_cli_starts_vehicles_and_stops_on_interrupt():
+def _drained(lines: queue.Queue) -> list[str]:
+    out = []
+    with contextlib.suppress(queue.Empty):
+        while True:
+            out.append(lines.get(timeout=1.0))
+    return out
+
+
+@pytest.mark.parametrize("stop_signal", [signal.SIGINT, signal.SIGTERM])
+def test_cli_starts_vehicles_and_stops_on_interrupt(stop_signal):
     def heartbeat(port: int, proc: subprocess.Popen) -> None:
         gcs = Probe(("127.0.0.1", port))
         try:
@@ -278,7 +297,7 @@ def test_cli_starts_vehicles_and_stops_on_interrupt():
         finally:
             gcs.close()
 
-    proc = _cli_session(heartbeat)
+    proc = _cli_session(heartbeat, stop_signal)
     assert not group_alive(proc.pid)
 
 
