@@ -22,8 +22,7 @@ from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.fleet import start_fleet, upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.planning import plan_scenario
-from gcs_planner.planning.acmpso import AcmpsoParams
+from gcs_planner.planning import config_of, plan_scenario
 from gcs_planner.planning.threat_env import ThreatEnv, resample_path, validate_path
 from gcs_planner.scenario import load_scenario
 from sitl_mock.fleet import MockFleet
@@ -48,7 +47,7 @@ async def fly(args: argparse.Namespace) -> int:
     items = plan_to_items(vp, plan.origin, "ardupilot")
     lat, lon, _ = enu_to_geodetic(vp.waypoints[0, 0], vp.waypoints[0, 1], 0.0, plan.origin)
     home = Origin(float(lat), float(lon), plan.origin.alt_m)  # home under the start, at the origin altitude
-    params = AcmpsoParams.from_scenario(scenario)
+    params = config_of(scenario)
     env = ThreatEnv.from_scenario(scenario, params.h_safe_m)
     vehicles = [{"sysid": vp.sysid, "home": home, "vehicle_type": vp.vehicle_type, "profile": "ardupilot"}]
     fleet_kw = {"speedup": args.speedup, "physics_dt_s": args.physics_dt_s, "rate_hz": args.rate_hz}

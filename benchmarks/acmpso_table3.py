@@ -27,7 +27,7 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from gcs_planner.planning.acmpso import ALGORITHMS, VARIANTS, AcmpsoParams, problem_from_scenario, solve  # noqa: E402
+from gcs_planner.planning.acmpso import ALGORITHMS, VARIANTS, Config, problem_from_scenario, solve  # noqa: E402
 from gcs_planner.planning.threat_env import validate_path  # noqa: E402
 from gcs_planner.scenario import load_scenario  # noqa: E402
 
@@ -155,7 +155,7 @@ def main() -> int:
     ap.add_argument("--plot", type=Path, help="write the convergence plot (PNG) here")
     args = ap.parse_args()
     scenario = load_scenario(args.scenario)
-    params = AcmpsoParams(collision=args.collision)
+    params = Config(collision=args.collision)
     problem, env_m = problem_from_scenario(scenario, scenario.vehicles[0], params)
     variants = [v.strip() for v in args.variants.split(",") if v.strip()]
     for v in variants:

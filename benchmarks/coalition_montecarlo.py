@@ -24,6 +24,7 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from gcs_planner.planning.coalition import load_world, simulate
@@ -83,7 +84,7 @@ def random_world(n: int, seed: int, **params) -> World:
             UavSpec(i, f"U{i + 1}", i + 1, (float(xy[i, 0]), float(xy[i, 1])), float(heading[i]), **kind)
         )
     targets = [replace(t, recon_uav=None) for t in base.targets]
-    return World(uavs=uavs, targets=targets, threats=[], params=replace(base.params, **params))
+    return World(uavs, targets, threats=[], params=msgspec.structs.replace(base.params, **params))
 
 
 def one_run(job: tuple) -> dict:

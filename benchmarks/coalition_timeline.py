@@ -22,6 +22,7 @@ import statistics
 from dataclasses import replace
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from gcs_planner.planning.coalition import load_world, simulate
@@ -148,7 +149,8 @@ def main() -> int:
     args = ap.parse_args()
     world = load_world(load_scenario(MISSION))
     if args.colony:
-        world = replace(world, params=replace(world.params, ants=args.colony[0], iterations=args.colony[1]))
+        ants, iterations = args.colony
+        world = replace(world, params=msgspec.structs.replace(world.params, ants=ants, iterations=iterations))
     load_before, cpu_before = os.getloadavg()[0], _cpu_times()
     results = [simulate(world, np.random.default_rng(args.seed)) for _ in range(max(1, args.repeat))]
     load_after, cpu_after = os.getloadavg()[0], _cpu_times()

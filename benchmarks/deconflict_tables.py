@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from gcs_planner.planning import config_of
 from gcs_planner.planning.deconflict4d import build_problem, planner
 from gcs_planner.scenario import load_scenario
 
@@ -34,7 +35,8 @@ MISSIONS = os.path.join(os.path.dirname(__file__), "..", "missions")
 
 
 def _run(path: str, seed: int, **overrides) -> dict:
-    problem = build_problem(load_scenario(path))
+    scenario = load_scenario(path)
+    problem = build_problem(scenario, config_of(scenario))
     problem.settings = dataclasses.replace(problem.settings, **overrides)
     t0 = time.perf_counter()
     out = planner.run(problem, np.random.default_rng(seed))

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gcs_planner.planning import config_of
 from gcs_planner.planning.baselines import METHODS, plan_baseline
 from gcs_planner.planning.priority_swarm import plan as plan_method
 from gcs_planner.scenario import load_scenario
@@ -60,7 +61,7 @@ def compare(args) -> None:
     for seed in args.seeds:  # seeds outermost: a cut-short run still covers every scenario
         for name, scenario in scenarios.items():
             cpu = time.process_time()
-            plan = plan_method(scenario, np.random.default_rng(seed))
+            plan = plan_method(scenario, config_of(scenario), np.random.default_rng(seed))
             rec = _record(plan, name, "priority_swarm", seed, time.process_time() - cpu)
             _append(args.out, rec)
             budget = rec["evaluations"] // len(scenario.vehicles)
@@ -76,7 +77,7 @@ def scale(args) -> None:
         scenario = load_scenario(MISSIONS / "swarm500.toml")
         scenario.vehicles = full.vehicles[:n] if n < len(full.vehicles) else full.vehicles
         t0, cpu = time.perf_counter(), time.process_time()
-        plan = plan_method(scenario, np.random.default_rng(args.seed))
+        plan = plan_method(scenario, config_of(scenario), np.random.default_rng(args.seed))
         rec = _record(plan, f"swarm500[:{n}]", "priority_swarm", args.seed, time.process_time() - cpu)
         rec["wall_s"] = time.perf_counter() - t0
         rec["cpu_s_per_uav"] = rec["cpu_s"] / n

@@ -6,7 +6,7 @@ that reads them. Every error names the file, the field and the bad value.
 
     name = "open field"
     [origin]            lat_deg, lon_deg, alt_m (AMSL)
-    [planner]           name = "priority_swarm", seed = 1, plus planner parameters
+    [planner]           name = "priority_swarm", seed = 1, plus the planner's parameters (its Config)
     [[vehicles]]        id, sysid (MAVLink system id 1..255; 0 or absent = planning only, e.g. a
                         500-UAV study), type ("multirotor" | "fixed_wing"), start = [x, y, z],
                         goal = [x, y, z], speed_mps, turn_radius_m, min_alt_m, max_alt_m,
@@ -116,8 +116,9 @@ class Scenario:
         raise KeyError(f"no vehicle {vehicle_id!r} in scenario {self.name!r}")
 
 
-# Top-level sections; the planner-specific ones ([acmpso], [coalition], [terrain], [[manned]]) are
-# read by their planners from Scenario.raw.
+# Top-level sections; [planner] is checked against its planner's config (gcs_planner.planning), the
+# planner-specific world tables ([coalition], [terrain], [[manned]]) by the planners that read them
+# from Scenario.raw.
 SECTIONS = (
     "name",
     "origin",
@@ -128,8 +129,22 @@ SECTIONS = (
     "manned",
     "coalition",
     "terrain",
-    "acmpso",
 )
+# the planner-specific world tables: table -> (its keys, {key: the keys of its rows})
+WORLD_TABLES: dict[str, tuple[tuple[str, ...], dict[str, tuple[str, ...]]]] = {
+    "coalition": (
+        ("targets", "threats"),
+        {
+            "targets": ("id", "approx", "position", "appear_s", "recon_s", "recon_angle_deg", "recon_uav")
+            + ("strike_timing", "strike_interval_s", "strike_angles_deg", "assess_angles_deg")
+            + ("assess_delay_s", "assess_duration_s", "reward", "decay_per_s"),
+            "threats": ("x", "y", "radius_m", "appear_s"),
+        },
+    ),
+    "terrain": (("type", "peaks", "file"), {"peaks": ("h_m", "x_m", "y_m", "sx_m", "sy_m")}),
+}
+MANNED_KEYS = ("id", "dt_s", "track", "position_m", "velocity_mps", "observed_s", "modes")
+MANNED_MODE_KEYS = ("name", "history", "velocity_mps", "sigma_mps", "strength", "weight")
 # [[vehicles]] keys: the common ones, the 4-D planner's timing and dynamics (deconflict4d), the
 # coalition planner's (coalition/model.py)
 VEHICLE_KEYS = (
@@ -157,6 +172,8 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
 
 
 def _parse(data: dict[str, Any], where: str) -> Scenario:
+    if "acmpso" in data:
+        raise InputError("the [acmpso] table's keys now belong in [planner] (name = \"acmpso\")")
     known_keys(data, SECTIONS, "top level")
     origin = checked_origin(data.get("origin"), "[origin]")
     planner = dict(table(data.get("planner"), "[planner]"))
@@ -190,6 +207,7 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
         if not lo < hi:
             raise InputError(f"bounds.{axis} must be [min, max] with min < max, got {rng!r}")
         bounds[axis] = (lo, hi)
+    _check_world_tables(data)
     name = data.get("name", where)
     if not isinstance(name, str):
         raise InputError(f"name must be a string, got {name!r}")
@@ -203,6 +221,21 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
         bounds=bounds,
         raw=data,
     )
+
+
+def _check_world_tables(data: dict[str, Any]) -> None:
+    """Unknown keys in the planner-specific tables (their values are the planners' to check)."""
+    for section, (keys, rows) in WORLD_TABLES.items():
+        if section not in data:
+            continue
+        known_keys(table(data[section], f"[{section}]"), keys, f"[{section}]")
+        for key, row_keys in rows.items():
+            for i, row in enumerate(items_of(data[section].get(key, []), f"{section}.{key}")):
+                known_keys(row, row_keys, f"{section}.{key}[{i}]")
+    for i, m in enumerate(items_of(data.get("manned", []), "manned")):
+        known_keys(m, MANNED_KEYS, f"manned[{i}]")
+        for k, mode in enumerate(items_of(m.get("modes", []), f"manned[{i}].modes")):
+            known_keys(mode, MANNED_MODE_KEYS, f"manned[{i}].modes[{k}]")
 
 
 def _vehicle(d: dict[str, Any], where: str) -> Vehicle:

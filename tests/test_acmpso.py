@@ -12,9 +12,9 @@ import pytest
 
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.plan import Plan
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import config_of, plan_scenario
 from gcs_planner.planning.acmpso import (
-    AcmpsoParams,
+    Config,
     TrackProblem,
     follow_terrain,
     limit_gradient,
@@ -44,7 +44,7 @@ def scenario():
 
 @pytest.fixture(scope="module")
 def paper(scenario):
-    problem, env_m = problem_from_scenario(scenario, scenario.vehicles[0], AcmpsoParams())
+    problem, env_m = problem_from_scenario(scenario, scenario.vehicles[0], Config())
     return problem, env_m
 
 
@@ -221,7 +221,7 @@ def test_follow_terrain_cleans_a_grazing_track(paper):
 
 def test_plan_is_registered_flies_clean_and_round_trips(scenario, tmp_path):
     raw = copy.deepcopy(scenario.raw)
-    raw["acmpso"].update(particles=20, iterations=25)
+    raw["planner"].update(particles=20, iterations=25)
     small = parse_scenario(raw, "small")
     progress = []
     result = plan_scenario(small, seed=3, progress=lambda f, m: progress.append(f))
@@ -250,21 +250,21 @@ def test_plan_is_registered_flies_clean_and_round_trips(scenario, tmp_path):
 
 def test_bad_parameters_name_the_field(scenario):
     for key, value, match in (
-        ("algorithm", "gwo", "acmpso.algorithm"),
-        ("particles", 0, "acmpso.particles"),
-        ("weights", [1, 2], "acmpso.weights"),
-        ("h_safe_m", -1.0, "acmpso.h_safe_m"),
+        ("algorithm", "gwo", "planner.algorithm is not one of the allowed values, got 'gwo'"),
+        ("particles", 0, "planner.particles must be an integer >= 1, got 0"),
+        ("weights", [1, 2], r"planner.weights must be a list of length 4, got \[1, 2\]"),
+        ("h_safe_m", -1.0, "planner.h_safe_m must be a number > 0.0, got -1.0"),
         ("colour", 1, "unknown key 'colour'"),
     ):
         raw = copy.deepcopy(scenario.raw)
-        raw["acmpso"][key] = value
+        raw["planner"][key] = value
         with pytest.raises(ScenarioError, match=match):
-            AcmpsoParams.from_scenario(parse_scenario(raw, "bad"))
+            config_of(parse_scenario(raw, "bad"))
     raw = copy.deepcopy(scenario.raw)
     del raw["bounds"]["z"]
     bad = parse_scenario(raw, "nobounds")
     with pytest.raises(ScenarioError, match="bounds.z"):
-        problem_from_scenario(bad, bad.vehicles[0], AcmpsoParams())
+        problem_from_scenario(bad, bad.vehicles[0], Config())
 
 
 def test_plan_over_a_gridded_elevation_model(scenario, tmp_path):
@@ -275,7 +275,7 @@ def test_plan_over_a_gridded_elevation_model(scenario, tmp_path):
     np.savez(tmp_path / "dem.npz", elevation_m=grid, geotransform=[0.0, 1000.0, 0.0, 0.0, 0.0, 1000.0])
     raw = copy.deepcopy(scenario.raw)
     raw["terrain"] = {"type": "grid", "file": str(tmp_path / "dem.npz")}
-    raw["acmpso"].update(particles=15, iterations=20)
+    raw["planner"].update(particles=15, iterations=20)
     dem = parse_scenario(raw, "dem")
     env = ThreatEnv.from_scenario(dem, 500.0)
     assert isinstance(env.terrain, GridTerrain)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import itertools
 import math
-from dataclasses import replace
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -555,7 +555,7 @@ def test_default_colony_shape_finds_as_good_plans_as_the_earlier_10x15_colony():
     ~40% of the time of 10 x 15). On larger problems it must find plans at least as good on average."""
     params = CoalitionParams()
     assert (params.ants, params.iterations) == (30, 6)
-    old = replace(params, ants=10, iterations=15)
+    old = msgspec.structs.replace(params, ants=10, iterations=15)
     kinds, offsets = (STRIKE,) * 7 + (ASSESS,) * 3, (0.0,) * 10
     new_J, old_J = [], []
     for seed in range(8):

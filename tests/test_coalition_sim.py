@@ -6,6 +6,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -95,7 +96,7 @@ def test_award_leg_becomes_an_uploadable_vehicle_plan(world, result):
 
 def test_plan_round_trip(tmp_path):
     scenario = load_scenario(MISSION)
-    scenario.raw["coalition"] = {**scenario.raw["coalition"], "t_end_s": 90.0}  # T1 and T3 phases only
+    scenario.planner["t_end_s"] = 90.0  # T1 and T3 phases only
     plan = plan_scenario(scenario)
     assert plan.planner == "coalition" and len(plan.vehicles) == 32 and plan.feasible
     assert {"tender", "bid", "award", "strike"} <= {e["event"] for e in plan.events}
@@ -127,7 +128,7 @@ def test_an_excluded_member_takes_its_lookalikes_off_the_task(world):
     """The paper world with the earlier 10 x 15 colony (seed 3): at T2 the member chosen for the
     60 deg strike cannot clear the threat at (1900, 950) and is excluded with its look-alikes;
     none of them gets that strike, and the formation still covers every task with clear legs."""
-    old = replace(world, params=replace(world.params, ants=10, iterations=15))
+    old = replace(world, params=msgspec.structs.replace(world.params, ants=10, iterations=15))
     result = simulate(old, np.random.default_rng(3))
     excluded = [e for e in _events(result, "member_excluded") if e["target"] == "T2"]
     assert excluded and excluded[0]["alike"]

@@ -7,8 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from gcs_planner.planning import plan_scenario
-from gcs_planner.planning.deconflict4d import build_problem
+from gcs_planner.planning import config_of, plan_scenario
 from gcs_planner.planning.deconflict4d.conflicts import closest_approach
 from gcs_planner.scenario import ScenarioError, parse_scenario
 
@@ -191,7 +190,7 @@ def test_manned_zone_is_avoided():
 
 
 def test_bad_settings_name_the_field():
-    with pytest.raises(ScenarioError, match="planner.bogus"):
-        build_problem(parse_scenario(_scenario(2, bogus=1)))
-    with pytest.raises(ScenarioError, match="planner.iterations"):
-        build_problem(parse_scenario(_scenario(2, iterations="many")))
+    with pytest.raises(ScenarioError, match="planner: unknown key 'bogus'"):
+        config_of(parse_scenario(_scenario(2, bogus=1)))
+    with pytest.raises(ScenarioError, match="planner.iterations must be an integer, got 'many'"):
+        config_of(parse_scenario(_scenario(2, iterations="many")))

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs_planner.planning import priority_swarm
+from gcs_planner.planning import config_of, priority_swarm
 from gcs_planner.scenario import load_scenario
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "swarm_small.toml"
@@ -32,6 +32,6 @@ def test_evaluations_count_every_cost_call(monkeypatch):
     monkeypatch.setattr(priority_swarm, "optimise", tracked)
     scenario = load_scenario(SCENARIO)
     scenario.planner.update(particles=8, iterations=6, rounds=2)
-    plan = priority_swarm.plan(scenario, np.random.default_rng(0))
+    plan = priority_swarm.plan(scenario, config_of(scenario), np.random.default_rng(0))
     assert plan.metrics["evaluations"] == seen[0] > 0
     assert len(repairs) >= len(scenario.vehicles)

@@ -9,12 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gcs_planner.config import parse
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.geometry.obstacles import HARD_PENALTY
 from gcs_planner.geometry.separation import check_plan
 from gcs_planner.planning import plan_scenario
-from gcs_planner.planning.priority_swarm import CostModel, SwarmConfig, Traffic, prepare, timed_samples
+from gcs_planner.planning.priority_swarm import Config, CostModel, Traffic, prepare, timed_samples
 from gcs_planner.scenario import Cylinder, Scenario, Vehicle, load_scenario
 
 MISSIONS = Path(__file__).resolve().parent.parent / "missions"
@@ -132,7 +133,7 @@ def test_cost_model_prices_obstacles_and_traffic():
     scenario.vehicles = [
         dataclasses.replace(scenario.vehicles[0], start=(0.0, 0.0, 40.0), goal=(500.0, 0.0, 40.0))
     ]
-    cfg = SwarmConfig.from_planner(FAST)
+    cfg = parse(Config, FAST, "planner")
     (prob,), obstacles, _, _ = prepare(scenario, cfg)
     straight = np.tile([0.0, 0.0, 40.0], 3) + np.repeat([125.0, 250.0, 375.0], 3) * np.tile([1, 0, 0], 3)
     detour = straight.copy()
@@ -148,12 +149,12 @@ def test_cost_model_prices_obstacles_and_traffic():
 
 
 def test_bad_planner_parameters_are_named():
-    with pytest.raises(UserError, match="planner.particle"):
-        SwarmConfig.from_planner({"name": "priority_swarm", "particle": 3})
-    with pytest.raises(UserError, match="planner.dt_s"):
-        SwarmConfig.from_planner({"dt_s": 1.0})
-    with pytest.raises(UserError, match="planner.iterations"):
-        SwarmConfig.from_planner({"iterations": 2.5})
+    with pytest.raises(UserError, match="unknown key 'particle'; did you mean 'particles'"):
+        parse(Config, {"name": "priority_swarm", "particle": 3}, "planner")
+    with pytest.raises(UserError, match=r"planner.dt_s must be a number <= 0.5, got 1.0"):
+        parse(Config, {"name": "priority_swarm", "dt_s": 1.0}, "planner")
+    with pytest.raises(UserError, match="planner.iterations must be an integer, got 2.5"):
+        parse(Config, {"name": "priority_swarm", "iterations": 2.5}, "planner")
 
 
 @pytest.mark.parametrize("method", ["pso", "de", "gwo"])

@@ -13,7 +13,7 @@ from gcs_planner.commands._mission_cli import print_losses
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
 from gcs_planner.mavlink.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
-from gcs_planner.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.validation import atomic_write, output_dir, unique
 
 SUFFIX = {"qgc": ".plan", "wpl": ".waypoints"}

@@ -26,8 +26,8 @@ from gcs_planner.conformance import format_report
 from gcs_planner.errors import UserError
 from gcs_planner.fly import FlyOptions, check_flight, fly
 from gcs_planner.plan import Plan
+from gcs_planner.planning import load_scenario
 from gcs_planner.progress import plan_with_progress, progress_bar
-from gcs_planner.scenario import load_scenario
 from gcs_planner.validation import MAX_RADIUS_M, MAX_SPEED_MPS, InputError, number, number_flag, output_dir
 
 WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid

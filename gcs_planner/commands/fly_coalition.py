@@ -19,7 +19,7 @@ from pathlib import Path
 from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
 from gcs_planner.commands.plan import SEED
 from gcs_planner.errors import UserError
-from gcs_planner.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.validation import MAX_DURATION_S, number_flag, output_dir
 
 SPEEDUP = number_flag(0, 1000, lo_open=True)  # mock simulation speed-up

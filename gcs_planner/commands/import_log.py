@@ -16,7 +16,7 @@ from pathlib import Path
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.files import load_plan_json
-from gcs_planner.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.telemetry.log_import import import_log
 from gcs_planner.validation import MAX_ALT_M, MIN_ALT_M, InputError, number, output_file, read_text
 

@@ -37,8 +37,8 @@ from gcs_planner.mavlink.items import scenario_fence_items, scenario_rally_items
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import validate_items
+from gcs_planner.planning import load_scenario
 from gcs_planner.progress import progress_bar
-from gcs_planner.scenario import load_scenario
 from gcs_planner.validation import number_flag
 
 

@@ -1,26 +1,35 @@
-"""Planners behind one interface: a Scenario in, a Plan out.
+"""Planners behind one contract: a Scenario and the planner's typed config in, a Plan out.
 
-Each planner module exposes ``plan(scenario, rng, progress) -> Plan`` where ``rng`` is a seeded
-numpy Generator (no global random state) and ``progress(fraction, message)`` may be None.
-The scenario's ``[planner] name`` picks the module, so methods are swapped in the file.
+A planner is a module with ``NAME``, ``Config`` (a :class:`PlannerConfig` tagged with ``NAME``:
+every ``[planner]`` key it reads, with its bounds) and ``plan(scenario, config, rng, progress)
+-> Plan``, where ``rng`` is a seeded numpy Generator (no global random state) and
+``progress(fraction, message)`` may be None. ``PLANNERS`` names the modules; the scenario's
+``[planner] name`` picks one, so methods are swapped in the file (docs/planners.md shows how to
+add one).
 """
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable
 from importlib import import_module
+from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
+from gcs_planner.config import Config, Seed, parse
 from gcs_planner.errors import UserError
 from gcs_planner.plan import Plan
-from gcs_planner.scenario import Scenario
+from gcs_planner.scenario import Scenario, ScenarioError
+from gcs_planner.scenario import load_scenario as read_scenario
+from gcs_planner.validation import InputError
 
-__all__ = ["PLANNERS", "Progress", "plan_scenario"]
+__all__ = ["PLANNERS", "Planner", "PlannerConfig", "Progress", "config_of", "load_scenario", "plan_scenario"]
 
 Progress = Callable[[float, str], None]
 
-# name in the scenario file -> module exposing plan(scenario, rng, progress)
+# [planner] name -> the module that implements it
 PLANNERS: dict[str, str] = {
     "straight": "gcs_planner.planning.straight",
     "priority_swarm": "gcs_planner.planning.priority_swarm",
@@ -30,12 +39,50 @@ PLANNERS: dict[str, str] = {
 }
 
 
+class PlannerConfig(Config, tag_field="name"):
+    """The ``[planner]`` table: ``name`` picks the planner (the tag), ``seed`` its generator."""
+
+    seed: Seed = 0
+
+
+class Planner(Protocol):
+    """What a planner module provides."""
+
+    NAME: str
+    Config: type[PlannerConfig]
+
+    def plan(
+        self, scenario: Scenario, config: PlannerConfig, rng: np.random.Generator, progress: Progress | None
+    ) -> Plan: ...
+
+
+def planner(name: str) -> Planner:
+    """The planner module registered as ``name``; UserError naming the nearest one otherwise."""
+    if name not in PLANNERS:
+        near = difflib.get_close_matches(str(name), PLANNERS, n=1)
+        hint = f"; did you mean {near[0]!r}?" if near else ""
+        raise UserError(f"planner.name {name!r} is not one of {sorted(PLANNERS)}{hint}")
+    return import_module(PLANNERS[name])
+
+
+def config_of(scenario: Scenario) -> PlannerConfig:
+    """The scenario's ``[planner]`` table as its planner's typed config (every key checked)."""
+    try:
+        return parse(planner(scenario.planner_name).Config, scenario.planner, "planner")
+    except InputError as exc:
+        raise ScenarioError(f"{scenario.path or scenario.name}: {exc}") from None
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """A scenario file whose ``[planner]`` table is also checked against its planner's config."""
+    scenario = read_scenario(path)
+    config_of(scenario)
+    return scenario
+
+
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:
     """Run the scenario's planner with a seeded generator (seed defaults to the file's)."""
-    name = scenario.planner_name
-    if name not in PLANNERS:
-        raise UserError(f"planner.name {name!r} is not one of {sorted(PLANNERS)}")
-    if seed is None:
-        seed = int(scenario.planner.get("seed", 0))
-    module = import_module(PLANNERS[name])
-    return module.plan(scenario, np.random.default_rng(seed), progress)
+    config = config_of(scenario)
+    module = planner(scenario.planner_name)
+    rng = np.random.default_rng(config.seed if seed is None else seed)
+    return module.plan(scenario, config, rng, progress)

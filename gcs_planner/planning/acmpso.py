@@ -47,22 +47,26 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+from msgspec import Meta
 from scipy.interpolate import CubicSpline
 
+from gcs_planner.config import Count, Distance, NonNegative, Positive, PositiveDistance
 from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.pso import CauchyMutation, PSOConfig, PSOResult, minimize
 from gcs_planner.planning.threat_env import ThreatEnv, ValidationReport, resample_path, validate_path
 from gcs_planner.scenario import Scenario, ScenarioError, Vehicle
+from gcs_planner.validation import MAX_ALT_M
 
 __all__ = [
     "ALGORITHMS",
-    "AcmpsoParams",
+    "NAME",
+    "Config",
     "TrackProblem",
     "TrackResult",
     "Weights",
@@ -77,8 +81,7 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 MAX_LEG = 64  # longest mission leg, in dense samples (6.4 km at 100 m)
-Progress = Callable[[float, str], None]
-
+NAME = "acmpso"
 ALGORITHMS = ("acmpso", "lpso", "bpso")
 VARIANTS = ("literal", "tuned")
 COLLISION_TERMS = ("literal", "depth")
@@ -286,72 +289,30 @@ def solve(
     return TrackResult(res.best_x, problem.nodes(best)[0], res.best_cost, terms, res, seconds, cpu_seconds)
 
 
-@dataclass(frozen=True)
-class AcmpsoParams:
-    """The scenario's [acmpso] table (all lengths in metres; defaults = the paper's Table 2)."""
+class Config(PlannerConfig, tag=NAME):
+    """The [planner] table (all lengths in metres; defaults = the paper's Table 2)."""
 
-    algorithm: str = "acmpso"
-    variant: str = "tuned"
-    particles: int = 50
-    iterations: int = 100
-    n_waypoints: int = 8
-    n_nodes: int = 100
-    length_unit_m: float = 1000.0
-    h_safe_m: float = 500.0
-    radar_strength_m: float = 10000.0
-    v_max_m: float = 10000.0
-    weights: tuple[float, float, float, float] = (0.3, 4.85, 4.85, 0.07)
-    collision: str = "literal"
-    init_noise: float = 0.05
-    validate_spacing_m: float = 100.0
-    follow_tolerance_m: float = 50.0
-    max_climb_deg: float = 10.0
-    margin_m: float = 25.0
-
-    @classmethod
-    def from_scenario(cls, scenario: Scenario) -> AcmpsoParams:
-        table = scenario.raw.get("acmpso", {})
-        where = f"{scenario.name}: acmpso"
-        if not isinstance(table, dict):
-            raise ScenarioError(f"{where} must be a table, got {table!r}")
-        known = {f.name: f for f in fields(cls)}
-        values: dict[str, Any] = {}
-        for key, value in table.items():
-            if key not in known:
-                raise ScenarioError(f"{where}: unknown key {key!r} (known: {sorted(known)})")
-            default = known[key].default
-            if isinstance(default, str):
-                if not isinstance(value, str):
-                    raise ScenarioError(f"{where}.{key} must be a string, got {value!r}")
-            elif isinstance(default, tuple):
-                if not (isinstance(value, list) and len(value) == 4 and all(_is_number(v) for v in value)):
-                    raise ScenarioError(
-                        f"{where}.{key} must be 4 numbers [phi1, phi2, phi3, phi4], got {value!r}"
-                    )
-                value = tuple(float(v) for v in value)
-            elif isinstance(default, int):
-                if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                    raise ScenarioError(f"{where}.{key} must be an integer >= 1, got {value!r}")
-            elif not _is_number(value) or not value > 0:
-                raise ScenarioError(f"{where}.{key} must be a number > 0, got {value!r}")
-            values[key] = value
-        params = cls(**values)
-        for key, allowed in (
-            ("algorithm", ALGORITHMS),
-            ("variant", VARIANTS),
-            ("collision", COLLISION_TERMS),
-        ):
-            if getattr(params, key) not in allowed:
-                raise ScenarioError(f"{where}.{key} must be one of {allowed}, got {getattr(params, key)!r}")
-        return params
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v)
+    algorithm: Literal["acmpso", "lpso", "bpso"] = "acmpso"
+    variant: Literal["literal", "tuned"] = "tuned"
+    particles: Count = 50
+    iterations: Count = 100
+    n_waypoints: Count = 8
+    n_nodes: Count = 100
+    length_unit_m: PositiveDistance = 1000.0
+    h_safe_m: Annotated[float, Meta(gt=0.0, le=MAX_ALT_M)] = 500.0
+    radar_strength_m: Positive = 10000.0
+    v_max_m: Positive = 10000.0
+    weights: tuple[NonNegative, NonNegative, NonNegative, NonNegative] = (0.3, 4.85, 4.85, 0.07)
+    collision: Literal["literal", "depth"] = "literal"
+    init_noise: Positive = 0.05
+    validate_spacing_m: PositiveDistance = 100.0
+    follow_tolerance_m: PositiveDistance = 50.0
+    max_climb_deg: Annotated[float, Meta(gt=0.0, le=90.0)] = 10.0
+    margin_m: Distance = 25.0
 
 
 def problem_from_scenario(
-    scenario: Scenario, vehicle: Vehicle, params: AcmpsoParams
+    scenario: Scenario, vehicle: Vehicle, params: Config
 ) -> tuple[TrackProblem, ThreatEnv]:
     """The vehicle's TrackProblem in fitness units and the environment in metres."""
     missing = [axis for axis in "xyz" if axis not in scenario.bounds]
@@ -483,9 +444,10 @@ def _longest_leg(
     return int(js[np.argmin(ok) - 1] if not ok.all() else js[-1])
 
 
-def plan(scenario: Scenario, rng: np.random.Generator, progress: Progress | None = None) -> Plan:
-    """Plan every vehicle's track independently with the scenario's [acmpso] parameters."""
-    params = AcmpsoParams.from_scenario(scenario)
+def plan(
+    scenario: Scenario, params: Config, rng: np.random.Generator, progress: Progress | None = None
+) -> Plan:
+    """Plan every vehicle's track independently with the scenario's [planner] parameters."""
     vehicles = []
     metrics: dict[str, Any] = {"algorithm": params.algorithm, "variant": params.variant}
     n = len(scenario.vehicles)
@@ -529,7 +491,7 @@ def plan(scenario: Scenario, rng: np.random.Generator, progress: Progress | None
         logger.info(
             "%s: F = %.4f in %.3f s, %d waypoints", vehicle.id, result.fitness, result.seconds, len(waypoints)
         )
-    return Plan(origin=scenario.origin, planner="acmpso", vehicles=vehicles, metrics=metrics)
+    return Plan(origin=scenario.origin, planner=NAME, vehicles=vehicles, metrics=metrics)
 
 
 def _vehicle_plan(
@@ -538,7 +500,7 @@ def _vehicle_plan(
     result: TrackResult,
     node_report: ValidationReport,
     flown_report: ValidationReport,
-    params: AcmpsoParams,
+    params: Config,
 ) -> VehiclePlan:
     seg = np.linalg.norm(np.diff(waypoints, axis=0), axis=1)
     times = np.concatenate([[0.0], np.cumsum(seg) / vehicle.speed_mps])

@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import time
 
+import msgspec
 import numpy as np
 
 from gcs_planner.plan import Plan
+from gcs_planner.planning import config_of
 from gcs_planner.planning.priority_swarm import (
     CostModel,
-    SwarmConfig,
     Traffic,
     prepare,
     repair_and_check,
@@ -103,7 +104,7 @@ def plan_baseline(
     if method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
     t_start = time.perf_counter()
-    cfg = SwarmConfig.from_planner(scenario.planner)
+    cfg = config_of(scenario)
     problems, obstacles, _, _ = prepare(scenario, cfg)
     budget = int(evaluations_per_vehicle or cfg.particles * cfg.iterations)
     traffic = Traffic(cfg.dt_s)
@@ -134,7 +135,7 @@ def plan_baseline(
         traffic.add(prob.index, slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
         if progress:
             progress((n + 1) / len(problems), prob.vehicle.id)
-    cfg_check = SwarmConfig(**{**cfg.__dict__, "repairs": 0})
+    cfg_check = msgspec.structs.replace(cfg, repairs=0)
     order = list(range(len(problems)))
     metrics = {"evaluations": int(evaluations), "method": method}
     result = repair_and_check(

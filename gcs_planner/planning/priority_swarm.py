@@ -38,8 +38,9 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
   exceed max(separation_i, separation_j) + ``separation_margin_m``, else HARD + shortfall. HARD =
   1e4 replaces the paper's infinity (violations still rank by size).
 - Weights b1..b4 = 1, 1, 0.1, 0.2 and a1 = a2 = 0.5 (the paper gives none).
-- PSO: the shared engine (gcs_planner.planning.pso), linear inertia 0.9 -> 0.4, c1 = c2 = 1.5,
-  v_max = 0.2 of the bound span. Initial swarm: the RRT* path resampled to W points by arc length,
+- PSO: the shared engine (gcs_planner.planning.pso), linear inertia ``w_max`` 0.9 -> ``w_min``
+  0.4, ``c1`` = ``c2`` = 1.5, v_max = ``v_max_fraction`` 0.2 of the bound span. Initial swarm:
+  the RRT* path resampled to W points by arc length,
   ``elite_fraction`` of the swarm = the UAV's best particles of the previous round, ``noise``
   particles = RRT* path + Gaussian noise (sigma = max(turn radius, 5 % of the xy span), 10 % of the
   band in z), ``random_fraction`` uniform in the bounds. Bounds: the scenario [bounds] box, else
@@ -56,94 +57,75 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
 from __future__ import annotations
 
 import contextvars
-import dataclasses
 import logging
 import math
 import time
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
+from msgspec import Meta
 from scipy.spatial import cKDTree
 
+from gcs_planner.config import Count, Distance, Fraction, NonNegative, PositiveDistance
 from gcs_planner.errors import UserError
 from gcs_planner.geometry.dubins import advance, segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.geometry.separation import check_plan
 from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.pso import PSOConfig, minimize
 from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
 from gcs_planner.scenario import Scenario, Vehicle
+from gcs_planner.validation import MAX_DURATION_S
 
-__all__ = ["SwarmConfig", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
+__all__ = ["NAME", "Config", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
 
 log = logging.getLogger(__name__)
 SLICE_SCALE = 1e7  # 4-D tree: samples of different time slices are this far apart
 
 
-@dataclass(frozen=True)
-class SwarmConfig:
-    """Planner parameters ([planner] table); see the module docstring for what each one means."""
+NAME = "priority_swarm"
 
-    waypoints: int = 5
-    particles: int = 30
-    iterations: int = 60
-    rounds: int = 3
-    elite_fraction: float = 0.15
-    random_fraction: float = 0.25
-    dt_s: float = 0.5
-    separation_margin_m: float = 2.0
-    obstacle_margin_m: float = 1.5
-    max_climb_deg: float = 20.0
-    b1: float = 1.0
-    b2: float = 1.0
-    b3: float = 0.1
-    b4: float = 0.2
-    a1: float = 0.5
-    pad_m: float = 100.0
-    rrt_step_m: float = 60.0
-    rrt_iterations: int = 500
-    rrt_extra_iterations: int = 150
-    delay_step_s: float = 5.0
-    repairs: int = 4
-    waypoint_tol_m: float = 1.0
-    acceptance_radius_m: float = 2.0
 
-    @classmethod
-    def from_planner(cls, table: dict) -> SwarmConfig:
-        names = {f.name: f for f in dataclasses.fields(cls)}
-        kwargs = {}
-        for key, value in table.items():
-            if key in ("name", "seed"):
-                continue
-            if key not in names:
-                raise UserError(f"planner.{key} is not a priority_swarm parameter (known: {sorted(names)})")
-            kind = int if names[key].type == "int" else float
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, int | float)
-                or (kind is int and value != int(value))
-            ):
-                raise UserError(
-                    f"planner.{key} must be {'an integer' if kind is int else 'a number'}, got {value!r}"
-                )
-            kwargs[key] = kind(value)
-            if not math.isfinite(kwargs[key]) or kwargs[key] < 0:
-                raise UserError(f"planner.{key} must be a finite number >= 0, got {value!r}")
-        cfg = cls(**kwargs)
-        for key in ("rrt_step_m", "delay_step_s"):
-            if not getattr(cfg, key) > 0:
-                raise UserError(f"planner.{key} must be > 0, got {getattr(cfg, key)!r}")
-        for key in ("waypoints", "particles", "iterations", "rounds"):
-            if getattr(cfg, key) < 1:
-                raise UserError(f"planner.{key} must be >= 1, got {getattr(cfg, key)!r}")
-        if not 0 < cfg.dt_s <= 0.5:
-            raise UserError(f"planner.dt_s must be in (0, 0.5] s, got {cfg.dt_s!r}")
-        if cfg.elite_fraction + cfg.random_fraction > 1 or min(cfg.elite_fraction, cfg.random_fraction) < 0:
-            raise UserError(
-                f"planner.elite_fraction + random_fraction must be in [0, 1], got"
-                f" {cfg.elite_fraction!r} + {cfg.random_fraction!r}"
+class Config(PlannerConfig, tag=NAME):
+    """The [planner] table; see the module docstring for what each parameter means."""
+
+    waypoints: Count = 5
+    particles: Count = 30
+    iterations: Count = 60
+    rounds: Count = 3
+    elite_fraction: Fraction = 0.15
+    random_fraction: Fraction = 0.25
+    dt_s: Annotated[float, Meta(gt=0.0, le=0.5)] = 0.5
+    separation_margin_m: Distance = 2.0
+    obstacle_margin_m: Distance = 1.5
+    max_climb_deg: Annotated[float, Meta(gt=0.0, le=90.0)] = 20.0
+    b1: NonNegative = 1.0
+    b2: NonNegative = 1.0
+    b3: NonNegative = 0.1
+    b4: NonNegative = 0.2
+    a1: Fraction = 0.5
+    c1: NonNegative = 1.5  # PSO cognitive and social factors
+    c2: NonNegative = 1.5
+    w_max: NonNegative = 0.9  # linear inertia schedule w_max -> w_min
+    w_min: NonNegative = 0.4
+    v_max_fraction: Annotated[float, Meta(gt=0.0, le=1.0)] = 0.2  # of the bound span per iteration
+    pad_m: Distance = 100.0
+    rrt_step_m: PositiveDistance = 60.0
+    rrt_iterations: Count = 500
+    rrt_extra_iterations: Annotated[int, Meta(ge=0, le=1_000_000)] = 150
+    delay_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 5.0
+    repairs: Annotated[int, Meta(ge=0, le=1000)] = 4
+    waypoint_tol_m: PositiveDistance = 1.0
+    acceptance_radius_m: PositiveDistance = 2.0
+
+    def __post_init__(self) -> None:
+        if self.elite_fraction + self.random_fraction > 1:
+            raise ValueError(
+                "elite_fraction + random_fraction must be <= 1,"
+                f" got {self.elite_fraction!r} + {self.random_fraction!r}"
             )
-        return cfg
 
 
 @dataclass
@@ -332,7 +314,7 @@ class CostModel:
     """Eqs. 3-14 for one UAV, vectorised over a swarm (P, D) -> (P,), with a term breakdown."""
 
     def __init__(
-        self, prob: VehicleProblem, obstacles: Obstacles, traffic: Traffic, cfg: SwarmConfig
+        self, prob: VehicleProblem, obstacles: Obstacles, traffic: Traffic, cfg: Config
     ) -> None:
         self.prob, self.obs, self.traffic, self.cfg = prob, obstacles, traffic, cfg
         self.evaluations = 0
@@ -430,7 +412,7 @@ class CostModel:
 
 
 def prepare(
-    scenario: Scenario, cfg: SwarmConfig
+    scenario: Scenario, cfg: Config
 ) -> tuple[list[VehicleProblem], Obstacles, np.ndarray, np.ndarray]:
     """Vehicle problems, obstacle arrays and the xy box (lo, hi) shared by all planners of this cost."""
     if not scenario.vehicles:
@@ -476,7 +458,7 @@ def resample_polyline(path: np.ndarray, n: int) -> np.ndarray:
     return np.column_stack([np.interp(s, cum, path[:, k]) for k in range(3)])
 
 
-def initial_paths(problems, obstacles, lo, hi, cfg: SwarmConfig, rng: np.random.Generator):
+def initial_paths(problems, obstacles, lo, hi, cfg: Config, rng: np.random.Generator):
     """Level 1: RRT* path per UAV, resampled to the particle encoding; difficulty = length ratio."""
     init, difficulty = [], []
     for prob in problems:
@@ -499,7 +481,7 @@ def initial_paths(problems, obstacles, lo, hi, cfg: SwarmConfig, rng: np.random.
 
 
 def seed_swarm(
-    prob: VehicleProblem, base: np.ndarray, elites: np.ndarray | None, cfg: SwarmConfig, rng
+    prob: VehicleProblem, base: np.ndarray, elites: np.ndarray | None, cfg: Config, rng
 ) -> np.ndarray:
     """Initial particles: the inherited path, elites, noisy copies; the engine adds the random rest."""
     n_random = int(round(cfg.random_fraction * cfg.particles))
@@ -521,22 +503,25 @@ def seed_swarm(
     return np.vstack(parts)
 
 
-def optimise(prob, obstacles, traffic, cfg: SwarmConfig, rng, init: np.ndarray, budget: int | None = None):
+def optimise(prob, obstacles, traffic, cfg: Config, rng, init: np.ndarray, budget: int | None = None):
     """One PSO run for one UAV; returns (best x, PSOResult, CostModel)."""
     model = CostModel(prob, obstacles, traffic, cfg)
     pso_cfg = PSOConfig(
         particles=cfg.particles,
         iterations=cfg.iterations,
         inertia="linear",
-        c1=1.5,
-        c2=1.5,
+        c1=cfg.c1,
+        c2=cfg.c2,
+        w_max=cfg.w_max,
+        w_min=cfg.w_min,
+        v_max_fraction=cfg.v_max_fraction,
         max_evaluations=budget,
     )
     res = minimize(model, prob.lower, prob.upper, pso_cfg, rng, init=init)
     return res.best_x, res, model
 
 
-def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: SwarmConfig) -> tuple[np.ndarray, np.ndarray]:
+def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     """Grid slices (K,) and positions (K, 3) of one UAV's path for the traffic list (columns included)."""
     model = CostModel(prob, Obstacles.from_scenario([]), Traffic(cfg.dt_s), cfg)
     dec = decode(prob, x[None, :])
@@ -592,7 +577,7 @@ def _run_round(problems, obstacles, cfg, rng, order, init, elites, previous, pro
     return best_x, best_cost, results
 
 
-def build_vehicle_plan(prob: VehicleProblem, x: np.ndarray, cfg: SwarmConfig, terms: dict) -> VehiclePlan:
+def build_vehicle_plan(prob: VehicleProblem, x: np.ndarray, cfg: Config, terms: dict) -> VehiclePlan:
     """Timed dense path, decimated mission waypoints and cost breakdown of one UAV."""
     v = prob.vehicle
     dec = decode(prob, x[None, :])
@@ -723,19 +708,20 @@ def repair_and_check(
     return plan_
 
 
-def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
+def plan(
+    scenario: Scenario, config: Config, rng: np.random.Generator, progress: Progress | None = None
+) -> Plan:
     """Priority swarm planner: see the module docstring."""
     t_start = time.perf_counter()
     tally = [0]
     token = EVALUATIONS.set(tally)
     try:
-        return _plan(scenario, rng, progress, t_start, tally)
+        return _plan(scenario, config, rng, progress, t_start, tally)
     finally:
         EVALUATIONS.reset(token)
 
 
-def _plan(scenario: Scenario, rng: np.random.Generator, progress, t_start: float, tally: list[int]) -> Plan:
-    cfg = SwarmConfig.from_planner(scenario.planner)
+def _plan(scenario: Scenario, cfg: Config, rng: np.random.Generator, progress, t_start, tally) -> Plan:
     problems, obstacles, lo, hi = prepare(scenario, cfg)
     init, difficulty = initial_paths(problems, obstacles, lo, hi, cfg, rng)
     if progress:

@@ -6,19 +6,28 @@ it ignores obstacles and other vehicles, and says so in each vehicle's notes.
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import numpy as np
+from msgspec import Meta
 
 from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.scenario import Scenario, ScenarioError
-from gcs_planner.validation import MAX_WAYPOINTS, number
+from gcs_planner.validation import MAX_RADIUS_M, MAX_WAYPOINTS
+
+NAME = "straight"
 
 
-def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
+class Config(PlannerConfig, tag=NAME):
+    waypoint_spacing_m: Annotated[float, Meta(ge=1.0, le=MAX_RADIUS_M)] = 100.0  # between mission items
+
+
+def plan(
+    scenario: Scenario, config: Config, rng: np.random.Generator, progress: Progress | None = None
+) -> Plan:
     del rng  # deterministic
-    unknown = sorted(set(scenario.planner) - {"name", "seed", "waypoint_spacing_m"})
-    if unknown:
-        raise ScenarioError(f"planner.{unknown[0]} is not a straight parameter (known: waypoint_spacing_m)")
-    spacing_m = number(scenario.planner.get("waypoint_spacing_m", 100.0), "planner.waypoint_spacing_m", 1.0)
+    spacing_m = config.waypoint_spacing_m
     vehicles = []
     for v in scenario.vehicles:
         start, goal = np.asarray(v.start), np.asarray(v.goal)
@@ -47,4 +56,4 @@ def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
         )
         if progress:
             progress(len(vehicles) / len(scenario.vehicles), v.id)
-    return Plan(origin=scenario.origin, planner="straight", vehicles=vehicles)
+    return Plan(origin=scenario.origin, planner=NAME, vehicles=vehicles)

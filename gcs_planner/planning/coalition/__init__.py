@@ -1,7 +1,7 @@
 """Online coalition task planning (seed 003): contract net under link limits, division-of-labour ACO,
 synchronised Dubins arrivals. Registered as planner "coalition".
 
-``plan(scenario, rng, progress)`` runs the event-driven simulation of the whole scenario
+``plan(scenario, config, rng, progress)`` runs the event-driven simulation of the whole scenario
 (model.py, sim.py) and returns a Plan holding each UAV's whole flown track (recon, tasks, loiter)
 with ``Plan.events`` = the timeline (tenders, bids, awards, strikes, ...).
 
@@ -14,15 +14,21 @@ the swarm flies.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.planning import Progress
 from gcs_planner.planning.coalition.model import CoalitionParams, UavSpec, World, load_world
 from gcs_planner.planning.coalition.sim import CoalitionSim, SimResult
 from gcs_planner.planning.coalition.track import Leg
 from gcs_planner.scenario import Scenario
 
-__all__ = ["CoalitionParams", "SimResult", "World", "leg_vehicle_plan", "load_world", "plan", "simulate"]
+__all__ = [
+    "NAME", "CoalitionParams", "Config", "SimResult", "World", "leg_vehicle_plan", "load_world", "plan",
+    "simulate",
+]  # fmt: skip
 
 
 def simulate(world: World, rng: np.random.Generator) -> SimResult:
@@ -58,8 +64,15 @@ def leg_vehicle_plan(
     )
 
 
-def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
-    world = load_world(scenario)
+NAME = "coalition"
+Config = CoalitionParams
+
+
+def plan(
+    scenario: Scenario, config: Config, rng: np.random.Generator, progress: Progress | None = None
+) -> Plan:
+    """The event simulation's tracks as a Plan (the offline reference; fly-coalition flies it)."""
+    world = replace(load_world(scenario), params=config)
     if progress:
         progress(0.0, "simulating coalition formation")
     result = simulate(world, rng)

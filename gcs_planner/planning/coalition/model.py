@@ -2,8 +2,8 @@
 
 Read from a scenario: the common ``[[vehicles]]`` table gives id, sysid, start, speed and turn radius;
 extra keys on each vehicle row carry the payload (``capabilities = "RSE"``, ``range_m``,
-``munitions``, ``heading_deg``). ``[coalition]`` holds the link and planner parameters,
-``[[coalition.targets]]`` the targets and ``[[coalition.threats]]`` the threats (see
+``munitions``, ``heading_deg``). ``[planner]`` holds the link and planner parameters
+(CoalitionParams), ``[[coalition.targets]]`` the targets and ``[[coalition.threats]]`` the threats (see
 missions/coalition_paper.toml).
 
 Choices where the paper is open (documented here, used everywhere):
@@ -16,17 +16,30 @@ Choices where the paper is open (documented here, used everywhere):
 - Resources are strict (the paper's examples are not): munitions decrease on each strike and a
   UAV without munitions never bids for a strike; the range used is speed x time flown.
 - r_min, C^r, C^e, rewards F, decay beta, weights and ACO parameters are not in the paper;
-  defaults below, all overridable in ``[coalition]``.
+  defaults below, all overridable in ``[planner]``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
+from msgspec import Meta
 
+from gcs_planner.config import (
+    Count,
+    Distance,
+    Duration,
+    Fraction,
+    NonNegative,
+    Positive,
+    PositiveDistance,
+    parse,
+)
+from gcs_planner.planning import PlannerConfig
 from gcs_planner.scenario import Scenario, ScenarioError
+from gcs_planner.validation import MAX_DURATION_S, InputError, items_of, table
 
 __all__ = ["CoalitionParams", "Target", "Threat", "UavSpec", "World", "load_world"]
 
@@ -90,36 +103,35 @@ class Threat:
     appear_s: float = 0.0
 
 
-@dataclass(frozen=True)
-class CoalitionParams:
-    """Link (section 3), path and optimiser parameters. Times [s], distances [m]."""
+class CoalitionParams(PlannerConfig, tag="coalition"):
+    """The [planner] table: link (section 3), path and optimiser parameters. Times [s], distances [m]."""
 
-    link_range_m: float = 1500.0
-    delay_s: float = 0.2
-    t_ta_s: float = 0.5
-    margin_s: float = 0.3
-    delay_jitter_s: float = 0.0  # extra uniform one-way delay in [0, jitter]
-    standoff_m: float = 200.0
-    kappa: float = 1.3
-    detect_radius_m: float = 400.0
-    assess_radius_m: float = 500.0
-    loiter_radius_m: float = 300.0
-    station_radius_m: float = 1000.0  # idle UAVs loiter on this ring about the nearest unfinished target
-    retender_s: float = 10.0
-    t_end_s: float = 400.0
-    method: str = "aco"  # "aco" | "polynomial" | "global"
-    w1: float = 1.0
-    w2: float = 0.3
-    w3: float = 0.5
-    time_scale_s: float = 60.0  # J3 normaliser and eq. 31 window width
-    ants: int = 30  # clusters (choice: 30 x 6 instead of 10 x 15, see aco.py)
-    iterations: int = 6
-    alpha: float = 1.0
-    beta: float = 2.0
-    q0: float = 0.9
-    rho: float = 0.1
-    tau0: float = 1.0
-    sample_ds_m: float = 10.0
+    link_range_m: Distance = 1500.0
+    delay_s: Duration = 0.2
+    t_ta_s: Duration = 0.5
+    margin_s: Duration = 0.3
+    delay_jitter_s: Duration = 0.0  # extra uniform one-way delay in [0, jitter]
+    standoff_m: Distance = 200.0
+    kappa: NonNegative = 1.3
+    detect_radius_m: Distance = 400.0
+    assess_radius_m: Distance = 500.0
+    loiter_radius_m: PositiveDistance = 300.0
+    station_radius_m: PositiveDistance = 1000.0  # idle UAVs loiter on this ring about the nearest target
+    retender_s: Duration = 10.0
+    t_end_s: Duration = 400.0
+    method: Literal["aco", "polynomial", "global"] = "aco"
+    w1: NonNegative = 1.0
+    w2: NonNegative = 0.3
+    w3: NonNegative = 0.5
+    time_scale_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 60.0  # J3 normaliser, eq. 31 window
+    ants: Count = 30  # clusters (choice: 30 x 6 instead of 10 x 15, see docs/coalition.md)
+    iterations: Count = 6
+    alpha: NonNegative = 1.0
+    beta: NonNegative = 2.0
+    q0: Fraction = 0.9
+    rho: Fraction = 0.1
+    tau0: Positive = 1.0
+    sample_ds_m: PositiveDistance = 10.0
 
     @property
     def delta_max_s(self) -> float:
@@ -140,14 +152,17 @@ def load_world(scenario: Scenario) -> World:
     """Build the coalition model from a scenario; errors name the field and value."""
     raw = scenario.raw
     where = str(scenario.path or scenario.name)
-    section = raw.get("coalition", {})
-    if not isinstance(section, dict):
-        raise ScenarioError(f"{where}: [coalition] must be a table")
-    params = _params(section, where)
+    try:
+        section = table(raw.get("coalition", {}), "[coalition]")
+        params = parse(CoalitionParams, scenario.planner, "planner")
+        targets_rows = items_of(section.get("targets", []), "coalition.targets")
+        threat_rows = items_of(section.get("threats", []), "coalition.threats")
+    except InputError as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
     rows = raw.get("vehicles", [])
     uavs = [_uav(i, v, rows[i] if i < len(rows) else {}, where) for i, v in enumerate(scenario.vehicles)]
     targets = [
-        _target(t, f"{where}: coalition.targets[{i}]") for i, t in enumerate(section.get("targets", []))
+        _target(t, f"{where}: coalition.targets[{i}]") for i, t in enumerate(targets_rows)
     ]
     ids = {u.id for u in uavs}
     for t in targets:
@@ -160,29 +175,9 @@ def load_world(scenario: Scenario) -> World:
             radius_m=_num(d, "radius_m", f"{where}: coalition.threats[{i}]", positive=True),
             appear_s=_num(d, "appear_s", f"{where}: coalition.threats[{i}]", 0.0),
         )
-        for i, d in enumerate(section.get("threats", []))
+        for i, d in enumerate(threat_rows)
     ]
     return World(uavs=uavs, targets=targets, threats=threats, params=params)
-
-
-def _params(section: dict[str, Any], where: str) -> CoalitionParams:
-    defaults = CoalitionParams()
-    kwargs: dict[str, Any] = {}
-    for name, default in defaults.__dict__.items():
-        if name not in section:
-            continue
-        value = section[name]
-        if isinstance(default, str):
-            if value not in ("aco", "polynomial", "global"):
-                raise ScenarioError(f"{where}: coalition.{name} must be aco|polynomial|global, got {value!r}")
-            kwargs[name] = value
-        elif isinstance(default, int):
-            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
-                raise ScenarioError(f"{where}: coalition.{name} must be an integer >= 1, got {value!r}")
-            kwargs[name] = value
-        else:
-            kwargs[name] = _num(section, name, f"{where}: coalition", nonneg=True)
-    return CoalitionParams(**kwargs)
 
 
 def _uav(index: int, v, row: dict[str, Any], where: str) -> UavSpec:

@@ -24,11 +24,14 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Any
+from typing import Annotated, Any
 
 import numpy as np
+from msgspec import Meta
 
+from gcs_planner.config import Count, Distance, Duration, Fraction, NonNegative
 from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.deconflict4d.manned import (
     MannedTrack,
     predict_zones,
@@ -38,13 +41,12 @@ from gcs_planner.planning.deconflict4d.manned import (
 from gcs_planner.planning.deconflict4d.planner import Outcome, Problem, Settings, UavSpec, full_polyline, run
 from gcs_planner.planning.deconflict4d.trajectory import DYNAMICS
 from gcs_planner.scenario import Scenario, ScenarioError
-from gcs_planner.validation import number
+from gcs_planner.validation import MAX_DURATION_S
 
-__all__ = ["build_problem", "plan", "to_plan"]
+__all__ = ["NAME", "Config", "build_problem", "plan", "to_plan"]
 
 NAME = "deconflict_4d"
 log = logging.getLogger(__name__)
-_ZONE_KEYS = {"confidence": 0.95, "safety_m": 5.0, "min_mode_weight": 0.01}
 _DYN_KEYS = (
     "v_max_mps",
     "a_max_mps2",
@@ -57,33 +59,50 @@ _DYN_KEYS = (
 )
 
 
-def plan(scenario: Scenario, rng: np.random.Generator, progress=None) -> Plan:
-    problem = build_problem(scenario)
+class Config(PlannerConfig, tag=NAME):
+    """The [planner] table: the method's Settings (planner.py) and the manned-traffic zones."""
+
+    particles: Count = 40
+    iterations: Count = 150  # the paper's maxiteration
+    interior_waypoints: Count = 1
+    c1: NonNegative = 1.5
+    c2: NonNegative = 1.5
+    w_max: NonNegative = 0.9
+    w_min: NonNegative = 0.4
+    init_spread_m: Distance = 3.0
+    insert_spread_m: Distance = 2.0
+    insert_radius_m: Distance = 10.0
+    zone_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 5.0
+    early_stop: bool = True
+    w_conflict: NonNegative = 1000.0
+    w_accel: NonNegative = 1000.0
+    w_speed: NonNegative = 1000.0
+    w_turn: NonNegative = 10.0
+    w_time: NonNegative = 1.0
+    w_time_limit: NonNegative = 100.0
+    use_delay: bool = True
+    delay_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 1.0
+    delay_max_steps: Annotated[int, Meta(ge=0, le=1_000_000)] = 200
+    max_delay_s: Duration = 60.0
+    use_waypoints: bool = True
+    insert_max_steps: Annotated[int, Meta(ge=0, le=1_000_000)] = 40
+    insert_particles: Count = 20
+    insert_iterations: Count = 50
+    max_waypoints: Count = 8
+    max_rounds: Count = 3
+    confidence: Annotated[float, Meta(gt=0.0, lt=1.0)] = 0.95  # manned-traffic zones (manned.py)
+    safety_m: Distance = 5.0
+    min_mode_weight: Fraction = 0.01
+
+    def settings(self) -> Settings:
+        return Settings(**{f.name: getattr(self, f.name) for f in dataclasses.fields(Settings)})
+
+
+def plan(
+    scenario: Scenario, config: Config, rng: np.random.Generator, progress: Progress | None = None
+) -> Plan:
+    problem = build_problem(scenario, config)
     return to_plan(scenario, problem, run(problem, rng, progress))
-
-
-def _settings(scenario: Scenario) -> tuple[Settings, dict[str, float]]:
-    fields = {f.name: f for f in dataclasses.fields(Settings)}
-    kwargs, zone = {}, dict(_ZONE_KEYS)
-    for key, value in scenario.planner.items():
-        if key in ("name", "seed"):
-            continue
-        if key in zone:
-            zone[key] = number(value, f"{scenario.name}: planner.{key}", 0.0)
-            continue
-        if key not in fields:
-            raise ScenarioError(
-                f"{scenario.name}: planner.{key} is not a deconflict_4d setting (got {value!r})"
-            )
-        default = getattr(Settings(), key)
-        if isinstance(default, bool) != isinstance(value, bool) or not isinstance(value, int | float | bool):
-            raise ScenarioError(f"{scenario.name}: planner.{key} must be like {default!r}, got {value!r}")
-        if isinstance(default, int) and not isinstance(default, bool) and value != int(value):
-            raise ScenarioError(f"{scenario.name}: planner.{key} must be an integer, got {value!r}")
-        if not isinstance(value, bool):
-            number(value, f"{scenario.name}: planner.{key}", 0.0)
-        kwargs[key] = type(default)(value)
-    return Settings(**kwargs), zone
 
 
 def _uav(scenario: Scenario, i: int) -> UavSpec:
@@ -165,9 +184,9 @@ def _manned_track(d: dict[str, Any], where: str) -> MannedTrack:
         raise ScenarioError(f"{where}: {exc}") from None
 
 
-def build_problem(scenario: Scenario) -> Problem:
+def build_problem(scenario: Scenario, config: Config) -> Problem:
     """Scenario -> Problem (settings, UAV specs, manned no-fly zones, waypoint box)."""
-    settings, zone_cfg = _settings(scenario)
+    settings = config.settings()
     if scenario.cylinders or scenario.hemispheres:
         log.warning("deconflict_4d ignores static obstacles (cylinders / hemispheres) in %s", scenario.name)
     if not scenario.vehicles:
@@ -192,9 +211,9 @@ def build_problem(scenario: Scenario) -> Problem:
             track,
             j,
             horizon,
-            zone_cfg["safety_m"],
-            zone_cfg["confidence"],
-            zone_cfg["min_mode_weight"],
+            config.safety_m,
+            config.confidence,
+            config.min_mode_weight,
             settings.zone_step_s,
         )
     return Problem(uavs=uavs, zones=zones, settings=settings, lower_m=lower, upper_m=upper)
