@@ -3,23 +3,21 @@
 Mirrors the seed papers' HIL setup (planner -> datalink -> flight controller -> telemetry ->
 display): the plan's missions are uploaded to every vehicle concurrently over MAVLink, the fleet
 is armed and started, every received frame is logged to MCAP (and .tlog on request), and the
-flown tracks are checked against the plan (gcs_planner.conformance). The vehicles are mock
-autopilots (sitl_mock) started here, or real ones / SITL reached with ``connect`` URLs.
+flown tracks are checked against the plan (gcs_planner.conformance). The vehicles come from a
+VehicleSource (gcs_planner.vehicles): the mock fleet the CLI hands in, or real ones / SITL.
 
 Choices:
 - Each mock vehicle's home is the plan's first waypoint projected to the ground, so mission
   altitudes (relative to home) equal plan ``z`` on the flat mock world, and its airframe is
-  tuned to the planned speed and turn radius (``_airframe_for``).
+  tuned to the planned speed and turn radius (sitl_mock.plan_fleet).
 - Track time is the vehicle's ``time_boot_ms`` for mocks (one simulated clock for the whole fleet,
   so separations are compared at the same instant whatever the speed-up) and the receive time
   for real vehicles, whose boot clocks differ.
-- Two-phase start, so that the plan's timing (and with it the planned separation) holds in the
-  air: every vehicle is armed and takes off (MAV_CMD_NAV_TAKEOFF) to its first waypoint's
-  altitude; once all hover there, each vehicle's route starts with MAV_CMD_MISSION_START at the
-  item after NAV_TAKEOFF, at the common start time plus its planned delay (delayed take-off as
-  a timed start; the mission's NAV_DELAY is then skipped), less the time the vehicle loses
-  accelerating to cruise speed (v / 2a, a = ROUTE_ACCEL_MPS2). Climb rates differ between
-  vehicles and altitudes, so a one-shot start would shift every route by its own climb time.
+- Two-phase start (gcs_planner.flight_ops), so that the plan's timing (and with it the planned
+  separation) holds in the air: take off, then start each route at the common start plus its
+  planned delay (delayed take-off as a timed start; the mission's NAV_DELAY is then skipped).
+  Climb rates differ between vehicles and altitudes, so a one-shot start would shift every route
+  by its own climb time.
 - While the routes run, a ScheduleKeeper (gcs_planner.timekeeping) sends each vehicle ground
   speed set-points (MAV_CMD_DO_CHANGE_SPEED) that hold it to the plan's timing; autopilots
   slow for corners and would otherwise fall behind the schedule the separation was planned on.
@@ -34,20 +32,26 @@ import asyncio
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
-from gcs_planner.conformance import MovingObstacle, Track, VehicleReport, conformance_report
+from gcs_planner.conformance import MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
+from gcs_planner.flight_ops import (
+    TrackRecorder,
+    accel_lead_s,
+    build_missions,
+    start_routes,
+    take_off_all,
+    vehicle_quirks,
+    wait_for_vehicles,
+    wait_until_done,
+)
 from gcs_planner.flight_report import write_flight_report
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at, take_off
-from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for, quirks_named
-from gcs_planner.mavlink.errors import MavlinkError
+from gcs_planner.mavlink.actions import safe_end
+from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_named
 from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
-from gcs_planner.mavlink.items import AUTOPILOTS, plan_to_items
+from gcs_planner.mavlink.items import AUTOPILOTS
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
@@ -55,33 +59,19 @@ from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.timekeeping import ScheduleKeeper
+from gcs_planner.vehicles import VehicleSource
 
-__all__ = ["FlyOptions", "FlyResult", "fly"]
+__all__ = ["FlyOptions", "FlyResult", "check_flight", "fly"]
 
 log = logging.getLogger(__name__)
 
-HEARTBEAT_WAIT_S = 10.0
+HEARTBEAT_WAIT_S = 10.0  # simulated vehicles answer at once
 REAL_HEARTBEAT_WAIT_S = 30.0  # real vehicles / SITL started by hand
-ARM_TIMEOUT_S = 120.0  # vehicle time to pass pre-arm checks (ArduCopter SITL needs ~45 s after boot)
-TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
-LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
-TAKEOFF_ATTEMPTS = 3
-TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" once no lower than this below its take-off altitude
-NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
-MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
-MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
-KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
-CATCH_UP_FACTOR = 1.3  # mock top speed / planned speed (headroom for schedule keeping)
-G_MPS2 = 9.80665
-ROUTE_ACCEL_MPS2 = 2.5  # real vehicles' assumed acceleration from the hover (ArduCopter WPNAV_ACCEL)
 
 
 @dataclass
 class FlyOptions:
     out_dir: Path = Path("out")
-    connect: list[str] = field(default_factory=list)  # empty: start mock vehicles
-    speedup: float = 10.0
-    autopilot: str = "ardupilot"
     workers: int = 8
     tlog: bool = False
     rrd: bool = True
@@ -109,47 +99,6 @@ class FlyResult:
         return all(r.passed for r in self.reports) and all(u.ok for u in self.uploads.values())
 
 
-class _TrackRecorder:
-    """Collects each vehicle's positions from the link's frames (completion is VehicleStatus's)."""
-
-    def __init__(self, origin: Origin, sim_clock: bool, sysids) -> None:
-        self.origin = origin
-        self.sim_clock = sim_clock
-        self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in sysids}
-        self.completed: dict[int, bool] = {}
-
-    def on_frame(self, msg, raw: bytes, t_s: float) -> None:
-        sysid = msg.get_srcSystem()
-        if sysid not in self.samples or msg.get_type() != "GLOBAL_POSITION_INT":
-            return
-        t = msg.time_boot_ms / 1000.0 if self.sim_clock else t_s
-        self.samples[sysid].append((t, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
-
-    def latest(self, sysid: int) -> tuple[float, np.ndarray] | None:
-        """Time [s] and ENU position [m] of the vehicle's newest position report."""
-        if not self.samples[sysid]:
-            return None
-        t, lat, lon, alt = self.samples[sysid][-1]
-        return t, np.array(geodetic_to_enu(lat, lon, alt, self.origin))
-
-    def now_s(self) -> float:
-        """The newest report time over all vehicles (the fleet's clock)."""
-        return max((rows[-1][0] for rows in self.samples.values() if rows), default=0.0)
-
-    def tracks(self) -> dict[int, Track]:
-        out = {}
-        for sysid, rows in self.samples.items():
-            if not rows:
-                continue
-            arr = np.asarray(rows, dtype=float)
-            e, n, u = geodetic_to_enu(arr[:, 1], arr[:, 2], arr[:, 3], self.origin)
-            order = np.argsort(arr[:, 0], kind="stable")
-            out[sysid] = Track(
-                arr[order, 0], np.column_stack([e, n, u])[order], self.completed.get(sysid, False)
-            )
-        return out
-
-
 def manned_traffic(scenario: Scenario, route_t0_s: float) -> list[MovingObstacle]:
     """The scenario's [[manned]] aircraft as constant-velocity traffic from the route start.
 
@@ -169,97 +118,6 @@ def manned_traffic(scenario: Scenario, route_t0_s: float) -> list[MovingObstacle
         for k, m in enumerate(scenario.raw.get("manned", []))
         if "position_m" in m and "velocity_mps" in m
     ]
-
-
-def _airframe_for(vp):
-    """The mock airframe tuned to the planned vehicle, as one would set SITL parameters.
-
-    The plan's speed and turn radius need a lateral acceleration of v^2 / R, and its steepest
-    legs a climb and sink rate of v x slope. A multirotor gets at least that acceleration, a fixed
-    wing at least that bank, both at least those vertical rates, all with headroom
-    (CATCH_UP_FACTOR) to catch up with their schedule.
-    """
-    from sitl_mock import AIRFRAMES
-
-    base = AIRFRAMES[vp.vehicle_type]
-    speed = float(np.max(vp.speeds_mps))
-    if speed <= 0:
-        return base
-    legs = np.diff(vp.path, axis=0)
-    horizontal = np.hypot(legs[:, 0], legs[:, 1])
-    slope = (legs[:, 2] / np.maximum(horizontal, 1e-9))[horizontal > 1.0]  # not take-off / landing
-    frame = replace(
-        base,
-        cruise_speed_mps=speed,
-        max_speed_mps=max(base.max_speed_mps, CATCH_UP_FACTOR * speed),
-        climb_rate_mps=max(base.climb_rate_mps, CATCH_UP_FACTOR * speed * float(np.max(slope, initial=0.0))),
-        sink_rate_mps=max(base.sink_rate_mps, -CATCH_UP_FACTOR * speed * float(np.min(slope, initial=0.0))),
-    )
-    if vp.turn_radius_m <= 0:
-        return frame
-    lateral_mps2 = speed**2 / vp.turn_radius_m
-    if vp.vehicle_type == "fixed_wing":
-        return replace(frame, max_bank_rad=max(base.max_bank_rad, float(np.arctan(lateral_mps2 / G_MPS2))))
-    return replace(frame, accel_mps2=max(base.accel_mps2, lateral_mps2))
-
-
-def _mock_fleet(plan: Plan, options: FlyOptions):
-    """One mock per vehicle, home under its first waypoint; a fixed wing's home is its take-off
-    climb run south of it (the mock climbs north), so that it reaches the first waypoint at its
-    altitude and flies on into the route."""
-    from sitl_mock import MockFleet
-    from sitl_mock.flight import climb_run_m
-
-    specs = []
-    for vp in plan.vehicles:
-        x, y = vp.waypoints[0, :2]
-        frame = _airframe_for(vp)
-        if vp.vehicle_type == "fixed_wing":
-            frame = replace(frame, climb_rate_mps=TAKEOFF_CLIMB_MPS)
-            y -= climb_run_m(frame.cruise_speed_mps, TAKEOFF_CLIMB_MPS, float(vp.waypoints[0, 2]))
-        lat, lon, alt = enu_to_geodetic(x, y, 0.0, plan.origin)
-        specs.append(
-            dict(
-                sysid=vp.sysid,
-                home=Origin(lat, lon, alt),
-                vehicle_type=vp.vehicle_type,
-                profile=options.autopilot,
-                airframe=frame,
-            )
-        )
-    # position reports at MOCK_TELEMETRY_HZ of flight time, within what one Python process streams
-    rate_hz = min(MOCK_TELEMETRY_HZ * options.speedup, MAX_WALL_TELEMETRY_HZ)
-    return MockFleet(vehicles=specs, speedup=options.speedup, home=plan.origin, rate_hz=rate_hz)
-
-
-async def _wait_for_vehicles(link: MavlinkLink, sysids: list[int], timeout_s: float) -> None:
-    """Until every vehicle's autopilot sent a HEARTBEAT (any other frame, or a camera's HEARTBEAT,
-    says nothing of what the vehicle is); duplicate system ids are refused."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if all(_heard(link, s) for s in sysids):
-            break
-        await asyncio.sleep(0.05)
-    missing = [s for s in sysids if not _heard(link, s)]
-    if missing:
-        raise UserError(f"no autopilot HEARTBEAT from sysid {missing} within {timeout_s:.0f} s")
-    duplicates = link.duplicates()
-    if duplicates:
-        raise UserError(f"system ids answer from several addresses (refusing to merge): {duplicates}")
-
-
-def _heard(link: MavlinkLink, sysid: int) -> bool:
-    return getattr(link.vehicles.get(sysid), "autopilot", None) is not None
-
-
-def vehicle_quirks(link: MavlinkLink, sysids: list[int]) -> dict[int, AutopilotQuirks]:
-    """Each vehicle's autopilot entry, from the HEARTBEAT it sent."""
-    return {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in sysids}
-
-
-def build_missions(plan: Plan, quirks: dict[int, AutopilotQuirks]) -> dict[int, list]:
-    """Each vehicle's mission items in its autopilot's conventions (validated)."""
-    return {vp.sysid: plan_to_items(vp, plan.origin, quirks[vp.sysid].conventions) for vp in plan.vehicles}
 
 
 def check_flight(plan: Plan) -> None:
@@ -293,6 +151,7 @@ async def fly(
     scenario: Scenario,
     plan: Plan,
     options: FlyOptions,
+    vehicles: VehicleSource,
     progress: Callable[[str, float, float], None] | None = None,
 ) -> FlyResult:
     """Upload, start and record the whole fleet; return the per-vehicle conformance report.
@@ -301,134 +160,164 @@ async def fly(
     ``progress("wait", sysid, 0)`` with a reason while a vehicle is not ready to arm.
     """
     t_wall = time.monotonic()
-    sysids = [vp.sysid for vp in plan.vehicles]
     check_flight(plan)  # before anything is sent
+    sysids = [vp.sysid for vp in plan.vehicles]
     unknown = sorted(set(options.drift_mps) - set(sysids))
     if unknown:
         raise UserError(f"drift for sysid {unknown[0]}, which is not in the plan {sorted(sysids)}")
-    log_errors: list[str] = []
+    if options.drift_mps and not vehicles.simulated:
+        raise UserError("--drift injects a fault into mock vehicles; it cannot act on connected vehicles")
     options.out_dir.mkdir(parents=True, exist_ok=True)
-    mcap_path = options.out_dir / "flight.mcap"
-    tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
-    route_t0_s = 0.0
-    fleet = None if options.connect else _mock_fleet(plan, options)
-    speedup = 1.0 if fleet is None else options.speedup
-    scenario_text = scenario.path.read_text() if scenario.path else None
-    uploads: dict[int, VehicleResult] = {}
-    end_states: dict[int, str] = {}
-    aborted: BaseException | None = None
-    if fleet is not None:
-        fleet.__enter__()
-    try:
-        urls = options.connect or [f"udpout:{h}:{p}" for h, p in fleet.addresses]
-        link = await MavlinkLink.open(*urls)
-        recorder = _TrackRecorder(plan.origin, fleet is not None, sysids)
-        status = VehicleStatus(link, sysids)
-        quirks: dict[int, AutopilotQuirks] = {}
-        try:
-            flight_log = FlightLogger(mcap_path, plan.origin, plan, scenario_text, tlog_path)
-        except OSError as exc:
-            raise UserError(f"cannot write the flight log {mcap_path}: {exc.strerror or exc}") from None
-        with _KeptLog(flight_log, log_errors) as logger:
-            link.subscribe(logger.on_frame)
-            link.subscribe(recorder.on_frame)
-            if options.live is not None:
-                link.subscribe(_live_views(options.live, plan, scenario).on_frame)
-            try:
-                await _wait_for_vehicles(link, sysids, HEARTBEAT_WAIT_S if fleet else REAL_HEARTBEAT_WAIT_S)
-                quirks = vehicle_quirks(link, sysids)
-                missions = build_missions(plan, quirks)
-                status.last_seq = {s: len(m) - 1 for s, m in missions.items()}
-                await request_streams(link, sysids)
-                uploads = await upload_fleet(
-                    link,
-                    missions,
-                    workers=options.workers,
-                    progress=lambda done, total, r: progress and progress("upload", done, total),
-                )
-                for sysid, r in uploads.items():
-                    logger.log_event(
-                        {"event": "upload", "sysid": sysid, "ok": r.ok, "error": str(r.error or "")}
-                    )
-                failed = [s for s, r in uploads.items() if not r.ok]
-                if failed:
-                    log.error("upload failed for sysid %s; not starting the fleet", failed)
-                else:
-                    for sysid, drift in options.drift_mps.items():
-                        if fleet is not None:
-                            fleet.set_drift(sysid, *drift)
-                    await _take_off_all(link, plan, status, speedup, options, quirks, progress, missions)
-                    climbed = frozenset(v.sysid for v in plan.vehicles if v.vehicle_type == "fixed_wing")
-                    logger.log_event({"event": "airborne", "sysids": sysids})
-                    leads = {
-                        vp.sysid: _accel_lead_s(
-                            vp, ROUTE_ACCEL_MPS2 if fleet is None else _airframe_for(vp).accel_mps2
-                        )
-                        for vp in plan.vehicles
-                    }
-                    lead_s = max(leads.values())
-                    route_t0_s = (recorder.now_s() if fleet is not None else time.time()) + lead_s
-                    routes = asyncio.create_task(
-                        _start_routes(link, plan, missions, speedup, logger, lead_s, leads, quirks, climbed)
-                    )
-                    keeper = None
-                    if options.keep_schedule:
-                        keeper = ScheduleKeeper()
-                        for vp in plan.vehicles:
-                            keeper.add(vp)
-                    await _wait_until_done(
-                        link, recorder, status, plan, speedup, options, progress, keeper, route_t0_s, quirks
-                    )
-                    await routes
-            except BaseException as exc:  # noqa: BLE001 - any failure or Ctrl-C ends safely, then re-raises
-                aborted = exc
-            finally:
-                if quirks and (aborted is not None or not all(t.done for t in status.tracks.values())):
-                    end_states = await asyncio.shield(safe_end(link, status, quirks))
-                elif quirks:  # every mission done: say where each vehicle ended, command nothing
-                    end_states = {s: _end_state(link, s) for s in sysids}
-                if end_states:
-                    states = {str(k): v for k, v in end_states.items()}
-                    logger.log_event({"event": "safe_end" if aborted else "end", "states": states})
-                status.close()
-                await link.close()
-    finally:
-        if fleet is not None:
-            fleet.__exit__(None, None, None)
-    if aborted is not None:
-        if end_states:
-            log.error("safe end: %s", _said(end_states))
-        if isinstance(aborted, UserError) and end_states:
-            raise UserError(f"{aborted}; safe end: {_said(end_states)}") from aborted
-        raise aborted
-    for sysid, track in status.tracks.items():
-        recorder.completed[sysid] = track.done
-    reports = conformance_report(
-        plan,
-        recorder.tracks(),
-        {v.sysid: v.separation_m for v in scenario.vehicles},
-        scenario.cylinders,
-        scenario.hemispheres,
-        manned_traffic(scenario, route_t0_s),
-        max_cross_track_m=options.max_cross_track_m,
-    )
-    for r in reports:
-        if not uploads[r.sysid].ok:
-            r.failures.insert(0, f"upload failed: {uploads[r.sysid].error}")
-    report_path = write_flight_report(
-        options.out_dir / "report.png", plan, recorder.tracks(), reports, scenario, options.max_cross_track_m
-    )
-    rrd_path = None
-    if options.rrd and not log_errors:
-        from gcs_planner.telemetry import log_flight_to_rerun, read_flight
+    flight = _Flight(scenario, plan, options, vehicles, progress)
+    with vehicles as urls:
+        await flight.run(urls)
+    if flight.aborted is not None:
+        if flight.end_states:
+            log.error("safe end: %s", _said(flight.end_states))
+        if isinstance(flight.aborted, UserError) and flight.end_states:
+            raise UserError(f"{flight.aborted}; safe end: {_said(flight.end_states)}") from flight.aborted
+        raise flight.aborted
+    return flight.result(time.monotonic() - t_wall)
 
-        rrd_path = options.out_dir / "flight.rrd"
-        log_flight_to_rerun(read_flight(mcap_path), rrd_path)
-    wall_s = time.monotonic() - t_wall
-    log_error = log_errors[0] if log_errors else None
-    return FlyResult(
-        reports, uploads, mcap_path, rrd_path, tlog_path, wall_s, end_states, report_path, log_error
-    )
+
+class _Flight:
+    """One flight's state, from the link's opening to the report (fly's steps as methods)."""
+
+    def __init__(self, scenario, plan, options: FlyOptions, vehicles: VehicleSource, progress) -> None:
+        self.scenario, self.plan, self.options, self.vehicles, self.progress = (
+            scenario, plan, options, vehicles, progress
+        )  # fmt: skip
+        self.sysids = [vp.sysid for vp in plan.vehicles]
+        self.mcap_path = options.out_dir / "flight.mcap"
+        self.tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
+        self.recorder = TrackRecorder(plan.origin, vehicles.simulated, self.sysids)
+        self.quirks: dict[int, AutopilotQuirks] = {}
+        self.uploads: dict[int, VehicleResult] = {}
+        self.end_states: dict[int, str] = {}
+        self.log_errors: list[str] = []
+        self.aborted: BaseException | None = None
+        self.route_t0_s = 0.0
+        self.status: VehicleStatus | None = None
+
+    async def run(self, urls: list[str]) -> None:
+        """Fly on the link to ``urls``; any failure or Ctrl-C ends safely, kept in ``aborted``."""
+        plan = self.plan
+        link = await MavlinkLink.open(*urls)
+        self.status = VehicleStatus(link, self.sysids)
+        scenario_text = self.scenario.path.read_text() if self.scenario.path else None
+        try:
+            flight_log = FlightLogger(self.mcap_path, plan.origin, plan, scenario_text, self.tlog_path)
+        except OSError as exc:
+            self.status.close()
+            await link.close()
+            raise UserError(f"cannot write the flight log {self.mcap_path}: {exc.strerror or exc}") from None
+        with _KeptLog(flight_log, self.log_errors) as logger:
+            link.subscribe(logger.on_frame)
+            link.subscribe(self.recorder.on_frame)
+            if self.options.live is not None:
+                link.subscribe(_live_views(self.options.live, plan, self.scenario).on_frame)
+            try:
+                await self._missions(link, logger)
+            except BaseException as exc:  # noqa: BLE001 - any failure or Ctrl-C ends safely, then re-raises
+                self.aborted = exc
+            finally:
+                await self._end(link, logger)
+
+    async def _missions(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        wait_s = HEARTBEAT_WAIT_S if self.vehicles.simulated else REAL_HEARTBEAT_WAIT_S
+        await wait_for_vehicles(link, self.sysids, wait_s)
+        self.quirks = vehicle_quirks(link, self.sysids)
+        missions = build_missions(self.plan, self.quirks)
+        self.status.last_seq = {s: len(m) - 1 for s, m in missions.items()}
+        await request_streams(link, self.sysids)
+        progress = self.progress
+        self.uploads = await upload_fleet(
+            link,
+            missions,
+            workers=self.options.workers,
+            progress=lambda done, total, r: progress and progress("upload", done, total),
+        )
+        for sysid, r in self.uploads.items():
+            logger.log_event({"event": "upload", "sysid": sysid, "ok": r.ok, "error": str(r.error or "")})
+        failed = [s for s, r in self.uploads.items() if not r.ok]
+        if failed:
+            log.error("upload failed for sysid %s; not starting the fleet", failed)
+            return
+        for sysid, drift in self.options.drift_mps.items():
+            self.vehicles.set_drift(sysid, *drift)
+        await self._routes(link, logger, missions)
+
+    async def _routes(self, link: MavlinkLink, logger: FlightLogger, missions: dict) -> None:
+        """Take off, start every route on time, keep the schedule until all are done."""
+        plan, options, speedup = self.plan, self.options, self.vehicles.speedup
+        await take_off_all(
+            link, plan, self.status, speedup, self.quirks, options.workers, options.timeout_factor,
+            self.progress, missions,
+        )  # fmt: skip
+        climbed = frozenset(v.sysid for v in plan.vehicles if v.vehicle_type == "fixed_wing")
+        logger.log_event({"event": "airborne", "sysids": self.sysids})
+        leads = {vp.sysid: accel_lead_s(vp, self.vehicles.accel_mps2(vp.sysid)) for vp in plan.vehicles}
+        lead_s = max(leads.values())
+        now = self.recorder.now_s() if self.vehicles.simulated else time.time()
+        self.route_t0_s = now + lead_s
+        routes = asyncio.create_task(
+            start_routes(link, plan, missions, speedup, logger, lead_s, leads, self.quirks, climbed)
+        )
+        keeper = None
+        if options.keep_schedule:
+            keeper = ScheduleKeeper()
+            for vp in plan.vehicles:
+                keeper.add(vp)
+        await wait_until_done(
+            link, self.recorder, self.status, plan, speedup, options.timeout_factor, self.progress, keeper,
+            self.route_t0_s, self.quirks,
+        )  # fmt: skip
+        await routes
+
+    async def _end(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        """Send airborne vehicles home after a failure (nothing after a clean end), log it, close."""
+        if self.quirks and (self.aborted is not None or not all(t.done for t in self.status.tracks.values())):
+            self.end_states = await asyncio.shield(safe_end(link, self.status, self.quirks))
+        elif self.quirks:  # every mission done: say where each vehicle ended, command nothing
+            self.end_states = {s: _end_state(link, s) for s in self.sysids}
+        if self.end_states:
+            states = {str(k): v for k, v in self.end_states.items()}
+            logger.log_event({"event": "safe_end" if self.aborted else "end", "states": states})
+        self.status.close()
+        await link.close()
+
+    def result(self, wall_s: float) -> FlyResult:
+        """The conformance report, the flight report PNG and the .rrd of the flown log."""
+        plan, scenario, options = self.plan, self.scenario, self.options
+        for sysid, track in self.status.tracks.items():
+            self.recorder.completed[sysid] = track.done
+        reports = conformance_report(
+            plan,
+            self.recorder.tracks(),
+            {v.sysid: v.separation_m for v in scenario.vehicles},
+            scenario.cylinders,
+            scenario.hemispheres,
+            manned_traffic(scenario, self.route_t0_s),
+            max_cross_track_m=options.max_cross_track_m,
+        )
+        for r in reports:
+            if not self.uploads[r.sysid].ok:
+                r.failures.insert(0, f"upload failed: {self.uploads[r.sysid].error}")
+        report_path = write_flight_report(
+            options.out_dir / "report.png", plan, self.recorder.tracks(), reports, scenario,
+            options.max_cross_track_m,
+        )  # fmt: skip
+        rrd_path = None
+        if options.rrd and not self.log_errors:
+            from gcs_planner.telemetry import log_flight_to_rerun, read_flight
+
+            rrd_path = options.out_dir / "flight.rrd"
+            log_flight_to_rerun(read_flight(self.mcap_path), rrd_path)
+        log_error = self.log_errors[0] if self.log_errors else None
+        return FlyResult(
+            reports, self.uploads, self.mcap_path, rrd_path, self.tlog_path, wall_s, self.end_states,
+            report_path, log_error,
+        )  # fmt: skip
 
 
 def _live_views(rec, plan: Plan, scenario: Scenario):
@@ -447,172 +336,3 @@ def _end_state(link: MavlinkLink, sysid: int) -> str:
 
 def _said(end_states: dict[int, str]) -> str:
     return ", ".join(f"sysid {s} {what}" for s, what in sorted(end_states.items()))
-
-
-async def _take_off_all(
-    link: MavlinkLink,
-    plan: Plan,
-    status: VehicleStatus,
-    speedup: float,
-    options: FlyOptions,
-    quirks: dict[int, AutopilotQuirks],
-    progress=None,
-    missions: dict | None = None,
-) -> None:
-    """Arm every vehicle once it is ready and climb it to its first waypoint's altitude; return
-    when all are there. With ``missions``, a fixed wing (which cannot wait in place) starts its
-    route as soon as it is up (``_start_routes`` leaves it out)."""
-    gate = asyncio.Semaphore(options.workers)
-    targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
-
-    def late() -> list[int]:
-        return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - TAKEOFF_ALT_TOL_M]
-
-    async def climb_into_route(vp) -> None:
-        while vp.sysid in late():
-            await asyncio.sleep(0.02)
-        items = missions[vp.sysid]
-        await start_mission_at(link, vp.sysid, quirks[vp.sysid], _route_seq(items), len(items) - 1)
-
-    def waiting(sysid: int, reason: str) -> None:
-        log.info("sysid %d not ready to arm: %s", sysid, reason)
-        if progress:
-            progress("wait", sysid, reason)
-
-    async def one(vp) -> None:
-        async with gate:
-            q = quirks[vp.sysid]
-            for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
-                try:
-                    await take_off(
-                        link, status, vp.sysid, q, float(vp.waypoints[0, 2]), ARM_TIMEOUT_S, speedup, waiting
-                    )
-                    break
-                except MavlinkError as exc:
-                    # a lost ACK makes the retried command fail (already armed / airborne)
-                    if (status.tracks[vp.sysid].rel_alt_m or 0.0) > TAKEOFF_ALT_TOL_M:
-                        return
-                    if attempt == TAKEOFF_ATTEMPTS:
-                        reason = status.reason(vp.sysid)
-                        raise UserError(
-                            f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) could not take off: {exc}"
-                            + (f" ({reason})" if reason else "")
-                        ) from exc
-                    log.warning("sysid %d take-off attempt %d failed: %s", vp.sysid, attempt, exc)
-                    await asyncio.sleep(1.0 / speedup)
-        if missions is not None and vp.vehicle_type == "fixed_wing":
-            climbs.append(asyncio.create_task(climb_into_route(vp)))
-
-    climbs: list[asyncio.Task] = []
-    await asyncio.gather(*(one(vp) for vp in plan.vehicles))
-    climb_s = max(float(vp.waypoints[0, 2]) for vp in plan.vehicles) / TAKEOFF_CLIMB_MPS
-    deadline = time.monotonic() + climb_s * options.timeout_factor / speedup + 10.0
-    while time.monotonic() < deadline and late():
-        await asyncio.sleep(0.05)
-    if late():
-        for task in climbs:
-            task.cancel()
-        seen = {s: status.tracks[s].rel_alt_m for s in late()}
-        raise UserError(f"sysid {late()} did not reach take-off altitude in time (relative altitude {seen})")
-    await asyncio.gather(*climbs)
-
-
-def _accel_lead_s(vp, accel_mps2: float) -> float:
-    """How much earlier than planned a route starts, so that accelerating from the hover at
-    ``accel_mps2`` puts the vehicle where a plan assuming instant cruise speed has it."""
-    return float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0]) / (2.0 * accel_mps2)
-
-
-async def _start_routes(
-    link: MavlinkLink,
-    plan: Plan,
-    missions: dict,
-    speedup: float,
-    logger,
-    lead_s: float,
-    leads: dict[int, float],
-    quirks: dict[int, AutopilotQuirks],
-    started: frozenset[int] = frozenset(),
-) -> None:
-    """Start each route (the item after NAV_TAKEOFF) at its planned start time, but those in
-    ``started`` (fixed wings that climbed into theirs).
-
-    Route time 0 is ``lead_s`` after now; each route starts its own acceleration lead earlier.
-    """
-    t0 = time.monotonic()
-
-    async def one(vp) -> None:
-        items = missions[vp.sysid]
-        if vp.sysid in started:
-            return
-        first = _route_seq(items)
-        offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
-        start_s = lead_s + offset_s - leads[vp.sysid]
-        await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
-        try:
-            await start_mission_at(link, vp.sysid, quirks[vp.sysid], first, len(items) - 1)
-        except MavlinkError as exc:
-            raise UserError(
-                f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) refused the mission start: {exc}"
-            ) from exc
-        logger.log_event({"event": "route_start", "sysid": vp.sysid, "planned_offset_s": offset_s})
-
-    await asyncio.gather(*(one(vp) for vp in plan.vehicles))
-
-
-def _route_seq(items) -> int:
-    """The route's first item: the one after NAV_TAKEOFF."""
-    return next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
-
-
-async def _wait_until_done(
-    link: MavlinkLink,
-    recorder: _TrackRecorder,
-    status: VehicleStatus,
-    plan: Plan,
-    speedup: float,
-    options: FlyOptions,
-    progress,
-    keeper: ScheduleKeeper | None,
-    route_t0_s: float,
-    quirks: dict[int, AutopilotQuirks],
-) -> None:
-    descent_s = max(float(v.waypoints[-1, 2]) for v in plan.vehicles) / LAND_SPEED_MPS
-    planned_s = max(float(v.path_times_s[-1]) + v.takeoff_delay_s for v in plan.vehicles) + descent_s
-    budget_s = planned_s * options.timeout_factor / speedup + 10.0
-    deadline = time.monotonic() + budget_s
-    total = len(plan.vehicles)
-
-    def done() -> set[int]:
-        return {s for s, t in status.tracks.items() if t.done}
-
-    while time.monotonic() < deadline and len(done()) < total:
-        if progress:
-            progress("fly", len(done()), total)
-        if keeper is not None:
-            _keep_schedule(link, recorder, status, keeper, route_t0_s, quirks)
-        await asyncio.sleep(KEEPER_PERIOD_S / speedup)
-    if progress:
-        progress("fly", len(done()), total)
-    # a little more telemetry after the last item (landing) for the log
-    await asyncio.sleep(min(1.0, 5.0 / speedup))
-
-
-def _keep_schedule(
-    link: MavlinkLink,
-    recorder: _TrackRecorder,
-    status: VehicleStatus,
-    keeper: ScheduleKeeper,
-    route_t0_s: float,
-    quirks: dict[int, AutopilotQuirks],
-) -> None:
-    for sysid, track in status.tracks.items():
-        if not track.started or track.done:
-            continue
-        latest = recorder.latest(sysid)
-        if latest is None:
-            continue
-        t_s, position = latest
-        speed = keeper.speed_command(sysid, t_s - route_t0_s, position)
-        if speed is not None:
-            change_speed(link, sysid, quirks[sysid], speed)

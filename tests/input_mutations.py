@@ -312,9 +312,10 @@ def run_case(argv: list[str], folder: Path) -> Outcome:
     return Outcome(argv, code, err.getvalue(), exc, sorted(_files(folder) - before))
 
 
-async def stub_fly(scenario, plan, options, progress=None):
+async def stub_fly(scenario, plan, options, vehicles, progress=None):
     """Stands in for gcs_planner.fly.fly: what the real one checks before it sends, then no flight."""
-    from gcs_planner.fly import FlyResult, build_missions
+    from gcs_planner.flight_ops import build_missions
+    from gcs_planner.fly import FlyResult
     from gcs_planner.mavlink.autopilots import quirks_named
     from gcs_planner.mavlink.items import AUTOPILOTS
 

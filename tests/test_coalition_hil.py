@@ -12,6 +12,7 @@ from gcs_planner.geo import enu_to_geodetic
 from gcs_planner.planning.coalition import load_world
 from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
+from sitl_mock.plan_fleet import MockVehiclesProcess
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
 
@@ -102,7 +103,9 @@ def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_pa
     the machine was busy: an upload's wall time is then ten times as much flight."""
     scenario = load_scenario(SCENARIO)
     result = asyncio.run(
-        run_coalition_hil(scenario, HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",)))
+        run_coalition_hil(
+            scenario, HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",)), MockVehiclesProcess
+        )
     )
     assert not result.failures, result.failures
     # the 8 strikes of T1's simultaneous attack, each within 1 s and 10 deg of its award
@@ -142,7 +145,7 @@ def test_a_vehicle_away_from_its_simulated_state_still_strikes_because_its_leg_i
     for replay in (False, True):
         options = HilOptions(out_dir=tmp_path / str(replay), speedup=20.0, targets=("T1",), uavs=("U13",),
                              offset_m={"U13": (300.0, -300.0)}, replay_legs=replay)  # fmt: skip
-        runs[replay] = asyncio.run(run_coalition_hil(scenario, options))
+        runs[replay] = asyncio.run(run_coalition_hil(scenario, options, MockVehiclesProcess))
     live, replayed = runs[False], runs[True]
     assert not live.failures and not replayed.failures, (live.failures, replayed.failures)
     (row,) = live.strikes

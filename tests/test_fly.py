@@ -9,6 +9,7 @@ from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
+from sitl_mock.plan_fleet import MockVehicles
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "straight_4uav.toml"
 
@@ -20,7 +21,8 @@ def scenario_and_plan():
 
 
 def _fly(scenario, plan, out, speedup=20.0, progress=None, **kw):
-    return asyncio.run(fly(scenario, plan, FlyOptions(out_dir=out, speedup=speedup, **kw), progress))
+    vehicles = MockVehicles(plan.vehicles, plan.origin, speedup)
+    return asyncio.run(fly(scenario, plan, FlyOptions(out_dir=out, **kw), vehicles, progress))
 
 
 def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_plan, tmp_path):

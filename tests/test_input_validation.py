@@ -13,6 +13,7 @@ from input_mutations import SCENARIO, base_mcap, base_plan, base_tlog, toml_dump
 
 from gcs_planner import fly as fly_module
 from gcs_planner.cli import main
+from gcs_planner.commands import fly as fly_command
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import MissionValidationError, validate_items
 from gcs_planner.telemetry import FlightLogger
@@ -146,7 +147,7 @@ def test_bad_mcap_attachment_is_ignored_not_a_traceback(tmp_path, capsys):
     ],
 )
 def test_fly_flags_are_checked_before_anything_is_written_or_sent(tmp_path, capsys, monkeypatch, flags, word):
-    monkeypatch.setattr(fly_module, "_mock_fleet", lambda *a: pytest.fail("a mock fleet was started"))
+    monkeypatch.setattr(fly_command, "mock_vehicles", lambda *a, **k: pytest.fail("a mock fleet was started"))
     out = tmp_path / "out"
     _fails(["fly", _scenario(tmp_path), "-o", str(out), "--no-rrd", *flags], capsys, word)
     assert not out.exists()

@@ -23,6 +23,7 @@ from gcs_planner.mavlink.wpl import loads_wpl
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
 from sitl_mock.mission_server import Failure
+from sitl_mock.plan_fleet import MockVehicles
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
@@ -48,8 +49,9 @@ PROFILES = [("ardupilot", "multirotor"), ("ardupilot", "fixed_wing"), ("px4", "m
 def _fly(scenario_name: str, autopilot: str, out: Path, **kw):
     scenario = load_scenario(MISSIONS / scenario_name)
     plan = plan_scenario(scenario)
-    options = FlyOptions(out_dir=out, speedup=20.0, autopilot=autopilot, rrd=False, **kw)
-    return asyncio.run(fly(scenario, plan, options))
+    options = FlyOptions(out_dir=out, rrd=False, **kw)
+    vehicles = MockVehicles(plan.vehicles, plan.origin, 20.0, autopilot)
+    return asyncio.run(fly(scenario, plan, options, vehicles))
 
 
 @pytest.mark.parametrize(

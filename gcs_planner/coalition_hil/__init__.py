@@ -23,16 +23,16 @@ swarm flies. Here the run splits the work in two:
 
 Flow:
 1. Every vehicle awarded a task (of the chosen targets and UAVs) is a mock fixed wing; the fleet
-   runs in its own process (``sitl_mock.process.MockFleetProcess``). Its first mission is a straight
-   ``LEAD_IN_S`` lead-in to its simulated position at the window start ``t_start`` = first award -
-   ``lead_s``, then its simulated pre-award track (idle loiter, recon) up to its simulated leg start
-   t_e^s, then ``PRE_AWARD_EXTEND_S`` more at the same turn rate (the loiter the bids predicted,
-   flown until the award's mission starts). Its home is south of the lead-in start by the take-off's
-   ground run (the mock climbs heading north), so the climb ends where the route starts.
-   ``HilOptions.offset_m`` moves a vehicle's first mission (tests: its live state then differs from
-   the simulated one).
-2. The fleet takes off (fly._take_off_all) and every route starts at once at route time 0 =
-   scenario time ``t_start - LEAD_IN_S`` (fly._start_routes).
+   runs in its own process (the "mock-process" vehicle source, sitl_mock.plan_fleet). Its first
+   mission is a straight ``LEAD_IN_S`` lead-in to its simulated position at the window start
+   ``t_start`` = first award - ``lead_s``, then its simulated pre-award track (idle loiter, recon)
+   up to its simulated leg start t_e^s, then ``PRE_AWARD_EXTEND_S`` more at the same turn rate (the
+   loiter the bids predicted, flown until the award's mission starts). Its home is south of the
+   lead-in start by the take-off's ground run (the mock climbs heading north), so the climb ends
+   where the route starts. ``HilOptions.offset_m`` moves a vehicle's first mission (tests: its live
+   state then differs from the simulated one).
+2. The fleet takes off (flight_ops.take_off_all) and every route starts at once at route time 0 =
+   scenario time ``t_start - LEAD_IN_S`` (flight_ops.start_routes).
 3. At an award's time the award joins a priority queue served by ``UPLOAD_WORKERS`` upload
    workers, earliest deadline first: the deadline is the latest leg start from which the shortest
    path (from the pose predicted then) still arrives on time, so a vehicle turning away from its
@@ -65,10 +65,10 @@ mock's top speed is CATCH_UP_FACTOR x cruise); one that cannot arrive on time ev
 at its minimum length and reported late. An assessor's transit is timed to reach the arc start at
 the awarded time (the simulation instead flies to the arc start and waits on the circle, and its
 track jumps there). Isolated far samples are removed from the simulated tracks before they
-become missions (``tracks.drop_spikes``). Take-off climbs at ``TAKEOFF_CLIMB_MPS`` (the climb is not
-part of the measurement and a real fleet would be airborne before the scenario starts). The
-airframe is tuned like fly._airframe_for, with bank for the minimum turn radius at the schedule
-keeper's top speed (CATCH_UP_FACTOR x cruise), so catching up does not widen turns.
+become missions (``tracks.drop_spikes``). The mock fleet (sitl_mock.plan_fleet.MockVehiclesProcess)
+climbs fast (the climb is not part of the measurement and a real fleet would be airborne before
+the scenario starts) and banks enough for the minimum turn radius at the schedule keeper's top
+speed, so catching up does not widen turns.
 
 Modules, one job each:
 
@@ -77,7 +77,6 @@ Modules, one job each:
 - ``missions``: simulated tracks and legs turned into VehiclePlans (waypoint selection, speeds,
   the per-UAV schedules, award and idle missions);
 - ``tracks``: sampled-track helpers (slice, pose at a time, turn continuation, spike removal);
-- ``fleet``: the mock fleet in its own process;
 - ``report``: TaskRow, measure_task, the report rows and table;
 - ``run``: HilOptions, HilResult and run_coalition_hil (the upload queue and schedule keeping).
 """

@@ -22,12 +22,12 @@ import asyncio
 import itertools
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from gcs_planner.coalition_hil.fleet import mock_fleet
 from gcs_planner.coalition_hil.live_legs import (
     LEG_SPEED_FACTOR,
     LiveState,
@@ -51,17 +51,17 @@ from gcs_planner.coalition_hil.missions import (
 )
 from gcs_planner.coalition_hil.report import TaskRow, add_prediction_errors, task_rows
 from gcs_planner.errors import UserError
-from gcs_planner.fly import (
-    HEARTBEAT_WAIT_S,
+from gcs_planner.flight_ops import (
     KEEPER_PERIOD_S,
     NAV_TAKEOFF,
-    FlyOptions,
-    _start_routes,
-    _take_off_all,
-    _TrackRecorder,
-    _wait_for_vehicles,
+    TrackRecorder,
+    start_routes,
+    take_off_all,
     vehicle_quirks,
+    wait_for_vehicles,
 )
+from gcs_planner.fly import HEARTBEAT_WAIT_S
+from gcs_planner.geo import Origin
 from gcs_planner.mavlink.actions import change_speed, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
@@ -77,19 +77,16 @@ from gcs_planner.planning.coalition.track import Leg
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.timekeeping import ScheduleKeeper
+from gcs_planner.vehicles import VehicleSource
 
-__all__ = ["UPLOAD_SAFETY", "HilOptions", "HilResult", "run_coalition_hil"]
+__all__ = ["UPLOAD_SAFETY", "HilOptions", "HilResult", "UploadTiming", "VehiclesFor", "run_coalition_hil"]
 
 NAV_WAYPOINT = 16
 START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
 PREFIX_DT_S = 2.0  # waypoint spacing on the predicted turn before a live leg [s]
 IDLE_LEAD_S = 10.0  # the next idle mission is uploaded this long before the last one's track ends [s]
 DEADLINE_HORIZON_S = 30.0  # leg-start deadlines searched this far ahead [s]
-# upload estimate = measured wall time per item x items x speed-up x this. Smaller starts legs
-# sooner (a mission landing after its leg start joins the leg a little late and catches up): 0.5
-# hit 8/8 of T1's strikes in 3 of 3 runs at speed-up 20 but 4/20 with the whole fleet, where
-# uploads take 5-15 s of flight; 1.5 hit 3-8/8 and 7-18/20.
-UPLOAD_SAFETY = 1.5
+UPLOAD_SAFETY = 1.5  # upload estimate = wall time per item x items x speed-up x this (docs/coalition.md)
 UPLOAD_WORKERS = 4
 RCVBUF_BYTES = 4 << 20  # GCS socket receive buffer (Linux caps it at net.core.rmem_max)
 # Mission transfers in flight: the defaults' 1.5 s COUNT re-send is 30 s of flight at speed-up 20
@@ -188,261 +185,315 @@ def _predicted_prefix(state: LiveState, t0_s: float) -> tuple[np.ndarray, np.nda
     return pre_t, state.predict(pre_t)[:, :2]
 
 
-async def run_coalition_hil(scenario: Scenario, options: HilOptions) -> HilResult:
-    """Simulate, fly the awarded vehicles on mock autopilots, upload each award as a leg planned from
-    the vehicle's live state (or, with ``replay_legs``, the simulation's leg)."""
+@dataclass
+class UploadTiming:
+    """The upload estimate's inputs, EMAs over the uploads so far (seeded by the fleet upload)."""
+
+    item_wall_s: float  # wall time per mission item at this concurrency
+    plan_wall_s: float = 0.0  # wall time to plan a live leg
+    items: int = 20  # items of the last award mission
+    idle_items: int = 30  # and of the last idle mission
+
+    def estimate_s(self, items: int, speedup: float, safety: float) -> float:
+        """Flight time [s] an upload of ``items`` is expected to take, with the safety factor."""
+        return speedup * (self.plan_wall_s + self.item_wall_s * items) * safety
+
+
+@dataclass(order=True)
+class _Job:
+    """A mission to plan and upload: due at ``t_s`` [scenario s], then served in ``rank`` order
+    (earliest deadline first, idle missions last; equal ranks in arrival order)."""
+
+    t_s: float
+    rank: tuple
+    kind: str = field(default="award", compare=False)  # "award" | "idle"
+    sched: VehicleSchedule | None = field(default=None, compare=False)
+    payload: Award | Idle | None = field(default=None, compare=False)
+
+
+VehiclesFor = Callable[[list[VehiclePlan], Origin, float], VehicleSource]
+
+
+async def run_coalition_hil(scenario: Scenario, options: HilOptions, vehicles_for: VehiclesFor) -> HilResult:
+    """Simulate, fly the awarded vehicles (``vehicles_for(initial plans, origin, speed-up)``, the mock
+    fleet from the CLI), upload each award as a leg planned from the vehicle's live state (or, with
+    ``replay_legs``, the simulation's leg)."""
     t_wall = time.monotonic()
-    world = load_world(scenario)
-    seed = options.seed if options.seed is not None else int(scenario.planner.get("seed", 0))
-    result = simulate(world, np.random.default_rng(seed))
-    awards, t_start, t_stop = _select_awards(result, options, seed)
-    schedules = build_schedules(
-        world, result, awards, t_start, t_stop, options.waypoint_dt_s, options.offset_m
-    )
-    t_route0 = t_start - LEAD_IN_S  # scenario time of route time 0 (the lead-in start)
-    flying = {s.uav.sysid for s in schedules}
-    targets = {e["target"] for e in awards}
-    replay = [
-        e for e in result.events
-        if e["event"] in LOGGED_EVENTS and t_start <= e["t_s"] <= t_stop and e.get("target") in targets
-    ]  # fmt: skip
-    initial = Plan(scenario.origin, "coalition", [s.initial for s in schedules])
-    missions = {vp.sysid: plan_to_items(vp, scenario.origin, options.autopilot) for vp in initial.vehicles}
+    run = _HilRun(scenario, options)
+    vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
     options.out_dir.mkdir(parents=True, exist_ok=True)
-    mcap_path = options.out_dir / "flight.mcap"
-    fly_options = FlyOptions(out_dir=options.out_dir, speedup=options.speedup, autopilot=options.autopilot)
     scenario_text = scenario.path.read_text() if scenario.path else None
-    uploads: list[dict] = []
-    failures: list[str] = []
-    flown_legs: dict[tuple[str, str], Leg] = {}
-    fleet = mock_fleet(schedules, scenario.origin, options.speedup)
-    recorder = _TrackRecorder(scenario.origin, True, list(missions))
-    telemetry = Telemetry(flying)
-    with fleet:
+    with vehicles as urls:
         # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
         # message lost when it overflows costs a re-send timer
-        urls = [f"udpout:{h}:{p}" for h, p in fleet.addresses]
         link = await MavlinkLink.open(*urls, receive_buffer_bytes=RCVBUF_BYTES)
         try:
-            with FlightLogger(mcap_path, scenario.origin, initial, scenario_text) as logger:
-                link.subscribe(logger.on_frame)
-                link.subscribe(recorder.on_frame)
-                link.subscribe(telemetry.on_frame)
-                await _wait_for_vehicles(link, sorted(flying), HEARTBEAT_WAIT_S)
-                quirks = vehicle_quirks(link, sorted(flying))
-                status = VehicleStatus(link, sorted(flying))
-                await request_streams(link, sorted(flying))
-                t_up = time.monotonic()
-                first = await upload_fleet(link, missions, workers=8)
-                bad = [s for s, r in first.items() if not r.ok]
-                if bad:
-                    raise UserError(f"initial mission upload failed for sysid {bad}")
-                # seed of the upload estimate: wall time per item at this concurrency
-                n_items = sum(len(m) for m in missions.values())
-                timing = {"item_wall_s": (time.monotonic() - t_up) * min(8, len(missions)) / n_items,
-                          "plan_wall_s": 0.0, "items": 20, "idle_items": 30}  # fmt: skip
-                await _take_off_all(link, initial, status, options.speedup, fly_options, quirks)
-                lead_s = 2.0
-                route_t0 = recorder.now_s() + lead_s
-                await _start_routes(
-                    link, initial, missions, options.speedup, logger, lead_s, {s: 0.0 for s in flying}, quirks
-                )
-                keeper = ScheduleKeeper()
-                current = {vp.sysid: vp for vp in initial.vehicles}
-                for vp in initial.vehicles:
-                    keeper.add(vp)
-
-                def scenario_now() -> float:
-                    return recorder.now_s() - route_t0 + t_route0
-
-                def upload_estimate_s(items: int) -> float:
-                    wall = timing["plan_wall_s"] + timing["item_wall_s"] * items
-                    return options.speedup * wall * options.upload_safety
-
-                def vehicle_state(uav) -> LiveState:
-                    rows = list(telemetry.rows[uav.sysid])  # a copy: planning runs in a thread
-                    state = live_state(rows, scenario.origin, 1.05 * uav.speed_mps / uav.r_min_m)
-                    return replace(state, t_s=state.t_s - route_t0 + t_route0)
-
-                def deadline_s(uav, e: dict, now: float) -> float:
-                    """The latest leg start [s] from which the shortest path (threats ignored) to the
-                    award's goal, flown at cruise from the pose predicted then, still arrives on
-                    time: the uploads' order of urgency (earliest deadline first). A vehicle turning
-                    away from its goal loses more than a second per second of waiting."""
-                    at = now + np.arange(0.0, DEADLINE_HORIZON_S, 0.5)
-                    q = vehicle_state(uav).predict(at)
-                    goal = np.broadcast_to(goal_pose(world, e), q.shape)
-                    spare = e["time_s"] - at - paths.shortest_lengths(q, goal, uav.r_min_m) / uav.speed_mps
-                    late = np.nonzero(spare < 0.0)[0]
-                    return float(at[late[0]] if len(late) else at[-1] + spare[-1])
-
-                def live_leg(sched: VehicleSchedule, award: Award, state: LiveState, now: float):
-                    """Plan the award's leg from the vehicle's newest reports (see live_legs).
-                    Runs in a thread, so that the event loop keeps draining the sockets: a loop
-                    blocked for ~0.1 s overflows them and a lost mission message costs a 1 s
-                    (wall) re-request."""
-                    e = award.event
-                    t_plan = time.monotonic()
-                    items = timing["items"]
-                    for _ in range(2):  # once more when the mission has more items than guessed
-                        t0 = now + upload_estimate_s(items) + START_AHEAD_S
-                        q0 = state.predict([t0])[0]
-                        leg = plan_live_leg(world, e, q0, t0, LEG_SPEED_FACTOR)
-                        if e["task"] == "strike" and not (
-                            leg.info["clear"] and abs(leg.info["late_s"]) < 0.05
-                        ):
-                            leg = onto_sim_leg(world, sched.uav, q0, t0, award.sim_leg, e["t_s"]) or leg
-                        prefix = _predicted_prefix(state, t0)
-                        vp = award_mission(sched, award, leg, prefix, t_route0, options.waypoint_dt_s,
-                                            np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
-                        n = len(vp.waypoints) + 4
-                        if upload_estimate_s(n) <= upload_estimate_s(items) + 0.5:
-                            break
-                        items = n
-                    plan_wall_s = time.monotonic() - t_plan
-                    timing["plan_wall_s"] = 0.5 * timing["plan_wall_s"] + 0.5 * plan_wall_s
-                    info = {
-                        "plan_wall_ms": round(1000.0 * plan_wall_s, 1),
-                        "t0_s": round(t0, 3),
-                        "estimate_s": round(t0 - now - START_AHEAD_S, 3),
-                        "live_pose": [round(float(v), 2) for v in q0],
-                        "state_age_s": round(now - state.t_s, 3),
-                        "turn_rate_dps": round(math.degrees(state.rate_rps), 2),
-                        "leg_late_s": round(leg.info["late_s"], 3),
-                        "clear": leg.info["clear"],
-                    }
-                    return leg, vp, info
-
-                def live_idle(sched: VehicleSchedule, idle: Idle, state: LiveState, now: float):
-                    """Plan the idle mission from the vehicle's newest reports: back onto the
-                    simulated track (``rejoin_leg``), then along it. Runs in a thread."""
-                    t_plan = time.monotonic()
-                    t0 = now + upload_estimate_s(timing["idle_items"]) + START_AHEAD_S
-                    q0 = state.predict([t0])[0]
-                    leg = rejoin_leg(world, sched.uav, q0, t0, sched.track, idle.end_s, now)
-                    prefix = _predicted_prefix(state, t0)
-                    vp = idle_mission(sched, idle, leg, prefix, t_route0, options.waypoint_dt_s,
-                                       np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
-                    info = {
-                        "plan_wall_ms": round(1000.0 * (time.monotonic() - t_plan), 1),
-                        "t0_s": round(t0, 3),
-                        "live_pose": [round(float(v), 2) for v in q0],
-                        "rejoin_s": round(float(leg.t[-1]), 3),
-                        "covered_s": round(min(idle.end_s, float(leg.t[-1]) + IDLE_SPAN_S), 3),
-                        "leg_late_s": round(leg.info["late_s"], 3),
-                        "clear": leg.info["clear"],
-                    }
-                    return vp, info
-
-                async def upload(kind: str, sched: VehicleSchedule, payload) -> None:
-                    e = payload.event
-                    sysid = sched.uav.sysid
-                    entry = {"kind": kind, "uav": e["uav"], "sysid": sysid, "target": e["target"],
-                             "task": e["task"], "award_t_s": e["t_s"], "ok": False}  # fmt: skip
-                    try:
-                        if kind == "idle" and options.replay_legs:
-                            vp = payload.mission
-                        elif kind == "idle":
-                            state, now = vehicle_state(sched.uav), scenario_now()
-                            vp, info = await asyncio.to_thread(live_idle, sched, payload, state, now)
-                            entry.update(info)
-                        elif options.replay_legs:
-                            leg = payload.sim_leg
-                            vp = award_mission(sched, payload, leg, None, t_route0, options.waypoint_dt_s, [])
-                            entry["t0_s"] = round(float(leg.t[0]), 3)
-                        else:
-                            state, now = vehicle_state(sched.uav), scenario_now()
-                            leg, vp, info = await asyncio.to_thread(live_leg, sched, payload, state, now)
-                            entry.update(info)
-                        items = plan_to_items(vp, scenario.origin, options.autopilot)
-                        entry["upload_start_s"] = scenario_now()
-                        t_up = time.monotonic()
-                        await MissionClient(link, sysid, timing=UPLOAD_TIMING).upload(items)
-                        per_item = (time.monotonic() - t_up) / len(items)
-                        timing["item_wall_s"] = 0.5 * timing["item_wall_s"] + 0.5 * per_item
-                        timing["items" if kind == "award" else "idle_items"] = len(items)
-                        seq = _first_ahead(items, vp, scenario_now() - t_route0, START_AHEAD_S)
-                        await start_mission_at(link, sysid, quirks[sysid], seq, len(items) - 1)
-                        current[sysid] = vp
-                        keeper.add(vp)
-                        if kind == "award":
-                            flown_legs[(e["target"], e["uav"])] = leg
-                        entry.update(ok=True, start_seq=seq, items=len(items))
-                        if entry.get("covered_s", math.inf) < payload.end_s - 1.0:  # the next idle chunk
-                            t_next = entry["covered_s"] - IDLE_LEAD_S
-                            due.append(
-                                (t_next, (2, t_next), "idle", sched, Idle(t_next, e, payload.end_s, None))
-                            )
-                            due.sort(key=lambda d: (d[0], d[1]))
-                    except MavlinkError as exc:
-                        entry["error"] = str(exc)
-                        failures.append(f"{e['uav']}: {kind} upload failed: {exc}")
-                    # the fleet's clock moves in steps of one position report: the upload ended
-                    # after the newest report and before the next one, which is its end time (so
-                    # start < end even when a fast upload fits between two reports)
-                    entry["upload_end_s"] = await next_report_after(scenario_now, scenario_now())
-                    if "t0_s" in entry:
-                        entry["landed_before_leg_s"] = round(entry["t0_s"] - entry["upload_end_s"], 3)
-                    uploads.append(entry)
-                    logger.log_event({"event": "upload", **entry})
-
-                queue: asyncio.PriorityQueue = asyncio.PriorityQueue()
-                order = itertools.count()
-
-                async def worker() -> None:
-                    while True:
-                        *_, kind, sched, payload = await queue.get()
-                        try:
-                            await upload(kind, sched, payload)
-                        finally:
-                            queue.task_done()
-
-                workers = [asyncio.create_task(worker()) for _ in range(UPLOAD_WORKERS)]
-                due = [
-                    (a.event["t_s"], (a.event["task"] != "strike", a.event["time_s"]), "award", s, a)
-                    for s in schedules
-                    for a in s.awards
-                ]
-                due += [
-                    (i.t_s, (2, i.t_s), "idle", s, i) for s in schedules for i in s.idles if i.t_s <= t_stop
-                ]
-                due.sort(key=lambda d: (d[0], d[1]))
-                events = sorted(replay, key=lambda e: e["t_s"])
-                route_end = t_stop - t_route0
-                deadline = time.monotonic() + (route_end + 10.0) * 2.0 / options.speedup + 10.0
-                while scenario_now() - t_route0 < route_end and time.monotonic() < deadline:
-                    now = scenario_now()
-                    while events and events[0]["t_s"] <= now:
-                        logger.log_event({**events.pop(0), "source": "coalition_simulation"})
-                    while due and due[0][0] <= now:
-                        _, rank, kind, sched, payload = due.pop(0)
-                        if kind == "award" and not options.replay_legs:
-                            rank = (False, deadline_s(sched.uav, payload.event, now))
-                        queue.put_nowait((rank, next(order), kind, sched, payload))
-                    if options.keep_schedule:
-                        _keep(link, recorder, keeper, current, route_t0, quirks)
-                    await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
-                try:
-                    await asyncio.wait_for(queue.join(), 10.0)
-                finally:
-                    for w in workers:
-                        w.cancel()
-                    await asyncio.gather(*workers, return_exceptions=True)
-                if time.monotonic() >= deadline:
-                    failures.append("the run did not reach the window end in time")
+            with FlightLogger(run.mcap_path, scenario.origin, run.initial, scenario_text) as logger:
+                await run.fly(link, logger)
         finally:
             await link.close()
-    lag = fleet.lag_events
-    tracks = recorder.tracks()
-    flown = {s: (tr.times_s - route_t0 + t_route0, tr.positions) for s, tr in tracks.items()}
-    sim_tracks = {s.uav.id: s.track for s in schedules}
-    limits = (options.max_time_error_s, options.max_angle_error_deg)
-    rows, missing = task_rows(world, awards, flown, flown_legs, sim_tracks, limits)
-    failures += missing
-    add_prediction_errors(uploads, flown)
-    return HilResult(
-        rows, uploads, mcap_path, t_start, time.monotonic() - t_wall, lag, failures, flown, flown_legs
-    )
+    return run.result(vehicles.lag_events, time.monotonic() - t_wall)
+
+
+class _HilRun:
+    """One coalition HIL run: the simulation's awards, the fleet's live state, the upload queue."""
+
+    def __init__(self, scenario: Scenario, options: HilOptions) -> None:
+        self.scenario, self.options = scenario, options
+        self.world = load_world(scenario)
+        seed = options.seed if options.seed is not None else int(scenario.planner.get("seed", 0))
+        self.sim = simulate(self.world, np.random.default_rng(seed))
+        self.awards, self.t_start, self.t_stop = _select_awards(self.sim, options, seed)
+        window = (self.t_start, self.t_stop)
+        self.schedules = build_schedules(
+            self.world, self.sim, self.awards, *window, options.waypoint_dt_s, options.offset_m
+        )
+        self.t_route0 = self.t_start - LEAD_IN_S  # scenario time of route time 0 (the lead-in start)
+        self.flying = sorted(s.uav.sysid for s in self.schedules)
+        self.initial = Plan(scenario.origin, "coalition", [s.initial for s in self.schedules])
+        self.missions = {
+            vp.sysid: plan_to_items(vp, scenario.origin, options.autopilot) for vp in self.initial.vehicles
+        }
+        self.mcap_path = options.out_dir / "flight.mcap"
+        self.uploads: list[dict] = []
+        self.failures: list[str] = []
+        self.flown_legs: dict[tuple[str, str], Leg] = {}
+        self.recorder = TrackRecorder(scenario.origin, True, list(self.missions))
+        self.telemetry = Telemetry(set(self.flying))
+        self.keeper = ScheduleKeeper()
+        self.current = {vp.sysid: vp for vp in self.initial.vehicles}
+        self.route_t0 = 0.0  # the fleet clock's value at route time 0
+        self.due: list[_Job] = []
+        self.queue: asyncio.PriorityQueue[tuple[tuple, int, _Job]] = asyncio.PriorityQueue()
+        self.order = itertools.count()
+
+    # --- clocks and estimates ----------------------------------------------------------------
+    def scenario_now(self) -> float:
+        return self.recorder.now_s() - self.route_t0 + self.t_route0
+
+    def upload_estimate_s(self, items: int) -> float:
+        return self.timing.estimate_s(items, self.options.speedup, self.options.upload_safety)
+
+    def vehicle_state(self, uav) -> LiveState:
+        rows = list(self.telemetry.rows[uav.sysid])  # a copy: planning runs in a thread
+        state = live_state(rows, self.scenario.origin, 1.05 * uav.speed_mps / uav.r_min_m)
+        return replace(state, t_s=state.t_s - self.route_t0 + self.t_route0)
+
+    def deadline_s(self, uav, e: dict, now: float) -> float:
+        """The latest leg start [s] from which the shortest path (threats ignored) to the award's
+        goal, flown at cruise from the pose predicted then, still arrives on time: the uploads'
+        order of urgency (earliest deadline first). A vehicle turning away from its goal loses
+        more than a second per second of waiting."""
+        at = now + np.arange(0.0, DEADLINE_HORIZON_S, 0.5)
+        q = self.vehicle_state(uav).predict(at)
+        goal = np.broadcast_to(goal_pose(self.world, e), q.shape)
+        spare = e["time_s"] - at - paths.shortest_lengths(q, goal, uav.r_min_m) / uav.speed_mps
+        late = np.nonzero(spare < 0.0)[0]
+        return float(at[late[0]] if len(late) else at[-1] + spare[-1])
+
+    # --- the fleet ---------------------------------------------------------------------------
+    async def fly(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        """Upload the initial missions, take off, start the routes, then serve the awards."""
+        for subscriber in (logger, self.recorder, self.telemetry):
+            link.subscribe(subscriber.on_frame)
+        await wait_for_vehicles(link, self.flying, HEARTBEAT_WAIT_S)
+        self.quirks = vehicle_quirks(link, self.flying)
+        status = VehicleStatus(link, self.flying)
+        await request_streams(link, self.flying)
+        t_up = time.monotonic()
+        first = await upload_fleet(link, self.missions, workers=8)
+        bad = [s for s, r in first.items() if not r.ok]
+        if bad:
+            raise UserError(f"initial mission upload failed for sysid {bad}")
+        n_items = sum(len(m) for m in self.missions.values())
+        self.timing = UploadTiming((time.monotonic() - t_up) * min(8, len(self.missions)) / n_items)
+        speedup = self.options.speedup
+        await take_off_all(link, self.initial, status, speedup, self.quirks)
+        lead_s = 2.0
+        self.route_t0 = self.recorder.now_s() + lead_s
+        no_lead = {s: 0.0 for s in self.flying}
+        await start_routes(link, self.initial, self.missions, speedup, logger, lead_s, no_lead, self.quirks)
+        for vp in self.initial.vehicles:
+            self.keeper.add(vp)
+        await self._serve(link, logger)
+
+    async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        """Until the window ends: log the simulation's events as they come due, queue the awards
+        and idle missions at their times, keep the schedule; then let the queue drain."""
+        options = self.options
+        workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
+        self.due = sorted(
+            [_Job(a.event["t_s"], (a.event["task"] != "strike", a.event["time_s"]), "award", s, a)
+             for s in self.schedules for a in s.awards]
+            + [_Job(i.t_s, (2, i.t_s), "idle", s, i)
+               for s in self.schedules for i in s.idles if i.t_s <= self.t_stop]
+        )  # fmt: skip
+        targets = {e["target"] for e in self.awards}
+        events = sorted(
+            (e for e in self.sim.events if e["event"] in LOGGED_EVENTS
+             and self.t_start <= e["t_s"] <= self.t_stop and e.get("target") in targets),
+            key=lambda e: e["t_s"],
+        )  # fmt: skip
+        route_end = self.t_stop - self.t_route0
+        deadline = time.monotonic() + (route_end + 10.0) * 2.0 / options.speedup + 10.0
+        while self.scenario_now() - self.t_route0 < route_end and time.monotonic() < deadline:
+            now = self.scenario_now()
+            while events and events[0]["t_s"] <= now:
+                logger.log_event({**events.pop(0), "source": "coalition_simulation"})
+            while self.due and self.due[0].t_s <= now:
+                job = self.due.pop(0)
+                if job.kind == "award" and not options.replay_legs:
+                    job.rank = (False, self.deadline_s(job.sched.uav, job.payload.event, now))
+                self.queue.put_nowait((job.rank, next(self.order), job))
+            if options.keep_schedule:
+                _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
+            await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
+        try:
+            await asyncio.wait_for(self.queue.join(), 10.0)
+        finally:
+            for w in workers:
+                w.cancel()
+            await asyncio.gather(*workers, return_exceptions=True)
+        if time.monotonic() >= deadline:
+            self.failures.append("the run did not reach the window end in time")
+
+    async def _worker(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        while True:
+            *_, job = await self.queue.get()
+            try:
+                await self._upload(link, logger, job)
+            finally:
+                self.queue.task_done()
+
+    # --- one upload --------------------------------------------------------------------------
+    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> None:
+        """Plan the job's mission, upload it in flight, start it at the first waypoint ahead."""
+        kind, sched, payload, e = job.kind, job.sched, job.payload, job.payload.event
+        sysid = sched.uav.sysid
+        entry = {"kind": kind, "uav": e["uav"], "sysid": sysid, "target": e["target"],
+                 "task": e["task"], "award_t_s": e["t_s"], "ok": False}  # fmt: skip
+        try:
+            vp, leg = await self._mission(job, entry)
+            items = plan_to_items(vp, self.scenario.origin, self.options.autopilot)
+            entry["upload_start_s"] = self.scenario_now()
+            t_up = time.monotonic()
+            await MissionClient(link, sysid, timing=UPLOAD_TIMING).upload(items)
+            per_item = (time.monotonic() - t_up) / len(items)
+            self.timing.item_wall_s = 0.5 * self.timing.item_wall_s + 0.5 * per_item
+            if kind == "award":
+                self.timing.items = len(items)
+            else:
+                self.timing.idle_items = len(items)
+            seq = _first_ahead(items, vp, self.scenario_now() - self.t_route0, START_AHEAD_S)
+            await start_mission_at(link, sysid, self.quirks[sysid], seq, len(items) - 1)
+            self.current[sysid] = vp
+            self.keeper.add(vp)
+            if kind == "award":
+                self.flown_legs[(e["target"], e["uav"])] = leg
+            entry.update(ok=True, start_seq=seq, items=len(items))
+            if entry.get("covered_s", math.inf) < payload.end_s - 1.0:  # the next idle chunk
+                t_next = entry["covered_s"] - IDLE_LEAD_S
+                idle = Idle(t_next, e, payload.end_s, None)
+                self.due.append(_Job(t_next, (2, t_next), "idle", sched, idle))
+                self.due.sort()
+        except MavlinkError as exc:
+            entry["error"] = str(exc)
+            self.failures.append(f"{e['uav']}: {kind} upload failed: {exc}")
+        # the fleet's clock moves in steps of one position report: the upload ended after the
+        # newest report and before the next one, which is its end time (so start < end even when
+        # a fast upload fits between two reports)
+        entry["upload_end_s"] = await next_report_after(self.scenario_now, self.scenario_now())
+        if "t0_s" in entry:
+            entry["landed_before_leg_s"] = round(entry["t0_s"] - entry["upload_end_s"], 3)
+        self.uploads.append(entry)
+        logger.log_event({"event": "upload", **entry})
+
+    async def _mission(self, job: _Job, entry: dict) -> tuple[VehiclePlan, Leg | None]:
+        """The job's mission and leg: planned live (in a thread) or, replaying, the simulation's."""
+        sched, payload = job.sched, job.payload
+        if job.kind == "idle" and self.options.replay_legs:
+            return payload.mission, None
+        if self.options.replay_legs:
+            leg = payload.sim_leg
+            entry["t0_s"] = round(float(leg.t[0]), 3)
+            vp = award_mission(sched, payload, leg, None, self.t_route0, self.options.waypoint_dt_s, [])
+            return vp, leg
+        state, now = self.vehicle_state(sched.uav), self.scenario_now()
+        if job.kind == "idle":
+            vp, info = await asyncio.to_thread(self._live_idle, sched, payload, state, now)
+            entry.update(info)
+            return vp, None
+        leg, vp, info = await asyncio.to_thread(self._live_leg, sched, payload, state, now)
+        entry.update(info)
+        return vp, leg
+
+    def _live_leg(self, sched: VehicleSchedule, award: Award, state: LiveState, now: float):
+        """Plan the award's leg from the vehicle's newest reports (see live_legs). Runs in a thread,
+        so that the event loop keeps draining the sockets: a loop blocked for ~0.1 s overflows them
+        and a lost mission message costs a 1 s (wall) re-request."""
+        e = award.event
+        t_plan = time.monotonic()
+        items = self.timing.items
+        for _ in range(2):  # once more when the mission has more items than guessed
+            t0 = now + self.upload_estimate_s(items) + START_AHEAD_S
+            q0 = state.predict([t0])[0]
+            leg = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR)
+            if e["task"] == "strike" and not (leg.info["clear"] and abs(leg.info["late_s"]) < 0.05):
+                leg = onto_sim_leg(self.world, sched.uav, q0, t0, award.sim_leg, e["t_s"]) or leg
+            prefix = _predicted_prefix(state, t0)
+            vp = award_mission(sched, award, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
+                               np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
+            n = len(vp.waypoints) + 4
+            if self.upload_estimate_s(n) <= self.upload_estimate_s(items) + 0.5:
+                break
+            items = n
+        plan_wall_s = time.monotonic() - t_plan
+        self.timing.plan_wall_s = 0.5 * self.timing.plan_wall_s + 0.5 * plan_wall_s
+        info = {
+            "plan_wall_ms": round(1000.0 * plan_wall_s, 1),
+            "t0_s": round(t0, 3),
+            "estimate_s": round(t0 - now - START_AHEAD_S, 3),
+            "live_pose": [round(float(v), 2) for v in q0],
+            "state_age_s": round(now - state.t_s, 3),
+            "turn_rate_dps": round(math.degrees(state.rate_rps), 2),
+            "leg_late_s": round(leg.info["late_s"], 3),
+            "clear": leg.info["clear"],
+        }
+        return leg, vp, info
+
+    def _live_idle(self, sched: VehicleSchedule, idle: Idle, state: LiveState, now: float):
+        """Plan the idle mission from the vehicle's newest reports: back onto the simulated track
+        (``rejoin_leg``), then along it. Runs in a thread."""
+        t_plan = time.monotonic()
+        t0 = now + self.upload_estimate_s(self.timing.idle_items) + START_AHEAD_S
+        q0 = state.predict([t0])[0]
+        leg = rejoin_leg(self.world, sched.uav, q0, t0, sched.track, idle.end_s, now)
+        prefix = _predicted_prefix(state, t0)
+        vp = idle_mission(sched, idle, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
+                          np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
+        info = {
+            "plan_wall_ms": round(1000.0 * (time.monotonic() - t_plan), 1),
+            "t0_s": round(t0, 3),
+            "live_pose": [round(float(v), 2) for v in q0],
+            "rejoin_s": round(float(leg.t[-1]), 3),
+            "covered_s": round(min(idle.end_s, float(leg.t[-1]) + IDLE_SPAN_S), 3),
+            "leg_late_s": round(leg.info["late_s"], 3),
+            "clear": leg.info["clear"],
+        }
+        return vp, info
+
+    # --- the report --------------------------------------------------------------------------
+    def result(self, lag_events: int, wall_s: float) -> HilResult:
+        tracks = self.recorder.tracks()
+        flown = {s: (tr.times_s - self.route_t0 + self.t_route0, tr.positions) for s, tr in tracks.items()}
+        sim_tracks = {s.uav.id: s.track for s in self.schedules}
+        limits = (self.options.max_time_error_s, self.options.max_angle_error_deg)
+        rows, missing = task_rows(self.world, self.awards, flown, self.flown_legs, sim_tracks, limits)
+        add_prediction_errors(self.uploads, flown)
+        return HilResult(
+            rows, self.uploads, self.mcap_path, self.t_start, wall_s, lag_events, self.failures + missing,
+            flown, self.flown_legs,
+        )  # fmt: skip
 
 
 async def next_report_after(clock, t_s: float, timeout_s: float = NEXT_REPORT_TIMEOUT_S) -> float:

@@ -29,6 +29,7 @@ from gcs_planner.plan import Plan
 from gcs_planner.planning import load_scenario
 from gcs_planner.progress import plan_with_progress, progress_bar
 from gcs_planner.validation import MAX_RADIUS_M, MAX_SPEED_MPS, InputError, number, number_flag, output_dir
+from gcs_planner.vehicles import ConnectedVehicles, mock_vehicles
 
 WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid
 
@@ -160,11 +161,13 @@ def run(args: argparse.Namespace) -> int:
     if not plan.feasible:
         bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]
         print(f"warning: the planner reports infeasible paths for {bad}; flying anyway")
+    if args.connect:
+        vehicles = ConnectedVehicles(args.connect)
+    else:
+        vehicles = mock_vehicles("mock", plan.vehicles, origin=plan.origin, speedup=args.speedup,
+                                 autopilot=args.autopilot)  # fmt: skip
     options = FlyOptions(
         out_dir=out,
-        connect=args.connect,
-        speedup=args.speedup,
-        autopilot=args.autopilot,
         workers=args.workers,
         tlog=args.tlog,
         rrd=not args.no_rrd,
@@ -187,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
         bars[stage].refresh()
 
     try:
-        result = asyncio.run(fly(scenario, plan, options, progress))
+        result = asyncio.run(fly(scenario, plan, options, vehicles, progress))
     finally:
         for bar in bars.values():
             bar.close()

@@ -21,6 +21,7 @@ from gcs_planner.commands.plan import SEED
 from gcs_planner.errors import UserError
 from gcs_planner.planning import load_scenario
 from gcs_planner.validation import MAX_DURATION_S, number_flag, output_dir
+from gcs_planner.vehicles import mock_vehicles
 
 SPEEDUP = number_flag(0, 1000, lo_open=True)  # mock simulation speed-up
 
@@ -55,6 +56,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
+def mock_fleet_process(plans, origin, speedup):
+    """The coalition run's vehicles: mock fixed wings in their own process (sitl_mock.plan_fleet)."""
+    return mock_vehicles("mock-process", plans, origin=origin, speedup=speedup)
+
+
 def run(args: argparse.Namespace) -> int:
     if args.speedup <= 0:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
@@ -79,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         replay_legs=args.replay_legs,
     )
     try:
-        result = asyncio.run(run_coalition_hil(scenario, options))
+        result = asyncio.run(run_coalition_hil(scenario, options, mock_fleet_process))
     except TimeoutError as exc:  # the mock fleet's process did not start
         raise UserError(str(exc)) from None
     print(format_strike_report(result.rows))

@@ -1,0 +1,288 @@
+"""Flight operations shared by `fly` and the coalition HIL run: wait for vehicles, take off, start
+routes on time, record tracks, keep the schedule, wait until done.
+
+Choices (see also gcs_planner.fly):
+- Two-phase start: every vehicle is armed and climbs (MAV_CMD_NAV_TAKEOFF) to its first
+  waypoint's altitude; once all are there, each route starts (MAV_CMD_MISSION_START at the item
+  after NAV_TAKEOFF) at the common start plus its planned delay, less the time it loses
+  accelerating to cruise (v / 2a). A fixed wing, which cannot wait in place, starts its route as
+  soon as it is up.
+- A vehicle is "up" once no lower than TAKEOFF_ALT_TOL_M below its take-off altitude; a lost
+  COMMAND_ACK makes a retried take-off fail (already armed / airborne), which counts as up.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+
+import numpy as np
+
+from gcs_planner.conformance import Track
+from gcs_planner.errors import UserError
+from gcs_planner.geo import Origin, geodetic_to_enu
+from gcs_planner.mavlink.actions import change_speed, start_mission_at, take_off
+from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for
+from gcs_planner.mavlink.errors import MavlinkError
+from gcs_planner.mavlink.items import plan_to_items
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.vehicle_status import VehicleStatus
+from gcs_planner.plan import Plan
+from gcs_planner.timekeeping import ScheduleKeeper
+
+__all__ = [
+    "KEEPER_PERIOD_S", "TrackRecorder", "accel_lead_s", "build_missions", "keep_schedule", "route_seq",
+    "start_routes", "take_off_all", "vehicle_quirks", "wait_for_vehicles", "wait_until_done",
+]  # fmt: skip
+
+log = logging.getLogger(__name__)
+
+ARM_TIMEOUT_S = 120.0  # vehicle time to pass pre-arm checks (ArduCopter SITL needs ~45 s after boot)
+TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
+LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
+TAKEOFF_ATTEMPTS = 3
+TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" once no lower than this below its take-off altitude
+NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
+KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
+
+
+class TrackRecorder:
+    """Collects each vehicle's positions from the link's frames (completion is VehicleStatus's)."""
+
+    def __init__(self, origin: Origin, sim_clock: bool, sysids) -> None:
+        self.origin = origin
+        self.sim_clock = sim_clock
+        self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in sysids}
+        self.completed: dict[int, bool] = {}
+
+    def on_frame(self, msg, raw: bytes, t_s: float) -> None:
+        sysid = msg.get_srcSystem()
+        if sysid not in self.samples or msg.get_type() != "GLOBAL_POSITION_INT":
+            return
+        t = msg.time_boot_ms / 1000.0 if self.sim_clock else t_s
+        self.samples[sysid].append((t, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
+
+    def latest(self, sysid: int) -> tuple[float, np.ndarray] | None:
+        """Time [s] and ENU position [m] of the vehicle's newest position report."""
+        if not self.samples[sysid]:
+            return None
+        t, lat, lon, alt = self.samples[sysid][-1]
+        return t, np.array(geodetic_to_enu(lat, lon, alt, self.origin))
+
+    def now_s(self) -> float:
+        """The newest report time over all vehicles (the fleet's clock)."""
+        return max((rows[-1][0] for rows in self.samples.values() if rows), default=0.0)
+
+    def tracks(self) -> dict[int, Track]:
+        out = {}
+        for sysid, rows in self.samples.items():
+            if not rows:
+                continue
+            arr = np.asarray(rows, dtype=float)
+            e, n, u = geodetic_to_enu(arr[:, 1], arr[:, 2], arr[:, 3], self.origin)
+            order = np.argsort(arr[:, 0], kind="stable")
+            out[sysid] = Track(
+                arr[order, 0], np.column_stack([e, n, u])[order], self.completed.get(sysid, False)
+            )
+        return out
+
+
+async def wait_for_vehicles(link: MavlinkLink, sysids: list[int], timeout_s: float) -> None:
+    """Until every vehicle's autopilot sent a HEARTBEAT (any other frame, or a camera's HEARTBEAT,
+    says nothing of what the vehicle is); duplicate system ids are refused."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if all(heard(link, s) for s in sysids):
+            break
+        await asyncio.sleep(0.05)
+    missing = [s for s in sysids if not heard(link, s)]
+    if missing:
+        raise UserError(f"no autopilot HEARTBEAT from sysid {missing} within {timeout_s:.0f} s")
+    duplicates = link.duplicates()
+    if duplicates:
+        raise UserError(f"system ids answer from several addresses (refusing to merge): {duplicates}")
+
+
+def heard(link: MavlinkLink, sysid: int) -> bool:
+    return getattr(link.vehicles.get(sysid), "autopilot", None) is not None
+
+
+def vehicle_quirks(link: MavlinkLink, sysids: list[int]) -> dict[int, AutopilotQuirks]:
+    """Each vehicle's autopilot entry, from the HEARTBEAT it sent."""
+    return {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in sysids}
+
+
+def build_missions(plan: Plan, quirks: dict[int, AutopilotQuirks]) -> dict[int, list]:
+    """Each vehicle's mission items in its autopilot's conventions (validated)."""
+    return {vp.sysid: plan_to_items(vp, plan.origin, quirks[vp.sysid].conventions) for vp in plan.vehicles}
+
+
+async def take_off_all(
+    link: MavlinkLink,
+    plan: Plan,
+    status: VehicleStatus,
+    speedup: float,
+    quirks: dict[int, AutopilotQuirks],
+    workers: int = 8,
+    timeout_factor: float = 2.0,
+    progress=None,
+    missions: dict | None = None,
+) -> None:
+    """Arm every vehicle once it is ready and climb it to its first waypoint's altitude; return
+    when all are there. With ``missions``, a fixed wing (which cannot wait in place) starts its
+    route as soon as it is up (``start_routes`` leaves it out)."""
+    gate = asyncio.Semaphore(workers)
+    targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
+
+    def late() -> list[int]:
+        return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - TAKEOFF_ALT_TOL_M]
+
+    async def climb_into_route(vp) -> None:
+        while vp.sysid in late():
+            await asyncio.sleep(0.02)
+        items = missions[vp.sysid]
+        await start_mission_at(link, vp.sysid, quirks[vp.sysid], route_seq(items), len(items) - 1)
+
+    def waiting(sysid: int, reason: str) -> None:
+        log.info("sysid %d not ready to arm: %s", sysid, reason)
+        if progress:
+            progress("wait", sysid, reason)
+
+    async def one(vp) -> None:
+        async with gate:
+            q = quirks[vp.sysid]
+            for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
+                try:
+                    await take_off(
+                        link, status, vp.sysid, q, float(vp.waypoints[0, 2]), ARM_TIMEOUT_S, speedup, waiting
+                    )
+                    break
+                except MavlinkError as exc:
+                    # a lost ACK makes the retried command fail (already armed / airborne)
+                    if (status.tracks[vp.sysid].rel_alt_m or 0.0) > TAKEOFF_ALT_TOL_M:
+                        return
+                    if attempt == TAKEOFF_ATTEMPTS:
+                        reason = status.reason(vp.sysid)
+                        raise UserError(
+                            f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) could not take off: {exc}"
+                            + (f" ({reason})" if reason else "")
+                        ) from exc
+                    log.warning("sysid %d take-off attempt %d failed: %s", vp.sysid, attempt, exc)
+                    await asyncio.sleep(1.0 / speedup)
+        if missions is not None and vp.vehicle_type == "fixed_wing":
+            climbs.append(asyncio.create_task(climb_into_route(vp)))
+
+    climbs: list[asyncio.Task] = []
+    await asyncio.gather(*(one(vp) for vp in plan.vehicles))
+    climb_s = max(float(vp.waypoints[0, 2]) for vp in plan.vehicles) / TAKEOFF_CLIMB_MPS
+    deadline = time.monotonic() + climb_s * timeout_factor / speedup + 10.0
+    while time.monotonic() < deadline and late():
+        await asyncio.sleep(0.05)
+    if late():
+        for task in climbs:
+            task.cancel()
+        seen = {s: status.tracks[s].rel_alt_m for s in late()}
+        raise UserError(f"sysid {late()} did not reach take-off altitude in time (relative altitude {seen})")
+    await asyncio.gather(*climbs)
+
+
+def accel_lead_s(vp, accel_mps2: float) -> float:
+    """How much earlier than planned a route starts, so that accelerating from the hover at
+    ``accel_mps2`` puts the vehicle where a plan assuming instant cruise speed has it."""
+    return float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0]) / (2.0 * accel_mps2)
+
+
+async def start_routes(
+    link: MavlinkLink,
+    plan: Plan,
+    missions: dict,
+    speedup: float,
+    logger,
+    lead_s: float,
+    leads: dict[int, float],
+    quirks: dict[int, AutopilotQuirks],
+    started: frozenset[int] = frozenset(),
+) -> None:
+    """Start each route (the item after NAV_TAKEOFF) at its planned start time, but those in
+    ``started`` (fixed wings that climbed into theirs).
+
+    Route time 0 is ``lead_s`` after now; each route starts its own acceleration lead earlier.
+    """
+    t0 = time.monotonic()
+
+    async def one(vp) -> None:
+        items = missions[vp.sysid]
+        if vp.sysid in started:
+            return
+        first = route_seq(items)
+        offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
+        start_s = lead_s + offset_s - leads[vp.sysid]
+        await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
+        try:
+            await start_mission_at(link, vp.sysid, quirks[vp.sysid], first, len(items) - 1)
+        except MavlinkError as exc:
+            raise UserError(
+                f"vehicle {vp.vehicle_id} (sysid {vp.sysid}) refused the mission start: {exc}"
+            ) from exc
+        logger.log_event({"event": "route_start", "sysid": vp.sysid, "planned_offset_s": offset_s})
+
+    await asyncio.gather(*(one(vp) for vp in plan.vehicles))
+
+
+def route_seq(items) -> int:
+    """The route's first item: the one after NAV_TAKEOFF."""
+    return next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
+
+
+async def wait_until_done(
+    link: MavlinkLink,
+    recorder: TrackRecorder,
+    status: VehicleStatus,
+    plan: Plan,
+    speedup: float,
+    timeout_factor: float,
+    progress,
+    keeper: ScheduleKeeper | None,
+    route_t0_s: float,
+    quirks: dict[int, AutopilotQuirks],
+) -> None:
+    descent_s = max(float(v.waypoints[-1, 2]) for v in plan.vehicles) / LAND_SPEED_MPS
+    planned_s = max(float(v.path_times_s[-1]) + v.takeoff_delay_s for v in plan.vehicles) + descent_s
+    budget_s = planned_s * timeout_factor / speedup + 10.0
+    deadline = time.monotonic() + budget_s
+    total = len(plan.vehicles)
+
+    def done() -> set[int]:
+        return {s for s, t in status.tracks.items() if t.done}
+
+    while time.monotonic() < deadline and len(done()) < total:
+        if progress:
+            progress("fly", len(done()), total)
+        if keeper is not None:
+            keep_schedule(link, recorder, status, keeper, route_t0_s, quirks)
+        await asyncio.sleep(KEEPER_PERIOD_S / speedup)
+    if progress:
+        progress("fly", len(done()), total)
+    # a little more telemetry after the last item (landing) for the log
+    await asyncio.sleep(min(1.0, 5.0 / speedup))
+
+
+def keep_schedule(
+    link: MavlinkLink,
+    recorder: TrackRecorder,
+    status: VehicleStatus,
+    keeper: ScheduleKeeper,
+    route_t0_s: float,
+    quirks: dict[int, AutopilotQuirks],
+) -> None:
+    for sysid, track in status.tracks.items():
+        if not track.started or track.done:
+            continue
+        latest = recorder.latest(sysid)
+        if latest is None:
+            continue
+        t_s, position = latest
+        speed = keeper.speed_command(sysid, t_s - route_t0_s, position)
+        if speed is not None:
+            change_speed(link, sysid, quirks[sysid], speed)

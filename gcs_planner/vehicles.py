@@ -1,0 +1,81 @@
+"""Where a flight's vehicles come from: a VehicleSource starts them (or not) and says how to reach them.
+
+``fly`` and the coalition HIL run take a source instead of starting mock autopilots themselves, so
+the flight code never imports the mock: real vehicles or SITL are ``ConnectedVehicles(urls)``, the
+mock fleet (sitl_mock) is found through the ``gcs_planner.vehicle_sources`` entry point
+(pyproject.toml) by ``mock_vehicles``. Layers import one way: sitl_mock uses gcs_planner's MAVLink
+core and plan types; nothing in gcs_planner imports sitl_mock.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from importlib.metadata import entry_points
+from typing import Protocol
+
+from gcs_planner.errors import UserError
+from gcs_planner.plan import VehiclePlan
+
+__all__ = ["ROUTE_ACCEL_MPS2", "ConnectedVehicles", "VehicleSource", "mock_vehicles"]
+
+ROUTE_ACCEL_MPS2 = 2.5  # real vehicles' assumed acceleration from the hover (ArduCopter WPNAV_ACCEL)
+ENTRY_POINT_GROUP = "gcs_planner.vehicle_sources"
+
+
+class VehicleSource(Protocol):
+    """Vehicles for one flight. ``simulated``: they share one simulated clock (time_boot_ms) that
+    runs ``speedup`` times faster than the wall clock; real vehicles run at 1 on their own clocks."""
+
+    simulated: bool
+    speedup: float
+
+    def __enter__(self) -> list[str]:
+        """Start the vehicles (if this source runs them); the link URLs that reach them."""
+
+    def __exit__(self, *exc: object) -> None:
+        """Stop what ``__enter__`` started."""
+
+    def accel_mps2(self, sysid: int) -> float:
+        """The vehicle's acceleration from the hover [m/s^2] (route starts lead by v / 2a)."""
+
+    def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
+        """Fault injection: a wind-like drift on one vehicle (mock vehicles only)."""
+
+    @property
+    def lag_events(self) -> int:
+        """How often a simulator fell behind its speed-up (0 for real vehicles)."""
+
+
+class ConnectedVehicles:
+    """Vehicles this tool does not start: real autopilots or SITL reached at ``urls``."""
+
+    simulated = False
+    speedup = 1.0
+    lag_events = 0
+
+    def __init__(self, urls: Sequence[str]) -> None:
+        self.urls = list(urls)
+
+    def __enter__(self) -> list[str]:
+        return self.urls
+
+    def __exit__(self, *exc: object) -> None:
+        pass
+
+    def accel_mps2(self, sysid: int) -> float:
+        return ROUTE_ACCEL_MPS2
+
+    def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
+        raise UserError("--drift injects a fault into mock vehicles; it cannot act on connected vehicles")
+
+
+def mock_vehicles(kind: str, plans: Sequence[VehiclePlan], **options) -> VehicleSource:
+    """The mock fleet ``kind`` ("mock": in this process, "mock-process": its own process) for
+    ``plans``, one mock autopilot per VehiclePlan, from the installed entry point."""
+    found = {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+    if kind not in found:
+        raise UserError(
+            f"no vehicle source {kind!r} is installed (known: {sorted(found)}); install gcs-planner with"
+            " its sitl_mock package (pip install -e .)"
+        )
+    return found[kind].load()(plans, **options)

@@ -1,0 +1,144 @@
+"""Mock fleets for a plan: one mock autopilot per VehiclePlan, homed and tuned for it.
+
+These are gcs_planner's vehicle sources (gcs_planner.vehicles.VehicleSource), registered as the
+``gcs_planner.vehicle_sources`` entry points "mock" (MockVehicles: the fleet in a thread of this
+process, for ``fly``) and "mock-process" (MockVehiclesProcess: its own process, for the coalition
+HIL run, whose in-flight uploads would otherwise share a core with 32 simulated vehicles).
+
+Each airframe is tuned to its planned vehicle as one would set SITL parameters (``airframe_for``):
+the plan's speed and turn radius need a lateral acceleration of v^2 / R and its steepest legs a
+climb and sink rate of v x slope; a multirotor gets at least that acceleration, a fixed wing at
+least that bank, both those vertical rates, all with headroom (CATCH_UP_FACTOR) for the schedule
+keeper to catch up. A fixed wing's home is its take-off climb run south of its first waypoint
+(the mock climbs heading north), so it reaches the waypoint at its altitude and flies on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.plan import VehiclePlan
+from sitl_mock.fleet import MockFleet
+from sitl_mock.flight import AIRFRAMES, G_MPS2, Airframe, climb_run_m
+from sitl_mock.process import MockFleetProcess
+
+__all__ = ["CATCH_UP_FACTOR", "MockVehicles", "MockVehiclesProcess", "airframe_for"]
+
+CATCH_UP_FACTOR = 1.3  # mock top speed / planned speed (headroom for schedule keeping)
+MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
+MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
+FLY_TAKEOFF_CLIMB_MPS = 2.0  # a fixed wing's take-off climb in `fly`: the rate its flight-time budget assumes
+HIL_TAKEOFF_CLIMB_MPS = 40.0  # coalition HIL: the take-off is not part of the measurement
+
+
+def airframe_for(vp: VehiclePlan) -> Airframe:
+    """The mock airframe tuned to the planned vehicle (module docstring)."""
+    base = AIRFRAMES[vp.vehicle_type]
+    speed = float(np.max(vp.speeds_mps))
+    if speed <= 0:
+        return base
+    legs = np.diff(vp.path, axis=0)
+    horizontal = np.hypot(legs[:, 0], legs[:, 1])
+    slope = (legs[:, 2] / np.maximum(horizontal, 1e-9))[horizontal > 1.0]  # not take-off / landing
+    frame = replace(
+        base,
+        cruise_speed_mps=speed,
+        max_speed_mps=max(base.max_speed_mps, CATCH_UP_FACTOR * speed),
+        climb_rate_mps=max(base.climb_rate_mps, CATCH_UP_FACTOR * speed * float(np.max(slope, initial=0.0))),
+        sink_rate_mps=max(base.sink_rate_mps, -CATCH_UP_FACTOR * speed * float(np.min(slope, initial=0.0))),
+    )
+    if vp.turn_radius_m <= 0:
+        return frame
+    lateral_mps2 = speed**2 / vp.turn_radius_m
+    if vp.vehicle_type == "fixed_wing":
+        return replace(frame, max_bank_rad=max(base.max_bank_rad, float(np.arctan(lateral_mps2 / G_MPS2))))
+    return replace(frame, accel_mps2=max(base.accel_mps2, lateral_mps2))
+
+
+def _home(vp: VehiclePlan, origin: Origin, climb_run: float) -> Origin:
+    """On the ground under the first waypoint, ``climb_run`` metres south of it."""
+    lat, lon, alt = enu_to_geodetic(vp.waypoints[0, 0], vp.waypoints[0, 1] - climb_run, 0.0, origin)
+    return Origin(float(lat), float(lon), float(alt))
+
+
+def _rate_hz(speedup: float) -> float:
+    """Position reports at MOCK_TELEMETRY_HZ of flight time, within what one Python process streams."""
+    return min(MOCK_TELEMETRY_HZ * speedup, MAX_WALL_TELEMETRY_HZ)
+
+
+class _PlanFleet:
+    """What both fleets share: the VehicleSource methods over a started fleet."""
+
+    simulated = True
+
+    def __init__(self, fleet: MockFleet | MockFleetProcess, airframes: dict[int, Airframe], speedup: float):
+        self.fleet, self.airframes, self.speedup = fleet, airframes, float(speedup)
+
+    def __enter__(self) -> list[str]:
+        self.fleet.__enter__()
+        return [f"udpout:{h}:{p}" for h, p in self.fleet.addresses]
+
+    def __exit__(self, *exc: object) -> None:
+        self.fleet.__exit__(*exc)
+
+    def accel_mps2(self, sysid: int) -> float:
+        return self.airframes[sysid].accel_mps2
+
+    def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
+        self.fleet.set_drift(sysid, east_mps, north_mps)
+
+    @property
+    def lag_events(self) -> int:
+        return self.fleet.lag_events
+
+
+class MockVehicles(_PlanFleet):
+    """``fly``'s mock fleet, in a thread of this process, on one simulated clock."""
+
+    def __init__(
+        self,
+        plans: Sequence[VehiclePlan],
+        origin: Origin,
+        speedup: float = 10.0,
+        autopilot: str = "ardupilot",
+    ) -> None:
+        airframes, specs = {}, []
+        for vp in plans:
+            frame, run_m = airframe_for(vp), 0.0
+            if vp.vehicle_type == "fixed_wing":
+                frame = replace(frame, climb_rate_mps=FLY_TAKEOFF_CLIMB_MPS)
+                run_m = climb_run_m(frame.cruise_speed_mps, FLY_TAKEOFF_CLIMB_MPS, float(vp.waypoints[0, 2]))
+            airframes[vp.sysid] = frame
+            specs.append(
+                dict(sysid=vp.sysid, home=_home(vp, origin, run_m), vehicle_type=vp.vehicle_type,
+                     profile=autopilot, airframe=frame)
+            )  # fmt: skip
+        fleet = MockFleet(vehicles=specs, speedup=speedup, home=origin, rate_hz=_rate_hz(speedup))
+        super().__init__(fleet, airframes, speedup)
+
+
+class MockVehiclesProcess(_PlanFleet):
+    """The coalition HIL run's fleet: mock fixed wings in their own process (module docstring),
+    each with the bank for its minimum turn radius at the keeper's top speed (CATCH_UP_FACTOR x
+    cruise), so catching up does not widen turns."""
+
+    def __init__(self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float = 10.0) -> None:
+        airframes, specs = {}, []
+        for vp in plans:
+            cruise = float(vp.speeds_mps[0])
+            run_m = climb_run_m(cruise, HIL_TAKEOFF_CLIMB_MPS, float(vp.waypoints[0, 2]))
+            frame = airframe_for(vp)
+            bank = float(np.arctan((CATCH_UP_FACTOR * cruise) ** 2 / vp.turn_radius_m / G_MPS2))
+            bank = max(frame.max_bank_rad, bank)
+            frame = replace(frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS)
+            airframes[vp.sysid] = frame
+            specs.append(
+                dict(sysid=vp.sysid, home=_home(vp, origin, run_m), vehicle_type="fixed_wing",
+                     profile="ardupilot", airframe=frame)
+            )  # fmt: skip
+        fleet = MockFleetProcess(vehicles=specs, speedup=speedup, home=origin, rate_hz=_rate_hz(speedup))
+        super().__init__(fleet, airframes, speedup)

@@ -1,0 +1,138 @@
+"""The layering the README draws holds: imports go one way, and no function grows past 80 lines.
+
+Every import in gcs_planner/ and sitl_mock/ is read from the source (function-level ones too), so
+a lazy import cannot hide a cycle."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("gcs_planner", "sitl_mock")
+MAX_FUNCTION_LINES = 80
+# the MAVLink core: message types, enums, wire structs, framing, signing, what autopilots store;
+# the GCS and the mock autopilot both build on it, and it builds on nothing else of the project
+MAVLINK_CORE = {f"gcs_planner.mavlink.{m}" for m in ("types", "enums", "wire", "dialect", "framing")} | {
+    f"gcs_planner.mavlink.{m}" for m in ("signing", "signing_streams", "readback")
+}
+# what the mock autopilot may use of gcs_planner: the MAVLink core, geodesy, plan types (its
+# plan-tuned fleets) and what those import
+MOCK_MAY_USE = MAVLINK_CORE | {"gcs_planner.geo", "gcs_planner.plan", "gcs_planner.errors"}
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for package in PACKAGES:
+        for path in (ROOT / package).rglob("*.py"):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            out[".".join(parts)] = path
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(name: str) -> set[str]:
+    """The project modules ``name`` imports, anywhere in its source."""
+    path = MODULES[name]
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([node.module] if node.module else []))
+            # `from package import module` imports the module; `from module import name` the module
+            targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base for a in node.names]
+        else:
+            continue
+        found |= {t for t in targets if t in MODULES}
+    return found
+
+
+GRAPH = {name: _imports(name) for name in MODULES}
+MODULES_OF = {p: [m for m in MODULES if m.split(".")[0] == p] for p in PACKAGES}
+
+
+def _unit(name: str) -> str:
+    """A layer unit: a subpackage of gcs_planner, a top-level module of it, or sitl_mock."""
+    parts = name.split(".")
+    return parts[0] if parts[0] == "sitl_mock" or len(parts) == 1 else ".".join(parts[:2])
+
+
+def _cycle(edges: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of the graph, if it has any (depth-first search)."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(v: str) -> list[str] | None:
+        state[v] = 1
+        stack.append(v)
+        for w in sorted(edges.get(v, ())):
+            if state.get(w) == 1:
+                return stack[stack.index(w) :] + [w]
+            if w not in state and (found := visit(w)):
+                return found
+        state[v] = 2
+        stack.pop()
+        return None
+
+    for v in sorted(edges):
+        if v not in state and (found := visit(v)):
+            return found
+    return None
+
+
+def test_gcs_planner_never_imports_the_mock():
+    offenders = sorted(m for m, deps in GRAPH.items() if m.startswith("gcs_planner") and any(
+        d.startswith("sitl_mock") for d in deps))  # fmt: skip
+    assert offenders == [], "the flight code gets its vehicles from a VehicleSource (gcs_planner/vehicles.py)"
+
+
+def test_the_mock_uses_only_the_mavlink_core_geodesy_and_plans():
+    used = {d for m in MODULES_OF["sitl_mock"] for d in GRAPH[m]} - set(MODULES_OF["sitl_mock"])
+    assert used <= MOCK_MAY_USE, sorted(used - MOCK_MAY_USE)
+
+
+def test_the_mavlink_core_builds_on_nothing_else():
+    for module in MAVLINK_CORE:
+        assert GRAPH[module] <= MAVLINK_CORE, (module, sorted(GRAPH[module] - MAVLINK_CORE))
+
+
+def test_no_import_cycle_between_packages_or_layers():
+    packages = {p: {d.split(".")[0] for m, deps in GRAPH.items() if m.split(".")[0] == p for d in deps} - {p}
+                for p in PACKAGES}  # fmt: skip
+    assert _cycle(packages) is None
+    units: dict[str, set[str]] = {}
+    for module, deps in GRAPH.items():
+        units.setdefault(_unit(module), set()).update(_unit(d) for d in deps if _unit(d) != _unit(module))
+    assert _cycle(units) is None, _cycle(units)
+
+
+def test_the_cycle_finder_finds_cycles():
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def _long_functions(path: Path) -> list[str]:
+    tree = ast.parse(path.read_text())
+    return [
+        f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1} lines)"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.end_lineno - node.lineno + 1 > MAX_FUNCTION_LINES
+    ]
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_function_over_80_lines(package):
+    long = [entry for path in sorted((ROOT / package).rglob("*.py")) for entry in _long_functions(path)]
+    assert long == []
