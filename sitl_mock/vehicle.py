@@ -86,6 +86,17 @@ class VehicleState:
     sim_time_s: float
 
 
+def _check_identity(sysid: int, profile: str, vehicle_type: str, port: int) -> None:
+    if not (isinstance(sysid, int) and 1 <= sysid <= 254):
+        raise ValueError(f"vehicle sysid must be an integer in 1..254, got {sysid!r}")
+    if profile not in PROFILES:
+        raise ValueError(f"vehicle profile must be one of {sorted(PROFILES)}, got {profile!r}")
+    if vehicle_type not in AIRFRAMES:
+        raise ValueError(f"vehicle_type must be one of {sorted(AIRFRAMES)}, got {vehicle_type!r}")
+    if not (isinstance(port, int) and 0 <= port <= 65535):
+        raise ValueError(f"vehicle port must be in 0..65535, got {port!r}")
+
+
 class MockVehicle:
     """A mock autopilot with system id ``sysid`` on UDP ``host:port`` (0 = ephemeral port)."""
 
@@ -106,14 +117,7 @@ class MockVehicle:
         signing_key: bytes | None = None,
         flight: dict | None = None,
     ) -> None:
-        if not (isinstance(sysid, int) and 1 <= sysid <= 254):
-            raise ValueError(f"vehicle sysid must be an integer in 1..254, got {sysid!r}")
-        if profile not in PROFILES:
-            raise ValueError(f"vehicle profile must be one of {sorted(PROFILES)}, got {profile!r}")
-        if vehicle_type not in AIRFRAMES:
-            raise ValueError(f"vehicle_type must be one of {sorted(AIRFRAMES)}, got {vehicle_type!r}")
-        if not (isinstance(port, int) and 0 <= port <= 65535):
-            raise ValueError(f"vehicle port must be in 0..65535, got {port!r}")
+        _check_identity(sysid, profile, vehicle_type, port)
         self.sysid = sysid
         self.profile = PROFILES[profile]
         self.vehicle_type = vehicle_type
@@ -148,7 +152,11 @@ class MockVehicle:
         self._pending_start: tuple[int | None, int | None] | None = None
         self._syncing_seq = False
         self._after_ack: Callable[[], None] | None = None  # runs once the COMMAND_ACK is sent
-        self._dispatch = {
+        self._dispatch, self._commands = self._handlers()
+
+    def _handlers(self) -> tuple[dict[str, Callable], dict[int, Callable]]:
+        """The handler of each message type and of each command the mock emulates."""
+        messages = {
             "COMMAND_LONG": self._on_command,
             "COMMAND_INT": self._on_command,
             "SET_MODE": self._on_set_mode,
@@ -157,7 +165,7 @@ class MockVehicle:
             "PARAM_SET": self._on_param_set,
             "PARAM_REQUEST_READ": self._on_param_request_read,
         }
-        self._commands = {
+        commands = {
             mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
             mavlink.MAV_CMD_DO_SET_MODE: self._cmd_set_mode,
             mavlink.MAV_CMD_MISSION_START: self._cmd_mission_start,
@@ -171,6 +179,7 @@ class MockVehicle:
             mavlink.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_capabilities,
             mavlink.MAV_CMD_SET_MESSAGE_INTERVAL: self._cmd_message_interval,
         }
+        return messages, commands
 
     # --- lifecycle ---------------------------------------------------------------------------
     def attach(self, world: World, index: int, home_enu_m: np.ndarray) -> None:

@@ -196,8 +196,6 @@ def minimize(
     total_iters = rounds * cfg.iterations
     stopped = False
     n_elite = int(round(cfg.elite_fraction * n_p))
-    r_shape = (n_p, dim) if cfg.per_dimension_random else (n_p, 1)
-    neg_v_max = -v_max
 
     for rnd in range(rounds):
         if rnd > 0:  # restart: keep elites' bests, re-draw the rest, velocities reset
@@ -212,13 +210,8 @@ def minimize(
             if cfg.max_evaluations is not None and evaluations + n_p > cfg.max_evaluations:
                 stopped = True
                 break
-            rows = x if trial is None else np.vstack([x, trial])
-            c = np.asarray(cost(rows), dtype=float).reshape(-1)
-            if c.shape != (len(rows),):
-                raise ValueError(f"cost returned shape {c.shape}, expected ({len(rows)},)")
-            if np.isnan(c).any():
-                c = np.where(np.isnan(c), np.inf, c)
-            evaluations += len(rows)
+            c = _evaluate(cost, x if trial is None else np.vstack([x, trial]))
+            evaluations += len(c)
             if trial is not None:
                 c, trial_c = c[:n_p], float(c[n_p])
             better = c < pbest_c
@@ -238,22 +231,7 @@ def minimize(
                 break
             if cfg.mutation is not None and cfg.mutation_stage == "gbest_greedy":
                 trial = np.clip(cfg.mutation(gbest_x[None, :], t, cfg.iterations, rng), lower, upper)
-            if cfg.mutation is not None and cfg.mutation_stage == "before_velocity":
-                x = np.clip(cfg.mutation(x, t, cfg.iterations, rng), lower, upper)
-            w = inertia_weight(cfg, t, cfg.iterations)
-            r1 = rng.random(r_shape)
-            r2 = rng.random(r_shape)
-            # v <- w v + c1 r1 (pbest - x) + c2 r2 (gbest - x), in place (this loop is the hot path)
-            v *= w
-            v += (cfg.c1 * r1) * (pbest_x - x)
-            v += (cfg.c2 * r2) * (gbest_x - x)
-            np.minimum(v, v_max, out=v)
-            np.maximum(v, neg_v_max, out=v)
-            x = x + v
-            if cfg.mutation is not None and cfg.mutation_stage == "after_move":
-                x = cfg.mutation(x, t + 1, cfg.iterations, rng)
-            np.minimum(x, upper, out=x)
-            np.maximum(x, lower, out=x)
+            x = _move(x, v, pbest_x, gbest_x, cfg, t, rng, (lower, upper, v_max))
         if stopped:
             break
 
@@ -269,6 +247,36 @@ def minimize(
         rounds=rnd + 1,
         stopped_by_budget=stopped,
     )
+
+
+def _evaluate(cost: Cost, rows: np.ndarray) -> np.ndarray:
+    """The cost of every row, NaN read as +inf; a cost of the wrong shape is an error."""
+    c = np.asarray(cost(rows), dtype=float).reshape(-1)
+    if c.shape != (len(rows),):
+        raise ValueError(f"cost returned shape {c.shape}, expected ({len(rows)},)")
+    return np.where(np.isnan(c), np.inf, c) if np.isnan(c).any() else c
+
+
+def _move(x, v, pbest_x, gbest_x, cfg: PSOConfig, t: int, rng: np.random.Generator, box) -> np.ndarray:
+    """One swarm step: mutation (per ``mutation_stage``), v <- w v + c1 r1 (pbest - x) + c2 r2
+    (gbest - x) clipped to +-v_max, in place (the hot path), x + v clipped to the bounds."""
+    lower, upper, v_max = box
+    if cfg.mutation is not None and cfg.mutation_stage == "before_velocity":
+        x = np.clip(cfg.mutation(x, t, cfg.iterations, rng), lower, upper)
+    r_shape = x.shape if cfg.per_dimension_random else (x.shape[0], 1)
+    r1 = rng.random(r_shape)
+    r2 = rng.random(r_shape)
+    v *= inertia_weight(cfg, t, cfg.iterations)
+    v += (cfg.c1 * r1) * (pbest_x - x)
+    v += (cfg.c2 * r2) * (gbest_x - x)
+    np.minimum(v, v_max, out=v)
+    np.maximum(v, -v_max, out=v)
+    x = x + v
+    if cfg.mutation is not None and cfg.mutation_stage == "after_move":
+        x = cfg.mutation(x, t + 1, cfg.iterations, rng)
+    np.minimum(x, upper, out=x)
+    np.maximum(x, lower, out=x)
+    return x
 
 
 def _check_init(init: np.ndarray | None, n_p: int, dim: int) -> np.ndarray:

@@ -114,6 +114,26 @@ class SimResult:
         return float(np.mean(done)) if done else math.nan
 
 
+@dataclass
+class _Formation:
+    """A coalition being formed: the candidates, the task poses, the problem and its solution."""
+
+    cands: list[int]
+    poses: np.ndarray  # (n, 3) candidate poses at t_e^s
+    goals: np.ndarray  # (K, 3) task entry poses
+    kind: np.ndarray
+    angle: np.ndarray
+    speed: np.ndarray
+    rmin: np.ndarray
+    L: np.ndarray  # (n, K) shortest lengths, threats ignored
+    prob: CoalitionProblem
+    plans: paths.FormationPaths
+    sol: object = None
+    segs: list = field(default_factory=list)
+    clear: list = field(default_factory=list)
+    opt_s: float = 0.0
+
+
 class CoalitionSim:
     def __init__(self, world: World, rng: np.random.Generator) -> None:
         self.w, self.p, self.rng = world, world.params, rng
@@ -405,18 +425,44 @@ class CoalitionSim:
 
     # ---- formation
     def _on_close(self, key: int) -> None:
+        """The tender closes: form the coalition from the bids (eqs. 24-31) and award its tasks."""
         tender = self.tenders[key]
         if tender.cancelled:
             return
         t_wall = time.perf_counter()
-        target, p = tender.target, self.p
-        leader = tender.leader
+        cands, poses, munitions, assess, rleft, etas = self._candidates(tender)
+        if not cands:
+            return self._fail(tender, "no candidates", t_wall)
+        f = self._formation(tender, cands, np.array(poses), munitions, assess, rleft)
+        if not coverable(f.prob):
+            return self._fail(tender, f"needs not covered by {len(cands)} candidates", t_wall)
+        why = self._solve(tender, f, np.array(etas))
+        if why:
+            return self._fail(tender, why, t_wall)
+        kind, p = f.kind, self.p
+        legs = paths.sample_legs(  # the last attempt's legs (all clear unless attempts ran out)
+            f.segs,
+            tender.t_es_s,
+            f.speed[f.sol.assign],
+            p.sample_ds_m,
+            ["strike" if kind[k] == STRIKE else "transit" for k in range(len(kind))],
+            [{"target": tender.target.id, "clear": f.clear[k]} for k in range(len(kind))],
+        )
+        dt = time.perf_counter() - t_wall
+        self.compute_s.append(dt)
+        self.optimiser_s.append(f.opt_s)
+        self._award(tender, f, legs, dt)
+
+    def _candidates(self, tender: Tender) -> tuple[list[int], list, list, list, list, list]:
+        """Candidates with their pose, munitions, assessment payload, range left and ETA at t_e^s:
+        the leader itself (eq. 24) while it leads, then every bidder."""
         cands: list[int] = []
         poses, munitions, assess, rleft, etas = [], [], [], [], []
-        if self.st[leader].state == LEADER:  # the leader itself is a candidate (eq. 24)
+        leader = tender.leader
+        if self.st[leader].state == LEADER:
             u = self.uavs[leader]
             pose = self.st[leader].track.state_at(tender.t_es_s)[0]
-            d = float(paths.free_heading_lengths(pose[None], np.asarray(target.xy), u.r_min_m)[0])
+            d = float(paths.free_heading_lengths(pose[None], np.asarray(tender.target.xy), u.r_min_m)[0])
             cands.append(leader)
             poses.append(pose)
             munitions.append(self.st[leader].munitions)
@@ -430,17 +476,18 @@ class CoalitionSim:
             assess.append(b.can_assess)
             rleft.append(b.range_left_m)
             etas.append(b.eta_s)
+        return cands, poses, munitions, assess, rleft, etas
+
+    def _formation(self, tender: Tender, cands: list[int], poses, munitions, assess, rleft) -> _Formation:
+        """The coalition problem of the candidates for the target's tasks (shortest Dubins lengths)."""
+        target = tender.target
         kind, angle, offset = target.tasks()
-        K = len(kind)
-        if not cands:
-            return self._fail(tender, "no candidates", t_wall)
-        n = len(cands)
+        n, K = len(cands), len(kind)
         goals = self._task_poses(target, kind, angle)
-        poses_a = np.array(poses)
         speed = np.array([self.uavs[i].speed_mps for i in cands])
         rmin = np.array([self.uavs[i].r_min_m for i in cands])
         L = paths.shortest_lengths(
-            np.repeat(poses_a, K, 0), np.tile(goals, (n, 1)), np.repeat(rmin, K)
+            np.repeat(poses, K, 0), np.tile(goals, (n, 1)), np.repeat(rmin, K)
         ).reshape(n, K)
         prob = CoalitionProblem(
             length_m=L,
@@ -458,105 +505,103 @@ class CoalitionSim:
             t0_s=self.outcomes[target.id].t_revealed_s,
             t_start_s=tender.t_es_s,
         )
-        if not coverable(prob):
-            return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
-        base = L.copy()
-        plans = paths.FormationPaths(poses_a, goals, rmin, self.known, p.kappa, p.sample_ds_m)
-        sol, bad, opt_s = None, [], 0.0
-        for _attempt in range(3):  # members whose timed leg cannot clear the threats are excluded
+        plans = paths.FormationPaths(poses, goals, rmin, self.known, self.p.kappa, self.p.sample_ds_m)
+        return _Formation(cands, poses, goals, kind, angle, speed, rmin, L, prob, plans)
+
+    def _solve(self, tender: Tender, f: _Formation, etas: np.ndarray) -> str | None:
+        """Assign the tasks (the colony, or a baseline) and time the members' legs; a member whose
+        timed leg cannot clear the threats is excluded (with its lookalikes) and the tasks
+        re-covered, up to three attempts. The reason it failed, or None."""
+        p, prob, kind, n = self.p, f.prob, f.kind, len(f.cands)
+        base = f.L.copy()
+        sol, bad = None, []
+        for _attempt in range(3):
             prob.length_m = base.copy()
             if not coverable(prob):
-                return self._fail(tender, f"needs not covered by {n} candidates clear of threats", t_wall)
+                return f"needs not covered by {n} candidates clear of threats"
             t_opt = time.perf_counter()
             fixed = None
             if sol is not None and p.method == "aco":  # re-cover only the excluded members' tasks
-                prob.length_m = np.where(np.isinf(base), np.inf, plans.lengths(L))
+                prob.length_m = np.where(np.isinf(base), np.inf, f.plans.lengths(f.L))
                 fixed = repair(sol.assign, bad, sol.t_required_s, prob, p)
                 prob.length_m = base.copy()
             if fixed is not None:
                 sol = make_solution(fixed, prob, p)
             elif p.method == "polynomial":
-                sol = solve_polynomial(prob, p, np.array(etas))
+                sol = solve_polynomial(prob, p, etas)
             else:
                 sol = solve_aco(prob, p, self.rng, scale=GLOBAL_SCALE if p.method == "global" else 1)
-            opt_s += time.perf_counter() - t_opt  # the colony run plus any repairs
+            f.opt_s += time.perf_counter() - t_opt  # the colony run plus any repairs
             if not sol.covered:
-                return self._fail(tender, f"needs not covered by {n} candidates", t_wall)
-            # exact, threat-avoiding minimum routes; lambda from them (the latest member is the reference)
-            routes = plans.routes(sol.assign)
-            exact = L.copy()
-            for k in range(K):
-                exact[sol.assign[k], k] = routes[k].length_m
-            prob.length_m = exact
-            sol = make_solution(sol.assign, prob, p)
-            want = np.array(
-                [
-                    max(routes[k].length_m, speed[sol.assign[k]] * (sol.t_required_s[k] - tender.t_es_s))
-                    if kind[k] == STRIKE
-                    else routes[k].length_m
-                    for k in range(K)
-                ]
-            )
-            segs, clear = plans.timed(sol.assign, want)
-            bad = [k for k in range(K) if not clear[k]]
+                return f"needs not covered by {n} candidates"
+            sol = self._time_legs(tender, f, sol)
+            bad = [k for k in range(len(kind)) if not f.clear[k]]
             if not bad:
-                break
-            for k in bad:
-                x = sol.assign[k]
-                alike = [i for i in lookalikes(poses_a, x, rmin[x]) if np.isfinite(base[i, k])]
-                base[[x, *alike], k] = np.inf
-                self.log(
-                    "member_excluded",
-                    uav=self.uavs[cands[x]].id,
-                    target=target.id,
-                    reason="timed path cannot clear the threats",
-                    alike=[self.uavs[cands[i]].id for i in alike],
-                )
-        legs = paths.sample_legs(  # the last attempt's legs (all clear unless attempts ran out)
-            segs,
-            tender.t_es_s,
-            speed[sol.assign],
-            p.sample_ds_m,
-            ["strike" if kind[k] == STRIKE else "transit" for k in range(K)],
-            [{"target": target.id, "clear": clear[k]} for k in range(K)],
+                return None
+            self._exclude(tender, f, base, sol, bad)
+        return None  # attempts ran out: the legs are flown as they are, marked not clear
+
+    def _time_legs(self, tender: Tender, f: _Formation, sol):
+        """Exact threat-avoiding routes of the assignment, the solution re-evaluated on them (the
+        latest member is the reference of lambda) and each leg stretched to its required time."""
+        routes = f.plans.routes(sol.assign)
+        exact = f.L.copy()
+        for k in range(len(f.kind)):
+            exact[sol.assign[k], k] = routes[k].length_m
+        f.prob.length_m = exact
+        sol = make_solution(sol.assign, f.prob, self.p)
+        want = np.array(
+            [
+                max(routes[k].length_m, f.speed[sol.assign[k]] * (sol.t_required_s[k] - tender.t_es_s))
+                if f.kind[k] == STRIKE
+                else routes[k].length_m
+                for k in range(len(f.kind))
+            ]
         )
-        dt = time.perf_counter() - t_wall
-        self.compute_s.append(dt)
-        self.optimiser_s.append(opt_s)
-        members = tuple(int(cands[i]) for i in sol.assign)
+        f.segs, f.clear = f.plans.timed(sol.assign, want)
+        f.sol = sol
+        return sol
+
+    def _exclude(self, tender: Tender, f: _Formation, base: np.ndarray, sol, bad: list[int]) -> None:
+        for k in bad:
+            x = sol.assign[k]
+            alike = [i for i in lookalikes(f.poses, x, f.rmin[x]) if np.isfinite(base[i, k])]
+            base[[x, *alike], k] = np.inf
+            self.log(
+                "member_excluded",
+                uav=self.uavs[f.cands[x]].id,
+                target=tender.target.id,
+                reason="timed path cannot clear the threats",
+                alike=[self.uavs[f.cands[i]].id for i in alike],
+            )
+
+    def _award(self, tender: Tender, f: _Formation, legs: list[Leg], compute_s: float) -> None:
+        """Log the coalition and send each member its award (lost on a broken link); release the
+        bidders that were not chosen and a leader that is not a member."""
+        target, p, sol, leader, key = tender.target, self.p, f.sol, tender.leader, tender.key
+        members = tuple(int(f.cands[i]) for i in sol.assign)
         out = self.outcomes[target.id]
         out.t_formed_s, out.J, out.parts = self.now, sol.J, sol.parts
         out.members = tuple(self.uavs[m].id for m in members)
-        out.pending = K
+        out.pending = len(f.kind)
         self.log(
             "formed",
             uav=self.uavs[leader].id,
             target=target.id,
-            candidates=n,
+            candidates=len(f.cands),
             members=list(out.members),
             J=round(sol.J, 4),
-            compute_s=round(dt, 4),
-            optimiser_s=round(opt_s, 4),
+            compute_s=round(compute_s, 4),
+            optimiser_s=round(f.opt_s, 4),
         )
         t_send = tender.t_es_s - p.delay_s
-        for k in range(K):
-            i = members[k]
-            award = Award(
-                leader,
-                i,
-                key,
-                target.id,
-                members,
-                "strike" if kind[k] == STRIKE else "assess",
-                float(angle[k]),
-                float(sol.t_required_s[k]),
-            )
-            t_arr = (
-                tender.t_es_s
-                if p.method == "global" or i == leader
-                else self.bus.arrival_s(leader, i, t_send)
-            )
-            entry = goals[k]
+        for k, i in enumerate(members):
+            task = "strike" if f.kind[k] == STRIKE else "assess"
+            at_s = float(sol.t_required_s[k])
+            award = Award(leader, i, key, target.id, members, task, float(f.angle[k]), at_s)
+            direct = p.method == "global" or i == leader
+            t_arr = tender.t_es_s if direct else self.bus.arrival_s(leader, i, t_send)
+            entry = f.goals[k]
             self.log(
                 "award",
                 uav=self.uavs[i].id,

@@ -321,12 +321,47 @@ def evaluate(
     """Cost, conflicts and feasibility of B fleet candidates; conflicts only for pairs with an
     ``active`` UAV (all when None)."""
     s = problem.settings
-    uavs = problem.uavs
     n_b, n_u = pts.shape[:2]
-    a_max = np.array([u.dyn.a_max_mps2 for u in uavs])[:, None]
-    norm = np.array([u.dyn.limit == "norm" for u in uavs])[:, None]
+    a_max = np.array([u.dyn.a_max_mps2 for u in problem.uavs])[:, None]
+    norm = np.array([u.dyn.limit == "norm" for u in problem.uavs])[:, None]
     tau = blend_times(pts, times, a_max, norm)
     margin = corner_deviation(pts, times, tau)
+    cost, penalty, terms = _own_cost(problem, pts, times, tau, norm, goal_idx)
+    act = np.arange(n_u) if active is None else np.asarray(active, dtype=int)
+    pts, times = with_rest_ends(pts, times, tau)
+    pairs, d, t, pc, f_c = _pair_conflicts(problem, pts, times, margin, active, act)
+    zc_pts, zc_t, zc_rot, zc_axes, _ = problem.zone_arrays
+    if len(zc_pts):
+        dz, tz = zone_closest_approach(
+            pts[:, act], times[:, act], zc_pts, zc_t, zc_rot, zc_axes, margin[:, act]
+        )
+    else:
+        dz, tz = np.full((n_b, len(act), 0), np.inf), np.zeros((n_b, len(act), 0))
+    zcf = dz < 1.0
+    f_c = f_c + zcf.sum(axis=(-1, -2)) + np.maximum(1.0 - dz, 0.0).sum(axis=(-1, -2))
+    n_conf = pc.sum(axis=-1) + zcf.sum(axis=(-1, -2))
+    limits_ok = penalty.sum(axis=-1) <= 1e-9
+    return _Eval(
+        cost=cost + s.w_conflict * f_c,
+        conflicts=n_conf,
+        feasible=(n_conf == 0) & limits_ok,
+        pairs=pairs,
+        pair_conflict=pc,
+        pair_t=t,
+        pair_d=d,
+        active=act,
+        zone_conflict=zcf,
+        zone_t=tz,
+        zone_d=dz,
+        terms=terms,
+    )
+
+
+def _own_cost(problem: Problem, pts, times, tau, norm, goal_idx):
+    """Each candidate's cost without conflicts: length, arrival-time error and the limit
+    penalties; (cost (B,), penalty (B, U), named terms)."""
+    s, uavs = problem.settings, problem.uavs
+    n_u = pts.shape[1]
     inflight = np.ones(pts.shape[1:3], dtype=bool)
     for i, u in enumerate(uavs):
         if u.dyn.vertical_takeoff:
@@ -352,10 +387,22 @@ def evaluate(
         + s.w_time_limit * err_excess
     )
     cost = (length + s.w_time * err + penalty).sum(axis=-1)
+    terms = {
+        "length_m": length,
+        "time_error_s": err,
+        "speed_excess": viol["speed"],
+        "blend_overlap_s": viol["blend_overlap"],
+        "turn_excess_m": viol["turn"],
+        "time_error_excess_s": err_excess,
+    }
+    return cost, penalty, terms
 
-    act = np.arange(n_u) if active is None else np.asarray(active, dtype=int)
-    sep = np.array([u.separation_m for u in uavs])
-    pts, times = with_rest_ends(pts, times, tau)
+
+def _pair_conflicts(problem: Problem, pts, times, margin, active, act):
+    """UAV-UAV conflicts: candidate pairs (with an active UAV), their closest approach, which are
+    closer than their separation plus corner margins, and the conflict term of the cost."""
+    n_b, n_u = pts.shape[:2]
+    sep = np.array([u.separation_m for u in problem.uavs])
     pairs = candidate_pairs(pts, times, sep[None, :] / 2 + margin)
     if active is not None and len(pairs):
         is_act = np.zeros(n_u, dtype=bool)
@@ -370,38 +417,7 @@ def evaluate(
         need = np.zeros((n_b, 0))
     pc = d < need
     f_c = pc.sum(axis=-1) + (np.maximum(need - d, 0.0) / np.where(need > 0, need, 1.0)).sum(axis=-1)
-    zc_pts, zc_t, zc_rot, zc_axes, _ = problem.zone_arrays
-    if len(zc_pts):
-        dz, tz = zone_closest_approach(
-            pts[:, act], times[:, act], zc_pts, zc_t, zc_rot, zc_axes, margin[:, act]
-        )
-    else:
-        dz, tz = np.full((n_b, len(act), 0), np.inf), np.zeros((n_b, len(act), 0))
-    zcf = dz < 1.0
-    f_c = f_c + zcf.sum(axis=(-1, -2)) + np.maximum(1.0 - dz, 0.0).sum(axis=(-1, -2))
-    n_conf = pc.sum(axis=-1) + zcf.sum(axis=(-1, -2))
-    limits_ok = penalty.sum(axis=-1) <= 1e-9
-    return _Eval(
-        cost=cost + s.w_conflict * f_c,
-        conflicts=n_conf,
-        feasible=(n_conf == 0) & limits_ok,
-        pairs=pairs,
-        pair_conflict=pc,
-        pair_t=t,
-        pair_d=d,
-        active=act,
-        zone_conflict=zcf,
-        zone_t=tz,
-        zone_d=dz,
-        terms={
-            "length_m": length,
-            "time_error_s": err,
-            "speed_excess": viol["speed"],
-            "blend_overlap_s": viol["blend_overlap"],
-            "turn_excess_m": viol["turn"],
-            "time_error_excess_s": err_excess,
-        },
-    )
+    return pairs, d, t, pc, f_c
 
 
 def with_rest_ends(pts: np.ndarray, times: np.ndarray, tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
