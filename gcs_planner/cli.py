@@ -15,23 +15,25 @@ from importlib import import_module
 from gcs_planner import __version__
 from gcs_planner.errors import UserError
 
-COMMANDS = [
-    "plan",
-    "fly",
-    "fly-coalition",
-    "demo",
-    "replay",
-    "watch",
-    "import-log",
-    "import-tlog",
-    "export",
-    "convert",
-    "upload",
-    "download",
-    "clear",
-    "start",
-    "signing-setup",
-]
+# command -> its one-line help (the first line of its module's docstring, tested): `--help` lists
+# them without importing every command
+COMMANDS = {
+    "plan": "Plan a scenario file and write plan.json.",
+    "fly": "Plan a scenario and fly it: upload to every vehicle, arm, start, record, check conformance.",
+    "fly-coalition": "Coalition HIL run: fly mock fixed wings and upload each coalition award to them in flight.",
+    "demo": "Run the bundled demo: plan missions/swarm_small.toml and fly it against mock vehicles.",
+    "replay": "Replay a flight log (MCAP) to Rerun (.rrd or a live viewer) or as MAVLink over UDP.",
+    "watch": "Watch vehicles the tool did not start: log their telemetry to MCAP, optionally with live views.",
+    "import-log": "Import a flight log into an MCAP flight log: .tlog, raw MAVLink, ArduPilot DataFlash, PX4 ULog.",
+    "import-tlog": "Import a flight log into an MCAP flight log (the older name of `import-log`, kept as an alias).",
+    "export": "Export plan.json as QGroundControl .plan or Mission Planner WPL files, one per vehicle.",
+    "convert": "Convert a mission file: .plan, .mission, WPL 110 / 120 or a fence / rally list -> .plan or WPL.",
+    "upload": "Upload a mission (plus fence and rally points) to one vehicle or many, and print what each accepted.",
+    "download": "Download a vehicle's mission (and fence and rally points) and print it; optionally save it to FILE.",
+    "clear": "Clear a vehicle's mission, fence or rally list (or all three) and confirm each was cleared.",
+    "start": "Start a vehicle's mission: optionally upload FILE first, then arm and send MISSION_START.",
+    "signing-setup": "Give a vehicle a MAVLink 2 signing key (SETUP_SIGNING), or turn its signing off, and check it took.",
+}  # fmt: skip
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -42,18 +44,17 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
-    """The parser; ``only``: import just that command's module (the others are listed without
-    their arguments), so a short command does not pay for the planners' imports."""
+    """The parser; ``only``: import just that command's module (the others are listed with their
+    help line, without their arguments), so a short command does not pay for the others' imports."""
     parser = OneLineParser(prog="gcs-planner", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"gcs-planner {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
-        if only is not None and name != only:
-            sub.add_parser(name)
+    for name, help_text in COMMANDS.items():
+        if name != only:
+            sub.add_parser(name, help=help_text)
             continue
         module = import_module(f"gcs_planner.commands.{name.replace('-', '_')}")
-        help_text = (module.__doc__ or name).strip().splitlines()[0]
         p = sub.add_parser(name, help=help_text, description=module.__doc__)
         module.add_arguments(p)
         p.set_defaults(run=module.run)

@@ -37,7 +37,6 @@ from gcs_planner.mavlink.items import scenario_fence_items, scenario_rally_items
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import validate_items
-from gcs_planner.planning import load_scenario
 from gcs_planner.progress import progress_bar
 from gcs_planner.validation import number_flag
 
@@ -105,6 +104,8 @@ def read_input(args: argparse.Namespace, autopilot: str, sysid: int) -> MissionF
     """FILE (+ --scenario's fence and rally) for vehicle ``sysid`` with ``autopilot``'s conventions."""
     mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=sysid)
     if args.scenario:
+        from gcs_planner.planning import load_scenario  # only with --scenario: upload starts lean
+
         scenario = load_scenario(args.scenario)
         mf.fence, mf.rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
         mf.lists = mf.lists | {MissionType.FENCE, MissionType.RALLY}
