@@ -21,16 +21,12 @@ from gcs_planner.mavlink import errors
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.signing import key_from_passphrase, setup_signing_message
-from gcs_planner.mavlink.types import MissionItem
 from sitl_mock.fleet import MockFleet
 
 KEY = key_from_passphrase("correct horse battery staple")
 JUNK = bytes((0xFD, 0xFF, 0x00))  # a MAVLink 2 start claiming 255 payload bytes, then nothing
 
 
-def _mission(n: int) -> list[MissionItem]:
-    return [MissionItem(seq=i, frame=3, command=16, current=int(i == 0), x=473_977_000 + 41 * i, y=85_455_000,
-                        z=30.0) for i in range(n)]  # fmt: skip
 
 
 def signing_timestamp() -> int:
@@ -115,7 +111,7 @@ async def _ack(peer: Peer, command: int, timeout_s: float = 3.0) -> mavlink.MAVL
 
 
 # ----------------------------------------------------------------- the mock under attack
-def test_signed_clear_all_replayed_from_a_new_port_is_refused():
+def test_signed_clear_all_replayed_from_a_new_port_is_refused(mission_of):
     """Failure 2: the vehicle had one replay table per source address; now one per vehicle."""
 
     async def main():
@@ -126,7 +122,7 @@ def test_signed_clear_all_replayed_from_a_new_port_is_refused():
             gcs.send(captured, vehicle.address)  # the operator clears (nothing stored yet)
             host, port = vehicle.address
             link = await MavlinkLink.open(f"udpout:{host}:{port}", signing_key=KEY)
-            await MissionClient(link, 1).upload(_mission(4))  # same stream (255, 190, link 0)
+            await MissionClient(link, 1).upload(mission_of(4))  # same stream (255, 190, link 0)
             assert len(vehicle.mission_server.items()) == 4
             attacker = Peer(66, 1)
             rejected = vehicle.link.rejected
@@ -368,7 +364,7 @@ def test_nan_and_inf_command_params_get_a_command_ack_and_no_traceback(caplog):
     assert "Traceback" not in caplog.text and not [r for r in caplog.records if r.exc_info]
 
 
-def test_nan_hold_time_is_refused_like_ardupilot_and_the_mission_kept():
+def test_nan_hold_time_is_refused_like_ardupilot_and_the_mission_kept(mission_of):
     """AP_Mission::sanity_check_params: NaN in NAV_WAYPOINT param1 -> MISSION_ACK INVALID_PARAM1."""
 
     async def main():
@@ -377,9 +373,9 @@ def test_nan_hold_time_is_refused_like_ardupilot_and_the_mission_kept():
             link = await MavlinkLink.open(f"udpout:{vehicle.address[0]}:{vehicle.address[1]}")
             await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 5)
             client = MissionClient(link, 1)
-            await client.upload(_mission(3))
+            await client.upload(mission_of(3))
             before = vehicle.mission_server.items()
-            bad = _mission(4)
+            bad = mission_of(4)
             bad[2] = dataclasses.replace(bad[2], param1=math.nan)
             with pytest.raises(errors.InvalidParam1Error):
                 await client.upload(bad)

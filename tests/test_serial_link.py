@@ -13,7 +13,6 @@ import pytest
 
 from gcs_planner.mavlink.link import MavlinkLink, parse_url
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.types import MissionItem
 from sitl_mock.fleet import MockFleet
 
 PIECE = 7  # bytes per write towards the GCS: every frame arrives in several reads
@@ -39,16 +38,9 @@ async def _bridge(master_fd: int, vehicle: tuple[str, int]) -> tuple[asyncio.Dat
     return transport, radio
 
 
-def _mission(n: int) -> list[MissionItem]:
-    return [
-        MissionItem(
-            seq=i, frame=3, command=16, current=int(i == 0), x=473_977_000 + 31 * i, y=85_455_000, z=25.0
-        )
-        for i in range(n)
-    ]
 
 
-def test_upload_and_verify_over_a_serial_line():
+def test_upload_and_verify_over_a_serial_line(mission_of):
     async def main():
         master, slave = os.openpty()
         path = os.ttyname(slave)
@@ -57,7 +49,7 @@ def test_upload_and_verify_over_a_serial_line():
             link = await MavlinkLink.open(f"serial:{path}:115200")
             try:
                 await link.wait_for(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, 10)
-                items = _mission(30)
+                items = mission_of(30)
                 result = await MissionClient(link, 1).upload(items, verify=True)
                 assert result.verified and not result.ack_lost
                 assert fleet.vehicle(1).mission_server.items()[1:] == items[1:]  # seq 0: ArduPilot's home

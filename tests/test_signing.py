@@ -11,16 +11,12 @@ from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.signing import key_from_passphrase
 from gcs_planner.mavlink.transfer import Timing
-from gcs_planner.mavlink.types import MissionItem
 from sitl_mock.fleet import MockFleet
 
 KEY = key_from_passphrase("correct horse battery staple")
 SIGNED = 0x01  # MAVLink 2 incompat flag: a signature block follows
 
 
-def _mission(n: int, lat: int = 473_977_000) -> list[MissionItem]:
-    return [MissionItem(seq=i, frame=3, command=16, current=int(i == 0), x=lat + 41 * i, y=85_455_000, z=30.0)
-            for i in range(n)]  # fmt: skip
 
 
 async def _link(fleet: MockFleet, key: bytes | None) -> tuple[MavlinkLink, list[bytes]]:
@@ -30,12 +26,12 @@ async def _link(fleet: MockFleet, key: bytes | None) -> tuple[MavlinkLink, list[
     return link, frames
 
 
-def test_signed_gcs_uploads_to_a_signed_vehicle_and_every_frame_is_signed():
+def test_signed_gcs_uploads_to_a_signed_vehicle_and_every_frame_is_signed(mission_of):
     async def main():
         async with MockFleet(count=1, profile="px4", signing_key=KEY) as fleet:
             link, frames = await _link(fleet, KEY)
             await link.wait_for(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 1, 10)
-            items = _mission(12)
+            items = mission_of(12)
             assert (await MissionClient(link, 1).upload(items, verify=True)).verified
             vehicle = fleet.vehicle(1)
             kept = [vehicle.mission_server.storage(i) for i in items]
@@ -46,20 +42,20 @@ def test_signed_gcs_uploads_to_a_signed_vehicle_and_every_frame_is_signed():
     asyncio.run(asyncio.wait_for(main(), 60))
 
 
-def test_signed_vehicle_ignores_an_unsigned_gcs_and_keeps_its_mission():
+def test_signed_vehicle_ignores_an_unsigned_gcs_and_keeps_its_mission(mission_of):
     async def main():
         async with MockFleet(count=1, profile="ardupilot", signing_key=KEY) as fleet:
             vehicle = fleet.vehicle(1)
             signed, _ = await _link(fleet, KEY)
             await signed.wait_for(lambda m: m.get_type() == "HEARTBEAT", 10)
-            await MissionClient(signed, 1).upload(_mission(5))
+            await MissionClient(signed, 1).upload(mission_of(5))
             before = vehicle.mission_server.items()
             await signed.close()
 
             unsigned, frames = await _link(fleet, None)
             fast = Timing(count_retry_s=0.2, count_retries=2)
             with pytest.raises(errors.MissionTimeoutError, match="no answer to MISSION_COUNT"):
-                await MissionClient(unsigned, 1, timing=fast).upload(_mission(7, lat=400_000_000))
+                await MissionClient(unsigned, 1, timing=fast).upload(mission_of(7, lat=400_000_000))
             assert vehicle.mission_server.items() == before  # it cannot command the vehicle ...
             assert vehicle.link.rejected >= 3
             assert not frames and len(vehicle.link.peers) == 1  # ... nor become a peer that hears it
@@ -88,7 +84,7 @@ def test_signing_key_checks():
         MavlinkLink(signing_key=b"short")
 
 
-def test_signing_setup_gives_a_vehicle_its_key_then_takes_it_away(capsys):
+def test_signing_setup_gives_a_vehicle_its_key_then_takes_it_away(capsys, mission_of):
     """`gcs-planner signing-setup` over UDP: afterwards only a GCS with the key can upload, a wrong
     current key is refused in one line, and --disable lets an unsigned GCS in again."""
     from gcs_planner.cli import main
@@ -98,7 +94,7 @@ def test_signing_setup_gives_a_vehicle_its_key_then_takes_it_away(capsys):
             link, _ = await _link(fleet, key)
             try:
                 fast = Timing(count_retry_s=0.2, count_retries=2)
-                await MissionClient(link, 1, timing=fast).upload(_mission(3))
+                await MissionClient(link, 1, timing=fast).upload(mission_of(3))
                 return True
             except errors.MissionTimeoutError:
                 return False
