@@ -24,7 +24,7 @@ from functools import lru_cache
 import numpy as np
 from pyproj import Transformer
 
-__all__ = ["Origin", "enu_to_geodetic", "geodetic_to_enu"]
+__all__ = ["Origin", "enu_to_geodetic", "geodetic_to_enu", "wrap_pi"]
 
 
 @dataclass(frozen=True)
@@ -68,3 +68,8 @@ def _like(values, template):
     """Return a float for scalar input, an ndarray otherwise."""
     arr = np.asarray(values, dtype=float)
     return float(arr) if np.ndim(template) == 0 and arr.ndim == 0 else arr
+
+
+def wrap_pi(angle_rad):
+    """Angles [rad] wrapped into [-pi, pi) (headings, turn angles), elementwise."""
+    return (np.asarray(angle_rad) + np.pi) % (2.0 * np.pi) - np.pi

@@ -35,6 +35,8 @@ from enum import IntEnum
 
 import numpy as np
 
+from gcs_planner.geo import wrap_pi
+
 __all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
 
 G_MPS2 = 9.80665
@@ -293,7 +295,7 @@ class Kinematics:
         left = (dv[:, 1] * c - dv[:, 0] * s) / dt_s
         self.pitch[m] = -np.arctan(fwd / G_MPS2)
         self.roll[m] = -np.arctan(left / G_MPS2)
-        self.turn_rate[m] = _wrap(psi - old_psi) / dt_s
+        self.turn_rate[m] = wrap_pi(psi - old_psi) / dt_s
         self.psi[m] = psi
 
     def _step_fixed_wing(self, m: np.ndarray | slice, dt_s: float) -> None:
@@ -310,11 +312,11 @@ class Kinematics:
             psi_des = np.where(circling, circle, psi_des)
         psi_des = np.where(mode == _CLIMB, psi, psi_des)
         max_rate = G_MPS2 * self.tan_bank[m] / v
-        rate = KP_PSI * _wrap(psi_des - psi)
+        rate = KP_PSI * wrap_pi(psi_des - psi)
         if circling.any():
             rate = rate - circling * v / self.loiter_r[m]  # feed-forward of the clockwise orbit
         rate = np.clip(rate, -max_rate, max_rate)
-        psi = _wrap(psi + rate * dt_s)
+        psi = wrap_pi(psi + rate * dt_s)
         landing = mode == _LAND
         target_z = np.where(landing, self.ground_z[m], tgt[:, 2])
         vz = np.clip(KP_ALT * (target_z - pos[:, 2]), -self.sink[m], self.climb[m])
@@ -332,11 +334,6 @@ class Kinematics:
 def _rows(mask: np.ndarray) -> np.ndarray | slice:
     """Index for the rows in ``mask``: a slice (views, no copies) when it selects every row."""
     return slice(None) if mask.all() else mask
-
-
-def _wrap(angle_rad: np.ndarray) -> np.ndarray:
-    """Wrap angles to [-pi, pi)."""
-    return (angle_rad + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def climb_run_m(speed_mps: float, climb_mps: float, alt_m: float, dt_s: float = 0.05) -> float:

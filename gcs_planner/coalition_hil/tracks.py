@@ -10,6 +10,8 @@ import math
 
 import numpy as np
 
+from gcs_planner.geo import wrap_pi
+
 __all__ = ["continue_turn", "drop_spikes", "pose_at", "slice_track"]
 
 
@@ -37,7 +39,7 @@ def continue_turn(
     tau = t_end + np.array([-2.0, -1.0, 0.0])
     p = np.column_stack([np.interp(tau, t, xy[:, 0]), np.interp(tau, t, xy[:, 1])])
     h = np.arctan2(*np.diff(p, axis=0).T[::-1])
-    rate = float(np.clip((h[1] - h[0] + np.pi) % (2 * np.pi) - np.pi, -max_rate, max_rate))
+    rate = float(np.clip(wrap_pi(h[1] - h[0]), -max_rate, max_rate))
     steps = np.arange(1, int(extend_s / dt_s) + 1)
     heading = h[1] + rate * (0.5 + (steps - 0.5) * dt_s)
     xy_ext = p[-1] + np.cumsum(speed_mps * dt_s * np.column_stack([np.cos(heading), np.sin(heading)]), axis=0)

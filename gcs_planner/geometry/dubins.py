@@ -50,6 +50,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq, minimize_scalar
 
+from gcs_planner.geo import wrap_pi
+
 __all__ = [
     "WORDS",
     "DubinsPath",
@@ -122,7 +124,7 @@ class DubinsPath:
         seg = np.minimum(np.searchsorted(bounds, s, side="left"), 2)
         seg_start_s = np.concatenate([[0.0], bounds[:2]])[seg]
         out = advance(poses[seg], self.curvatures()[seg], s - seg_start_s)
-        out[:, 2] = _wrap(out[:, 2])
+        out[:, 2] = wrap_pi(out[:, 2])
         return out
 
     def sample_step(self, step_m: float) -> tuple[np.ndarray, np.ndarray]:
@@ -418,10 +420,6 @@ def _make(q0, word: str, lengths: np.ndarray, r0: float, r1: float, rm: float) -
         lengths=tuple(float(v) for v in lengths),
         radii=radii,
     )
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return (np.asarray(a) + math.pi) % _TWO_PI - math.pi
 
 
 def _ccw_angle(a: np.ndarray) -> np.ndarray:

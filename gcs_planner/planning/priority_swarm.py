@@ -69,6 +69,7 @@ from scipy.spatial import cKDTree
 
 from gcs_planner.config import Count, Distance, Fraction, NonNegative, PositiveDistance
 from gcs_planner.errors import UserError
+from gcs_planner.geo import wrap_pi
 from gcs_planner.geometry.dubins import advance, segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.geometry.separation import check_plan
@@ -193,7 +194,7 @@ def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
     )
     d = np.diff(pts, axis=1)
     theta = np.arctan2(d[..., 1], d[..., 0])  # (P, W-1)
-    turn = (theta[:, 1:] - theta[:, :-1] + math.pi) % (2 * math.pi) - math.pi
+    turn = wrap_pi(theta[:, 1:] - theta[:, :-1])
     heading = np.concatenate([theta[:, :1], theta[:, :-1] + turn / 2, theta[:, -1:]], axis=1)
     q = np.concatenate([pts[..., :2], heading[..., None]], axis=2)
     q0 = q[:, :-1].reshape(-1, 3)

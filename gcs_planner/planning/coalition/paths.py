@@ -69,6 +69,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gcs_planner.geo import wrap_pi
 from gcs_planner.geometry.dubins import WORDS, DubinsPath, sample_batch, word_lengths
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.planning.coalition.track import Leg
@@ -1097,7 +1098,7 @@ def sample_legs(
 ) -> list[Leg]:
     """sample_segments for many chains at once (one vectorised sampling of all their paths)."""
     s, q, n = _sample_flat([p for ch in chains for p in ch], ds_m)
-    q[..., 2] = (q[..., 2] + math.pi) % TWO_PI - math.pi  # as DubinsPath.sample
+    q[..., 2] = wrap_pi(q[..., 2])  # as DubinsPath.sample
     legs, j = [], 0
     for chain, speed, kind, info in zip(chains, speed_mps, kinds, infos):
         pts, ss, s_off = [], [], 0.0

@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gcs_planner.geo import wrap_pi
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.aco import CoalitionProblem, coverable, make_solution, repair, solve_aco
 from gcs_planner.planning.coalition.baselines import GLOBAL_SCALE, solve_polynomial
@@ -820,7 +821,7 @@ def lookalikes(
     of candidate x's pose: their timed paths to one entry pose at one time cross the same airspace,
     so when x's cannot clear the threats theirs are presumed not to either (choice, see above)."""
     d = np.hypot(poses[:, 0] - poses[x, 0], poses[:, 1] - poses[x, 1])
-    turn = np.abs((poses[:, 2] - poses[x, 2] + math.pi) % (2.0 * math.pi) - math.pi)
+    turn = np.abs(wrap_pi(poses[:, 2] - poses[x, 2]))
     return [int(i) for i in np.flatnonzero((d < radius_m) & (turn < max_turn_rad)) if i != x]
 
 
