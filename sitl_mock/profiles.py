@@ -1,10 +1,10 @@
 """Autopilot profiles: the mission-protocol and flight-mode conventions the mock emulates.
 
-Numbers come from the autopilots' sources (see ../shared/reference/mavlink-mission-notes.md):
-ArduPilot MissionItemProtocol (requests with legacy MISSION_REQUEST, re-requests after 1000 ms,
-cancels after 8000 ms, home at seq 0, rounds stored values) and PX4 mavlink_mission (MISSION_REQUEST_INT,
-250 ms retry, 5 s protocol timeout, no home item). Capacities are typical defaults (ArduPilot's
-mission storage on a 16 kB FRAM, PX4's dataman), both overridable per vehicle.
+Numbers come from the autopilots' sources: ArduPilot libraries/GCS_MAVLink/MissionItemProtocol.cpp
+(requests with legacy MISSION_REQUEST, re-requests after 1000 ms, cancels after 8000 ms, home at seq
+0, rounds stored values) and PX4 src/modules/mavlink/mavlink_mission.cpp (MISSION_REQUEST_INT, 250
+ms retry, 5 s protocol timeout, no home item). Capacities are typical defaults (ArduPilot's mission
+storage on a 16 kB FRAM, PX4's dataman), both overridable per vehicle.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """Priority swarm planner (seed 000): RRT* initial paths, prioritised PSO with restarts, Dubins paths.
 
-Pipeline (../shared/seeds/digest-000-priority-swarm.md, the same method as PPSwarm, Drones 2024):
+Pipeline (D. Galinskyi, "Models and method of planning the motion of a swarm of UAVs ... taking
+into account the priority of tasks"; the same method as PPSwarm, Drones 2024; docs/priority-swarm.md):
 
 1. Level 1: one RRT* path per UAV among the static obstacles; priorities from the task priority
    (``Vehicle.priority``, higher first) and the path difficulty.

@@ -30,13 +30,8 @@ J of a plan (eqs. 7-12), normalised so the weights are comparable:
 Defaults (not in the paper): alpha 1, beta 2, q0 0.9, rho 0.1, tau0 1, 30 clusters, 6 iterations.
 
 Colony shape (choice, for compute): 30 clusters x 6 iterations (180 plans) instead of 10 x 15
-(150). A construction step costs about the same for 10 or 30 clusters (numpy call overhead on
-small arrays), so the colony's time is set by iterations x tasks: 6 iterations take ~40% of the
-time of 15. Over the 69 formations of the paper runs (seeds 3, 1, 7) and 20 Monte Carlo
-worlds (24-56 UAVs), 5 colony seeds each, the mean J is 0.9714 against 0.9696 for 10 x 15
-(better by > 0.005 on 21 problems, worse on 7); 20 x 8 gave 0.9710, 40 x 4 0.9708. The colony
-draws a different number of random numbers, so the simulation's later random draws (bus
-jitter) change too.
+(150): a construction step costs about the same for 10 or 30 clusters, so the colony's time is
+set by iterations x tasks (measurements: docs/coalition.md, Decisions).
 
 Repair (choice, not in the paper): when a member's timed path cannot clear the threats, the leader
 re-covers only that task (``repair``: a free candidate or a swap, schedule-keeping moves first,

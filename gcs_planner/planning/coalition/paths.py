@@ -28,15 +28,12 @@ circle (after 0-3/4 of the first link). Every returned leg is re-checked against
 the result is reported.
 
 Choices in the fallbacks (compute; not in the paper):
-- The detour scans via poses on 24 bearings x 30 distances (it was 48 x 60: a quarter of the
-  Dubins evaluations). The roots are refined by Illinois to 1e-2 m either way, so the grid only
-  has to bracket them; a coarser grid gives other (equally exact) candidate paths. On the paper
-  runs (seeds 3, 1, 7) the same members clear with the same times and J; their detour legs differ.
+- The detour scans via poses on 24 bearings x 30 distances. The roots are refined by Illinois to
+  1e-2 m either way, so the grid only has to bracket them.
 - The loiter fallback runs only for a route whose detour found no exact path at all, not for one
-  whose exact detours all cross a threat (``_DetourPlan.blocked``). On the paper runs (seeds 3,
-  1, 7) the loiter never cleared such a route (0 of 3, ~5 ms each); a route it would clear now
-  has its member excluded instead (the leader re-covers the task). Without threats nothing
-  changes (an exact detour always clears).
+  whose exact detours all cross a threat (``_DetourPlan.blocked``); a route it would clear has
+  its member excluded instead (the leader re-covers the task).
+(Measurements behind both: docs/coalition.md, Decisions.)
 
 Compute (target 0.05 s per formation; numpy call overhead, not arithmetic, dominates): paths are
 sampled for clearance checks and legs in one ``sample_batch`` call (``chains_clear``,

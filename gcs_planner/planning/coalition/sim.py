@@ -23,20 +23,14 @@ the excluded tasks are re-covered (``aco.repair``: a free candidate or a swap wi
 member, schedule-keeping moves first, then the best J), instead of a new colony run. Members
 that keep their task and required time keep their memoised paths (``paths.FormationPaths``).
 The colony re-runs only when no move covers a task; the polynomial and global baselines re-run
-their optimiser as before. On the paper scenario (seed 3) this changes only T2: the strikes
-come 0.33 s earlier (240.42 s instead of 240.75 s), J rises from 0.730 to 0.746, and the
-formation's compute falls from ~0.24 s to 0.13-0.19 s (median of 10 runs, shared 2-core VM).
+their optimiser as before (measured effect: docs/coalition.md, Decisions).
 Look-alike exclusion (choice, for compute): candidates that start within the excluded member's turn
 radius and 30 deg of its heading (``lookalikes``; idle UAVs share loiter stations, so there are
 often several) are excluded from the same task with it (logged as ``alike``). Their timed paths to
 the same entry pose at the same time cross the same airspace, and finding out that each of them
 fails too cost a whole attempt (~10-15 ms) apiece (the risk: a look-alike that would have cleared
 is lost, and if that leaves a task uncovered the formation fails and the leader re-tenders, as for
-any exclusion). With the earlier 10 x 15 colony, seed 3's T2 formation excluded U19 at 60 deg, then
-its look-alike U12, and succeeded in the third attempt; with this rule it succeeds in the second
-(U16 at 60 deg, U19 at 120 deg, U12 at 300 deg), strikes still at 240.42 s, J 0.739 instead of
-0.746, a third less compute. The test of this rule runs that colony: with the current one no paper
-run (seeds 3, 1, 7) excludes a member.
+any exclusion; measured effect: docs/coalition.md, Decisions).
 
 ``SimResult.events`` is the timeline (tenders, bids, awards with time, vehicle, strike point,
 arrival time and attack angle, failures, strikes, assessments, re-plans); ``SimResult.award_legs``
