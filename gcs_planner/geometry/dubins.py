@@ -27,10 +27,10 @@ Method (why it is general rather than the textbook normalised formulas):
 Free terminal heading (shortest path to a point): the optimum is a CS path (or a CC path when the
 point is inside a turning circle). We evaluate the analytic CS tangent headings for both turn
 directions plus a sweep of ``n_headings`` end headings over all six words, then refine the best
-few headings with a bounded scalar search; the result is never longer than any swept heading. With
-optimum often sits where an arc of a CCC word vanishes (a CC path, a jump in the swept length), so
-the analytic CC headings (third arc zero, or first arc zero so the middle circle starts at q0) are
-candidates too.
+few headings with a bounded scalar search; the result is never longer than any swept heading. For
+a point inside a turning circle the optimum often sits where an arc of a CCC word vanishes (a CC
+path, a jump in the swept length), so the analytic CC headings (third arc zero, or first arc zero
+so the middle circle starts at q0) are candidates too.
 
 Stretching (simultaneous arrival, seed 003): ``stretch_to_length`` scales both radii by one factor
 ``k >= 1`` (so ``r0 : r1`` is kept) and solves ``L_word(k) + n 2 pi k r0 = target`` by a scan over
