@@ -175,8 +175,10 @@ def minimize(
     rng: np.random.Generator,
     init: np.ndarray | None = None,
     progress: Progress | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> PSOResult:
-    """Minimise ``cost`` over the box [lower, upper] with a particle swarm (see module docstring)."""
+    """Minimise ``cost`` over the box [lower, upper] with a particle swarm (see module docstring);
+    ``stop()`` is asked after every swarm evaluation, and True ends the run there."""
     lower = np.asarray(lower, dtype=float).reshape(-1)
     upper = np.asarray(upper, dtype=float).reshape(-1)
     if lower.shape != upper.shape or not np.all(upper >= lower):
@@ -194,7 +196,7 @@ def minimize(
     evaluations = 0
     rounds = cfg.restarts + 1
     total_iters = rounds * cfg.iterations
-    stopped = False
+    stopped = halted = False
     n_elite = int(round(cfg.elite_fraction * n_p))
 
     for rnd in range(rounds):
@@ -227,12 +229,15 @@ def minimize(
             history.append(gbest_c)
             if progress is not None:
                 progress(len(history) / total_iters, f"round {rnd + 1} iteration {t} best {gbest_c:.6g}")
+            if stop is not None and stop():
+                halted = True
+                break
             if t == cfg.iterations:
                 break
             if cfg.mutation is not None and cfg.mutation_stage == "gbest_greedy":
                 trial = np.clip(cfg.mutation(gbest_x[None, :], t, cfg.iterations, rng), lower, upper)
             x = _move(x, v, pbest_x, gbest_x, cfg, t, rng, (lower, upper, v_max))
-        if stopped:
+        if stopped or halted:
             break
 
     order = np.argsort(pbest_c, kind="stable")

@@ -31,7 +31,6 @@ PSO iterations (stages 1 and 3) plus delay steps (stage 2).
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import math
 import time
@@ -460,9 +459,6 @@ def _earliest_conflict(ev: _Eval, u: int) -> float:
 # ---------------------------------------------------------------------------- PSO wrapper
 
 
-class _Solved(Exception):
-    """Raised from the cost function to stop the engine at the first feasible best (early stop)."""
-
 
 def _pso(
     problem: Problem,
@@ -491,8 +487,6 @@ def _pso(
             state.update(cost=float(ev.cost[i]), x=x[i].copy(), feasible=bool(ev.feasible[i]))
         if state["feasible"] and state["first"] is None:
             state["first"] = state["it"]
-            if s.early_stop:
-                raise _Solved
         return ev.cost
 
     cfg = PSOConfig(
@@ -504,8 +498,8 @@ def _pso(
         w_max=s.w_max,
         w_min=s.w_min,
     )
-    with contextlib.suppress(_Solved):
-        minimize(cost, layout.lower, layout.upper, cfg, rng, init=init)
+    solved = (lambda: state["first"] is not None) if s.early_stop else None
+    minimize(cost, layout.lower, layout.upper, cfg, rng, init=init, stop=solved)
     return state["x"], state["cost"], state["it"], state["first"]
 
 
