@@ -46,8 +46,9 @@ and the flown waypoints are both validated on a dense resample and both reports 
 from __future__ import annotations
 
 import logging
+import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Annotated, Any, Literal
 
@@ -83,7 +84,14 @@ logger = logging.getLogger(__name__)
 MAX_LEG = 64  # longest mission leg, in dense samples (6.4 km at 100 m)
 NAME = "acmpso"
 ALGORITHMS = ("acmpso", "lpso", "bpso")
-VARIANTS = ("literal", "tuned")
+VARIANTS = ("literal", "tuned", "safe")
+# The safe fitness samples the flown polyline at most SAFETY_SPACING_M apart and keeps
+# SAFETY_MARGIN_M clear: a chord of length s between two clear samples cuts at most s^2 / (8 R)
+# into a convex volume of radius R (5.6 m for the paper's 2 km cylinders, 1.9 m for its 6 km
+# domes; less for its peaks), so the track itself is clear everywhere, not only at samples.
+SAFETY_SPACING_M = 300.0
+SAFETY_MARGIN_M = 15.0
+SAFETY_WEIGHT = 1000.0  # per fitness unit of depth: any violation outweighs the whole of F
 COLLISION_TERMS = ("literal", "depth")
 
 
@@ -116,6 +124,9 @@ class TrackProblem:
     weights: Weights = field(default_factory=Weights)
     radar_strength: float = 10.0
     collision: str = "literal"
+    length_unit_m: float = 1.0  # metres per length unit
+    safety_spacing: float = 0.0  # > 0: the "safe" fitness, checked on samples at most this far apart
+    safety_margin: float = 0.0  # clearance the safe fitness adds to every threat and the floor
 
     def __post_init__(self) -> None:
         for name in ("start", "goal", "lower", "upper"):
@@ -168,7 +179,34 @@ class TrackProblem:
         nx = x[:, 0::3] @ mid + fixed[:, 0]
         ny = x[:, 1::3] @ mid + fixed[:, 1]
         nz = np.maximum(x[:, 2::3] @ mid + fixed[:, 2], self.env.floor(nx, ny))
+        if self.safety_spacing:  # safe: the interior nodes clear the margin too, and so do the chords
+            inner = self.env.floor(nx[:, 1:-1], ny[:, 1:-1]) + self.safety_margin
+            nz[:, 1:-1] = np.maximum(nz[:, 1:-1], inner)
+            nz = self._lift_chords(nx, ny, nz)
         return nx, ny, nz
+
+    def _lift_chords(self, nx: np.ndarray, ny: np.ndarray, nz: np.ndarray) -> np.ndarray:
+        """The safe variant's repair of eq. 3 between nodes: both ends of a segment whose chord
+        passes below terrain + h_safe + margin at one of its samples are raised by the largest
+        shortfall, so the whole chord rises by it (a node takes the larger of its two segments'; the
+        start and the goal stay where the scenario puts them)."""
+        u = self._chord_samples(nx, ny, nz)
+        sx = nx[:, :-1, None] + np.diff(nx, axis=1)[..., None] * u
+        sy = ny[:, :-1, None] + np.diff(ny, axis=1)[..., None] * u
+        sz = nz[:, :-1, None] + np.diff(nz, axis=1)[..., None] * u
+        need = np.maximum(self.env.floor(sx, sy) + self.safety_margin - sz, 0.0).max(axis=-1)  # (P, N - 1)
+        raise_by = np.zeros_like(nz)
+        np.maximum(raise_by[:, :-1], need, out=raise_by[:, :-1])
+        np.maximum(raise_by[:, 1:], need, out=raise_by[:, 1:])
+        raise_by[:, [0, -1]] = 0.0
+        return nz + raise_by
+
+    def _chord_samples(self, nx: np.ndarray, ny: np.ndarray, nz: np.ndarray) -> np.ndarray:
+        """Sample positions u in [0, 1) along each node segment, at most ``safety_spacing`` apart."""
+        legs = np.diff(nx, axis=1) ** 2 + np.diff(ny, axis=1) ** 2 + np.diff(nz, axis=1) ** 2
+        longest = float(np.sqrt(legs.max()))
+        samples = max(1, math.ceil(longest / self.safety_spacing))
+        return np.arange(samples) / samples
 
     def nodes(self, x: np.ndarray) -> np.ndarray:
         """(P, N, 3): the smoothed track of each particle, altitude-repaired above terrain."""
@@ -200,16 +238,34 @@ class TrackProblem:
         f_h = nz.std(axis=1)
         return {"length": f_l, "radar": f_r, "collision": f_c, "height": f_h}
 
-    def fitness(self, x: np.ndarray) -> np.ndarray:
+    def objective(self, x: np.ndarray) -> np.ndarray:
         """F of eq. 4 for each particle, (P,)."""
         t = self.terms(x)
         w = self.weights
-        return (
-            w.length * t["length"]
-            + w.radar * t["radar"]
-            + w.collision * t["collision"]
-            + w.height * t["height"]
-        )
+        f = w.length * t["length"] + w.radar * t["radar"] + w.collision * t["collision"]
+        return f + w.height * t["height"]
+
+    def fitness(self, x: np.ndarray) -> np.ndarray:
+        """What the swarm minimises: F, plus the safety penalty in the safe variant."""
+        f = self.objective(x)
+        return f + self.safety_penalty(x) if self.safety_spacing else f
+
+    def safety_penalty(self, x: np.ndarray) -> np.ndarray:
+        """(P,): how far the flown track (the node polyline, sampled at most ``safety_spacing``
+        apart) enters a radar dome, a cylinder or terrain + h_safe, each grown by
+        ``safety_margin``: SAFETY_WEIGHT x the summed depth plus 1 per sample inside. The paper
+        checks its threats at the nodes only, so its optimum may cut through them in between."""
+        nodes = self.nodes(x)
+        u = self._chord_samples(nodes[..., 0], nodes[..., 1], nodes[..., 2])
+        seg = nodes[:, :-1, None, :] + (nodes[:, 1:, None, :] - nodes[:, :-1, None, :]) * u[:, None]
+        pts = np.concatenate([seg.reshape(len(nodes), -1, 3), nodes[:, -1:]], axis=1)
+        m = self.safety_margin
+        depth = np.maximum(self.env.floor(pts[..., 0], pts[..., 1]) + m - pts[..., 2], 0.0)
+        if len(self.env.radar_r):
+            depth += np.maximum(self.env.radar_depth(pts) + m, 0.0).sum(axis=-1)
+        if len(self.env.cyl_r):
+            depth += np.maximum(self.env.cylinder_depth(pts) + m, 0.0).sum(axis=-1)
+        return SAFETY_WEIGHT * depth.sum(axis=1) + (depth > 0).sum(axis=1)
 
 
 def _sq_dist(a: np.ndarray, c: float) -> np.ndarray:
@@ -280,20 +336,27 @@ def solve(
     """One independent run of ``algorithm`` on ``problem`` (times the initialisation and the swarm)."""
     cfg = algorithm_config(algorithm, variant, particles, iterations, v_max)
     lower, upper = problem.bounds()
+    optimised = problem
+    if variant == "safe" and not problem.safety_spacing:
+        spacing, margin = SAFETY_SPACING_M / problem.length_unit_m, SAFETY_MARGIN_M / problem.length_unit_m
+        optimised = replace(problem, safety_spacing=spacing, safety_margin=margin)
     t0, c0 = time.perf_counter(), time.process_time()
-    init = line_init(problem, particles, init_noise, rng) if variant == "tuned" else None
-    res = minimize(problem.fitness, lower, upper, cfg, rng, init=init, progress=progress)
+    init = line_init(problem, particles, init_noise, rng) if variant != "literal" else None
+    res = minimize(optimised.fitness, lower, upper, cfg, rng, init=init, progress=progress)
     seconds, cpu_seconds = time.perf_counter() - t0, time.process_time() - c0
     best = res.best_x[None, :]
-    terms = {k: float(v[0]) for k, v in problem.terms(best).items()}
-    return TrackResult(res.best_x, problem.nodes(best)[0], res.best_cost, terms, res, seconds, cpu_seconds)
+    terms = {k: float(v[0]) for k, v in optimised.terms(best).items()}
+    if optimised.safety_spacing:
+        terms["safety"] = float(optimised.safety_penalty(best)[0])
+    f = float(optimised.objective(best)[0])  # eq. 4 of the track found (without the safety penalty)
+    return TrackResult(res.best_x, optimised.nodes(best)[0], f, terms, res, seconds, cpu_seconds)
 
 
 class Config(PlannerConfig, tag=NAME):
     """The [planner] table (all lengths in metres; defaults = the paper's Table 2)."""
 
     algorithm: Literal["acmpso", "lpso", "bpso"] = "acmpso"
-    variant: Literal["literal", "tuned"] = "tuned"
+    variant: Literal["literal", "tuned", "safe"] = "safe"
     particles: Count = 50
     iterations: Count = 100
     n_waypoints: Count = 8
@@ -333,6 +396,7 @@ def problem_from_scenario(
         weights=Weights(*params.weights),
         radar_strength=params.radar_strength_m * k,
         collision=params.collision,
+        length_unit_m=params.length_unit_m,
     )
     return problem, env_m
 
