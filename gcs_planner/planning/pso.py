@@ -57,11 +57,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gcs_planner.planning import Progress
+
 __all__ = ["CauchyMutation", "Mutation", "PSOConfig", "PSOResult", "inertia_weight", "minimize"]
 
 Cost = Callable[[np.ndarray], np.ndarray]
 Mutation = Callable[[np.ndarray, int, int, np.random.Generator], np.ndarray]
-Progress = Callable[[float, str], None]
 
 INERTIA_SCHEDULES = ("constant", "linear", "exponential")
 MUTATION_STAGES = ("before_velocity", "after_move", "gbest_greedy")
@@ -179,10 +180,7 @@ def minimize(
 ) -> PSOResult:
     """Minimise ``cost`` over the box [lower, upper] with a particle swarm (see module docstring);
     ``stop()`` is asked after every swarm evaluation, and True ends the run there."""
-    lower = np.asarray(lower, dtype=float).reshape(-1)
-    upper = np.asarray(upper, dtype=float).reshape(-1)
-    if lower.shape != upper.shape or not np.all(upper >= lower):
-        raise ValueError(f"bounds must have equal shape and upper >= lower, got {lower!r} / {upper!r}")
+    lower, upper = _check_bounds(lower, upper)
     n_p, dim = cfg.particles, lower.size
     span = upper - lower
     v_max = cfg.v_max_fraction * span if cfg.v_max is None else np.broadcast_to(cfg.v_max, (dim,)) * 1.0
@@ -201,11 +199,7 @@ def minimize(
 
     for rnd in range(rounds):
         if rnd > 0:  # restart: keep elites' bests, re-draw the rest, velocities reset
-            order = np.argsort(pbest_c, kind="stable")
-            keep = order[:n_elite]
-            x = _fill(pbest_x[keep], n_p, lower, span, rng)
-            pbest_x = x.copy()
-            pbest_c = np.concatenate([pbest_c[keep], np.full(n_p - keep.size, np.inf)])
+            x, pbest_x, pbest_c = _restart(pbest_x, pbest_c, n_elite, lower, span, rng)
         v = (rng.random((n_p, dim)) * 2.0 - 1.0) * v_max * cfg.init_velocity
         trial = None  # mutated copy of gbest, evaluated with the next swarm (gbest_greedy)
         for t in range(1, cfg.iterations + 1):
@@ -252,6 +246,21 @@ def minimize(
         rounds=rnd + 1,
         stopped_by_budget=stopped,
     )
+
+
+def _check_bounds(lower, upper) -> tuple[np.ndarray, np.ndarray]:
+    lower = np.asarray(lower, dtype=float).reshape(-1)
+    upper = np.asarray(upper, dtype=float).reshape(-1)
+    if lower.shape != upper.shape or not np.all(upper >= lower):
+        raise ValueError(f"bounds must have equal shape and upper >= lower, got {lower!r} / {upper!r}")
+    return lower, upper
+
+
+def _restart(pbest_x, pbest_c, n_elite: int, lower, span, rng: np.random.Generator):
+    """A restart round's swarm: the elites' bests kept (with their costs), the rest re-drawn."""
+    keep = np.argsort(pbest_c, kind="stable")[:n_elite]
+    x = _fill(pbest_x[keep], len(pbest_c), lower, span, rng)
+    return x, x.copy(), np.concatenate([pbest_c[keep], np.full(len(pbest_c) - keep.size, np.inf)])
 
 
 def _evaluate(cost: Cost, rows: np.ndarray) -> np.ndarray:

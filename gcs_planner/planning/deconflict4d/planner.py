@@ -34,11 +34,11 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from gcs_planner.planning import Progress
 from gcs_planner.planning.deconflict4d.conflicts import (
     candidate_pairs,
     conflict_counts,
@@ -58,7 +58,6 @@ from gcs_planner.planning.pso import PSOConfig, minimize
 __all__ = ["Outcome", "Problem", "Settings", "Track", "UavSpec", "initial_tracks", "run"]
 
 log = logging.getLogger(__name__)
-Progress = Callable[[float, str], None]
 
 
 @dataclass(frozen=True)
