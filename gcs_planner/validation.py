@@ -18,10 +18,12 @@ import tempfile
 import tomllib
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+
+if TYPE_CHECKING:  # gcs_planner.geo imports numpy and pyproj: only the readers of origins need it
+    from gcs_planner.geo import Origin
 
 __all__ = [
     "FLOAT32_MAX", "MAX_ALT_M", "MAX_DURATION_S", "MAX_RADIUS_M", "MAX_RANGE_M", "MAX_SPEED_MPS",
@@ -101,6 +103,8 @@ def table(value: Any, field: str) -> dict[str, Any]:
 
 def origin(value: Any, field: str) -> Origin:
     """A local frame's origin table {lat_deg, lon_deg, alt_m [AMSL, default 0]}, checked."""
+    from gcs_planner.geo import Origin
+
     o = known_keys(table(value, field), ("lat_deg", "lon_deg", "alt_m"), field)
     try:
         return Origin(

@@ -33,7 +33,6 @@ from gcs_planner.commands._mission_cli import (
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.files import MissionFile, load_plan_json, mission_input
 from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
-from gcs_planner.mavlink.items import scenario_fence_items, scenario_rally_items
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import validate_items
@@ -104,6 +103,7 @@ def read_input(args: argparse.Namespace, autopilot: str, sysid: int) -> MissionF
     """FILE (+ --scenario's fence and rally) for vehicle ``sysid`` with ``autopilot``'s conventions."""
     mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=sysid)
     if args.scenario:
+        from gcs_planner.mavlink.items import scenario_fence_items, scenario_rally_items
         from gcs_planner.planning import load_scenario  # only with --scenario: upload starts lean
 
         scenario = load_scenario(args.scenario)

@@ -14,7 +14,7 @@ from enum import StrEnum
 
 from gcs_planner.mavlink import readback
 from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot
-from gcs_planner.mavlink.items import SPEED_AIRSPEED, SPEED_GROUNDSPEED
+from gcs_planner.mavlink.units import SPEED_AIRSPEED, SPEED_GROUNDSPEED
 
 __all__ = [
     "ARDUCOPTER",

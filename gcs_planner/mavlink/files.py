@@ -17,15 +17,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.dialect import KNOWN_COMMANDS, has_position
-from gcs_planner.mavlink.items import deg_to_e7
 from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.mavlink.units import e7
 from gcs_planner.validation import write_text_atomic
+
+if TYPE_CHECKING:  # numpy-backed; imported only by the readers of plan.json
+    from gcs_planner.plan import Plan, VehiclePlan
 
 __all__ = [
     "FENCE_COMMANDS",
@@ -137,7 +140,7 @@ class MissionFile:
             home = self.home_item or default_home_item()
             if self.home is not None:
                 lat, lon, alt = self.home
-                home = replace(home, x=int(deg_to_e7(lat)), y=int(deg_to_e7(lon)), z=float(alt))
+                home = replace(home, x=e7(lat), y=e7(lon), z=float(alt))
             body.insert(0, home)
         elif autopilot == "px4":
             body = [_for_px4(item) for item in body]
@@ -281,6 +284,8 @@ def plan_mission_file(vehicle_plan: VehiclePlan, origin, autopilot: str = "ardup
 
 def load_plan_json(path: str | Path) -> Plan:
     """plan.json (from `gcs-planner plan`) -> Plan, with one-line errors."""
+    from gcs_planner.plan import Plan
+
     try:
         return Plan.load(path)
     except UserError:  # already one line naming the file and the field

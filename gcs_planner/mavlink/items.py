@@ -53,6 +53,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.units import SPEED_AIRSPEED, SPEED_GROUNDSPEED, e7, half_away
 from gcs_planner.mavlink.validate import MissionValidationError, validate_items
 from gcs_planner.plan import VehiclePlan
 from gcs_planner.scenario import Scenario
@@ -80,7 +81,6 @@ DWELL_LEG_M = 0.01  # a leg shorter than this is a wait, not a move
 
 REL = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 NO_FRAME = mavlink.MAV_FRAME_MISSION
-SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0
 
 
 def round_half_away(values) -> np.ndarray:
@@ -92,16 +92,6 @@ def round_half_away(values) -> np.ndarray:
 def deg_to_e7(deg) -> np.ndarray:
     """Degrees -> MAVLink int degE7, correctly rounded (half away from zero); int64 array."""
     return round_half_away(np.asarray(deg, dtype=float) * 1e7)
-
-
-def e7(deg: float) -> int:
-    """One value in degrees -> degE7 int, rounded half away from zero (scalar fast path of deg_to_e7)."""
-    return half_away(float(deg) * 1e7)
-
-
-def half_away(value: float) -> int:
-    """One value rounded to the nearest int, halves away from zero."""
-    return int(math.copysign(math.floor(abs(value) + 0.5), value))
 
 
 def plan_to_items(

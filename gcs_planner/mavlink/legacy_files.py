@@ -16,8 +16,8 @@ import re
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.files import MissionFile, MissionFileError
-from gcs_planner.mavlink.items import e7
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.units import e7
 
 __all__ = ["is_legacy_fence", "is_legacy_rally", "loads_legacy_fence", "loads_legacy_rally"]
 

@@ -44,8 +44,8 @@ from gcs_planner.mavlink.files import (
     ranges,
     unknown_command_notes,
 )
-from gcs_planner.mavlink.items import e7, half_away
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.units import e7, half_away
 
 __all__ = ["dumps_plan", "loads_plan", "plan_losses"]
 

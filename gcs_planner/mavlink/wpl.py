@@ -38,8 +38,8 @@ from gcs_planner.mavlink.files import (
     mission_type_of,
     unknown_command_notes,
 )
-from gcs_planner.mavlink.items import e7, half_away
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.units import e7, half_away
 
 __all__ = ["HEADER", "dumps_mission_file", "dumps_wpl", "loads_wpl", "loads_wpl_items", "wpl_losses"]
 
