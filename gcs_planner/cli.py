@@ -19,6 +19,7 @@ from gcs_planner.errors import UserError
 # them without importing every command
 COMMANDS = {
     "plan": "Plan a scenario file and write plan.json.",
+    "sweep": "Run a study: a scenario's planner over a grid of parameters and seeds, resumable, on processes or Dask.",
     "fly": "Plan a scenario and fly it: upload to every vehicle, arm, start, record, check conformance.",
     "fly-coalition": "Coalition HIL run: fly mock fixed wings and upload each coalition award to them in flight.",
     "demo": "Run the bundled demo: plan missions/swarm_small.toml and fly it against mock vehicles.",

@@ -1,0 +1,54 @@
+"""Run a study: a scenario's planner over a grid of parameters and seeds, resumable, on processes or Dask."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+from gcs_planner.errors import UserError
+from gcs_planner.progress import progress_bar
+from gcs_planner.sweep import load_study, run_study, summarise
+from gcs_planner.validation import output_file
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("study", type=Path, help="study TOML (see gcs_planner/sweep.py, studies/)")
+    p.add_argument("-o", "--out", default=None, help="results CSV, appended and resumed [out/<study>.csv]")
+    p.add_argument("--workers", type=int, default=2, help="local worker processes [2]")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler tcp://HOST:PORT or 'local'")
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.workers < 1:
+        raise UserError(f"--workers must be >= 1, got {args.workers}")
+    study, scenario = load_study(args.study)
+    if args.out:
+        out = output_file(args.out, "-o")
+    else:
+        out = Path("out") / f"{args.study.stem}.csv"
+        out.parent.mkdir(parents=True, exist_ok=True)
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        bar = bar or progress_bar(total, "sweeping", "run")
+        bar.n = done
+        bar.refresh()
+
+    try:
+        ran = run_study(study, scenario, out, args.workers, args.scheduler, progress)
+    finally:
+        if bar is not None:
+            bar.close()
+    summary = summarise(study, out)
+    summary_path = out.with_name(out.stem + "_summary.csv")
+    with summary_path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, list(summary[0]) if summary else ["runs"])
+        writer.writeheader()
+        writer.writerows(summary)
+    print(f"{ran} runs now, results {out}, summary {summary_path}")
+    for entry in summary:
+        said = (f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in entry.items())
+        print("  " + ", ".join(said))
+    return 0

@@ -1,0 +1,193 @@
+"""Parameter sweeps: a study's grid x seeds planned on local processes or a Dask cluster, resumable.
+
+A study (TOML) names a scenario, the grid of ``[planner]`` values, the seeds and the metrics to
+keep (keys of ``Plan.metrics``, plus ``feasible_fraction`` and ``cpu_s``)::
+
+    name = "priority swarm budget"
+    scenario = "../missions/swarm_small.toml"      # relative to the study file
+    seeds = [0, 1, 2]
+    metrics = ["cost_total", "feasible_fraction", "evaluations"]
+    [grid]
+    particles = [6, 10]
+    iterations = [4, 8]
+
+Every run (one grid point, one seed) is planned with that seed, so its result does not depend on
+the worker or the order. Rows are appended to one CSV as runs finish; a killed sweep started again
+skips every run already in the file. A run that fails is recorded with its error, not fatal.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Annotated, Any
+
+from msgspec import Meta
+
+from gcs_planner.config import Config, parse
+from gcs_planner.errors import UserError
+from gcs_planner.validation import InputError, load_toml, read_text
+
+__all__ = ["Study", "load_study", "run_study", "summarise"]
+
+FIXED_COLUMNS = ["run_id", "seed", "error", "cpu_s"]
+
+
+class Study(Config):
+    """A study file's keys."""
+
+    name: str
+    scenario: str
+    seeds: list[Annotated[int, Meta(ge=0, le=2**63 - 1)]]
+    metrics: list[str]
+    grid: dict[str, list[int | float | str | bool]] = {}
+
+
+def load_study(path: str | Path) -> tuple[Study, Path]:
+    """The study and its scenario's path (relative paths are relative to the study file)."""
+    path = Path(path)
+    try:
+        study = parse(Study, load_toml(read_text(path, "study"), str(path)), "study")
+    except InputError as exc:
+        raise UserError(f"{path}: {exc}") from None
+    if not study.seeds:
+        raise UserError(f"{path}: seeds must name at least one seed")
+    scenario = (path.parent / study.scenario).resolve()
+    if not scenario.is_file():
+        raise UserError(f"{path}: scenario {study.scenario!r} is not a file ({scenario})")
+    return study, scenario
+
+
+def runs(study: Study) -> Iterator[tuple[str, dict[str, Any], int]]:
+    """(run id, grid values, seed) of every run, grid points outermost."""
+    keys = sorted(study.grid)
+    for values in itertools.product(*(study.grid[k] for k in keys)):
+        params = dict(zip(keys, values, strict=True))
+        for seed in study.seeds:
+            ident = hashlib.sha1(json.dumps([params, seed], sort_keys=True).encode()).hexdigest()[:12]
+            yield ident, params, seed
+
+
+def plan_run(scenario_path: str, params: dict[str, Any], seed: int, metrics: list[str]) -> dict[str, Any]:
+    """One run (in a worker): plan the scenario with ``params`` in its [planner] table."""
+    from gcs_planner.planning import load_scenario, plan_scenario
+
+    cpu = time.process_time()
+    scenario = load_scenario(scenario_path)
+    scenario.planner.update(params)
+    plan = plan_scenario(scenario, seed=seed)
+    values = dict(plan.metrics)
+    values["feasible_fraction"] = sum(v.feasible for v in plan.vehicles) / len(plan.vehicles)
+    values["cpu_s"] = time.process_time() - cpu
+    return {m: values.get(m, math.nan) for m in [*metrics, "cpu_s"]}
+
+
+def _done(out: Path) -> set[str]:
+    if not out.exists():
+        return set()
+    with out.open(newline="") as f:
+        return {row["run_id"] for row in csv.DictReader(f)}
+
+
+def run_study(
+    study: Study,
+    scenario: Path,
+    out: Path,
+    workers: int = 2,
+    scheduler: str | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    max_runs: int | None = None,
+) -> int:
+    """Run every run not yet in ``out`` (local processes, or the Dask scheduler at ``scheduler``:
+    an address, or "local" for a LocalCluster of ``workers``); the number of runs done now."""
+    todo = [r for r in runs(study) if r[0] not in _done(out)][:max_runs]
+    columns = FIXED_COLUMNS + sorted(study.grid) + [m for m in study.metrics if m != "cpu_s"]
+    new_file = not out.exists()
+    with out.open("a", newline="") as f, _executor(scheduler, workers) as submit:
+        writer = csv.DictWriter(f, columns, extrasaction="ignore")
+        if new_file:
+            writer.writeheader()
+        futures = {submit(plan_run, str(scenario), params, seed, study.metrics): (ident, params, seed)
+                   for ident, params, seed in todo}  # fmt: skip
+        for n, (future, (ident, params, seed)) in enumerate(_completed(futures), 1):
+            row = {"run_id": ident, "seed": seed, "error": "", **params}
+            try:
+                row.update(future.result())
+            except Exception as exc:  # noqa: BLE001 - a failed run is recorded, the sweep goes on
+                row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+            writer.writerow(row)
+            f.flush()
+            if progress:
+                progress(n, len(todo))
+    return len(todo)
+
+
+class _executor:
+    """``with _executor(scheduler, workers) as submit``: a process pool or a Dask client."""
+
+    def __init__(self, scheduler: str | None, workers: int) -> None:
+        self.scheduler, self.workers = scheduler, workers
+
+    def __enter__(self):
+        if self.scheduler is None:
+            self.pool = ProcessPoolExecutor(self.workers)
+            return self.pool.submit
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise UserError("--scheduler needs dask.distributed: pip install 'gcs-planner[dask]'") from None
+        self.cluster = (
+            LocalCluster(n_workers=self.workers, threads_per_worker=1, dashboard_address=None)
+            if self.scheduler == "local" else None
+        )  # fmt: skip
+        self.pool = Client(self.cluster or self.scheduler)
+        return lambda fn, *args: self.pool.submit(fn, *args, pure=False)
+
+    def __exit__(self, *exc) -> None:
+        if self.scheduler is None:
+            self.pool.shutdown(cancel_futures=True)
+            return
+        self.pool.close()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def _completed(futures: dict) -> Iterator[tuple[Any, Any]]:
+    """(future, its key) as each finishes, for process-pool and Dask futures alike."""
+    if futures and type(next(iter(futures))).__module__.startswith("distributed"):
+        from distributed import as_completed as dask_completed
+
+        for future in dask_completed(list(futures)):
+            yield future, futures[future]
+        return
+    for future in as_completed(futures):
+        yield future, futures[future]
+
+
+def summarise(study: Study, out: Path) -> list[dict[str, Any]]:
+    """Per grid point: runs, failures, and each metric's mean and standard deviation over seeds."""
+    with out.open(newline="") as f:
+        rows = list(csv.DictReader(f))
+    keys = sorted(study.grid)
+    groups: dict[tuple, list[dict]] = {}
+    for row in rows:
+        groups.setdefault(tuple(row[k] for k in keys), []).append(row)
+    summary = []
+    for point, members in sorted(groups.items()):
+        ok = [r for r in members if not r["error"]]
+        entry: dict[str, Any] = {**dict(zip(keys, point, strict=True)), "runs": len(members),
+                                 "failed": len(members) - len(ok)}  # fmt: skip
+        for m in [*study.metrics, "cpu_s"]:
+            values = [float(r[m]) for r in ok if r.get(m) not in (None, "")]
+            mean = sum(values) / len(values) if values else math.nan
+            var = sum((v - mean) ** 2 for v in values) / (len(values) - 1) if len(values) > 1 else 0.0
+            entry[f"{m} mean"], entry[f"{m} std"] = mean, math.sqrt(var)
+        summary.append(entry)
+    return summary

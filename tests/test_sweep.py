@@ -1,0 +1,78 @@
+"""`gcs-planner sweep`: every run once, deterministic per seed, resumable, failures recorded, and the
+same results on a Dask LocalCluster as on local processes."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import pytest
+
+from gcs_planner.cli import main
+from gcs_planner.sweep import load_study, run_study, summarise
+
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
+
+
+def _study(tmp_path: Path, grid: str, scenario: str = "straight_4uav", metrics: str = '"feasible_fraction"'):
+    path = tmp_path / "study.toml"
+    path.write_text(
+        f'name = "t"\nscenario = "{MISSIONS / scenario}.toml"\nseeds = [0, 1]\nmetrics = [{metrics}]\n'
+        f"[grid]\n{grid}\n"
+    )
+    return path
+
+
+def _rows(out: Path) -> list[dict]:
+    with out.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_a_killed_sweep_resumes_without_redoing_runs(tmp_path):
+    study, scenario = load_study(_study(tmp_path, "waypoint_spacing_m = [50.0, 100.0, 200.0]"))
+    out = tmp_path / "r.csv"
+    assert run_study(study, scenario, out, workers=2, max_runs=2) == 2  # "killed" after two runs
+    first = _rows(out)
+    assert run_study(study, scenario, out, workers=2) == 4
+    rows = _rows(out)
+    assert rows[:2] == first and len(rows) == 6 and len({r["run_id"] for r in rows}) == 6
+    assert run_study(study, scenario, out, workers=2) == 0  # nothing left
+    summary = summarise(study, out)
+    assert [s["runs"] for s in summary] == [2, 2, 2]
+    assert all(s["feasible_fraction mean"] == 1.0 for s in summary)
+
+
+def test_a_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path):
+    study, scenario = load_study(_study(tmp_path, "waypoint_spacing_m = [0.5, 100.0]"))
+    out = tmp_path / "r.csv"
+    run_study(study, scenario, out, workers=1)
+    rows = _rows(out)
+    failed = [r for r in rows if r["error"]]
+    assert len(rows) == 4 and len(failed) == 2
+    assert all("waypoint_spacing_m" in r["error"] and r["waypoint_spacing_m"] == "0.5" for r in failed)
+
+
+def test_dask_local_cluster_gives_the_local_results(tmp_path):
+    grid = "particles = [6]\niterations = [4]\nrounds = [1]\nrrt_iterations = [60]"
+    path = _study(tmp_path, grid, "swarm_small", '"cost_total", "feasible_fraction", "evaluations"')
+    study, scenario = load_study(path)
+    local, dask = tmp_path / "local.csv", tmp_path / "dask.csv"
+    run_study(study, scenario, local, workers=2)
+    pytest.importorskip("distributed")
+    run_study(study, scenario, dask, workers=2, scheduler="local")
+
+    def results(out):
+        return {r["run_id"]: {k: v for k, v in r.items() if k != "cpu_s"} for r in _rows(out)}
+
+    assert results(local) == results(dask) and len(results(local)) == 2
+    assert all(not r["error"] for r in results(local).values())
+
+
+def test_cli_runs_a_study_and_refuses_a_misspelt_key(tmp_path, capsys):
+    path = _study(tmp_path, "waypoint_spacing_m = [100.0]")
+    out = tmp_path / "r.csv"
+    assert main(["sweep", str(path), "-o", str(out), "--workers", "1"]) == 0
+    assert (tmp_path / "r_summary.csv").exists() and len(_rows(out)) == 2
+    path.write_text(path.read_text().replace("seeds", "seed"))
+    assert main(["sweep", str(path), "-o", str(out)]) == 2
+    assert "unknown key 'seed'; did you mean 'seeds'?" in capsys.readouterr().err
