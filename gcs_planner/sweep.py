@@ -140,9 +140,12 @@ class _executor:
             self.pool = ProcessPoolExecutor(self.workers)
             return self.pool.submit
         try:
+            import dask
             from distributed import Client, LocalCluster
         except ImportError:
             raise UserError("--scheduler needs dask.distributed: pip install 'gcs-planner[dask]'") from None
+        # the workers' stack profiler samples every 10 ms and takes the GIL from the planners
+        dask.config.set({"distributed.worker.profile.enabled": False})
         self.cluster = (
             LocalCluster(n_workers=self.workers, threads_per_worker=1, dashboard_address=None)
             if self.scheduler == "local" else None
