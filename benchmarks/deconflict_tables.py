@@ -17,11 +17,11 @@ scenarios with the full method (wall time to conflict-free; target for 100: < 30
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import logging
 import os
 import time
 
+import msgspec
 import numpy as np
 
 from gcs_planner.planning import config_of
@@ -37,7 +37,7 @@ MISSIONS = os.path.join(os.path.dirname(__file__), "..", "missions")
 def _run(path: str, seed: int, **overrides) -> dict:
     scenario = load_scenario(path)
     problem = build_problem(scenario, config_of(scenario))
-    problem.settings = dataclasses.replace(problem.settings, **overrides)
+    problem.settings = msgspec.structs.replace(problem.settings, **overrides)
     t0 = time.perf_counter()
     out = planner.run(problem, np.random.default_rng(seed))
     m = out.metrics

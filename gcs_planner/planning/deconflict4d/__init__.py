@@ -6,7 +6,7 @@ planner.py and returns a Plan whose vehicles carry the timed waypoints, per-leg 
 DO_CHANGE_SPEED), the take-off delay and the densely sampled flown path.
 
 Scenario keys (besides the common ones of gcs_planner.scenario):
-    [planner]      name = "deconflict_4d", seed, any Settings field (planner.py), and
+    [planner]      name = "deconflict_4d", seed, any Config field (planner.py), and
                    confidence (0.95), safety_m (manned safety distance, 5.0), min_mode_weight (0.01)
     [[vehicles]]   takeoff_s (planned take-off, 0), arrival_s (planned arrival at the goal; default
                    take-off + climb + straight distance / speed_mps), v_max_mps, a_max_mps2,
@@ -24,24 +24,21 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Annotated, Any
+from typing import Any
 
 import numpy as np
-from msgspec import Meta
 
-from gcs_planner.config import Count, Distance, Duration, Fraction, NonNegative
 from gcs_planner.plan import Plan, VehiclePlan
-from gcs_planner.planning import PlannerConfig, Progress
+from gcs_planner.planning import Progress
 from gcs_planner.planning.deconflict4d.manned import (
     MannedTrack,
     predict_zones,
     prior_from_history,
     prior_from_velocity,
 )
-from gcs_planner.planning.deconflict4d.planner import Outcome, Problem, Settings, UavSpec, full_polyline, run
+from gcs_planner.planning.deconflict4d.planner import Config, Outcome, Problem, UavSpec, full_polyline, run
 from gcs_planner.planning.deconflict4d.trajectory import DYNAMICS
 from gcs_planner.scenario import Scenario, ScenarioError
-from gcs_planner.validation import MAX_DURATION_S
 
 __all__ = ["NAME", "Config", "build_problem", "plan", "to_plan"]
 
@@ -57,45 +54,6 @@ _DYN_KEYS = (
     "max_time_error_s",
     "limit",
 )
-
-
-class Config(PlannerConfig, tag=NAME):
-    """The [planner] table: the method's Settings (planner.py) and the manned-traffic zones."""
-
-    particles: Count = 40
-    iterations: Count = 150  # the paper's maxiteration
-    interior_waypoints: Count = 1
-    c1: NonNegative = 1.5
-    c2: NonNegative = 1.5
-    w_max: NonNegative = 0.9
-    w_min: NonNegative = 0.4
-    init_spread_m: Distance = 3.0
-    insert_spread_m: Distance = 2.0
-    insert_radius_m: Distance = 10.0
-    zone_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 5.0
-    early_stop: bool = True
-    w_conflict: NonNegative = 1000.0
-    w_accel: NonNegative = 1000.0
-    w_speed: NonNegative = 1000.0
-    w_turn: NonNegative = 10.0
-    w_time: NonNegative = 1.0
-    w_time_limit: NonNegative = 100.0
-    use_delay: bool = True
-    delay_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 1.0
-    delay_max_steps: Annotated[int, Meta(ge=0, le=1_000_000)] = 200
-    max_delay_s: Duration = 60.0
-    use_waypoints: bool = True
-    insert_max_steps: Annotated[int, Meta(ge=0, le=1_000_000)] = 40
-    insert_particles: Count = 20
-    insert_iterations: Count = 50
-    max_waypoints: Count = 8
-    max_rounds: Count = 3
-    confidence: Annotated[float, Meta(gt=0.0, lt=1.0)] = 0.95  # manned-traffic zones (manned.py)
-    safety_m: Distance = 5.0
-    min_mode_weight: Fraction = 0.01
-
-    def settings(self) -> Settings:
-        return Settings(**{f.name: getattr(self, f.name) for f in dataclasses.fields(Settings)})
 
 
 def plan(
@@ -186,7 +144,7 @@ def _manned_track(d: dict[str, Any], where: str) -> MannedTrack:
 
 def build_problem(scenario: Scenario, config: Config) -> Problem:
     """Scenario -> Problem (settings, UAV specs, manned no-fly zones, waypoint box)."""
-    settings = config.settings()
+    settings = config
     if scenario.cylinders or scenario.hemispheres:
         log.warning("deconflict_4d ignores static obstacles (cylinders / hemispheres) in %s", scenario.name)
     if not scenario.vehicles:

@@ -35,10 +35,13 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field, replace
+from typing import Annotated
 
 import numpy as np
+from msgspec import Meta
 
-from gcs_planner.planning import Progress
+from gcs_planner.config import Count, Distance, Duration, Fraction, NonNegative
+from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.deconflict4d.conflicts import (
     candidate_pairs,
     conflict_counts,
@@ -54,8 +57,9 @@ from gcs_planner.planning.deconflict4d.trajectory import (
     sample_path,
 )
 from gcs_planner.planning.pso import PSOConfig, minimize
+from gcs_planner.validation import MAX_DURATION_S
 
-__all__ = ["Outcome", "Problem", "Settings", "Track", "UavSpec", "initial_tracks", "run"]
+__all__ = ["Outcome", "Problem", "Config", "Track", "UavSpec", "initial_tracks", "run"]
 
 log = logging.getLogger(__name__)
 
@@ -77,38 +81,40 @@ class UavSpec:
     z_max_m: float
 
 
-@dataclass(frozen=True)
-class Settings:
-    """Method parameters (scenario ``[planner]`` keys of the same name)."""
+class Config(PlannerConfig, tag="deconflict_4d"):
+    """Method parameters: the scenario's [planner] table, with the manned-traffic zone settings."""
 
-    particles: int = 40
-    iterations: int = 150  # the paper's maxiteration
-    interior_waypoints: int = 1
-    c1: float = 1.5
-    c2: float = 1.5
-    w_max: float = 0.9
-    w_min: float = 0.4
-    init_spread_m: float = 3.0
-    insert_spread_m: float = 2.0
-    insert_radius_m: float = 10.0
-    zone_step_s: float = 5.0
+    particles: Count = 40
+    iterations: Count = 150  # the paper's maxiteration
+    interior_waypoints: Count = 1
+    c1: NonNegative = 1.5
+    c2: NonNegative = 1.5
+    w_max: NonNegative = 0.9
+    w_min: NonNegative = 0.4
+    init_spread_m: Distance = 3.0
+    insert_spread_m: Distance = 2.0
+    insert_radius_m: Distance = 10.0
+    zone_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 5.0
     early_stop: bool = True
-    w_conflict: float = 1000.0
-    w_accel: float = 1000.0
-    w_speed: float = 1000.0
-    w_turn: float = 10.0
-    w_time: float = 1.0
-    w_time_limit: float = 100.0
+    w_conflict: NonNegative = 1000.0
+    w_accel: NonNegative = 1000.0
+    w_speed: NonNegative = 1000.0
+    w_turn: NonNegative = 10.0
+    w_time: NonNegative = 1.0
+    w_time_limit: NonNegative = 100.0
     use_delay: bool = True
-    delay_step_s: float = 1.0
-    delay_max_steps: int = 200
-    max_delay_s: float = 60.0
+    delay_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 1.0
+    delay_max_steps: Annotated[int, Meta(ge=0, le=1_000_000)] = 200
+    max_delay_s: Duration = 60.0
     use_waypoints: bool = True
-    insert_max_steps: int = 40
-    insert_particles: int = 20
-    insert_iterations: int = 50
-    max_waypoints: int = 8
-    max_rounds: int = 3
+    insert_max_steps: Annotated[int, Meta(ge=0, le=1_000_000)] = 40
+    insert_particles: Count = 20
+    insert_iterations: Count = 50
+    max_waypoints: Count = 8
+    max_rounds: Count = 3
+    confidence: Annotated[float, Meta(gt=0.0, lt=1.0)] = 0.95  # manned-traffic zones (manned.py)
+    safety_m: Distance = 5.0
+    min_mode_weight: Fraction = 0.01
 
 
 @dataclass
@@ -124,7 +130,7 @@ class Track:
 class Problem:
     uavs: list[UavSpec]
     zones: list[Zone]
-    settings: Settings
+    settings: Config
     lower_m: np.ndarray  # (3,) box for waypoints
     upper_m: np.ndarray
     zone_arrays: tuple[np.ndarray, ...] | None = None  # stacked zones (computed when None)
