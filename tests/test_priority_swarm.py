@@ -168,3 +168,16 @@ def test_baselines_use_the_same_budget_and_are_checked(method):
     assert plan.metrics["evaluations"] >= 100 * len(scenario.vehicles)
     report = check_plan(plan, scenario, step_s=0.5, max_climb_rad=math.radians(20))
     assert report.bad_vehicles() <= {vp.vehicle_id for vp in plan.vehicles if not vp.feasible}
+
+
+def test_ablation_switches_remove_the_rrt_start_and_the_priority_order():
+    scenario = load_scenario(MISSIONS / "swarm_small.toml")
+    scenario.planner = {**FAST, "rounds": 1, "rrt_iterations": 80}
+    full = plan_scenario(scenario, seed=2)
+    scenario.planner.update(rrt_start=False, priority_order=False)
+    bare = plan_scenario(scenario, seed=2)
+    ids = [v.id for v in scenario.vehicles]
+    assert set(full.metrics["rrt_difficulty"].values()) != {1.0}
+    assert set(bare.metrics["rrt_difficulty"].values()) == {1.0}  # no RRT* run
+    assert bare.metrics["priority_order"] == ids  # scenario order
+    assert full.metrics["priority_order"][:2] == ["uav1", "uav4"]  # priority 2 first

@@ -121,6 +121,9 @@ class Config(PlannerConfig, tag=NAME):
     repairs: Annotated[int, Meta(ge=0, le=1000)] = 4
     waypoint_tol_m: PositiveDistance = 1.0
     acceptance_radius_m: PositiveDistance = 2.0
+    rrt_start: bool = True  # ablation switches: False starts every swarm from the straight line,
+    priority_order: bool = True  # and plans the UAVs in scenario order (rounds=1: no restarts,
+    # elite_fraction=0: no elites, repairs=0: no repair)
 
     def __post_init__(self) -> None:
         if self.elite_fraction + self.random_fraction > 1:
@@ -725,10 +728,17 @@ def plan(
 
 def _plan(scenario: Scenario, cfg: Config, rng: np.random.Generator, progress, t_start, tally) -> Plan:
     problems, obstacles, lo, hi = prepare(scenario, cfg)
-    init, difficulty = initial_paths(problems, obstacles, lo, hi, cfg, rng)
+    if cfg.rrt_start:
+        init, difficulty = initial_paths(problems, obstacles, lo, hi, cfg, rng)
+    else:
+        lines = [np.vstack([p.start, p.goal]) for p in problems]
+        init = [resample_polyline(line, cfg.waypoints + 2)[1:-1].ravel() for line in lines]
+        difficulty = np.ones(len(problems))
     if progress:
-        progress(0.1, "RRT* initial paths")
-    order = sorted(range(len(problems)), key=lambda i: (-problems[i].vehicle.priority, -difficulty[i], i))
+        progress(0.1, "initial paths")
+    order = list(range(len(problems)))
+    if cfg.priority_order:
+        order.sort(key=lambda i: (-problems[i].vehicle.priority, -difficulty[i], i))
     elites: dict[int, np.ndarray] = {}
     previous = None
     best = None
