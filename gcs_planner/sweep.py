@@ -1,7 +1,7 @@
 """Parameter sweeps: a study's grid x seeds planned on local processes or a Dask cluster, resumable.
 
 A study (TOML) names a scenario, the grid of ``[planner]`` values, the seeds and the metrics to
-keep (keys of ``Plan.metrics``, plus ``feasible_fraction`` and ``cpu_s``)::
+keep (keys of ``Plan.metrics``, dotted for nested ones, plus ``feasible_fraction`` and ``cpu_s``)::
 
     name = "priority swarm budget"
     scenario = "../missions/swarm_small.toml"      # relative to the study file
@@ -86,7 +86,16 @@ def plan_run(scenario_path: str, params: dict[str, Any], seed: int, metrics: lis
     values = dict(plan.metrics)
     values["feasible_fraction"] = sum(v.feasible for v in plan.vehicles) / len(plan.vehicles)
     values["cpu_s"] = time.process_time() - cpu
-    return {m: values.get(m, math.nan) for m in [*metrics, "cpu_s"]}
+    return {m: metric(values, m) for m in [*metrics, "cpu_s"]}
+
+
+def metric(values: dict[str, Any], name: str) -> Any:
+    """``values[name]``, where a dotted name walks nested tables ("uav1.fitness"); NaN if absent."""
+    for key in name.split("."):
+        if not isinstance(values, dict) or key not in values:
+            return math.nan
+        values = values[key]
+    return values
 
 
 def _done(out: Path) -> set[str]:

@@ -4,12 +4,13 @@ same results on a Dask LocalCluster as on local processes."""
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.sweep import load_study, run_study, summarise
+from gcs_planner.sweep import load_study, metric, run_study, summarise
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
@@ -76,3 +77,9 @@ def test_cli_runs_a_study_and_refuses_a_misspelt_key(tmp_path, capsys):
     path.write_text(path.read_text().replace("seeds", "seed"))
     assert main(["sweep", str(path), "-o", str(out)]) == 2
     assert "unknown key 'seed'; did you mean 'seeds'?" in capsys.readouterr().err
+
+
+def test_dotted_metrics_walk_nested_tables():
+    values = {"uav1": {"fitness": 38.3, "history": [1, 2]}, "cost_total": 4.0}
+    assert metric(values, "uav1.fitness") == 38.3 and metric(values, "cost_total") == 4.0
+    assert math.isnan(metric(values, "uav2.fitness")) and math.isnan(metric(values, "cost_total.x"))
