@@ -116,7 +116,8 @@ def run_study(
 ) -> int:
     """Run every run not yet in ``out`` (local processes, or the Dask scheduler at ``scheduler``:
     an address, or "local" for a LocalCluster of ``workers``); the number of runs done now."""
-    todo = [r for r in runs(study) if r[0] not in _done(out)][:max_runs]
+    done = _done(out)
+    todo = [r for r in runs(study) if r[0] not in done][:max_runs]
     columns = FIXED_COLUMNS + sorted(study.grid) + [m for m in study.metrics if m != "cpu_s"]
     new_file = not out.exists()
     with out.open("a", newline="") as f, _executor(scheduler, workers) as submit:
