@@ -214,7 +214,9 @@ class TrackProblem:
 
     def terms(self, x: np.ndarray) -> dict[str, np.ndarray]:
         """Unweighted f_L, f_R, f_C, f_H (eqs. 5-10), each (P,)."""
-        nx, ny, nz = self._node_xyz(x)
+        return self._terms(*self._node_xyz(x))
+
+    def _terms(self, nx: np.ndarray, ny: np.ndarray, nz: np.ndarray) -> dict[str, np.ndarray]:
         dx, dy, dz = np.diff(nx, axis=1), np.diff(ny, axis=1), np.diff(nz, axis=1)
         f_l = np.sqrt(dx * dx + dy * dy + dz * dz).sum(axis=1)
         env = self.env
@@ -240,22 +242,28 @@ class TrackProblem:
 
     def objective(self, x: np.ndarray) -> np.ndarray:
         """F of eq. 4 for each particle, (P,)."""
-        t = self.terms(x)
+        return self._objective(self.terms(x))
+
+    def _objective(self, t: dict[str, np.ndarray]) -> np.ndarray:
         w = self.weights
         f = w.length * t["length"] + w.radar * t["radar"] + w.collision * t["collision"]
         return f + w.height * t["height"]
 
     def fitness(self, x: np.ndarray) -> np.ndarray:
-        """What the swarm minimises: F, plus the safety penalty in the safe variant."""
-        f = self.objective(x)
-        return f + self.safety_penalty(x) if self.safety_spacing else f
+        """What the swarm minimises: F, plus the safety penalty in the safe variant (the nodes,
+        the hot path, are built once for both)."""
+        xyz = self._node_xyz(x)
+        f = self._objective(self._terms(*xyz))
+        return f + self._penalty(np.stack(xyz, axis=-1)) if self.safety_spacing else f
 
     def safety_penalty(self, x: np.ndarray) -> np.ndarray:
         """(P,): how far the flown track (the node polyline, sampled at most ``safety_spacing``
         apart) enters a radar dome, a cylinder or terrain + h_safe, each grown by
         ``safety_margin``: SAFETY_WEIGHT x the summed depth plus 1 per sample inside. The paper
         checks its threats at the nodes only, so its optimum may cut through them in between."""
-        nodes = self.nodes(x)
+        return self._penalty(self.nodes(x))
+
+    def _penalty(self, nodes: np.ndarray) -> np.ndarray:
         u = self._chord_samples(nodes[..., 0], nodes[..., 1], nodes[..., 2])
         seg = nodes[:, :-1, None, :] + (nodes[:, 1:, None, :] - nodes[:, :-1, None, :]) * u[:, None]
         pts = np.concatenate([seg.reshape(len(nodes), -1, 3), nodes[:, -1:]], axis=1)
