@@ -70,6 +70,17 @@ class TrackRecorder:
         t, lat, lon, alt = self.samples[sysid][-1]
         return t, np.array(geodetic_to_enu(lat, lon, alt, self.origin))
 
+    def positions_since(self, sysid: int, t_s: float) -> np.ndarray:
+        """(M, 3) ENU positions [m] of the vehicle's reports from t_s on."""
+        rows = self.samples[sysid]
+        k = len(rows)
+        while k > 0 and rows[k - 1][0] >= t_s:
+            k -= 1
+        if k == len(rows):
+            return np.zeros((0, 3))
+        arr = np.asarray(rows[k:], dtype=float)
+        return np.column_stack(geodetic_to_enu(arr[:, 1], arr[:, 2], arr[:, 3], self.origin))
+
     def now_s(self) -> float:
         """The newest report time over all vehicles (the fleet's clock)."""
         return max((rows[-1][0] for rows in self.samples.values() if rows), default=0.0)

@@ -22,6 +22,7 @@ import numpy as np
 
 from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.plan import VehiclePlan
+from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.flight import AIRFRAMES, G_MPS2, Airframe, climb_run_m
 from sitl_mock.process import MockFleetProcess
@@ -90,6 +91,10 @@ class _PlanFleet:
 
     def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
         self.fleet.set_drift(sysid, east_mps, north_mps)
+
+    def cut_link(self, sysid: int) -> None:
+        """The vehicle's link goes dead both ways: to the GCS it is lost (it stops reporting)."""
+        self.fleet.set_faults(sysid, LinkFaults(loss=1.0))
 
     @property
     def lag_events(self) -> int:

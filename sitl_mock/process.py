@@ -17,12 +17,15 @@ START_TIMEOUT_S = 30.0  # the child must be serving within this [s]
 
 
 def _serve(conn, kwargs: dict) -> None:
-    """Child process: run a MockFleet, send its addresses, run until told to stop, send its lag count."""
+    """Child process: run a MockFleet, send its addresses, apply the fault calls it is sent
+    ((method name, args)) until told to stop, send its lag count."""
     from sitl_mock.fleet import MockFleet
 
     with MockFleet(**kwargs) as fleet:
         conn.send(fleet.addresses)
-        conn.recv()
+        while (message := conn.recv()) != "stop":
+            name, args = message
+            getattr(fleet, name)(*args)
         lag = fleet.lag_events
     conn.send(lag)
 
@@ -45,6 +48,10 @@ class MockFleetProcess:
             raise TimeoutError(f"the mock fleet process did not start within {START_TIMEOUT_S:g} s")
         self.addresses = self._conn.recv()
         return self
+
+    def set_faults(self, sysid: int | None, faults) -> None:
+        """MockFleet.set_faults in the child process."""
+        self._conn.send(("set_faults", (sysid, faults)))
 
     def __exit__(self, *exc: object) -> None:
         try:

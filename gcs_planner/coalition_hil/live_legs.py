@@ -151,14 +151,17 @@ def timed_leg(
     return leg
 
 
-def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0) -> Leg:
+def plan_live_leg(
+    world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0, known=None
+) -> Leg:
     """The award's leg from pose q0 (x, y, heading [rad]) at t0_s (see ``timed_leg``): to the strike
     entry pose, or to the assessment arc start followed by the assessment arc, arriving at
-    award["time_s"], around the threats known at the award."""
+    award["time_s"], around the known threats (default: the scenario's, known at the award)."""
     p = world.params
     uav = next(u for u in world.uavs if u.id == award["uav"])
     target = next(t for t in world.targets if t.id == award["target"])
-    known = [th for th in world.threats if th.appear_s <= award["t_s"]]
+    if known is None:
+        known = [th for th in world.threats if th.appear_s <= award["t_s"]]
     strike = award["task"] == "strike"
     leg = timed_leg(world, uav, q0, t0_s, goal_pose(world, award), float(award["time_s"]), known,
                     "strike" if strike else "transit", max_speed_factor)  # fmt: skip
@@ -171,26 +174,25 @@ def plan_live_leg(world, award: dict, q0: np.ndarray, t0_s: float, max_speed_fac
                "assess", {**leg.info, "arc_t0_s": float(arc.t[0])})  # fmt: skip
 
 
-def rejoin_leg(world, uav, q0, t0_s: float, track, end_s: float, now_s: float) -> Leg:
+def rejoin_leg(world, uav, q0, t0_s: float, track, end_s: float, known) -> Leg:
     """A timed leg from pose q0 at t0_s back onto the simulated track (t, xy) at the earliest time
     t_j >= t0_s + REJOIN_MIN_S (and <= end_s) whose point the shortest path reaches at 0.9 x
-    cruise: after a strike or assessment the vehicle returns to where the simulation has it, so
-    that its next award starts from about the simulated state."""
+    cruise, around the known threats: after a strike or assessment the vehicle returns to where
+    the simulation has it, so that its next award starts from about the simulated state."""
     t, xy = track
     grid = np.arange(t0_s + REJOIN_MIN_S, max(end_s, t0_s + REJOIN_MIN_S + 1.0), 1.0)
     goals = np.array([pose_at(t, xy, tj) for tj in grid])
     lengths = paths.shortest_lengths(np.broadcast_to(q0, goals.shape), goals, uav.r_min_m)
     ok = np.nonzero(lengths <= 0.9 * uav.speed_mps * (grid - t0_s))[0]
     j = int(ok[0]) if len(ok) else len(grid) - 1
-    known = [th for th in world.threats if th.appear_s <= now_s]
     return timed_leg(world, uav, q0, t0_s, goals[j], float(grid[j]), known, "transit")
 
 
-def onto_sim_leg(world, uav, q0, t0_s: float, sim_leg: Leg, now_s: float) -> Leg | None:
+def onto_sim_leg(world, uav, q0, t0_s: float, sim_leg: Leg, known) -> Leg | None:
     """Fallback for a strike whose live leg finds no threat-clear path of the right length: a
     timed leg onto the simulation's own strike leg (``rejoin_leg``), then the rest of that leg
     (which the simulation planned clear). None when that is not clear and on time either."""
-    rejoin = rejoin_leg(world, uav, q0, t0_s, (sim_leg.t, sim_leg.xy), float(sim_leg.t[-1]), now_s)
+    rejoin = rejoin_leg(world, uav, q0, t0_s, (sim_leg.t, sim_leg.xy), float(sim_leg.t[-1]), known)
     if not rejoin.info["clear"] or abs(rejoin.info["late_s"]) >= 0.05 or rejoin.t[-1] >= sim_leg.t[-1]:
         return None
     rest = sim_leg.t > rejoin.t[-1] + 1e-6

@@ -39,6 +39,7 @@ __all__ = [
     "VehicleSchedule",
     "award_mission",
     "build_schedules",
+    "first_mission",
     "idle_mission",
 ]
 
@@ -135,6 +136,18 @@ def _track_piece(uav, t, xy, t0: float, dt_s: float, a: float, b: float, forced=
     return _piece_plan(uav, ts, xys, t0, dt_s, forced)
 
 
+def first_mission(uav, track, t_start: float, t_end: float, dt_s: float, offset=(0.0, 0.0)) -> VehiclePlan:
+    """A straight LEAD_IN_S lead-in to the track's position at t_start, then the track (t, xy) up to
+    t_end and PRE_AWARD_EXTEND_S more at its last turn rate, shifted by offset (east, north) [m]."""
+    t0 = t_start - LEAD_IN_S
+    piece = _track_piece(uav, *track, t0, dt_s, t_start, t_end, extend_s=PRE_AWARD_EXTEND_S)
+    h0 = np.arctan2(*(piece.path[1, :2] - piece.path[0, :2])[::-1])
+    lead_in = piece.path[0, :2] - LEAD_IN_S * uav.speed_mps * np.array([np.cos(h0), np.sin(h0)])
+    ts = np.r_[t0, piece.path_times_s + t0]
+    xys = np.vstack([lead_in, piece.path[:, :2]]) + np.asarray(offset)
+    return _piece_plan(uav, ts, xys, t0, dt_s, [])
+
+
 def build_schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> list[VehicleSchedule]:
     """Each awarded UAV's missions: the initial one, its awards (flown from the award time: the leg
     plus AFTER_GOAL_S of the simulated track after it) and, where the simulation flies on before
@@ -149,16 +162,11 @@ def build_schedules(world, result, awards, t_start, t_stop, dt_s, offsets) -> li
         t, xy = drop_spikes(
             *result.tracks[uav.index].history(t_stop + 2 * PRE_AWARD_EXTEND_S)[:2], uav.speed_mps
         )
-        t0 = t_start - LEAD_IN_S
-        piece = partial(_track_piece, uav, t, xy, t0, dt_s)
+        piece = partial(_track_piece, uav, t, xy, t_start - LEAD_IN_S, dt_s)
         mine = sorted(by_uav[uav.id], key=lambda e: e["t_s"])
         legs = [result.award_legs[(e["target"], uav.id)] for e in mine]
-        initial = piece(t_start, float(legs[0].t[0]), extend_s=PRE_AWARD_EXTEND_S)
-        h0 = np.arctan2(*(initial.path[1, :2] - initial.path[0, :2])[::-1])
-        lead_in = initial.path[0, :2] - LEAD_IN_S * uav.speed_mps * np.array([np.cos(h0), np.sin(h0)])
-        ts = np.r_[t0, initial.path_times_s + t0]
-        xys = np.vstack([lead_in, initial.path[:, :2]]) + np.asarray(offsets.get(uav.id, (0.0, 0.0)))
-        initial = _piece_plan(uav, ts, xys, t0, dt_s, [])
+        offset = offsets.get(uav.id, (0.0, 0.0))
+        initial = first_mission(uav, (t, xy), t_start, float(legs[0].t[0]), dt_s, offset)
         flown, idles = [], []
         for k, (e, leg) in enumerate(zip(mine, legs)):
             end = float(legs[k + 1].t[0]) if k + 1 < len(mine) else t_stop

@@ -21,7 +21,9 @@ from gcs_planner.coalition_hil.tracks import pose_at
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.track import Leg
 
-__all__ = ["TaskRow", "add_prediction_errors", "format_strike_report", "measure_task", "task_rows"]
+__all__ = [
+    "TaskRow", "add_prediction_errors", "format_strike_report", "formation_rows", "measure_task", "task_rows",
+]
 
 MEASURE_WINDOW_S = 15.0  # closest approach searched within this of the awarded time [s]
 ARC_TOL_M = 50.0  # an assessment arc is flown within this of the assessment circle [m]
@@ -151,3 +153,24 @@ def add_prediction_errors(uploads: list[dict], flown: dict) -> None:
             t, positions = flown[u["sysid"]]
             miss = pose_at(t, positions[:, :2], u["t0_s"])[:2] - np.asarray(u["live_pose"][:2])
             u["prediction_error_m"] = round(float(np.hypot(*miss)), 2)
+
+
+def formation_rows(sim_events: list[dict], online_events: list[dict], targets) -> list[dict]:
+    """The coalitions formed by the simulation and by the online run, side by side in the order they
+    were formed (per target: the n-th formation of each), for the flown targets."""
+    def formed(events):
+        return [e for e in events if e["event"] == "formed" and e["target"] in targets]
+
+    sim, online = formed(sim_events), formed(online_events)
+    rows = []
+    for k in range(max(len(sim), len(online))):
+        a = sim[k] if k < len(sim) else None
+        b = online[k] if k < len(online) else None
+        rows.append({
+            "target": (a or b)["target"],
+            "sim_leader": a and a["uav"], "online_leader": b and b["uav"],
+            "sim_t_s": a and a["t_s"], "online_t_s": b and b["t_s"],
+            "sim_members": a and a["members"], "online_members": b and b["members"],
+            "same_members": bool(a and b and sorted(a["members"]) == sorted(b["members"])),
+        })  # fmt: skip
+    return rows

@@ -115,6 +115,9 @@ class HilOptions:
     replay_legs: bool = False  # upload the simulation's legs instead of live-planned ones (comparison)
     offset_m: dict[str, tuple[float, float]] = field(default_factory=dict)  # UAV id: first-mission shift
     upload_safety: float = UPLOAD_SAFETY  # leg start = now + this x the measured upload estimate (+1 s)
+    online: bool = False  # decisions by the contract net in flight (online_run), not the simulation's
+    cut_links: dict[str, float] = field(default_factory=dict)  # online, mock: UAV id -> link cut [scenario s]
+    popup_threats: tuple = ()  # online: Threats injected into the running contract net
 
 
 @dataclass
@@ -130,6 +133,10 @@ class HilResult:
     failures: list[str] = field(default_factory=list)
     tracks: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)  # sysid: t [s], ENU [m]
     legs: dict[tuple[str, str], Leg] = field(default_factory=dict)  # (target, UAV): the leg flown
+    events: list[dict] = field(default_factory=list)  # online: the contract net's timeline
+    formations: list[dict] = field(default_factory=list)  # online: formations beside the simulation's
+    lost_awards: list[dict] = field(default_factory=list)  # online: awards of vehicles lost in flight
+    tender_compute_s: list[float] = field(default_factory=list)  # online: wall time per formation
 
     @property
     def strikes(self) -> list[TaskRow]:
@@ -209,18 +216,22 @@ class _Job:
     kind: str = field(default="award", compare=False)  # "award" | "idle"
     sched: VehicleSchedule | None = field(default=None, compare=False)
     payload: Award | Idle | None = field(default=None, compare=False)
+    gen: int = field(default=0, compare=False)  # the vehicle's plan generation it belongs to (online run)
 
 
 VehiclesFor = Callable[[list[VehiclePlan], Origin, float], VehicleSource]
 
 
-async def run_coalition_hil(scenario: Scenario, options: HilOptions, vehicles_for: VehiclesFor) -> HilResult:
+async def run_coalition_hil(
+    scenario: Scenario, options: HilOptions, vehicles_for: VehiclesFor, runner: type | None = None
+) -> HilResult:
     """Simulate, fly the awarded vehicles (``vehicles_for(initial plans, origin, speed-up)``, the mock
     fleet from the CLI), upload each award as a leg planned from the vehicle's live state (or, with
-    ``replay_legs``, the simulation's leg)."""
+    ``replay_legs``, the simulation's leg). ``runner``: the run's class (online_run.OnlineRun)."""
     t_wall = time.monotonic()
-    run = _HilRun(scenario, options)
+    run = (runner or _HilRun)(scenario, options)
     vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
+    run.vehicles = vehicles
     options.out_dir.mkdir(parents=True, exist_ok=True)
     scenario_text = scenario.path.read_text() if scenario.path else None
     with vehicles as urls:
@@ -248,9 +259,14 @@ class _HilRun:
         self.schedules = build_schedules(
             self.world, self.sim, self.awards, *window, options.waypoint_dt_s, options.offset_m
         )
+        self._init_flight([s.initial for s in self.schedules])
+
+    def _init_flight(self, initial: list[VehiclePlan]) -> None:
+        """The flight's state: the initial missions, the telemetry, the schedule keeper, the queue."""
+        scenario, options = self.scenario, self.options
         self.t_route0 = self.t_start - LEAD_IN_S  # scenario time of route time 0 (the lead-in start)
-        self.flying = sorted(s.uav.sysid for s in self.schedules)
-        self.initial = Plan(scenario.origin, "coalition", [s.initial for s in self.schedules])
+        self.flying = sorted(vp.sysid for vp in initial)
+        self.initial = Plan(scenario.origin, "coalition", initial)
         self.missions = {
             vp.sysid: plan_to_items(vp, scenario.origin, options.autopilot) for vp in self.initial.vehicles
         }
@@ -278,6 +294,10 @@ class _HilRun:
         rows = list(self.telemetry.rows[uav.sysid])  # a copy: planning runs in a thread
         state = live_state(rows, self.scenario.origin, 1.05 * uav.speed_mps / uav.r_min_m)
         return replace(state, t_s=state.t_s - self.route_t0 + self.t_route0)
+
+    def known_threats(self, t_s: float) -> list:
+        """The threats the legs planned at t_s avoid: the scenario's, known by then."""
+        return [th for th in self.world.threats if th.appear_s <= t_s]
 
     def deadline_s(self, uav, e: dict, now: float) -> float:
         """The latest leg start [s] from which the shortest path (threats ignored) to the award's
@@ -366,8 +386,9 @@ class _HilRun:
                 self.queue.task_done()
 
     # --- one upload --------------------------------------------------------------------------
-    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> None:
-        """Plan the job's mission, upload it in flight, start it at the first waypoint ahead."""
+    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> dict:
+        """Plan the job's mission, upload it in flight, start it at the first waypoint ahead; the
+        upload's log entry."""
         kind, sched, payload, e = job.kind, job.sched, job.payload, job.payload.event
         sysid = sched.uav.sysid
         entry = {"kind": kind, "uav": e["uav"], "sysid": sysid, "target": e["target"],
@@ -394,7 +415,7 @@ class _HilRun:
             if entry.get("covered_s", math.inf) < payload.end_s - 1.0:  # the next idle chunk
                 t_next = entry["covered_s"] - IDLE_LEAD_S
                 idle = Idle(t_next, e, payload.end_s, None)
-                self.due.append(_Job(t_next, (2, t_next), "idle", sched, idle))
+                self.due.append(_Job(t_next, (2, t_next), "idle", sched, idle, job.gen))
                 self.due.sort()
         except MavlinkError as exc:
             entry["error"] = str(exc)
@@ -407,6 +428,7 @@ class _HilRun:
             entry["landed_before_leg_s"] = round(entry["t0_s"] - entry["upload_end_s"], 3)
         self.uploads.append(entry)
         logger.log_event({"event": "upload", **entry})
+        return entry
 
     async def _mission(self, job: _Job, entry: dict) -> tuple[VehiclePlan, Leg | None]:
         """The job's mission and leg: planned live (in a thread) or, replaying, the simulation's."""
@@ -434,12 +456,13 @@ class _HilRun:
         e = award.event
         t_plan = time.monotonic()
         items = self.timing.items
+        known = self.known_threats(e["t_s"])
         for _ in range(2):  # once more when the mission has more items than guessed
             t0 = now + self.upload_estimate_s(items) + START_AHEAD_S
             q0 = state.predict([t0])[0]
-            leg = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR)
+            leg = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR, known)
             if e["task"] == "strike" and not (leg.info["clear"] and abs(leg.info["late_s"]) < 0.05):
-                leg = onto_sim_leg(self.world, sched.uav, q0, t0, award.sim_leg, e["t_s"]) or leg
+                leg = onto_sim_leg(self.world, sched.uav, q0, t0, award.sim_leg, known) or leg
             prefix = _predicted_prefix(state, t0)
             vp = award_mission(sched, award, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
                                np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
@@ -467,7 +490,7 @@ class _HilRun:
         t_plan = time.monotonic()
         t0 = now + self.upload_estimate_s(self.timing.idle_items) + START_AHEAD_S
         q0 = state.predict([t0])[0]
-        leg = rejoin_leg(self.world, sched.uav, q0, t0, sched.track, idle.end_s, now)
+        leg = rejoin_leg(self.world, sched.uav, q0, t0, sched.track, idle.end_s, self.known_threats(now))
         prefix = _predicted_prefix(state, t0)
         vp = idle_mission(sched, idle, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
                           np.arange(now, t0, PREFIX_DT_S))  # fmt: skip

@@ -20,14 +20,21 @@ reward cancels its own, stores it, bids on the other, and re-tenders when it is 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from gcs_planner.planning.coalition.model import CoalitionParams, Target
 from gcs_planner.planning.coalition.paths import free_heading_lengths
-from gcs_planner.planning.coalition.track import Loiter, Track
+from gcs_planner.planning.coalition.track import Loiter
 
 __all__ = ["Award", "Bid", "Tender", "bid_for", "stays_in_range", "tender_times"]
+
+
+class Poses(Protocol):
+    """A UAV's poses over time: a planned Track, or live telemetry propagated (the online engine)."""
+
+    def state_at(self, t_s) -> np.ndarray: ...
 
 
 @dataclass
@@ -83,7 +90,7 @@ def tender_times(t0_s: float, params: CoalitionParams) -> tuple[float, float]:
     return t_es - params.delay_s - params.t_ta_s, t_es
 
 
-def stays_in_range(own: Track, leader: Loiter, t0_s: float, t1_s: float, range_m: float) -> bool:
+def stays_in_range(own: Poses, leader: Loiter, t0_s: float, t1_s: float, range_m: float) -> bool:
     """Propagate both UAVs over [t0, t1] (0.1 s steps): always within range_m of each other?"""
     t = np.linspace(t0_s, t1_s, max(2, int(np.ceil((t1_s - t0_s) / 0.1)) + 1))
     a, b = own.state_at(t), leader.state(t)
@@ -92,7 +99,7 @@ def stays_in_range(own: Track, leader: Loiter, t0_s: float, t1_s: float, range_m
 
 def bid_for(
     uav: int,
-    track: Track,
+    track: Poses,
     speed_mps: float,
     r_min_m: float,
     munitions: int,

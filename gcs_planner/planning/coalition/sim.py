@@ -159,11 +159,16 @@ class CoalitionSim:
         )
 
     # ---- plumbing
+    def pose(self, i: int, t_s) -> np.ndarray:
+        """(len(t), 3) x, y, heading of UAV i at times t_s, from its planned track (the online
+        engine, coalition_hil.online, answers from live telemetry instead)."""
+        return self.st[i].track.state_at(t_s)
+
     def positions(self, t_s: float) -> np.ndarray:
-        return np.array([s.track.state_at(t_s)[0, :2] for s in self.st])
+        return np.array([self.pose(i, t_s)[0, :2] for i in range(len(self.st))])
 
     def position(self, i: int, t_s: float) -> np.ndarray:
-        return self.st[i].track.state_at(t_s)[0, :2]
+        return self.pose(i, t_s)[0, :2]
 
     def at(self, t_s: float, kind: str, **data) -> None:
         heapq.heappush(self.heap, (t_s, self.seq, kind, data))
@@ -176,18 +181,29 @@ class CoalitionSim:
         return self.uavs[i].range_max_m - self.uavs[i].speed_mps * t_s
 
     def run(self) -> SimResult:
+        self.start()
+        self.advance(self.p.t_end_s)
+        return self.result()
+
+    def start(self) -> None:
+        """Put the scenario's timeline on the event heap: targets, pop-up threats, station keeping."""
         self.at(0.0, "restation")
         for t in self.w.targets:
             self.at(t.appear_s, "target_appear", target=t)
         for th in self.w.threats:
             if th.appear_s > 0:
                 self.at(th.appear_s, "threat_appear", threat=th)
-        while self.heap:
+
+    def advance(self, t_s: float) -> None:
+        """Handle every event due up to t_s (and the scenario's end)."""
+        stop = min(t_s, self.p.t_end_s)
+        while self.heap and self.heap[0][0] <= stop:
             t, _, kind, data = heapq.heappop(self.heap)
-            if t > self.p.t_end_s:
-                break
             self.now = t
             getattr(self, "_on_" + kind)(**data)
+        self.now = max(self.now, stop)
+
+    def result(self) -> SimResult:
         return SimResult(
             self.events,
             [s.track for s in self.st],
@@ -209,7 +225,7 @@ class CoalitionSim:
         if not open_:
             return
         u, s = self.uavs[i], self.st[i]
-        q0 = s.track.state_at(self.now)[0]
+        q0 = self.pose(i, self.now)[0]
         c = np.array([t.approx_xy for t in open_])
         d = np.hypot(*(c - q0[:2]).T)
         tgt = c[int(np.argmin(d))]
@@ -246,12 +262,12 @@ class CoalitionSim:
             if not idle:
                 self.at(self.now + self.p.retender_s, "target_appear", target=target)
                 return
-            poses = np.array([self.st[i].track.state_at(self.now)[0] for i in idle])
+            poses = np.array([self.pose(i, self.now)[0] for i in idle])
             r = np.array([self.uavs[i].r_min_m for i in idle])
             i = idle[int(np.argmin(paths.free_heading_lengths(poses, np.asarray(target.approx_xy), r)))]
         u, s = self.uavs[i], self.st[i]
         s.state = RECON
-        q0 = s.track.state_at(self.now)[0]
+        q0 = self.pose(i, self.now)[0]
         arc0 = paths.arc_start_pose(target.xy, target.recon_angle_rad, self.p.detect_radius_m)[0]
         route = paths.min_route(q0, arc0, u.r_min_m, self.known, self.p.kappa)
         segs, _ = paths.timed_route(route, route.length_m, self.known)
@@ -356,7 +372,7 @@ class CoalitionSim:
         u = self.uavs[uav]
         bid, why = bid_for(
             uav,
-            s.track,
+            _PoseView(self, uav),
             u.speed_mps,
             u.r_min_m,
             s.munitions,
@@ -456,7 +472,7 @@ class CoalitionSim:
         leader = tender.leader
         if self.st[leader].state == LEADER:
             u = self.uavs[leader]
-            pose = self.st[leader].track.state_at(tender.t_es_s)[0]
+            pose = self.pose(leader, tender.t_es_s)[0]
             d = float(paths.free_heading_lengths(pose[None], np.asarray(tender.target.xy), u.r_min_m)[0])
             cands.append(leader)
             poses.append(pose)
@@ -717,7 +733,7 @@ class CoalitionSim:
             raise RuntimeError(f"{self.uavs[uav].id} was awarded a strike without munitions")
         s.munitions -= 1
         s.strikes += 1
-        pose = s.track.state_at(self.now)[0]
+        pose = self.pose(uav, self.now)[0]
         self.log(
             "strike",
             uav=self.uavs[uav].id,
@@ -773,7 +789,7 @@ class CoalitionSim:
     def _replan(self, i: int, leg: Leg) -> None:
         """Re-route the rest of leg from the current pose around the known threats, same goal and time."""
         u, s = self.uavs[i], self.st[i]
-        q0 = s.track.state_at(self.now)[0]
+        q0 = self.pose(i, self.now)[0]
         # goal: the leg's own end for strikes/transits; the arc start for recon/assess legs
         kinds = leg.kind
         j_goal = len(leg.t) - 1
@@ -806,6 +822,17 @@ class CoalitionSim:
             if old is leg:
                 self.award_legs[(tid, uid)] = new
         self.log("replan", uav=u.id, clear=clear, late_s=round(late, 4))
+
+
+@dataclass(frozen=True)
+class _PoseView:
+    """UAV i's poses as a track (``state_at``) for the bid functions: its planned track, or live."""
+
+    sim: CoalitionSim
+    i: int
+
+    def state_at(self, t_s) -> np.ndarray:
+        return self.sim.pose(self.i, t_s)
 
 
 def lookalikes(

@@ -1,0 +1,250 @@
+"""The online coalition run: the contract net (online.OnlineContractNet) decides in flight, on telemetry.
+
+Every UAV of the scenario flies. The engine runs as the simulation up to the window start
+``t_start`` (the flight's lead-in ends there), so the first missions are its planned tracks; from
+then on it advances with the telemetry's scenario clock and answers from live state. Each time
+the engine starts a new leg for a vehicle (a station change, a recon, an award, a re-plan around a
+pop-up threat) the vehicle's plan generation goes up and a mission is queued for it: an award's
+leg is planned from the vehicle's live state to the award's goal at the awarded time and angle
+(as in the offline run, around the threats the engine knows now); any other leg becomes an "idle"
+mission that rejoins the engine's track. Idle missions follow the engine's track in 40 s chunks;
+a job of an older generation than the vehicle's is dropped when its turn comes. A vehicle whose
+newest report is ``LOSS_AFTER_S`` older than the fleet's clock is lost: the engine hands its
+task on and its queued missions are dropped. The window ends as in the offline run, or later
+(up to ``OVERRUN_S``) while a flown target still has a task to do.
+
+An award reaches its vehicle as a mission upload: the engine's awarded times allow for the
+uploads of a whole coalition (``award_lag_s`` = ceil(tasks / upload workers) x the measured
+upload estimate of an ``AWARD_ITEMS`` mission + ``START_AHEAD_S``).
+
+The report is the offline run's, over the engine's awards (a lost vehicle's awards are listed,
+not judged), plus the online and simulated formations side by side (``formation_rows``) and the
+wall time of each formation made in flight.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+
+import numpy as np
+
+from gcs_planner.coalition_hil.live_legs import LiveState
+from gcs_planner.coalition_hil.missions import IDLE_SPAN_S, Award, Idle, VehicleSchedule, first_mission
+from gcs_planner.coalition_hil.online import OnlineContractNet
+from gcs_planner.coalition_hil.report import add_prediction_errors, formation_rows, task_rows
+from gcs_planner.coalition_hil.run import (
+    IDLE_LEAD_S,
+    START_AHEAD_S,
+    UPLOAD_WORKERS,
+    HilOptions,
+    HilResult,
+    _HilRun,
+    _Job,
+    _keep,
+    _select_awards,
+    run_coalition_hil,
+    VehiclesFor,
+)
+from gcs_planner.coalition_hil.tracks import drop_spikes
+from gcs_planner.flight_ops import KEEPER_PERIOD_S
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.planning.coalition import load_world, simulate
+from gcs_planner.scenario import Scenario
+from gcs_planner.telemetry import FlightLogger
+
+__all__ = ["OnlineRun", "run_online"]
+
+LOSS_AFTER_S = 3.0  # a vehicle whose newest report is this much older than the fleet's is lost [s]
+OVERRUN_S = 90.0  # the window is extended by up to this while a flown target has a task left [s]
+FIRST_SPAN_S = 45.0  # the first mission covers this much of the engine's track after t_start [s]
+AWARD_ITEMS = 30  # items of a typical award mission (19-45), for the award lag [s]
+HISTORY_AHEAD_S = 120.0  # the engine's track is read this far past the window end [s]
+
+
+class OnlineRun(_HilRun):
+    """One online coalition run (module docstring); ``fly`` and ``result`` as the offline run's."""
+
+    def __init__(self, scenario: Scenario, options: HilOptions) -> None:
+        self.scenario, self.options = scenario, options
+        self.world = load_world(scenario)
+        seed = options.seed if options.seed is not None else int(scenario.planner.get("seed", 0))
+        self.sim = simulate(self.world, np.random.default_rng(seed))  # the reference
+        self.awards, self.t_start, self.t_stop = _select_awards(self.sim, options, seed)
+        self.targets = {e["target"] for e in self.awards}
+        self.engine = OnlineContractNet(self.world, np.random.default_rng(seed), self)
+        self.engine.start()
+        self.engine.advance(self.t_start)
+        self.engine.go_live(self.t_start)
+        self.by_sysid = {u.sysid: u for u in self.world.uavs}
+        self.sched = {}
+        for u in self.world.uavs:
+            track = self._engine_track(u)
+            vp = first_mission(u, track, self.t_start, self.t_start + FIRST_SPAN_S, options.waypoint_dt_s,
+                               options.offset_m.get(u.id, (0.0, 0.0)))  # fmt: skip
+            self.sched[u.sysid] = VehicleSchedule(u, vp, track, [], [])
+        self._init_flight([s.initial for s in self.sched.values()])
+        self.gen = {s: 0 for s in self.flying}
+        self.last_leg = {u.sysid: self._last_leg(u) for u in self.world.uavs}
+        self.logged = len(self.engine.events)
+        self.award_events: dict[tuple[str, str], dict] = {}
+        self.cut = dict(options.cut_links)
+        self.vehicles = None
+        self.t_end = float("inf")
+        first_chunk = self.t_start + FIRST_SPAN_S - IDLE_LEAD_S
+        for s in self.sched.values():
+            idle = Idle(first_chunk, {"uav": s.uav.id, "target": None, "task": "idle", "t_s": first_chunk},
+                        self._end_s(), None)  # fmt: skip
+            self.due.append(_Job(first_chunk, (2, first_chunk), "idle", s, idle, 0))
+
+    # --- the engine's view of the fleet (online.LiveFleet) -----------------------------------
+    def state(self, i: int) -> LiveState | None:
+        uav = self.world.uavs[i]
+        return self.vehicle_state(uav) if self.telemetry.rows[uav.sysid] else None
+
+    def flown_since(self, i: int, t_s: float) -> np.ndarray:
+        sysid = self.world.uavs[i].sysid
+        return self.recorder.positions_since(sysid, t_s - self.t_route0 + self.route_t0)[:, :2]
+
+    def known_threats(self, t_s: float) -> list:
+        return list(self.engine.known)
+
+    # --- the engine's plan -------------------------------------------------------------------
+    def _end_s(self) -> float:
+        return self.t_stop + OVERRUN_S
+
+    def _engine_track(self, uav) -> tuple[np.ndarray, np.ndarray]:
+        history = self.engine.st[uav.index].track.history(self._end_s() + HISTORY_AHEAD_S)
+        return drop_spikes(history[0], history[1], uav.speed_mps)
+
+    def _last_leg(self, uav):
+        legs = self.engine.st[uav.index].track.legs
+        return legs[-1] if legs else None
+
+    async def _mission(self, job: _Job, entry: dict):
+        job.sched.track = self._engine_track(job.sched.uav)  # the engine's plan as it is now
+        return await super()._mission(job, entry)
+
+    def _queue_changes(self, now: float) -> None:
+        """A job for every vehicle whose engine plan has a new leg: its award's, or an idle one."""
+        award_of = {id(leg): key for key, leg in self.engine.award_legs.items()}
+        for sysid in self.flying:
+            uav = self.by_sysid[sysid]
+            leg = self._last_leg(uav)
+            if leg is self.last_leg[sysid] or uav.index in self.engine.lost:
+                continue
+            self.last_leg[sysid] = leg
+            self.gen[sysid] += 1
+            sched, key = self.sched[sysid], award_of.get(id(leg))
+            if key is not None:
+                e = self.award_events[key]
+                job = _Job(now, (False, self.deadline_s(uav, e, now)), "award", sched,
+                           Award(e, leg, self._end_s()), self.gen[sysid])  # fmt: skip
+            else:
+                event = {"uav": uav.id, "target": leg.info.get("target"), "task": leg.kind, "t_s": now}
+                job = _Job(now, (1, now), "idle", sched, Idle(now, event, self._end_s(), None), self.gen[sysid])
+            self.queue.put_nowait((job.rank, next(self.order), job))
+
+    def _check_losses(self) -> None:
+        fleet_now = self.recorder.now_s()
+        for sysid in self.flying:
+            rows, i = self.telemetry.rows[sysid], self.by_sysid[sysid].index
+            if rows and i not in self.engine.lost and fleet_now - rows[-1][0] > LOSS_AFTER_S:
+                self.engine.vehicle_lost(i)
+                self.gen[sysid] += 1
+                self.current.pop(sysid, None)
+
+    def _cut_links(self, now: float) -> None:
+        """The test fault: the mock vehicle's link goes dead at its time (it stops reporting)."""
+        for uav_id, t_s in list(self.cut.items()):
+            if now >= t_s:
+                self.vehicles.cut_link(next(u.sysid for u in self.world.uavs if u.id == uav_id))
+                del self.cut[uav_id]
+
+    def _log_events(self, logger: FlightLogger) -> None:
+        for e in self.engine.events[self.logged :]:
+            if e["event"] == "award":
+                self.award_events[(e["target"], e["uav"])] = e
+            logger.log_event({**e, "source": "online_contract_net"})
+        self.logged = len(self.engine.events)
+
+    def _open(self, now: float) -> bool:
+        """Is the window still open: before its end, or with a flown target's task left (overrun)?"""
+        if now < self.t_stop:
+            return True
+        undone = any(self.engine.outcomes[t].t_done_s is None for t in self.targets)
+        return undone and now < self._end_s()
+
+    # --- the loop ----------------------------------------------------------------------------
+    async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        options = self.options
+        tasks = max(len(t.strike_angles_rad) + len(t.assess_angles_rad) for t in self.world.targets)
+        rounds = -(-tasks // UPLOAD_WORKERS)
+        self.engine.award_lag_s = rounds * self.upload_estimate_s(AWARD_ITEMS) + START_AHEAD_S
+        for threat in options.popup_threats:
+            self.engine.inject_threat(threat)
+        workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
+        self.due.sort()
+        deadline = time.monotonic() + (self._end_s() - self.t_route0 + 10.0) * 2.0 / options.speedup + 10.0
+        while self._open(self.scenario_now()) and time.monotonic() < deadline:
+            now = self.scenario_now()
+            if now >= self.t_start:
+                self._cut_links(now)
+                self._check_losses()
+                self.engine.advance(now)
+                self._log_events(logger)
+                self._queue_changes(now)
+            while self.due and self.due[0].t_s <= now:
+                job = self.due.pop(0)
+                self.queue.put_nowait((job.rank, next(self.order), job))
+            if options.keep_schedule:
+                _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
+            await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
+        self.t_end = self.scenario_now()
+        try:
+            await asyncio.wait_for(self.queue.join(), 10.0)
+        finally:
+            for w in workers:
+                w.cancel()
+            await asyncio.gather(*workers, return_exceptions=True)
+        if time.monotonic() >= deadline:
+            self.failures.append("the run did not reach the window end in time")
+
+    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> dict | None:
+        sysid = job.sched.uav.sysid
+        if job.gen != self.gen[sysid]:
+            return None  # superseded by a newer plan of the engine, or the vehicle is lost
+        entry = await super()._upload(link, logger, job)
+        if job.kind == "award" and entry["ok"]:  # back onto the engine's track after the leg
+            t_end = float(job.payload.sim_leg.t[-1])
+            idle = Idle(t_end, job.payload.event, self._end_s(), None)
+            self.due.append(_Job(t_end, (2, t_end), "idle", job.sched, idle, job.gen))
+            self.due.sort()
+        return entry
+
+    # --- the report --------------------------------------------------------------------------
+    def result(self, lag_events: int, wall_s: float) -> HilResult:
+        tracks = self.recorder.tracks()
+        flown = {s: (tr.times_s - self.route_t0 + self.t_route0, tr.positions) for s, tr in tracks.items()}
+        lost = {self.world.uavs[i].id for i in self.engine.lost}
+        awards = [e for e in self.award_events.values() if e["target"] in self.targets]
+        judged = [e for e in awards if e["uav"] not in lost and e["t_s"] <= self.t_end]
+        engine_tracks = {s.uav.id: s.track for s in self.sched.values()}
+        limits = (self.options.max_time_error_s, self.options.max_angle_error_deg)
+        rows, missing = task_rows(self.world, judged, flown, self.flown_legs, engine_tracks, limits)
+        add_prediction_errors(self.uploads, flown)
+        result = HilResult(
+            rows, self.uploads, self.mcap_path, self.t_start, wall_s, lag_events, self.failures + missing,
+            flown, self.flown_legs,
+        )  # fmt: skip
+        result.events = list(self.engine.events)
+        result.formations = formation_rows(self.sim.events, self.engine.events, self.targets)
+        result.lost_awards = [e for e in awards if e["uav"] in lost]
+        result.tender_compute_s = list(self.engine.live_compute_s)
+        return result
+
+
+async def run_online(scenario: Scenario, options: HilOptions, vehicles_for: VehiclesFor) -> HilResult:
+    """The online coalition run (module docstring) on ``vehicles_for``'s fleet."""
+    return await run_coalition_hil(scenario, options, vehicles_for, OnlineRun)
+
