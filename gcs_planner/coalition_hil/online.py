@@ -32,6 +32,7 @@ Choices (the paper does not model loss):
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import replace
 from typing import Protocol
 
@@ -83,6 +84,7 @@ class OnlineContractNet(CoalitionSim):
         self.recon_of: dict[int, Target] = {}
         self.award_lag_s = 0.0  # set by the run: the time an award takes to reach the vehicle [s]
         self._live_mark = 0
+        self.live_cpu_s: list[float] = []  # CPU time of every formation since going live [s]
         self._states: dict[int, LiveState | None] = {}
 
     # ---- the live clock
@@ -181,6 +183,14 @@ class OnlineContractNet(CoalitionSim):
         return idle[int(np.argmin(d))]
 
     # ---- formation: the awarded times allow for the award's upload
+    def _on_close(self, key: int) -> None:
+        """As the simulation's; in flight the CPU time of the formation is kept too (its wall time
+        includes waits for the GIL held by the run's planning threads)."""
+        t_cpu = time.thread_time()
+        super()._on_close(key)
+        if self.now >= self.live_from_s:
+            self.live_cpu_s.append(time.thread_time() - t_cpu)
+
     def _formation(self, tender, cands, poses, munitions, assess, rleft):
         """As the simulation's, with the awarded times computed as if the members started
         ``award_lag_s`` after t_e^s: in flight an award is a mission upload, which takes that long

@@ -26,10 +26,12 @@ from __future__ import annotations
 
 import asyncio
 import time
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
-from gcs_planner.coalition_hil.live_legs import LiveState
+from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, LiveState, plan_live_leg
 from gcs_planner.coalition_hil.missions import IDLE_SPAN_S, Award, Idle, VehicleSchedule, first_mission
 from gcs_planner.coalition_hil.online import OnlineContractNet
 from gcs_planner.coalition_hil.report import add_prediction_errors, formation_rows, task_rows
@@ -49,17 +51,37 @@ from gcs_planner.coalition_hil.run import (
 from gcs_planner.coalition_hil.tracks import drop_spikes
 from gcs_planner.flight_ops import KEEPER_PERIOD_S
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.errors import UserError
 from gcs_planner.planning.coalition import load_world, simulate
+from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
 
-__all__ = ["OnlineRun", "run_online"]
+__all__ = ["Fault", "OnlineRun", "run_online"]
 
 LOSS_AFTER_S = 3.0  # a vehicle whose newest report is this much older than the fleet's is lost [s]
 OVERRUN_S = 90.0  # the window is extended by up to this while a flown target has a task left [s]
 FIRST_SPAN_S = 45.0  # the first mission covers this much of the engine's track after t_start [s]
 AWARD_ITEMS = 30  # items of a typical award mission (19-45), for the award lag [s]
 HISTORY_AHEAD_S = 120.0  # the engine's track is read this far past the window end [s]
+THREAT_AHEAD_S = 8.0  # a fault's pop-up threat is put at least this far ahead on a leg [s]
+THREAT_TRIES = 8  # points tried for a fault's pop-up threat
+
+
+@dataclass(frozen=True)
+class Fault:
+    """An in-flight event tied to an award, ``after_s`` after the award of the ``member``-th vehicle
+    awarded a task of ``target`` (award order): "cut" that vehicle's link (the mock stops its
+    reports), or "threat": a pop-up threat of ``radius_m`` across the rest of its leg, or of the
+    next member's, where the leg passes clear of the others and can go around it in time
+    (``_threat_across_a_leg``: the fault tests one leg's avoidance, not a crowd's and not an
+    impossible one), injected into the contract net."""
+
+    kind: Literal["cut", "threat"]
+    target: str
+    member: int = 0
+    after_s: float = 5.0
+    radius_m: float = 120.0
 
 
 class OnlineRun(_HilRun):
@@ -88,7 +110,7 @@ class OnlineRun(_HilRun):
         self.last_leg = {u.sysid: self._last_leg(u) for u in self.world.uavs}
         self.logged = len(self.engine.events)
         self.award_events: dict[tuple[str, str], dict] = {}
-        self.cut = dict(options.cut_links)
+        self.faults = list(options.faults)
         self.vehicles = None
         self.t_end = float("inf")
         first_chunk = self.t_start + FIRST_SPAN_S - IDLE_LEAD_S
@@ -154,12 +176,49 @@ class OnlineRun(_HilRun):
                 self.gen[sysid] += 1
                 self.current.pop(sysid, None)
 
-    def _cut_links(self, now: float) -> None:
-        """The test fault: the mock vehicle's link goes dead at its time (it stops reporting)."""
-        for uav_id, t_s in list(self.cut.items()):
-            if now >= t_s:
-                self.vehicles.cut_link(next(u.sysid for u in self.world.uavs if u.id == uav_id))
-                del self.cut[uav_id]
+    def _apply_faults(self, now: float) -> None:
+        """Apply each Fault whose time has come (see Fault)."""
+        for fault in list(self.faults):
+            awarded = [e for e in self.award_events.values() if e["target"] == fault.target]
+            if len(awarded) <= fault.member or now < awarded[fault.member]["t_s"] + fault.after_s:
+                continue
+            if fault.kind == "cut":
+                self.vehicles.cut_link(awarded[fault.member]["sysid"])
+            elif not self._threat_across_a_leg(awarded[fault.member:], fault.radius_m, now):
+                continue
+            self.faults.remove(fault)
+
+    def _threat_across_a_leg(self, awarded: list[dict], radius_m: float, now: float) -> bool:
+        """Put a pop-up threat on the rest of the first of these awards' legs (from THREAT_AHEAD_S to
+        3 s before its end) at a point clear of every other award leg by the threat's avoidance
+        radius (kappa x r) + 50 m, around which the vehicle's live leg can still arrive on time
+        (``THREAT_TRIES`` such points tried, the clearest first). False when none has one yet."""
+        need = self.world.params.kappa * radius_m + 50.0
+        for e in awarded:
+            leg = self.engine.award_legs.get((e["target"], e["uav"]))
+            if leg is None:
+                continue
+            rest = leg.xy[(leg.t >= now + THREAT_AHEAD_S) & (leg.t <= leg.t[-1] - 3.0)]
+            clearance = self._clearance_to_other_legs(rest, leg, now) if len(rest) else np.zeros(0)
+            uav = self.by_sysid[e["sysid"]]
+            t0 = now + START_AHEAD_S
+            q0 = self.vehicle_state(uav).predict([t0])[0]
+            for j in np.argsort(-clearance)[:THREAT_TRIES]:
+                if clearance[j] < need:
+                    break
+                threat = Threat(float(rest[j, 0]), float(rest[j, 1]), radius_m, now)
+                known = [*self.engine.known, threat]
+                live = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR, known)
+                if live.info["clear"] and live.info["late_s"] <= 0.1:
+                    self.engine.inject_threat(threat)
+                    return True
+        return False
+
+    def _clearance_to_other_legs(self, points: np.ndarray, leg, now: float) -> np.ndarray:
+        """Each point's distance [m] to the rest of every other award leg (inf without any)."""
+        others = [lg.xy[lg.t >= now] for lg in self.engine.award_legs.values() if lg is not leg]
+        others = np.vstack([o for o in others if len(o)] or [np.full((1, 2), np.inf)])
+        return np.hypot(*(points[:, None, :] - others[None, :, :]).transpose(2, 0, 1)).min(axis=1)
 
     def _log_events(self, logger: FlightLogger) -> None:
         for e in self.engine.events[self.logged :]:
@@ -181,18 +240,18 @@ class OnlineRun(_HilRun):
         tasks = max(len(t.strike_angles_rad) + len(t.assess_angles_rad) for t in self.world.targets)
         rounds = -(-tasks // UPLOAD_WORKERS)
         self.engine.award_lag_s = rounds * self.upload_estimate_s(AWARD_ITEMS) + START_AHEAD_S
-        for threat in options.popup_threats:
-            self.engine.inject_threat(threat)
+        if any(f.kind == "cut" for f in self.faults) and not hasattr(self.vehicles, "cut_link"):
+            raise UserError("a link-cut fault needs the mock fleet (this vehicle source cannot cut a link)")
         workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
         self.due.sort()
         deadline = time.monotonic() + (self._end_s() - self.t_route0 + 10.0) * 2.0 / options.speedup + 10.0
         while self._open(self.scenario_now()) and time.monotonic() < deadline:
             now = self.scenario_now()
             if now >= self.t_start:
-                self._cut_links(now)
                 self._check_losses()
                 self.engine.advance(now)
                 self._log_events(logger)
+                self._apply_faults(now)
                 self._queue_changes(now)
             while self.due and self.due[0].t_s <= now:
                 job = self.due.pop(0)
@@ -241,6 +300,7 @@ class OnlineRun(_HilRun):
         result.formations = formation_rows(self.sim.events, self.engine.events, self.targets)
         result.lost_awards = [e for e in awards if e["uav"] in lost]
         result.tender_compute_s = list(self.engine.live_compute_s)
+        result.tender_cpu_s = list(self.engine.live_cpu_s)
         return result
 
 

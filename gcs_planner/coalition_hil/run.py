@@ -116,8 +116,7 @@ class HilOptions:
     offset_m: dict[str, tuple[float, float]] = field(default_factory=dict)  # UAV id: first-mission shift
     upload_safety: float = UPLOAD_SAFETY  # leg start = now + this x the measured upload estimate (+1 s)
     online: bool = False  # decisions by the contract net in flight (online_run), not the simulation's
-    cut_links: dict[str, float] = field(default_factory=dict)  # online, mock: UAV id -> link cut [scenario s]
-    popup_threats: tuple = ()  # online: Threats injected into the running contract net
+    faults: tuple = ()  # online: online_run.Fault events tied to awards (link cut, pop-up threat)
 
 
 @dataclass
@@ -137,6 +136,7 @@ class HilResult:
     formations: list[dict] = field(default_factory=list)  # online: formations beside the simulation's
     lost_awards: list[dict] = field(default_factory=list)  # online: awards of vehicles lost in flight
     tender_compute_s: list[float] = field(default_factory=list)  # online: wall time per formation
+    tender_cpu_s: list[float] = field(default_factory=list)  # online: CPU time per formation (closed tender)
 
     @property
     def strikes(self) -> list[TaskRow]:
