@@ -128,7 +128,8 @@ def test_a_displaced_vehicle_loses_its_task_to_one_that_can_make_it():
         length = paths.shortest_lengths(bid_pose[e["uav"]][None], goal_pose(w, e)[None], uav.r_min_m)[0]
         assert t_es + length / uav.speed_mps <= e["time_s"] + 1e-6, e
     # where it really is, the leader's tender does not reach it (link range from live positions)
-    assert "U8" not in bid_pose and not any(e["uav"] == "U8" for e in engine.events if e["event"] == "not_bidding")
+    assert "U8" not in bid_pose
+    assert not any(e["uav"] == "U8" for e in engine.events if e["event"] == "not_bidding")
     strikes = [e for e in engine.events if e["event"] == "strike" and e["target"] == "T1"]
     assert len(strikes) == 8 and all(abs(e["error_s"]) < 0.05 for e in strikes)
 

@@ -168,8 +168,9 @@ class OnlineContractNet(CoalitionSim):
         )
         self.parts.append(part)
         leader = self._new_leader(award.leader, target)
+        angle_deg = round(math.degrees(award.angle_rad) % 360, 3)
         self.log("task_retendered", uav=self.uavs[award.uav].id, target=target.id, task=award.task,
-                 angle_deg=round(math.degrees(award.angle_rad) % 360, 3), leader=self.uavs[leader].id)  # fmt: skip
+                 angle_deg=angle_deg, leader=self.uavs[leader].id)  # fmt: skip
         self.at(self.now, "retender", uav=leader, target=part)
 
     def _new_leader(self, leader: int, target: Target) -> int:

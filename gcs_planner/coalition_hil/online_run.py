@@ -32,7 +32,7 @@ from typing import Literal
 import numpy as np
 
 from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, LiveState, plan_live_leg
-from gcs_planner.coalition_hil.missions import IDLE_SPAN_S, Award, Idle, VehicleSchedule, first_mission
+from gcs_planner.coalition_hil.missions import Award, Idle, VehicleSchedule, first_mission
 from gcs_planner.coalition_hil.online import OnlineContractNet
 from gcs_planner.coalition_hil.report import add_prediction_errors, formation_rows, task_rows
 from gcs_planner.coalition_hil.run import (
@@ -41,17 +41,17 @@ from gcs_planner.coalition_hil.run import (
     UPLOAD_WORKERS,
     HilOptions,
     HilResult,
+    VehiclesFor,
     _HilRun,
     _Job,
     _keep,
     _select_awards,
     run_coalition_hil,
-    VehiclesFor,
 )
 from gcs_planner.coalition_hil.tracks import drop_spikes
+from gcs_planner.errors import UserError
 from gcs_planner.flight_ops import KEEPER_PERIOD_S
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.errors import UserError
 from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.scenario import Scenario
@@ -164,7 +164,8 @@ class OnlineRun(_HilRun):
                            Award(e, leg, self._end_s()), self.gen[sysid])  # fmt: skip
             else:
                 event = {"uav": uav.id, "target": leg.info.get("target"), "task": leg.kind, "t_s": now}
-                job = _Job(now, (1, now), "idle", sched, Idle(now, event, self._end_s(), None), self.gen[sysid])
+                idle = Idle(now, event, self._end_s(), None)
+                job = _Job(now, (1, now), "idle", sched, idle, self.gen[sysid])
             self.queue.put_nowait((job.rank, next(self.order), job))
 
     def _check_losses(self) -> None:

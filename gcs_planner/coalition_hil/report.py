@@ -22,7 +22,13 @@ from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.track import Leg
 
 __all__ = [
-    "TaskRow", "add_prediction_errors", "format_strike_report", "formation_rows", "measure_task", "task_rows",
+    "TaskRow",
+    "add_prediction_errors",
+    "format_formations",
+    "format_strike_report",
+    "formation_rows",
+    "measure_task",
+    "task_rows",
 ]
 
 MEASURE_WINDOW_S = 15.0  # closest approach searched within this of the awarded time [s]
@@ -174,3 +180,13 @@ def formation_rows(sim_events: list[dict], online_events: list[dict], targets) -
             "same_members": bool(a and b and sorted(a["members"]) == sorted(b["members"])),
         })  # fmt: skip
     return rows
+
+
+def format_formations(rows: list[dict]) -> str:
+    """The formation_rows as a table: target, leaders, times, same members?"""
+    lines = ["target  sim leader  online leader  sim t [s]  online t [s]  same members"]
+    for r in rows:
+        times = [f"{t:.2f}" if t is not None else "-" for t in (r["sim_t_s"], r["online_t_s"])]
+        lines.append(f"{r['target']:<7} {r['sim_leader'] or '-':<11} {r['online_leader'] or '-':<14} "
+                     f"{times[0]:>9}  {times[1]:>12}  {'yes' if r['same_members'] else 'no'}")  # fmt: skip
+    return "\n".join(lines)

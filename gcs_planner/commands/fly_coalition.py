@@ -1,11 +1,13 @@
 """Coalition HIL run: fly mock fixed wings and upload each coalition award to them in flight.
 
-Runs the coalition simulation of a scenario (planner "coalition"), starts a mock fixed wing for
-every awarded UAV, and while they fly uploads each award's mission over MAVLink at its award time.
-Who wins which task, when and at which angle comes from the simulation; the leg flown is planned
-from the vehicle's live telemetry (see gcs_planner/coalition_hil/; --replay-legs uploads the
-simulation's own legs instead, for comparison). Writes OUT/flight.mcap (tenders, bids, awards and
-uploads as events) and prints each strike's and assessment's flown arrival time and heading
+By default the contract net runs online (gcs_planner/coalition_hil/online_run.py): every UAV of
+the scenario is a mock fixed wing, and who tenders, who bids and who wins which task, when and at
+which angle is decided in flight from the vehicles' telemetry; the event simulation is run too,
+as the reference its formations are printed beside. --offline takes every decision from the
+simulation instead and flies only the awarded UAVs (gcs_planner/coalition_hil/run.py). Either way
+each award's leg is planned from the vehicle's live telemetry (--replay-legs, offline only,
+uploads the simulation's own legs, for comparison). Writes OUT/flight.mcap (tenders, bids, awards
+and uploads as events) and prints each strike's and assessment's flown arrival time and heading
 against its award. Exits 1 when one is more than --max-time-error late or early or
 --max-angle-error off its awarded angle.
 """
@@ -17,6 +19,8 @@ import asyncio
 from pathlib import Path
 
 from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
+from gcs_planner.coalition_hil.online_run import OnlineRun
+from gcs_planner.coalition_hil.report import format_formations
 from gcs_planner.commands.plan import SEED
 from gcs_planner.errors import UserError
 from gcs_planner.planning import load_scenario
@@ -52,7 +56,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"a live leg starts after X times the measured upload time (+1 s) [{UPLOAD_SAFETY:g}]",
     )
     p.add_argument(
-        "--replay-legs", action="store_true", help="fly the simulation's legs, not live-planned ones"
+        "--offline", action="store_true", help="take the decisions from the simulation, not online"
+    )
+    p.add_argument(
+        "--replay-legs", action="store_true", help="with --offline: fly the simulation's legs, not live ones"
     )
 
 
@@ -66,6 +73,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
     if args.upload_safety <= 0:
         raise UserError(f"--upload-safety must be > 0, got {args.upload_safety}")
+    if args.replay_legs and not args.offline:
+        raise UserError("--replay-legs flies the simulation's own legs: it needs --offline")
     output_dir(args.out, "-o")
     scenario = load_scenario(args.scenario)
     if scenario.planner.get("name") != "coalition":
@@ -83,15 +92,21 @@ def run(args: argparse.Namespace) -> int:
         max_angle_error_deg=args.max_angle_error,
         upload_safety=args.upload_safety,
         replay_legs=args.replay_legs,
+        online=not args.offline,
     )
+    runner = None if args.offline else OnlineRun
     try:
-        result = asyncio.run(run_coalition_hil(scenario, options, mock_fleet_process))
+        result = asyncio.run(run_coalition_hil(scenario, options, mock_fleet_process, runner))
     except TimeoutError as exc:  # the mock fleet's process did not start
         raise UserError(str(exc)) from None
     print(format_strike_report(result.rows))
     ok = sum(u["ok"] for u in result.uploads)
     print(f"{ok}/{len(result.uploads)} missions (award + idle) uploaded in flight; log {result.mcap_path}; "
           f"{result.wall_time_s:.1f} s wall")  # fmt: skip
+    if options.online:
+        print(format_formations(result.formations))
+        cpu = max(result.tender_cpu_s, default=0.0)
+        print(f"{len(result.tender_cpu_s)} formations in flight, CPU up to {cpu * 1000:.1f} ms each")
     for f in result.failures:
         print(f"failure: {f}")
     return 0 if result.passed else 1
