@@ -1,13 +1,14 @@
 """Coalition HIL run (seed 003): coalition awards flown by mock vehicles on legs planned from live telemetry.
 
 The paper's hardware-in-the-loop test pushes each coalition's new paths to the vehicles while the
-swarm flies. Here the run splits the work in two:
+swarm flies. Two runs share this package:
 
-- **The decisions come from the simulation.** The coalition simulation
-  (gcs_planner.planning.coalition) runs first for the seed. Its contract net decides every award:
-  the winning vehicle, the target and task, the awarded time and the attack (or assessment)
-  angle. The run keeps those decisions and logs them at their times. A real-time contract net with
-  bids from telemetry is future work.
+- **Online** (``online_run.OnlineRun``, ``online.OnlineContractNet``; the CLI's default): the
+  contract net itself runs in flight on the vehicles' telemetry; see those modules.
+- **Offline** (this docstring, ``run``): the decisions come from the simulation. The coalition
+  simulation (gcs_planner.planning.coalition) runs first for the seed. Its contract net decides
+  every award: the winning vehicle, the target and task, the awarded time and the attack (or
+  assessment) angle. The run keeps those decisions and logs them at their times.
 - **The flown legs come from live state.** When an award's mission is about to be uploaded, the
   vehicle's leg is planned from its own newest GLOBAL_POSITION_INT reports, not from the
   simulated state: position, course and ground speed of the newest report, turn rate fitted over
@@ -78,7 +79,8 @@ Modules, one job each:
   the per-UAV schedules, award and idle missions);
 - ``tracks``: sampled-track helpers (slice, pose at a time, turn continuation, spike removal);
 - ``report``: TaskRow, measure_task, the report rows and table;
-- ``run``: HilOptions, HilResult and run_coalition_hil (the upload queue and schedule keeping).
+- ``run``: HilOptions, HilResult and run_coalition_hil (the upload queue and schedule keeping);
+- ``online``: the contract net on live state; ``online_run``: the online flight (OnlineRun, Fault).
 """
 
 from gcs_planner.coalition_hil.live_legs import LiveState, live_state, plan_live_leg

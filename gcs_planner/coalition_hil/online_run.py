@@ -45,14 +45,12 @@ from gcs_planner.coalition_hil.run import (
     _HilRun,
     _Job,
     _keep,
-    _select_awards,
     run_coalition_hil,
 )
 from gcs_planner.coalition_hil.tracks import drop_spikes
 from gcs_planner.errors import UserError
 from gcs_planner.flight_ops import KEEPER_PERIOD_S
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
@@ -88,11 +86,7 @@ class OnlineRun(_HilRun):
     """One online coalition run (module docstring); ``fly`` and ``result`` as the offline run's."""
 
     def __init__(self, scenario: Scenario, options: HilOptions) -> None:
-        self.scenario, self.options = scenario, options
-        self.world = load_world(scenario)
-        seed = options.seed if options.seed is not None else int(scenario.planner.get("seed", 0))
-        self.sim = simulate(self.world, np.random.default_rng(seed))  # the reference
-        self.awards, self.t_start, self.t_stop = _select_awards(self.sim, options, seed)
+        seed = self._simulate(scenario, options)  # the reference, and the window
         self.targets = {e["target"] for e in self.awards}
         self.engine = OnlineContractNet(self.world, np.random.default_rng(seed), self)
         self.engine.start()

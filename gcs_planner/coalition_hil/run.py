@@ -250,16 +250,21 @@ class _HilRun:
     """One coalition HIL run: the simulation's awards, the fleet's live state, the upload queue."""
 
     def __init__(self, scenario: Scenario, options: HilOptions) -> None:
-        self.scenario, self.options = scenario, options
-        self.world = load_world(scenario)
-        seed = options.seed if options.seed is not None else int(scenario.planner.get("seed", 0))
-        self.sim = simulate(self.world, np.random.default_rng(seed))
-        self.awards, self.t_start, self.t_stop = _select_awards(self.sim, options, seed)
+        self._simulate(scenario, options)
         window = (self.t_start, self.t_stop)
         self.schedules = build_schedules(
             self.world, self.sim, self.awards, *window, options.waypoint_dt_s, options.offset_m
         )
         self._init_flight([s.initial for s in self.schedules])
+
+    def _simulate(self, scenario: Scenario, options: HilOptions) -> int:
+        """Run the event simulation; its awards to fly and the window. The seed used."""
+        self.scenario, self.options = scenario, options
+        self.world = load_world(scenario)
+        seed = options.seed if options.seed is not None else int(scenario.planner.get("seed", 0))
+        self.sim = simulate(self.world, np.random.default_rng(seed))
+        self.awards, self.t_start, self.t_stop = _select_awards(self.sim, options, seed)
+        return seed
 
     def _init_flight(self, initial: list[VehiclePlan]) -> None:
         """The flight's state: the initial missions, the telemetry, the schedule keeper, the queue."""

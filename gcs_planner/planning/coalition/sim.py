@@ -606,9 +606,13 @@ class CoalitionSim:
             optimiser_s=round(f.opt_s, 4),
         )
         t_send = tender.t_es_s - p.delay_s
+        # an assessor that cannot reach its arc by the required start starts when it gets there
+        x = sol.assign
+        eta = f.prob.t_start_s + f.prob.length_m[x, np.arange(len(x))] / f.speed[x]
+        start = np.where(f.kind == STRIKE, sol.t_required_s, np.fmax(sol.t_required_s, eta))
         for k, i in enumerate(members):
             task = "strike" if f.kind[k] == STRIKE else "assess"
-            at_s = float(sol.t_required_s[k])
+            at_s = float(start[k])
             award = Award(leader, i, key, target.id, members, task, float(f.angle[k]), at_s)
             direct = p.method == "global" or i == leader
             t_arr = tender.t_es_s if direct else self.bus.arrival_s(leader, i, t_send)
