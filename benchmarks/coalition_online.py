@@ -52,6 +52,15 @@ def main() -> None:
         first = first or r
         for f in r.failures:
             print(f"  failure: {f}")
+        for e in r.released_awards:
+            print(f"  released: {e['uav']} {e['target']} {e['task']} (its live leg would be late; re-tendered)")
+        for x in r.rows:
+            if not x.passed:
+                legs = [u for u in r.uploads if u["uav"] == x.uav and u["kind"] == "award"]
+                print(f"  missed: {x.uav} {x.target} {x.task} dt {x.time_error_s:+.2f} s "
+                      f"dangle {x.angle_error_deg:+.1f} deg; its award uploads: "
+                      + "; ".join(f"t0 {u.get('t0_s')} late {u.get('leg_late_s')} clear {u.get('clear')}"
+                                  for u in legs))  # fmt: skip
     print()
     print(format_formations(first.formations))
     for row in first.formations:

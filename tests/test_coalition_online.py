@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, LiveState, goal_pose
@@ -134,10 +135,13 @@ def test_a_displaced_vehicle_loses_its_task_to_one_that_can_make_it():
     assert len(strikes) == 8 and all(abs(e["error_s"]) < 0.05 for e in strikes)
 
 
-def test_a_lost_vehicles_task_is_re_tendered_and_done():
+@pytest.mark.parametrize("how", ["lost", "released"])
+def test_a_lost_or_released_vehicles_task_is_re_tendered_and_done(how):
+    """U8, a T1 striker, is lost mid-leg, or released (its live leg would be late)."""
     w = world()
     lost_at = 70.0
-    engine = online(w, PlannedFleet(), at={lost_at: lambda eng: eng.vehicle_lost(7)})  # U8, a T1 striker
+    hand_on = {"lost": lambda eng: eng.vehicle_lost(7), "released": lambda eng: eng.release(7, "T1")}[how]
+    engine = online(w, PlannedFleet(), at={lost_at: hand_on})
     lost = next(e for e in engine.events if e["event"] == "award" and e["uav"] == "U8")
     assert lost["time_s"] > lost_at  # mid-leg
     again = [e for e in engine.events if e["event"] == "award" and e["t_s"] > lost_at and e["target"] == "T1"]

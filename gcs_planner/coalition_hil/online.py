@@ -21,6 +21,9 @@ Choices (the paper does not model loss):
   the leader is lost or busy, by the nearest idle vehicle to the target. The target's other
   tasks keep their awards; its J stays the first coalition's. A lost recon vehicle's target is
   given to the nearest idle recon vehicle. A lost vehicle never bids and is never a candidate.
+- a member whose live leg cannot arrive within the time bound (planned at its upload, from where
+  it really is) is released (``release``): its task is re-tendered as a lost vehicle's, and it
+  loiters where it is, then keeps station.
 - a formation that fails is re-tendered after ``retender_s``, as in the simulation (the paper).
 - an award reaches a vehicle as a mission upload, not a radio message: the awarded times are
   computed as if the members started ``award_lag_s`` (the run's measured upload time for a
@@ -80,6 +83,7 @@ class OnlineContractNet(CoalitionSim):
         self.live_from_s = math.inf
         self.lost: set[int] = set()
         self.tasks: dict[int, Award] = {}  # the award each vehicle is executing
+        self.released: list[Award] = []  # awards handed on because the vehicle could not make them
         self.parts: list[Target] = []  # single tasks re-tendered after a loss
         self.recon_of: dict[int, Target] = {}
         self.award_lag_s = 0.0  # set by the run: the time an award takes to reach the vehicle [s]
@@ -158,6 +162,26 @@ class OnlineContractNet(CoalitionSim):
         if award is not None:
             self._retender(award)
 
+    def release(self, i: int, target_id: str) -> bool:
+        """Vehicle i cannot make its award for target_id from where it really is (its live leg would
+        be late): the task is re-tendered as a lost one's, and the vehicle, idle again, loiters
+        where it is (then keeps station). False when it holds no such award."""
+        award = self.tasks.get(i)
+        if award is None or award.target_id != target_id or i in self.lost:
+            return False
+        del self.tasks[i]
+        self.released.append(award)
+        self.log("award_released", uav=self.uavs[i].id, target=target_id, task=award.task,
+                 reason="its live leg cannot arrive on time")  # fmt: skip
+        u, s = self.uavs[i], self.st[i]
+        q = self.pose(i, [self.now, self.now + 1.0])
+        hold = Leg(np.array([self.now, self.now + 1.0]), q[:, :2], q[:, 2], "transit", {})
+        s.track.start_leg(hold, self._clear_loiter(*q[1], self.now + 1.0, u))
+        s.state = IDLE
+        self._retender(award)
+        self._station(i)
+        return True
+
     def _retender(self, award: Award) -> None:
         target = next(t for t in self.w.targets if t.id == award.target_id)
         strike = award.task == "strike"
@@ -216,15 +240,15 @@ class OnlineContractNet(CoalitionSim):
             out.pending, out.J, out.parts, out.members = *before[:3], before[3] + out.members
 
     def _on_strike(self, uav: int, award: Award) -> None:
-        if uav not in self.lost:
+        if uav not in self.lost and not any(award is r for r in self.released):
             super()._on_strike(uav, award)
 
     def _on_assess_start(self, uav: int, award: Award) -> None:
-        if uav not in self.lost:
+        if uav not in self.lost and not any(award is r for r in self.released):
             super()._on_assess_start(uav, award)
 
     def _on_task_done(self, uav: int, award: Award) -> None:
-        if uav not in self.lost:
+        if uav not in self.lost and not any(award is r for r in self.released):
             super()._on_task_done(uav, award)
 
     def _task_done(self, uav: int, award: Award) -> None:

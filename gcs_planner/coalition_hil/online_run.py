@@ -14,8 +14,9 @@ task on and its queued missions are dropped. The window ends as in the offline r
 (up to ``OVERRUN_S``) while a flown target still has a task to do.
 
 An award reaches its vehicle as a mission upload: the engine's awarded times allow for the
-uploads of a whole coalition (``award_lag_s`` = ceil(tasks / upload workers) x the measured
-upload estimate of an ``AWARD_ITEMS`` mission + ``START_AHEAD_S``).
+uploads of a whole coalition behind the award uploads still queued (``award_lag_s`` = ceil((open
+award uploads + tasks) / upload workers) x the measured upload estimate of an ``AWARD_ITEMS``
+mission + ``START_AHEAD_S``): T3 forms 0.86 s after T1, while T1's ten uploads are under way.
 
 The report is the offline run's, over the engine's awards (a lost vehicle's awards are listed,
 not judged), plus the online and simulated formations side by side (``formation_rows``) and the
@@ -105,6 +106,7 @@ class OnlineRun(_HilRun):
         self.logged = len(self.engine.events)
         self.award_events: dict[tuple[str, str], dict] = {}
         self.faults = list(options.faults)
+        self.awards_open = 0  # award jobs queued or uploading
         self.vehicles = None
         self.t_end = float("inf")
         first_chunk = self.t_start + FIRST_SPAN_S - IDLE_LEAD_S
@@ -138,8 +140,18 @@ class OnlineRun(_HilRun):
         return legs[-1] if legs else None
 
     async def _mission(self, job: _Job, entry: dict):
-        job.sched.track = self._engine_track(job.sched.uav)  # the engine's plan as it is now
-        return await super()._mission(job, entry)
+        """The job's mission over the engine's plan as it is now. An award leg that would be late
+        beyond the time bound releases the award (the engine re-tenders it); the mission is still
+        sent, and the idle mission the release causes replaces it."""
+        job.sched.track = self._engine_track(job.sched.uav)
+        vp, leg = await super()._mission(job, entry)
+        late = job.kind == "award" and leg.info["late_s"] > self.options.max_time_error_s
+        if late and self.engine.release(job.sched.uav.index, job.payload.event["target"]):
+            entry["released"] = True
+            self.engine.advance(self.scenario_now())
+            self._log_events(self.logger)
+            self._queue_changes(self.scenario_now())
+        return vp, leg
 
     def _queue_changes(self, now: float) -> None:
         """A job for every vehicle whose engine plan has a new leg: its award's, or an idle one."""
@@ -153,6 +165,7 @@ class OnlineRun(_HilRun):
             self.gen[sysid] += 1
             sched, key = self.sched[sysid], award_of.get(id(leg))
             if key is not None:
+                self.awards_open += 1
                 e = self.award_events[key]
                 job = _Job(now, (False, self.deadline_s(uav, e, now)), "award", sched,
                            Award(e, leg, self._end_s()), self.gen[sysid])  # fmt: skip
@@ -229,12 +242,17 @@ class OnlineRun(_HilRun):
         undone = any(self.engine.outcomes[t].t_done_s is None for t in self.targets)
         return undone and now < self._end_s()
 
+    def _award_lag_s(self) -> float:
+        """The flight time a new coalition's award uploads may take: ceil((award uploads still
+        queued or running + the most tasks of a target) / workers) uploads of AWARD_ITEMS items."""
+        tasks = max(len(t.strike_angles_rad) + len(t.assess_angles_rad) for t in self.world.targets)
+        rounds = -(-(self.awards_open + tasks) // UPLOAD_WORKERS)
+        return rounds * self.upload_estimate_s(AWARD_ITEMS) + START_AHEAD_S
+
     # --- the loop ----------------------------------------------------------------------------
     async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
         options = self.options
-        tasks = max(len(t.strike_angles_rad) + len(t.assess_angles_rad) for t in self.world.targets)
-        rounds = -(-tasks // UPLOAD_WORKERS)
-        self.engine.award_lag_s = rounds * self.upload_estimate_s(AWARD_ITEMS) + START_AHEAD_S
+        self.logger = logger
         if any(f.kind == "cut" for f in self.faults) and not hasattr(self.vehicles, "cut_link"):
             raise UserError("a link-cut fault needs the mock fleet (this vehicle source cannot cut a link)")
         workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
@@ -244,6 +262,7 @@ class OnlineRun(_HilRun):
             now = self.scenario_now()
             if now >= self.t_start:
                 self._check_losses()
+                self.engine.award_lag_s = self._award_lag_s()
                 self.engine.advance(now)
                 self._log_events(logger)
                 self._apply_faults(now)
@@ -266,9 +285,12 @@ class OnlineRun(_HilRun):
 
     async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> dict | None:
         sysid = job.sched.uav.sysid
-        if job.gen != self.gen[sysid]:
-            return None  # superseded by a newer plan of the engine, or the vehicle is lost
-        entry = await super()._upload(link, logger, job)
+        try:
+            if job.gen != self.gen[sysid]:
+                return None  # superseded by a newer plan of the engine, or the vehicle is lost
+            entry = await super()._upload(link, logger, job)
+        finally:
+            self.awards_open -= job.kind == "award"
         if job.kind == "award" and entry["ok"]:  # back onto the engine's track after the leg
             t_end = float(job.payload.sim_leg.t[-1])
             idle = Idle(t_end, job.payload.event, self._end_s(), None)
@@ -281,8 +303,10 @@ class OnlineRun(_HilRun):
         tracks = self.recorder.tracks()
         flown = {s: (tr.times_s - self.route_t0 + self.t_route0, tr.positions) for s, tr in tracks.items()}
         lost = {self.world.uavs[i].id for i in self.engine.lost}
+        released = {(a.target_id, self.world.uavs[a.uav].id) for a in self.engine.released}
         awards = [e for e in self.award_events.values() if e["target"] in self.targets]
-        judged = [e for e in awards if e["uav"] not in lost and e["t_s"] <= self.t_end]
+        judged = [e for e in awards if e["uav"] not in lost and e["t_s"] <= self.t_end
+                  and (e["target"], e["uav"]) not in released]  # fmt: skip
         engine_tracks = {s.uav.id: s.track for s in self.sched.values()}
         limits = (self.options.max_time_error_s, self.options.max_angle_error_deg)
         rows, missing = task_rows(self.world, judged, flown, self.flown_legs, engine_tracks, limits)
@@ -294,6 +318,7 @@ class OnlineRun(_HilRun):
         result.events = list(self.engine.events)
         result.formations = formation_rows(self.sim.events, self.engine.events, self.targets)
         result.lost_awards = [e for e in awards if e["uav"] in lost]
+        result.released_awards = [e for e in awards if (e["target"], e["uav"]) in released]
         result.tender_compute_s = list(self.engine.live_compute_s)
         result.tender_cpu_s = list(self.engine.live_cpu_s)
         return result

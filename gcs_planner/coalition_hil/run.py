@@ -135,6 +135,7 @@ class HilResult:
     events: list[dict] = field(default_factory=list)  # online: the contract net's timeline
     formations: list[dict] = field(default_factory=list)  # online: formations beside the simulation's
     lost_awards: list[dict] = field(default_factory=list)  # online: awards of vehicles lost in flight
+    released_awards: list[dict] = field(default_factory=list)  # online: awards handed on (late live leg)
     tender_compute_s: list[float] = field(default_factory=list)  # online: wall time per formation
     tender_cpu_s: list[float] = field(default_factory=list)  # online: CPU time per formation (closed tender)
 
