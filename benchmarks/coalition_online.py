@@ -53,7 +53,7 @@ def main() -> None:
         for f in r.failures:
             print(f"  failure: {f}")
         for e in r.released_awards:
-            print(f"  released: {e['uav']} {e['target']} {e['task']} (its live leg would be late; re-tendered)")
+            print(f"  released: {e['uav']} {e['target']} {e['task']} (live leg late; re-tendered)")
         for x in r.rows:
             if not x.passed:
                 legs = [u for u in r.uploads if u["uav"] == x.uav and u["kind"] == "award"]

@@ -61,7 +61,7 @@ __all__ = ["Fault", "OnlineRun", "run_online"]
 LOSS_AFTER_S = 3.0  # a vehicle whose newest report is this much older than the fleet's is lost [s]
 OVERRUN_S = 90.0  # the window is extended by up to this while a flown target has a task left [s]
 FIRST_SPAN_S = 45.0  # the first mission covers this much of the engine's track after t_start [s]
-AWARD_ITEMS = 30  # items of a typical award mission (19-45), for the award lag [s]
+AWARD_ITEMS = 30  # items of a typical award mission (19-45), for the award lag
 HISTORY_AHEAD_S = 120.0  # the engine's track is read this far past the window end [s]
 THREAT_AHEAD_S = 8.0  # a fault's pop-up threat is put at least this far ahead on a leg [s]
 THREAT_TRIES = 8  # points tried for a fault's pop-up threat
@@ -274,14 +274,7 @@ class OnlineRun(_HilRun):
                 _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
             await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
         self.t_end = self.scenario_now()
-        try:
-            await asyncio.wait_for(self.queue.join(), 10.0)
-        finally:
-            for w in workers:
-                w.cancel()
-            await asyncio.gather(*workers, return_exceptions=True)
-        if time.monotonic() >= deadline:
-            self.failures.append("the run did not reach the window end in time")
+        await self._drain(workers, deadline)
 
     async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> dict | None:
         sysid = job.sched.uav.sysid

@@ -374,6 +374,11 @@ class _HilRun:
             if options.keep_schedule:
                 _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
             await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
+        await self._drain(workers, deadline)
+
+    async def _drain(self, workers: list[asyncio.Task], deadline: float) -> None:
+        """Let the upload queue empty (10 s at most), stop the workers; a failure when the window
+        end was not reached by the wall-clock deadline."""
         try:
             await asyncio.wait_for(self.queue.join(), 10.0)
         finally:
