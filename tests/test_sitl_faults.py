@@ -98,6 +98,8 @@ def test_faults_measured_over_udp():
 
         fleet.set_faults(2, LinkFaults(duplicate=1.0))
         seqs = _seqs(faulty, 0.6)
+        while len(seqs) > 1 and seqs[0] != seqs[1]:
+            seqs.pop(0)  # frames sent before the switch (still in the socket) come once
         assert len(seqs) > 20 and all(a == b for a, b in zip(seqs[::2], seqs[1::2], strict=False))
 
         fleet.set_faults(2, LinkFaults(reorder=0.3, seed=9))

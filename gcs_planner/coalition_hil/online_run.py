@@ -102,6 +102,7 @@ class OnlineRun(_HilRun):
             self.sched[u.sysid] = VehicleSchedule(u, vp, track, [], [])
         self._init_flight([s.initial for s in self.sched.values()])
         self.gen = {s: 0 for s in self.flying}
+        self.locks = {s: asyncio.Lock() for s in self.flying}
         self.last_leg = {u.sysid: self._last_leg(u) for u in self.world.uavs}
         self.logged = len(self.engine.events)
         self.award_events: dict[tuple[str, str], dict] = {}
@@ -277,11 +278,14 @@ class OnlineRun(_HilRun):
         await self._drain(workers, deadline)
 
     async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> dict | None:
+        """One vehicle's jobs one at a time (a vehicle takes one mission transfer at a time); a job
+        superseded by a newer plan of the engine, or of a lost vehicle, is dropped."""
         sysid = job.sched.uav.sysid
         try:
-            if job.gen != self.gen[sysid]:
-                return None  # superseded by a newer plan of the engine, or the vehicle is lost
-            entry = await super()._upload(link, logger, job)
+            async with self.locks[sysid]:
+                if job.gen != self.gen[sysid]:
+                    return None
+                entry = await super()._upload(link, logger, job)
         finally:
             self.awards_open -= job.kind == "award"
         if job.kind == "award" and entry["ok"]:  # back onto the engine's track after the leg
