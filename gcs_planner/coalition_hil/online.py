@@ -164,7 +164,8 @@ class OnlineContractNet(CoalitionSim):
 
     def release(self, i: int, target_id: str) -> bool:
         """Vehicle i cannot make its award for target_id from where it really is (its live leg would
-        be late): the task is re-tendered as a lost one's, and the vehicle, idle again, loiters
+        be late, or early where no path of the right length is found): the task is re-tendered as
+        a lost one's, and the vehicle, idle again, loiters
         where it is (then keeps station). False when it holds no such award."""
         award = self.tasks.get(i)
         if award is None or award.target_id != target_id or i in self.lost:

@@ -142,11 +142,12 @@ class OnlineRun(_HilRun):
 
     async def _mission(self, job: _Job, entry: dict):
         """The job's mission over the engine's plan as it is now. An award leg that would be late
-        beyond the time bound releases the award (the engine re-tenders it); the mission is still
+        (or early: no path of the right length, paths.timed_route) beyond the time bound releases
+        the award (the engine re-tenders it); the mission is still
         sent, and the idle mission the release causes replaces it."""
         job.sched.track = self._engine_track(job.sched.uav)
         vp, leg = await super()._mission(job, entry)
-        late = job.kind == "award" and leg.info["late_s"] > self.options.max_time_error_s
+        late = job.kind == "award" and abs(leg.info["late_s"]) > self.options.max_time_error_s
         if late and self.engine.release(job.sched.uav.index, job.payload.event["target"]):
             entry["released"] = True
             self.engine.advance(self.scenario_now())
