@@ -240,16 +240,20 @@ class OnlineContractNet(CoalitionSim):
         if any(tender.target is part for part in self.parts):  # a replacement: the task stays pending
             out.pending, out.J, out.parts, out.members = *before[:3], before[3] + out.members
 
+    def _standing(self, uav: int, award: Award) -> bool:
+        """Is this award still the vehicle's to fly (not lost, not released)?"""
+        return uav not in self.lost and not any(award is r for r in self.released)
+
     def _on_strike(self, uav: int, award: Award) -> None:
-        if uav not in self.lost and not any(award is r for r in self.released):
+        if self._standing(uav, award):
             super()._on_strike(uav, award)
 
     def _on_assess_start(self, uav: int, award: Award) -> None:
-        if uav not in self.lost and not any(award is r for r in self.released):
+        if self._standing(uav, award):
             super()._on_assess_start(uav, award)
 
     def _on_task_done(self, uav: int, award: Award) -> None:
-        if uav not in self.lost and not any(award is r for r in self.released):
+        if self._standing(uav, award):
             super()._on_task_done(uav, award)
 
     def _task_done(self, uav: int, award: Award) -> None:

@@ -150,9 +150,7 @@ class OnlineRun(_HilRun):
         late = job.kind == "award" and abs(leg.info["late_s"]) > self.options.max_time_error_s
         if late and self.engine.release(job.sched.uav.index, job.payload.event["target"]):
             entry["released"] = True
-            self.engine.advance(self.scenario_now())
-            self._log_events(self.logger)
-            self._queue_changes(self.scenario_now())
+            self._step_engine(self.scenario_now())
         return vp, leg
 
     def _queue_changes(self, now: float) -> None:
@@ -244,6 +242,12 @@ class OnlineRun(_HilRun):
         undone = any(self.engine.outcomes[t].t_done_s is None for t in self.targets)
         return undone and now < self._end_s()
 
+    def _step_engine(self, now: float) -> None:
+        """Advance the engine to now, log its new events, queue the missions of its new legs."""
+        self.engine.advance(now)
+        self._log_events(self.logger)
+        self._queue_changes(now)
+
     def _award_lag_s(self) -> float:
         """The flight time a new coalition's award uploads may take: ceil((award uploads still
         queued or running + the most tasks of a target) / workers) uploads of AWARD_ITEMS items."""
@@ -265,10 +269,8 @@ class OnlineRun(_HilRun):
             if now >= self.t_start:
                 self._check_losses()
                 self.engine.award_lag_s = self._award_lag_s()
-                self.engine.advance(now)
-                self._log_events(logger)
+                self._step_engine(now)
                 self._apply_faults(now)
-                self._queue_changes(now)
             while self.due and self.due[0].t_s <= now:
                 job = self.due.pop(0)
                 self.queue.put_nowait((job.rank, next(self.order), job))
