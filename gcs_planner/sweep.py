@@ -35,7 +35,7 @@ from gcs_planner.config import Config, parse
 from gcs_planner.errors import UserError
 from gcs_planner.validation import InputError, load_toml, read_text
 
-__all__ = ["Study", "load_study", "run_study", "summarise"]
+__all__ = ["Study", "load_study", "marginals", "run_study", "summarise"]
 
 FIXED_COLUMNS = ["run_id", "seed", "error", "cpu_s"]
 
@@ -154,8 +154,14 @@ class _executor:
             from distributed import Client, LocalCluster
         except ImportError:
             raise UserError("--scheduler needs dask.distributed: pip install 'gcs-planner[dask]'") from None
-        # the workers' stack profiler samples every 10 ms and takes the GIL from the planners
-        dask.config.set({"distributed.worker.profile.enabled": False})
+        # the workers' stack profiler samples every 10 ms and takes the GIL from the planners; the
+        # nanny's MALLOC_TRIM_THRESHOLD_ also fixes glibc's mmap threshold, so every numpy array
+        # over 128 KiB is mapped and unmapped afresh (docs/sweeps.md has both measured)
+        environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ"))
+        environ.pop("MALLOC_TRIM_THRESHOLD_", None)
+        dask.config.set(
+            {"distributed.worker.profile.enabled": False, "distributed.nanny.pre-spawn-environ": environ}
+        )
         self.cluster = (
             LocalCluster(n_workers=self.workers, threads_per_worker=1, dashboard_address=None)
             if self.scheduler == "local" else None
@@ -184,10 +190,25 @@ def _completed(futures: dict) -> Iterator[tuple[Any, Any]]:
         yield future, futures[future]
 
 
+def _read(out: Path) -> list[dict[str, str]]:
+    with out.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _mean_std(values: list[float]) -> tuple[float, float]:
+    """Mean and sample standard deviation (NaN and 0 for no values, 0 for one)."""
+    mean = sum(values) / len(values) if values else math.nan
+    var = sum((v - mean) ** 2 for v in values) / (len(values) - 1) if len(values) > 1 else 0.0
+    return mean, math.sqrt(var)
+
+
+def _numbers(rows: list[dict[str, str]], name: str) -> list[float]:
+    return [float(r[name]) for r in rows if not r["error"] and r.get(name) not in (None, "")]
+
+
 def summarise(study: Study, out: Path) -> list[dict[str, Any]]:
     """Per grid point: runs, failures, and each metric's mean and standard deviation over seeds."""
-    with out.open(newline="") as f:
-        rows = list(csv.DictReader(f))
+    rows = _read(out)
     keys = sorted(study.grid)
     groups: dict[tuple, list[dict]] = {}
     for row in rows:
@@ -198,9 +219,21 @@ def summarise(study: Study, out: Path) -> list[dict[str, Any]]:
         entry: dict[str, Any] = {**dict(zip(keys, point, strict=True)), "runs": len(members),
                                  "failed": len(members) - len(ok)}  # fmt: skip
         for m in [*study.metrics, "cpu_s"]:
-            values = [float(r[m]) for r in ok if r.get(m) not in (None, "")]
-            mean = sum(values) / len(values) if values else math.nan
-            var = sum((v - mean) ** 2 for v in values) / (len(values) - 1) if len(values) > 1 else 0.0
-            entry[f"{m} mean"], entry[f"{m} std"] = mean, math.sqrt(var)
+            entry[f"{m} mean"], entry[f"{m} std"] = _mean_std(_numbers(ok, m))
         summary.append(entry)
     return summary
+
+
+def marginals(study: Study, out: Path) -> dict[tuple[str, str], list[tuple[str, float, float, int]]]:
+    """Per (metric, grid key): for each of the key's values, the metric's mean, standard deviation
+    and run count over every run with that value (the other keys and the seeds pooled)."""
+    rows = _read(out)
+    curves = {}
+    for m in [*study.metrics, "cpu_s"]:
+        for key in sorted(study.grid):
+            points = []
+            for value in study.grid[key]:
+                values = _numbers([r for r in rows if r[key] == str(value)], m)
+                points.append((str(value), *_mean_std(values), len(values)))
+            curves[m, key] = points
+    return curves

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.sweep import load_study, metric, run_study, summarise
+from gcs_planner.sweep import load_study, marginals, metric, run_study, summarise
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
@@ -74,6 +74,8 @@ def test_cli_runs_a_study_and_refuses_a_misspelt_key(tmp_path, capsys):
     out = tmp_path / "r.csv"
     assert main(["sweep", str(path), "-o", str(out), "--workers", "1"]) == 0
     assert (tmp_path / "r_summary.csv").exists() and len(_rows(out)) == 2
+    png = tmp_path / "r_plots.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
     path.write_text(path.read_text().replace("seeds", "seed"))
     assert main(["sweep", str(path), "-o", str(out)]) == 2
     assert "unknown key 'seed'; did you mean 'seeds'?" in capsys.readouterr().err
@@ -83,3 +85,19 @@ def test_dotted_metrics_walk_nested_tables():
     values = {"uav1": {"fitness": 38.3, "history": [1, 2]}, "cost_total": 4.0}
     assert metric(values, "uav1.fitness") == 38.3 and metric(values, "cost_total") == 4.0
     assert math.isnan(metric(values, "uav2.fitness")) and math.isnan(metric(values, "cost_total.x"))
+
+
+def test_marginals_pool_the_other_keys_and_seeds(tmp_path):
+    study, _ = load_study(_study(tmp_path, "a = [1, 2]\nb = [true, false]", metrics='"m"'))
+    out = tmp_path / "r.csv"
+    rows = [("1", "True", "0", "1.0"), ("1", "False", "1", "3.0"), ("2", "True", "0", "10.0"),
+            ("2", "False", "1", ""), ("2", "False", "0", "99.0")]  # fmt: skip
+    with out.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["run_id", "seed", "error", "cpu_s", "a", "b", "m"])
+        for i, (a, b, seed, m) in enumerate(rows):
+            writer.writerow([i, seed, "boom" if m == "99.0" else "", 0.5, a, b, m])
+    curves = marginals(study, out)
+    assert curves["m", "a"] == [("1", 2.0, math.sqrt(2.0), 2), ("2", 10.0, 0.0, 1)]  # failed run left out
+    assert [(v, n) for v, _, _, n in curves["m", "b"]] == [("True", 2), ("False", 1)]
+    assert curves["cpu_s", "a"][1] == ("2", 0.5, 0.0, 2)

@@ -9,6 +9,7 @@ from pathlib import Path
 from gcs_planner.errors import UserError
 from gcs_planner.progress import progress_bar
 from gcs_planner.sweep import load_study, run_study, summarise
+from gcs_planner.sweep_plots import write_plots
 from gcs_planner.validation import output_file
 
 
@@ -47,7 +48,8 @@ def run(args: argparse.Namespace) -> int:
         writer = csv.DictWriter(f, list(summary[0]) if summary else ["runs"])
         writer.writeheader()
         writer.writerows(summary)
-    print(f"{ran} runs now, results {out}, summary {summary_path}")
+    plots = write_plots(study, out, out.with_name(out.stem + "_plots.png"))
+    print(f"{ran} runs now, results {out}, summary {summary_path}" + (f", plots {plots}" if plots else ""))
     for entry in summary:
         said = (f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in entry.items())
         print("  " + ", ".join(said))

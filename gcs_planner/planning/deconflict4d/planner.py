@@ -59,7 +59,18 @@ from gcs_planner.planning.deconflict4d.trajectory import (
 from gcs_planner.planning.pso import PSOConfig, minimize
 from gcs_planner.validation import MAX_DURATION_S
 
-__all__ = ["Outcome", "Problem", "Config", "Track", "UavSpec", "initial_tracks", "run"]
+__all__ = [
+    "Config",
+    "Outcome",
+    "Problem",
+    "Search",
+    "Track",
+    "UavSpec",
+    "initial_tracks",
+    "joint_search",
+    "run",
+    "swarm_config",
+]
 
 log = logging.getLogger(__name__)
 
@@ -464,37 +475,47 @@ def _earliest_conflict(ev: _Eval, u: int) -> float:
 # ---------------------------------------------------------------------------- PSO wrapper
 
 
+@dataclass(frozen=True)
+class Search:
+    """One swarm's search space and cost: the free parameters of ``layout``, conflicts checked for
+    the ``active`` UAVs (all when None). Public so that benchmarks can give library optimisers the
+    very cost and start the method's PSO sees."""
 
-def _pso(
-    problem: Problem,
-    layout: _Layout,
-    active: np.ndarray | None,
-    particles: int,
-    iterations: int,
-    rng: np.random.Generator,
-) -> tuple[np.ndarray, float, int, int | None]:
-    """Run the shared engine; returns (best x, best cost, iterations run, first feasible iteration)."""
-    s = problem.settings
-    dim = layout.x0.size
-    spread_m = s.init_spread_m if active is None else s.insert_spread_m
-    spread = np.concatenate([np.full(3 * layout.n_pos, spread_m), 0.15 * layout.x0[3 * layout.n_pos :]])
-    init = layout.x0 + rng.normal(size=(particles, dim)) * spread
-    init[0] = layout.x0
-    init = np.clip(init, layout.lower, layout.upper)
-    state = {"it": 0, "cost": math.inf, "x": layout.x0.copy(), "feasible": False, "first": None}
+    problem: Problem
+    layout: _Layout
+    active: np.ndarray | None = None
 
-    def cost(x: np.ndarray) -> np.ndarray:
-        pts, tms = layout.decode(x)
-        ev = evaluate(problem, pts, tms, layout.goal_idx, active)
-        state["it"] += 1
-        i = int(np.argmin(ev.cost))
-        if ev.cost[i] < state["cost"]:
-            state.update(cost=float(ev.cost[i]), x=x[i].copy(), feasible=bool(ev.feasible[i]))
-        if state["feasible"] and state["first"] is None:
-            state["first"] = state["it"]
-        return ev.cost
+    @property
+    def lower(self) -> np.ndarray:
+        return self.layout.lower
 
-    cfg = PSOConfig(
+    @property
+    def upper(self) -> np.ndarray:
+        return self.layout.upper
+
+    def evaluate(self, x: np.ndarray) -> _Eval:
+        pts, tms = self.layout.decode(x)
+        return evaluate(self.problem, pts, tms, self.layout.goal_idx, self.active)
+
+    def initial_swarm(self, particles: int, rng: np.random.Generator) -> np.ndarray:
+        """The current trajectories (particle 0) plus Gaussian spread, clipped to the bounds."""
+        s, lay = self.problem.settings, self.layout
+        spread_m = s.init_spread_m if self.active is None else s.insert_spread_m
+        spread = np.concatenate([np.full(3 * lay.n_pos, spread_m), 0.15 * lay.x0[3 * lay.n_pos :]])
+        init = lay.x0 + rng.normal(size=(particles, lay.x0.size)) * spread
+        init[0] = lay.x0
+        return np.clip(init, lay.lower, lay.upper)
+
+
+def joint_search(problem: Problem, tracks: list[Track]) -> Search:
+    """Stage 1's search: every UAV's interior waypoints and leg durations at once."""
+    free = {i: list(range(1, len(t.waypoints) - 1)) for i, t in enumerate(tracks)}
+    return Search(problem, _Layout(problem, tracks, free))
+
+
+def swarm_config(s: Config, particles: int, iterations: int) -> PSOConfig:
+    """The paper's PSO settings: linear inertia w_max -> w_min, c1, c2."""
+    return PSOConfig(
         particles=particles,
         iterations=iterations,
         c1=s.c1,
@@ -503,8 +524,30 @@ def _pso(
         w_max=s.w_max,
         w_min=s.w_min,
     )
+
+
+def _pso(
+    search: Search, particles: int, iterations: int, rng: np.random.Generator
+) -> tuple[np.ndarray, float, int, int | None]:
+    """Run the shared engine; returns (best x, best cost, iterations run, first feasible iteration)."""
+    s = search.problem.settings
+    state = {"it": 0, "cost": math.inf, "x": search.layout.x0.copy(), "feasible": False, "first": None}
+
+    def cost(x: np.ndarray) -> np.ndarray:
+        ev = search.evaluate(x)
+        state["it"] += 1
+        i = int(np.argmin(ev.cost))
+        if ev.cost[i] < state["cost"]:
+            state.update(cost=float(ev.cost[i]), x=x[i].copy(), feasible=bool(ev.feasible[i]))
+        if state["feasible"] and state["first"] is None:
+            state["first"] = state["it"]
+        return ev.cost
+
     solved = (lambda: state["first"] is not None) if s.early_stop else None
-    minimize(cost, layout.lower, layout.upper, cfg, rng, init=init, stop=solved)
+    init = search.initial_swarm(particles, rng)
+    minimize(
+        cost, search.lower, search.upper, swarm_config(s, particles, iterations), rng, init=init, stop=solved
+    )
     return state["x"], state["cost"], state["it"], state["first"]
 
 
@@ -512,11 +555,10 @@ def _pso(
 
 
 def _stage_pso(problem: Problem, tracks: list[Track], rng: np.random.Generator) -> tuple[list[Track], dict]:
-    n_int = {i: list(range(1, len(t.waypoints) - 1)) for i, t in enumerate(tracks)}
-    layout = _Layout(problem, tracks, n_int)
+    search = joint_search(problem, tracks)
     s = problem.settings
-    x, _, iters, first = _pso(problem, layout, None, s.particles, s.iterations, rng)
-    new = layout.tracks(x, tracks)
+    x, _, iters, first = _pso(search, s.particles, s.iterations, rng)
+    new = search.layout.tracks(x, tracks)
     # a swarm stopped early may leave some UAV outside its limits: keep that UAV's previous
     # trajectory when it was within them (the later stages cannot repair limits)
     before, after = _limit_excess(problem, tracks), _limit_excess(problem, new)
@@ -657,7 +699,7 @@ def _stage_waypoints(
         sub, members = _local_problem(problem, tracks, pick, new_track.waypoints[free or [0]], ev)
         sub_tracks = [new_track] + [tracks[m] for m in members[1:]]
         layout = _Layout(sub, sub_tracks, {0: free})
-        x, _, n_it, _ = _pso(sub, layout, np.array([0]), s.insert_particles, s.insert_iterations, rng)
+        x, _, n_it, _ = _pso(Search(sub, layout, np.array([0])), s.insert_particles, s.insert_iterations, rng)
         iters += n_it
         candidate = layout.tracks(x, sub_tracks)
         if excess[pick] <= 0 and _limit_excess(sub, candidate)[0] > 0:

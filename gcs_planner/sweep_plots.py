@@ -1,0 +1,40 @@
+"""A sweep's per-parameter curves as one PNG: each metric's mean and spread against each grid key."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gcs_planner.sweep import Study, marginals
+
+
+def write_plots(study: Study, results: Path, path: Path) -> Path | None:
+    """One row per metric, one column per grid key: mean +- standard deviation over the runs with
+    each value of the key (the other keys and the seeds pooled). None when the grid is empty."""
+    curves = marginals(study, results)
+    keys = sorted(study.grid)
+    metrics = list(dict.fromkeys(m for m, _ in curves))
+    if not keys:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(
+        len(metrics), len(keys), figsize=(3.2 * len(keys), 2.4 * len(metrics)), squeeze=False
+    )
+    for row, m in enumerate(metrics):
+        for col, key in enumerate(keys):
+            ax = axes[row][col]
+            labels, means, stds, _ = zip(*curves[m, key], strict=True)
+            x = range(len(labels))
+            ax.errorbar(x, means, yerr=stds, marker="o", capsize=3)
+            ax.set_xticks(list(x), labels)
+            ax.set_xlabel(key)
+            if col == 0:
+                ax.set_ylabel(m)
+    fig.suptitle(f"{study.name}: mean +- std over runs")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
