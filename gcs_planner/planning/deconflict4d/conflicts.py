@@ -43,6 +43,26 @@ def _cpa(d0: np.ndarray, dv: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, 
     return np.sqrt(np.einsum("...i,...i->...", d, d)), s
 
 
+def _velocity(p0: np.ndarray, p1: np.ndarray, t0: np.ndarray, t1: np.ndarray) -> np.ndarray:
+    """Constant velocity of each leg (..., 3); 0 on a leg of zero duration."""
+    dt = t1 - t0
+    return np.where((dt > 0)[..., None], (p1 - p0) / np.where(dt > 0, dt, 1.0)[..., None], 0.0)
+
+
+def _legs_cpa(pa0, ta0, ta1, va, pb0, tb0, tb1, vb, scale_b=None) -> tuple[np.ndarray, np.ndarray]:
+    """Closest approach of legs given by start point, time span and velocity; +inf without overlap."""
+    lo = np.maximum(ta0, tb0)
+    hi = np.minimum(ta1, tb1)
+    valid = hi > lo
+    d0 = (pa0 + va * (lo - ta0)[..., None]) - (pb0 + vb * (lo - tb0)[..., None])
+    dv = va - vb
+    if scale_b is not None:
+        inv = 1.0 / scale_b
+        d0, dv = d0 * inv, dv * inv
+    dist, s = _cpa(d0, dv, np.where(valid, hi - lo, 0.0))
+    return np.where(valid, dist, np.inf), lo + s
+
+
 def segment_closest_approach(
     pa0: np.ndarray,
     pa1: np.ndarray,
@@ -59,19 +79,8 @@ def segment_closest_approach(
     Points (..., 3), times (...), all broadcast; ``scale_b`` (..., 3) divides the relative
     position axis by axis (ellipsoid semi-axes). Returns (distance, time); +inf without overlap.
     """
-    lo = np.maximum(ta0, tb0)
-    hi = np.minimum(ta1, tb1)
-    valid = hi > lo
-    da, db = ta1 - ta0, tb1 - tb0
-    va = np.where((da > 0)[..., None], (pa1 - pa0) / np.where(da > 0, da, 1.0)[..., None], 0.0)
-    vb = np.where((db > 0)[..., None], (pb1 - pb0) / np.where(db > 0, db, 1.0)[..., None], 0.0)
-    d0 = (pa0 + va * (lo - ta0)[..., None]) - (pb0 + vb * (lo - tb0)[..., None])
-    dv = va - vb
-    if scale_b is not None:
-        inv = 1.0 / scale_b
-        d0, dv = d0 * inv, dv * inv
-    dist, s = _cpa(d0, dv, np.where(valid, hi - lo, 0.0))
-    return np.where(valid, dist, np.inf), lo + s
+    va, vb = _velocity(pa0, pa1, ta0, ta1), _velocity(pb0, pb1, tb0, tb1)
+    return _legs_cpa(pa0, ta0, ta1, va, pb0, tb0, tb1, vb, scale_b)
 
 
 def closest_approach(
@@ -110,10 +119,10 @@ def candidate_pairs(points: np.ndarray, times: np.ndarray, reach_m: np.ndarray) 
     lo = points.min(axis=2) - reach_m[..., None]
     hi = points.max(axis=2) + reach_m[..., None]
     t_lo, t_hi = times.min(axis=2), times.max(axis=2)
-    overlap = np.all(
-        (lo[:, :, None, :] <= hi[:, None, :, :]) & (lo[:, None, :, :] <= hi[:, :, None, :]), axis=-1
-    )
-    overlap &= (t_lo[:, :, None] < t_hi[:, None, :]) & (t_lo[:, None, :] < t_hi[:, :, None])
+    overlap = (t_lo[:, :, None] < t_hi[:, None, :]) & (t_lo[:, None, :] < t_hi[:, :, None])
+    for ax in range(3):  # axis by axis: a reduction over a last axis of 3 is slow
+        a_lo, a_hi = lo[..., ax], hi[..., ax]
+        overlap &= (a_lo[:, :, None] <= a_hi[:, None, :]) & (a_lo[:, None, :] <= a_hi[:, :, None])
     i, j = np.nonzero(np.triu(overlap.any(axis=0), k=1))
     return np.stack([i, j], axis=1)
 
@@ -135,6 +144,7 @@ def pair_closest_approach(
         return d_min, t_min
     p0, p1 = points[:, :, :-1], points[:, :, 1:]
     t0, t1 = times[:, :, :-1], times[:, :, 1:]
+    vel = _velocity(p0, p1, t0, t1)  # once per leg, not per leg pair
     if reach_m is None:
         keep = np.ones((n_p, n_w - 1, n_w - 1), dtype=bool)
     else:
@@ -145,12 +155,13 @@ def pair_closest_approach(
         step = max(1, _CHUNK_ELEMENTS // (3 * (n_w - 1) ** 2))
         for start in range(0, n_p, step):
             i, j = pairs[start : start + step, 0], pairs[start : start + step, 1]
-            r = (reach_m[i] + reach_m[j])[:, None, None, None]
-            near = np.all(
-                (lo[i][:, :, None] - r <= hi[j][:, None, :]) & (lo[j][:, None, :] - r <= hi[i][:, :, None]),
-                axis=-1,
-            )
-            near &= (tlo[i][:, :, None] < thi[j][:, None, :]) & (tlo[j][:, None, :] < thi[i][:, :, None])
+            r = (reach_m[i] + reach_m[j])[:, None, None]
+            near = (tlo[i][:, :, None] < thi[j][:, None, :]) & (tlo[j][:, None, :] < thi[i][:, :, None])
+            for ax in range(3):
+                lo_i, lo_j, hi_i, hi_j = lo[i, :, ax], lo[j, :, ax], hi[i, :, ax], hi[j, :, ax]
+                near &= (lo_i[:, :, None] - r <= hi_j[:, None, :]) & (
+                    lo_j[:, None, :] - r <= hi_i[:, :, None]
+                )
             keep[start : start + step] = near
     k_p, k_a, k_b = np.nonzero(keep)  # sorted by pair
     if not len(k_p):
@@ -161,15 +172,15 @@ def pair_closest_approach(
     for start in range(0, len(k_p), step):
         sl = slice(start, start + step)
         i, j, a, b = pairs[k_p[sl], 0], pairs[k_p[sl], 1], k_a[sl], k_b[sl]
-        dist[:, sl], when[:, sl] = segment_closest_approach(
+        dist[:, sl], when[:, sl] = _legs_cpa(
             p0[:, i, a],
-            p1[:, i, a],
             t0[:, i, a],
             t1[:, i, a],
+            vel[:, i, a],
             p0[:, j, b],
-            p1[:, j, b],
             t0[:, j, b],
             t1[:, j, b],
+            vel[:, j, b],
         )
     starts = np.flatnonzero(np.r_[True, k_p[1:] != k_p[:-1]])
     group = k_p[starts]
