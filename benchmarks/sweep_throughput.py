@@ -28,7 +28,7 @@ def main() -> None:
     ap.add_argument("study", type=Path)
     ap.add_argument("--seeds", type=int, default=None, help="seeds 0..N-1 instead of the study's")
     args = ap.parse_args()
-    study, scenario = load_study(args.study)
+    study, base = load_study(args.study)
     if args.seeds:
         study = msgspec.structs.replace(study, seeds=list(range(args.seeds)))
     configs = {
@@ -41,7 +41,7 @@ def main() -> None:
         for name, (workers, scheduler) in configs.items():
             out = Path(tmp) / f"{workers}{scheduler}.csv"
             t = time.perf_counter()
-            n = run_study(study, scenario, out, workers, scheduler)
+            n = run_study(study, base, out, workers, scheduler)
             wall[name] = time.perf_counter() - t
             with out.open(newline="") as f:
                 cpu[name] = statistics.mean(float(r["cpu_s"]) for r in csv.DictReader(f))

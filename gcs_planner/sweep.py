@@ -11,6 +11,9 @@ keep (keys of ``Plan.metrics``, dotted for nested ones, plus ``feasible_fraction
     particles = [6, 10]
     iterations = [4, 8]
 
+A grid key ``scenario`` (a list of scenario files, relative to the study file) sweeps over
+scenarios as well, e.g. the fleet sizes of a table; the top-level ``scenario`` may then be left out.
+
 Every run (one grid point, one seed) is planned with that seed, so its result does not depend on
 the worker or the order. Rows are appended to one CSV as runs finish; a killed sweep started again
 skips every run already in the file. A run that fails is recorded with its error, not fatal.
@@ -44,14 +47,15 @@ class Study(Config):
     """A study file's keys."""
 
     name: str
-    scenario: str
     seeds: list[Annotated[int, Meta(ge=0, le=2**63 - 1)]]
     metrics: list[str]
     grid: dict[str, list[int | float | str | bool]] = {}
+    scenario: str = ""
 
 
 def load_study(path: str | Path) -> tuple[Study, Path]:
-    """The study and its scenario's path (relative paths are relative to the study file)."""
+    """The study and the folder its scenario paths are relative to (the study file's), every
+    scenario checked to be a file."""
     path = Path(path)
     try:
         study = parse(Study, load_toml(read_text(path, "study"), str(path)), "study")
@@ -59,10 +63,14 @@ def load_study(path: str | Path) -> tuple[Study, Path]:
         raise UserError(f"{path}: {exc}") from None
     if not study.seeds:
         raise UserError(f"{path}: seeds must name at least one seed")
-    scenario = (path.parent / study.scenario).resolve()
-    if not scenario.is_file():
-        raise UserError(f"{path}: scenario {study.scenario!r} is not a file ({scenario})")
-    return study, scenario
+    base = path.parent.resolve()
+    named = study.grid.get("scenario") or ([study.scenario] if study.scenario else [])
+    if not named:
+        raise UserError(f"{path}: scenario must name a scenario file (or grid.scenario a list of them)")
+    for name in named:
+        if not isinstance(name, str) or not (base / name).is_file():
+            raise UserError(f"{path}: scenario {name!r} is not a file ({base / str(name)})")
+    return study, base
 
 
 def runs(study: Study) -> Iterator[tuple[str, dict[str, Any], int]]:
@@ -75,12 +83,16 @@ def runs(study: Study) -> Iterator[tuple[str, dict[str, Any], int]]:
             yield ident, params, seed
 
 
-def plan_run(scenario_path: str, params: dict[str, Any], seed: int, metrics: list[str]) -> dict[str, Any]:
-    """One run (in a worker): plan the scenario with ``params`` in its [planner] table."""
+def plan_run(
+    base: str, params: dict[str, Any], seed: int, metrics: list[str], default: str
+) -> dict[str, Any]:
+    """One run (in a worker): plan its scenario (``params["scenario"]`` or ``default``, relative to
+    ``base``) with the other ``params`` in its [planner] table."""
     from gcs_planner.planning import load_scenario, plan_scenario
 
     cpu = time.process_time()
-    scenario = load_scenario(scenario_path)
+    params = dict(params)
+    scenario = load_scenario(Path(base) / params.pop("scenario", default))
     scenario.planner.update(params)
     plan = plan_scenario(scenario, seed=seed)
     values = dict(plan.metrics)
@@ -107,7 +119,7 @@ def _done(out: Path) -> set[str]:
 
 def run_study(
     study: Study,
-    scenario: Path,
+    base: Path,
     out: Path,
     workers: int = 2,
     scheduler: str | None = None,
@@ -124,7 +136,8 @@ def run_study(
         writer = csv.DictWriter(f, columns, extrasaction="ignore")
         if new_file:
             writer.writeheader()
-        futures = {submit(plan_run, str(scenario), params, seed, study.metrics): (ident, params, seed)
+        args = (study.metrics, study.scenario)
+        futures = {submit(plan_run, str(base), params, seed, *args): (ident, params, seed)
                    for ident, params, seed in todo}  # fmt: skip
         for n, (future, (ident, params, seed)) in enumerate(_completed(futures), 1):
             row = {"run_id": ident, "seed": seed, "error": "", **params}
@@ -202,8 +215,15 @@ def _mean_std(values: list[float]) -> tuple[float, float]:
     return mean, math.sqrt(var)
 
 
+_FLAGS = {"True": 1.0, "False": 0.0}  # a met / unmet condition counts as 1 / 0
+
+
+def _number(text: str) -> float:
+    return _FLAGS[text] if text in _FLAGS else float(text)
+
+
 def _numbers(rows: list[dict[str, str]], name: str) -> list[float]:
-    return [float(r[name]) for r in rows if not r["error"] and r.get(name) not in (None, "")]
+    return [_number(r[name]) for r in rows if not r["error"] and r.get(name) not in (None, "")]
 
 
 def summarise(study: Study, out: Path) -> list[dict[str, Any]]:

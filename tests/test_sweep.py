@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from pathlib import Path
 
 import pytest
 
 from gcs_planner.cli import main
+from gcs_planner.errors import UserError
 from gcs_planner.sweep import load_study, marginals, metric, run_study, summarise
+from gcs_planner.sweep import runs as sweep_runs
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
@@ -30,23 +33,23 @@ def _rows(out: Path) -> list[dict]:
 
 
 def test_a_killed_sweep_resumes_without_redoing_runs(tmp_path):
-    study, scenario = load_study(_study(tmp_path, "waypoint_spacing_m = [50.0, 100.0, 200.0]"))
+    study, base = load_study(_study(tmp_path, "waypoint_spacing_m = [50.0, 100.0, 200.0]"))
     out = tmp_path / "r.csv"
-    assert run_study(study, scenario, out, workers=2, max_runs=2) == 2  # "killed" after two runs
+    assert run_study(study, base, out, workers=2, max_runs=2) == 2  # "killed" after two runs
     first = _rows(out)
-    assert run_study(study, scenario, out, workers=2) == 4
+    assert run_study(study, base, out, workers=2) == 4
     rows = _rows(out)
     assert rows[:2] == first and len(rows) == 6 and len({r["run_id"] for r in rows}) == 6
-    assert run_study(study, scenario, out, workers=2) == 0  # nothing left
+    assert run_study(study, base, out, workers=2) == 0  # nothing left
     summary = summarise(study, out)
     assert [s["runs"] for s in summary] == [2, 2, 2]
     assert all(s["feasible_fraction mean"] == 1.0 for s in summary)
 
 
 def test_a_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path):
-    study, scenario = load_study(_study(tmp_path, "waypoint_spacing_m = [0.5, 100.0]"))
+    study, base = load_study(_study(tmp_path, "waypoint_spacing_m = [0.5, 100.0]"))
     out = tmp_path / "r.csv"
-    run_study(study, scenario, out, workers=1)
+    run_study(study, base, out, workers=1)
     rows = _rows(out)
     failed = [r for r in rows if r["error"]]
     assert len(rows) == 4 and len(failed) == 2
@@ -56,11 +59,11 @@ def test_a_failing_run_is_recorded_and_the_sweep_goes_on(tmp_path):
 def test_dask_local_cluster_gives_the_local_results(tmp_path):
     grid = "particles = [6]\niterations = [4]\nrounds = [1]\nrrt_iterations = [60]"
     path = _study(tmp_path, grid, "swarm_small", '"cost_total", "feasible_fraction", "evaluations"')
-    study, scenario = load_study(path)
+    study, base = load_study(path)
     local, dask = tmp_path / "local.csv", tmp_path / "dask.csv"
-    run_study(study, scenario, local, workers=2)
+    run_study(study, base, local, workers=2)
     pytest.importorskip("distributed")
-    run_study(study, scenario, dask, workers=2, scheduler="local")
+    run_study(study, base, dask, workers=2, scheduler="local")
 
     def results(out):
         return {r["run_id"]: {k: v for k, v in r.items() if k != "cpu_s"} for r in _rows(out)}
@@ -101,3 +104,33 @@ def test_marginals_pool_the_other_keys_and_seeds(tmp_path):
     assert curves["m", "a"] == [("1", 2.0, math.sqrt(2.0), 2), ("2", 10.0, 0.0, 1)]  # failed run left out
     assert [(v, n) for v, _, _, n in curves["m", "b"]] == [("True", 2), ("False", 1)]
     assert curves["cpu_s", "a"][1] == ("2", 0.5, 0.0, 2)
+
+
+def test_a_grid_over_scenarios_plans_each_file_and_pools_flags(tmp_path):
+    from gcs_planner.planning import load_scenario, plan_scenario
+
+    names = [os.path.relpath(MISSIONS / f"deconflict_{n}uav.toml", tmp_path) for n in (4, 5)]
+    path = tmp_path / "study.toml"
+    path.write_text(f'name = "t"\nseeds = [1]\nmetrics = ["iterations_total", "conflict_free"]\n'
+                    f"[grid]\nscenario = {names!r}\nmax_rounds = [1]\n".replace("'", '"'))  # fmt: skip
+    study, base = load_study(path)
+    out = tmp_path / "r.csv"
+    assert run_study(study, base, out, workers=1) == 2
+    rows = {r["scenario"]: r for r in _rows(out)}
+    for name in names:
+        scenario = load_scenario(tmp_path / name)
+        scenario.planner.update(max_rounds=1)
+        direct = plan_scenario(scenario, seed=1).metrics
+        assert int(rows[name]["iterations_total"]) == direct["iterations_total"]
+    summary = {s["scenario"]: s for s in summarise(study, out)}
+    assert all(s["conflict_free mean"] in (0.0, 1.0) for s in summary.values()) and len(summary) == 2
+    path.write_text(path.read_text().replace("deconflict_5uav", "deconflict_55uav"))
+    with pytest.raises(UserError, match="deconflict_55uav.toml' is not a file"):
+        load_study(path)
+
+
+@pytest.mark.parametrize("path", sorted((MISSIONS.parent / "studies").glob("*.toml")), ids=lambda p: p.stem)
+def test_every_bundled_study_loads_and_names_its_runs(path):
+    study, base = load_study(path)
+    runs = list(sweep_runs(study))
+    assert runs and len({ident for ident, _, _ in runs}) == len(runs)

@@ -23,7 +23,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise UserError(f"--workers must be >= 1, got {args.workers}")
-    study, scenario = load_study(args.study)
+    study, base = load_study(args.study)
     if args.out:
         out = output_file(args.out, "-o")
     else:
@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
         bar.refresh()
 
     try:
-        ran = run_study(study, scenario, out, args.workers, args.scheduler, progress)
+        ran = run_study(study, base, out, args.workers, args.scheduler, progress)
     finally:
         if bar is not None:
             bar.close()

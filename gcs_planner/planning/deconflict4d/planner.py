@@ -835,6 +835,7 @@ def _finish(
         "length_m": float(ev.terms["length_m"].sum()),
         "time_error_s": float(ev.terms["time_error_s"].sum()),
         "delays_s": {u.id: t.delay_s for u, t in zip(problem.uavs, tracks, strict=True) if t.delay_s},
+        "uavs_delayed": sum(1 for t in tracks if t.delay_s),
         "waypoints_added": int(
             sum(len(t.waypoints) for t in tracks)
             - sum(problem.settings.interior_waypoints + 2 for _ in tracks)
