@@ -12,7 +12,8 @@ comm: 32 UAVs, link range 1000/1500/2000/2500 m paired with one-way delay 0.2/2/
       Each message gets a uniform extra delay of up to 0.25 dt_d (jitter), so a small margin loses
       late bids. Runs per cell = --runs.
 Threats are left out here to keep the default run short (they are exercised by the timeline
-scenario and the tests); every run uses its own seed (run index), identical across methods.
+scenario and the tests); every run uses its own seed (run index), identical across methods. A run
+is gcs_planner.planning.coalition.montecarlo.run, the task studies/coalition_mc.toml sweeps.
 """
 
 from __future__ import annotations
@@ -21,15 +22,11 @@ import argparse
 import math
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 
-import msgspec
 import numpy as np
 
-from gcs_planner.planning.coalition import load_world, simulate
-from gcs_planner.planning.coalition.model import UavSpec, World
-from gcs_planner.scenario import load_scenario
+from gcs_planner.planning.coalition import montecarlo
 
 MISSION = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
 SIZES = (24, 32, 40, 48, 56)
@@ -38,68 +35,9 @@ LINKS = ((1000.0, 0.2), (1500.0, 2.0), (2000.0, 3.5), (2500.0, 5.5))
 MARGINS = (0.3, 1.0, 3.0)
 
 
-def random_world(n: int, seed: int, **params) -> World:
-    """n UAVs in the Table 1 mix at random positions/headings; the paper's targets, no threats."""
-    base = load_world(load_scenario(MISSION))
-    rng = np.random.default_rng(seed)
-    n_rse, n_s = round(n * 11 / 32), round(n * 11 / 32)
-    xy = rng.uniform([500.0, 500.0], [7500.0, 6500.0], (n, 2))
-    heading = rng.uniform(-math.pi, math.pi, n)
-    uavs = []
-    for i in range(n):
-        if i < n_rse:
-            kind = dict(
-                altitude_m=300.0,
-                speed_mps=50.0,
-                r_min_m=150.0,
-                range_max_m=18000.0,
-                munitions=2 if i < n_rse // 2 else 1,
-                recon=True,
-                strike=True,
-                assess=True,
-            )
-        elif i < n_rse + n_s:
-            kind = dict(
-                altitude_m=500.0,
-                speed_mps=60.0,
-                r_min_m=200.0,
-                range_max_m=26000.0,
-                munitions=4,
-                recon=False,
-                strike=True,
-                assess=False,
-            )
-        else:
-            kind = dict(
-                altitude_m=400.0,
-                speed_mps=50.0,
-                r_min_m=150.0,
-                range_max_m=20000.0,
-                munitions=0,
-                recon=True,
-                strike=False,
-                assess=True,
-            )
-        uavs.append(
-            UavSpec(i, f"U{i + 1}", i + 1, (float(xy[i, 0]), float(xy[i, 1])), float(heading[i]), **kind)
-        )
-    targets = [replace(t, recon_uav=None) for t in base.targets]
-    return World(uavs, targets, threats=[], params=msgspec.structs.replace(base.params, **params))
-
-
 def one_run(job: tuple) -> dict:
     n, seed, params = job
-    world = random_world(n, seed, **params)
-    t = time.perf_counter()
-    res = simulate(world, np.random.default_rng(seed))
-    formed = [e for e in res.events if e["event"] == "formed"]
-    return {
-        "J": res.effectiveness,
-        "completion_s": res.completion_s,
-        "served": sum(o.t_done_s is not None for o in res.outcomes.values()) / len(res.outcomes),
-        "optimiser_s": float(np.mean([e["optimiser_s"] for e in formed])) if formed else math.nan,
-        "wall_s": time.perf_counter() - t,
-    }
+    return montecarlo.run(MISSION, {"uavs": n, **params}, seed)
 
 
 def run_cells(cells: dict, runs: int, workers: int) -> dict:

@@ -11,8 +11,11 @@ keep (keys of ``Plan.metrics``, dotted for nested ones, plus ``feasible_fraction
     particles = [6, 10]
     iterations = [4, 8]
 
-A grid key ``scenario`` (a list of scenario files, relative to the study file) sweeps over
-scenarios as well, e.g. the fleet sizes of a table; the top-level ``scenario`` may then be left out.
+``task = "package.module:function"`` runs another function per run instead of the planner (e.g.
+``gcs_planner.planning.coalition.montecarlo:run``): ``function(scenario_path, params, seed)``
+returns the metrics. A grid key ``scenario`` (a list of scenario files, relative to the study file)
+sweeps over scenarios as well, e.g. the fleet sizes of a table; the top-level ``scenario`` may then
+be left out.
 
 Every run (one grid point, one seed) is planned with that seed, so its result does not depend on
 the worker or the order. Rows are appended to one CSV as runs finish; a killed sweep started again
@@ -23,6 +26,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import importlib
 import itertools
 import json
 import math
@@ -51,6 +55,7 @@ class Study(Config):
     metrics: list[str]
     grid: dict[str, list[int | float | str | bool]] = {}
     scenario: str = ""
+    task: str = "gcs_planner.sweep:plan"
 
 
 def load_study(path: str | Path) -> tuple[Study, Path]:
@@ -70,6 +75,7 @@ def load_study(path: str | Path) -> tuple[Study, Path]:
     for name in named:
         if not isinstance(name, str) or not (base / name).is_file():
             raise UserError(f"{path}: scenario {name!r} is not a file ({base / str(name)})")
+    task_named(study.task)
     return study, base
 
 
@@ -83,20 +89,41 @@ def runs(study: Study) -> Iterator[tuple[str, dict[str, Any], int]]:
             yield ident, params, seed
 
 
-def plan_run(
-    base: str, params: dict[str, Any], seed: int, metrics: list[str], default: str
-) -> dict[str, Any]:
-    """One run (in a worker): plan its scenario (``params["scenario"]`` or ``default``, relative to
-    ``base``) with the other ``params`` in its [planner] table."""
+def plan(scenario: Path, params: dict[str, Any], seed: int) -> dict[str, Any]:
+    """The default task: plan the scenario with ``params`` in its [planner] table; Plan.metrics
+    plus the share of feasible vehicles."""
     from gcs_planner.planning import load_scenario, plan_scenario
 
+    loaded = load_scenario(scenario)
+    loaded.planner.update(params)
+    result = plan_scenario(loaded, seed=seed)
+    return {
+        **result.metrics,
+        "feasible_fraction": sum(v.feasible for v in result.vehicles) / len(result.vehicles),
+    }
+
+
+def task_named(name: str) -> Callable[[Path, dict[str, Any], int], dict[str, Any]]:
+    """The function a study's ``task = "package.module:function"`` names (UserError if none)."""
+    module, _, attr = name.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError, ValueError):
+        raise UserError(f"study task {name!r} is not an importable 'package.module:function'") from None
+    if not callable(fn):
+        raise UserError(f"study task {name!r} is not a function")
+    return fn
+
+
+def run_task(
+    task: str, base: str, params: dict[str, Any], seed: int, metrics: list[str], default: str
+) -> dict[str, Any]:
+    """One run (in a worker): the study's task on its scenario (``params["scenario"]`` or
+    ``default``, relative to ``base``) with the other ``params``; the named metrics and CPU time."""
     cpu = time.process_time()
     params = dict(params)
-    scenario = load_scenario(Path(base) / params.pop("scenario", default))
-    scenario.planner.update(params)
-    plan = plan_scenario(scenario, seed=seed)
-    values = dict(plan.metrics)
-    values["feasible_fraction"] = sum(v.feasible for v in plan.vehicles) / len(plan.vehicles)
+    scenario = Path(base) / params.pop("scenario", default)
+    values = task_named(task)(scenario, params, seed)
     values["cpu_s"] = time.process_time() - cpu
     return {m: metric(values, m) for m in [*metrics, "cpu_s"]}
 
@@ -137,7 +164,7 @@ def run_study(
         if new_file:
             writer.writeheader()
         args = (study.metrics, study.scenario)
-        futures = {submit(plan_run, str(base), params, seed, *args): (ident, params, seed)
+        futures = {submit(run_task, study.task, str(base), params, seed, *args): (ident, params, seed)
                    for ident, params, seed in todo}  # fmt: skip
         for n, (future, (ident, params, seed)) in enumerate(_completed(futures), 1):
             row = {"run_id": ident, "seed": seed, "error": "", **params}
@@ -223,7 +250,9 @@ def _number(text: str) -> float:
 
 
 def _numbers(rows: list[dict[str, str]], name: str) -> list[float]:
-    return [_number(r[name]) for r in rows if not r["error"] and r.get(name) not in (None, "")]
+    """The metric's values over the runs that ran and defined it (NaN: undefined for that run)."""
+    cells = (_number(r[name]) for r in rows if not r["error"] and r.get(name) not in (None, ""))
+    return [v for v in cells if not math.isnan(v)]
 
 
 def summarise(study: Study, out: Path) -> list[dict[str, Any]]:

@@ -134,3 +134,22 @@ def test_every_bundled_study_loads_and_names_its_runs(path):
     study, base = load_study(path)
     runs = list(sweep_runs(study))
     assert runs and len({ident for ident, _, _ in runs}) == len(runs)
+
+
+def test_a_study_task_runs_instead_of_the_planner_and_a_misspelt_one_is_refused(tmp_path):
+    from gcs_planner.planning.coalition import montecarlo
+
+    paper = MISSIONS / "coalition_paper.toml"
+    path = tmp_path / "study.toml"
+    task = "gcs_planner.planning.coalition.montecarlo:run"
+    path.write_text(f'name = "t"\nscenario = "{paper}"\ntask = "{task}"\nseeds = [3]\n'
+                    'metrics = ["J", "served"]\n[grid]\nuavs = [24]\nt_end_s = [350.0]\n')  # fmt: skip
+    study, base = load_study(path)
+    out = tmp_path / "r.csv"
+    run_study(study, base, out, workers=1)
+    (row,) = _rows(out)
+    direct = montecarlo.run(paper, {"uavs": 24, "t_end_s": 350.0}, 3)
+    assert not row["error"] and float(row["J"]) == direct["J"] and float(row["served"]) == direct["served"]
+    path.write_text(path.read_text().replace("montecarlo:run", "montecarlo:rnu"))
+    with pytest.raises(UserError, match="task 'gcs_planner.planning.coalition.montecarlo:rnu' is not"):
+        load_study(path)
