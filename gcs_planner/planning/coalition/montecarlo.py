@@ -23,7 +23,7 @@ from gcs_planner.scenario import load_scenario
 
 __all__ = ["random_world", "run"]
 
-# (share of the fleet, type) in the order the paper's Table 1 lists them
+# the paper's Table 1 types: recon-strike-assess (munitions set per UAV), strike, recon-assess
 _RECON_STRIKE = dict(altitude_m=300.0, speed_mps=50.0, r_min_m=150.0, range_max_m=18000.0,
                      recon=True, strike=True, assess=True)  # fmt: skip
 _STRIKE = dict(altitude_m=500.0, speed_mps=60.0, r_min_m=200.0, range_max_m=26000.0, munitions=4,
