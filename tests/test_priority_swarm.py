@@ -170,6 +170,21 @@ def test_baselines_use_the_same_budget_and_are_checked(method):
     assert report.bad_vehicles() <= {vp.vehicle_id for vp in plan.vehicles if not vp.feasible}
 
 
+def test_the_compare_task_gives_a_baseline_the_methods_counted_budget_on_the_same_seed():
+    from gcs_planner.planning.baselines import compare_run, plan_baseline
+
+    path = MISSIONS / "swarm_small.toml"
+    params = {**FAST, "rounds": 1, "rrt_iterations": 60}
+    method = compare_run(path, {**params, "method": "priority_swarm"}, 4)
+    de = compare_run(path, {**params, "method": "de"}, 4)
+    scenario = load_scenario(path)
+    scenario.planner.update(params)
+    budget = method["evaluations"] // len(scenario.vehicles)
+    direct = plan_baseline(scenario, np.random.default_rng(4), "de", budget).metrics
+    assert de["cost_total"] == direct["cost_total"] and de["evaluations"] == direct["evaluations"]
+    assert de["evaluations"] <= method["evaluations"] and de["method"] == "de"
+
+
 def test_ablation_switches_remove_the_rrt_start_and_the_priority_order():
     scenario = load_scenario(MISSIONS / "swarm_small.toml")
     scenario.planner = {**FAST, "rounds": 1, "rrt_iterations": 80}

@@ -19,6 +19,8 @@ independent checker (no repair), so an infeasible UAV is flagged, never hidden.
 from __future__ import annotations
 
 import time
+from pathlib import Path
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -28,14 +30,15 @@ from gcs_planner.planning import config_of
 from gcs_planner.planning.priority_swarm import (
     CostModel,
     Traffic,
+    plan,
     prepare,
     repair_and_check,
     timed_samples,
 )
 from gcs_planner.planning.pso import PSOConfig, minimize
-from gcs_planner.scenario import Scenario
+from gcs_planner.scenario import Scenario, load_scenario
 
-__all__ = ["METHODS", "differential_evolution", "grey_wolf", "plan_baseline"]
+__all__ = ["METHODS", "compare_run", "differential_evolution", "grey_wolf", "plan_baseline"]
 
 METHODS = ("pso", "de", "gwo")
 
@@ -146,3 +149,19 @@ def plan_baseline(
     result.metrics["iterations_to_1pct"] = float(np.mean(to_1pct))
     result.metrics["wall_time_s"] = time.perf_counter() - t_start
     return result
+
+
+def compare_run(scenario_path: Path, params: dict[str, Any], seed: int) -> dict[str, Any]:
+    """A sweep task for seed 000's comparison (studies/priority_swarm_compare.toml):
+    ``params["method"]`` is "priority_swarm" or one of METHODS, the rest go to [planner]. A
+    baseline gets the method's counted evaluations per UAV on the same seed, so the method is
+    planned first, as benchmarks/priority_swarm.py compare does once for all baselines."""
+    params = dict(params)
+    method = params.pop("method")
+    scenario = load_scenario(scenario_path)
+    scenario.planner.update(params)
+    result = plan(scenario, config_of(scenario), np.random.default_rng(seed))
+    if method != "priority_swarm":
+        budget = result.metrics["evaluations"] // len(scenario.vehicles)
+        result = plan_baseline(scenario, np.random.default_rng(seed), method, budget)
+    return {**result.metrics, "feasible_fraction": result.metrics["feasible_count"] / len(result.vehicles)}
