@@ -263,7 +263,12 @@ def summarise(study: Study, out: Path) -> list[dict[str, Any]]:
     for row in rows:
         groups.setdefault(tuple(row[k] for k in keys), []).append(row)
     summary = []
-    for point, members in sorted(groups.items()):
+    rank = {k: {str(v): i for i, v in enumerate(study.grid[k])} for k in keys}  # the study's order
+
+    def grid_order(item: tuple[tuple, list]) -> tuple:
+        return tuple(rank[k].get(v, len(rank[k])) for k, v in zip(keys, item[0], strict=True))
+
+    for point, members in sorted(groups.items(), key=grid_order):
         ok = [r for r in members if not r["error"]]
         entry: dict[str, Any] = {**dict(zip(keys, point, strict=True)), "runs": len(members),
                                  "failed": len(members) - len(ok)}  # fmt: skip

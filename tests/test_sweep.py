@@ -109,7 +109,7 @@ def test_marginals_pool_the_other_keys_and_seeds(tmp_path):
 def test_a_grid_over_scenarios_plans_each_file_and_pools_flags(tmp_path):
     from gcs_planner.planning import load_scenario, plan_scenario
 
-    names = [os.path.relpath(MISSIONS / f"deconflict_{n}uav.toml", tmp_path) for n in (4, 5)]
+    names = [os.path.relpath(MISSIONS / f"deconflict_{n}uav.toml", tmp_path) for n in (5, 10)]
     path = tmp_path / "study.toml"
     path.write_text(f'name = "t"\nseeds = [1]\nmetrics = ["iterations_total", "conflict_free"]\n'
                     f"[grid]\nscenario = {names!r}\nmax_rounds = [1]\n".replace("'", '"'))  # fmt: skip
@@ -122,9 +122,10 @@ def test_a_grid_over_scenarios_plans_each_file_and_pools_flags(tmp_path):
         scenario.planner.update(max_rounds=1)
         direct = plan_scenario(scenario, seed=1).metrics
         assert int(rows[name]["iterations_total"]) == direct["iterations_total"]
+    assert [s["scenario"] for s in summarise(study, out)] == names  # the study's order
     summary = {s["scenario"]: s for s in summarise(study, out)}
     assert all(s["conflict_free mean"] in (0.0, 1.0) for s in summary.values()) and len(summary) == 2
-    path.write_text(path.read_text().replace("deconflict_5uav", "deconflict_55uav"))
+    path.write_text(path.read_text().replace("deconflict_10uav", "deconflict_55uav"))
     with pytest.raises(UserError, match="deconflict_55uav.toml' is not a file"):
         load_study(path)
 
