@@ -10,11 +10,11 @@ from gcs_planner.sweep import Study, marginals
 def write_plots(study: Study, results: Path, path: Path) -> Path | None:
     """One row per metric, one column per grid key: mean +- standard deviation over the runs with
     each value of the key (the other keys and the seeds pooled). None when the grid is empty."""
-    curves = marginals(study, results)
     keys = sorted(study.grid)
-    metrics = list(dict.fromkeys(m for m, _ in curves))
     if not keys:
         return None
+    curves = marginals(study, results)
+    metrics = list(dict.fromkeys(m for m, _ in curves))
     import matplotlib
 
     matplotlib.use("Agg")
