@@ -310,6 +310,8 @@ class OnlineRun(_HilRun):
         engine_tracks = {s.uav.id: s.track for s in self.sched.values()}
         limits = (self.options.max_time_error_s, self.options.max_angle_error_deg)
         rows, missing = task_rows(self.world, judged, flown, self.flown_legs, engine_tracks, limits)
+        missing += [f"{t}: a task was still undone when the window closed at {self.t_end:.1f} s"
+                    for t in self.targets if self.engine.outcomes[t].t_done_s is None]  # fmt: skip
         add_prediction_errors(self.uploads, flown)
         result = HilResult(
             rows, self.uploads, self.mcap_path, self.t_start, wall_s, lag_events, self.failures + missing,
