@@ -25,9 +25,12 @@ Choices (the paper does not model loss):
   it really is) is released (``release``): its task is re-tendered as a lost vehicle's, and it
   loiters where it is, then keeps station.
 - a formation that fails is re-tendered after ``retender_s``, as in the simulation (the paper).
-- an award reaches a vehicle as a mission upload, not a radio message: the awarded times are
-  computed as if the members started ``award_lag_s`` (the run's measured upload time for a
-  coalition's missions) after t_e^s; the legs still start at t_e^s, stretched to arrive then.
+- an award reaches a vehicle as a mission upload, not a radio message: the members start
+  ``award_lag_s`` (the run's measured upload time for a coalition's missions) after t_e^s, from
+  their poses predicted then, and the awarded times follow from those.
+- a re-tendered task goes to a vehicle that had no award for that target (so not back to the
+  member released from it); a member whose timed leg cannot clear the threats leaves every task
+  of that kind, not only the one it was given.
 - pop-up threats come from the scenario's timeline or ``inject_threat`` while running; as in the
   simulation, every active leg that crosses one is re-planned to the same goal and time.
 """
@@ -44,7 +47,7 @@ import numpy as np
 from gcs_planner.coalition_hil.live_legs import LiveState
 from gcs_planner.planning.coalition.contract_net import Award
 from gcs_planner.planning.coalition.model import Target, Threat, World
-from gcs_planner.planning.coalition.sim import IDLE, LEADER, RECON, CoalitionSim
+from gcs_planner.planning.coalition.sim import IDLE, LEADER, RECON, CoalitionSim, lookalikes
 from gcs_planner.planning.coalition.track import Leg
 
 __all__ = ["LOST", "LiveFleet", "OnlineContractNet", "arc_covered"]
@@ -86,6 +89,7 @@ class OnlineContractNet(CoalitionSim):
         self.released: list[Award] = []  # awards handed on because the vehicle could not make them
         self.parts: list[Target] = []  # single tasks re-tendered after a loss
         self.recon_of: dict[int, Target] = {}
+        self.awarded: dict[str, set[int]] = {}  # target id -> the vehicles awarded one of its tasks
         self.award_lag_s = 0.0  # set by the run: the time an award takes to reach the vehicle [s]
         self._live_mark = 0
         self.live_cpu_s: list[float] = []  # CPU time of every formation since going live [s]
@@ -217,12 +221,24 @@ class OnlineContractNet(CoalitionSim):
         if self.now >= self.live_from_s:
             self.live_cpu_s.append(time.thread_time() - t_cpu)
 
+    def _candidates(self, tender):
+        """As the simulation's, less the vehicles that already had an award for the target: a
+        released member re-bids for the task it could not make, and a vehicle holds one award per
+        target (the run and its report key awards by target and vehicle)."""
+        had = self.awarded.get(tender.target.id, set())
+        columns = super()._candidates(tender)
+        keep = [k for k, i in enumerate(columns[0]) if i not in had]
+        return tuple([column[k] for k in keep] for column in columns)
+
     def _formation(self, tender, cands, poses, munitions, assess, rleft):
-        """As the simulation's, with the awarded times computed as if the members started
-        ``award_lag_s`` after t_e^s: in flight an award is a mission upload, which takes that long
-        for a whole coalition, and a member that must start at t_e^s would arrive late."""
+        """As the simulation's, with the members starting ``award_lag_s`` after t_e^s from their
+        poses predicted then: in flight an award is a mission upload, which takes that long for a
+        whole coalition, and a member that must start at t_e^s would arrive late."""
+        t_start = tender.t_es_s + self.award_lag_s
+        if self.award_lag_s > 0.0:
+            poses = np.array([self.pose(i, [t_start])[0] for i in cands])
         f = super()._formation(tender, cands, poses, munitions, assess, rleft)
-        f.prob.t_start_s += self.award_lag_s
+        f.prob.t_start_s = t_start
         return f
 
     # ---- execution of awards: lost vehicles do nothing, their awards are handed on
@@ -233,12 +249,24 @@ class OnlineContractNet(CoalitionSim):
         super()._on_award_rx(award, leg, k)
         self.tasks[award.uav] = award
 
+    def _exclude(self, tender, f, base: np.ndarray, sol, bad: list[int]) -> None:
+        """As the simulation's, but the member and its lookalikes leave every task of that kind:
+        the simulation flies a leg that cannot clear as it is, but in flight the leg is planned
+        around the threats from where the vehicle is, arrives late and is released."""
+        super()._exclude(tender, f, base, sol, bad)
+        for k in bad if self.now >= self.live_from_s else ():
+            x = sol.assign[k]
+            base[np.ix_([x, *lookalikes(f.poses, x, f.rmin[x])], f.kind == f.kind[k])] = np.inf
+
     def _award(self, tender, f, legs, compute_s: float) -> None:
         out = self.outcomes[tender.target.id]
         before = (out.pending, out.J, out.parts, out.members)
+        formed = len(self.events)
         super()._award(tender, f, legs, compute_s)
+        self.awarded.setdefault(tender.target.id, set()).update(int(f.cands[x]) for x in f.sol.assign)
         if any(tender.target is part for part in self.parts):  # a replacement: the task stays pending
             out.pending, out.J, out.parts, out.members = *before[:3], before[3] + out.members
+            self.events[formed]["retender"] = True
 
     def _standing(self, uav: int, award: Award) -> bool:
         """Is this award still the vehicle's to fly (not lost, not released)?"""

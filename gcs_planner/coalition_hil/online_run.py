@@ -153,6 +153,12 @@ class OnlineRun(_HilRun):
             self._step_engine(self.scenario_now())
         return vp, leg
 
+    def _leg_start_s(self, award: Award, earliest_s: float) -> float:
+        """The engine's leg start, where the formation timed the member from (its predicted pose at
+        t_e^s + award_lag_s), unless the upload cannot land by then: a loitering vehicle turns
+        ~20 deg/s, and a pose a second off can need a whole extra turn to its goal."""
+        return max(earliest_s, float(award.sim_leg.t[0]))
+
     def _queue_changes(self, now: float) -> None:
         """A job for every vehicle whose engine plan has a new leg: its award's, or an idle one."""
         award_of = {id(leg): key for key, leg in self.engine.award_legs.items()}

@@ -163,23 +163,23 @@ def add_prediction_errors(uploads: list[dict], flown: dict) -> None:
 
 def formation_rows(sim_events: list[dict], online_events: list[dict], targets) -> list[dict]:
     """The coalitions formed by the simulation and by the online run, side by side in the order they
-    were formed (per target: the n-th formation of each), for the flown targets."""
+    were formed (per target: the n-th formation of each), for the flown targets. The online run's
+    re-tenders of single tasks (a lost or released member's) follow, with no simulated side."""
     def formed(events):
         return [e for e in events if e["event"] == "formed" and e["target"] in targets]
 
-    sim, online = formed(sim_events), formed(online_events)
-    rows = []
-    for k in range(max(len(sim), len(online))):
-        a = sim[k] if k < len(sim) else None
-        b = online[k] if k < len(online) else None
-        rows.append({
-            "target": (a or b)["target"],
-            "sim_leader": a and a["uav"], "online_leader": b and b["uav"],
-            "sim_t_s": a and a["t_s"], "online_t_s": b and b["t_s"],
-            "sim_members": a and a["members"], "online_members": b and b["members"],
-            "same_members": bool(a and b and sorted(a["members"]) == sorted(b["members"])),
-        })  # fmt: skip
-    return rows
+    sim = formed(sim_events)
+    online = [e for e in formed(online_events) if not e.get("retender")]
+    pairs = [(sim[k] if k < len(sim) else None, online[k] if k < len(online) else None)
+             for k in range(max(len(sim), len(online)))]  # fmt: skip
+    pairs += [(None, e) for e in formed(online_events) if e.get("retender")]
+    return [{
+        "target": (a or b)["target"], "retender": bool(b and b.get("retender")),
+        "sim_leader": a and a["uav"], "online_leader": b and b["uav"],
+        "sim_t_s": a and a["t_s"], "online_t_s": b and b["t_s"],
+        "sim_members": a and a["members"], "online_members": b and b["members"],
+        "same_members": bool(a and b and sorted(a["members"]) == sorted(b["members"])),
+    } for a, b in pairs]  # fmt: skip
 
 
 def format_formations(rows: list[dict]) -> str:
@@ -187,6 +187,7 @@ def format_formations(rows: list[dict]) -> str:
     lines = ["target  sim leader  online leader  sim t [s]  online t [s]  same members"]
     for r in rows:
         times = [f"{t:.2f}" if t is not None else "-" for t in (r["sim_t_s"], r["online_t_s"])]
+        same = "re-tender" if r["retender"] else "yes" if r["same_members"] else "no"
         lines.append(f"{r['target']:<7} {r['sim_leader'] or '-':<11} {r['online_leader'] or '-':<14} "
-                     f"{times[0]:>9}  {times[1]:>12}  {'yes' if r['same_members'] else 'no'}")  # fmt: skip
+                     f"{times[0]:>9}  {times[1]:>12}  {same}")  # fmt: skip
     return "\n".join(lines)

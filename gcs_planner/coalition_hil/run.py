@@ -469,7 +469,7 @@ class _HilRun:
         items = self.timing.items
         known = self.known_threats(e["t_s"])
         for _ in range(2):  # once more when the mission has more items than guessed
-            t0 = now + self.upload_estimate_s(items) + START_AHEAD_S
+            t0 = self._leg_start_s(award, now + self.upload_estimate_s(items) + START_AHEAD_S)
             q0 = state.predict([t0])[0]
             leg = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR, known)
             if e["task"] == "strike" and not (leg.info["clear"] and abs(leg.info["late_s"]) < 0.05):
@@ -486,7 +486,7 @@ class _HilRun:
         info = {
             "plan_wall_ms": round(1000.0 * plan_wall_s, 1),
             "t0_s": round(t0, 3),
-            "estimate_s": round(t0 - now - START_AHEAD_S, 3),
+            "estimate_s": round(self.upload_estimate_s(items), 3),
             "live_pose": [round(float(v), 2) for v in q0],
             "state_age_s": round(now - state.t_s, 3),
             "turn_rate_dps": round(math.degrees(state.rate_rps), 2),
@@ -494,6 +494,10 @@ class _HilRun:
             "clear": leg.info["clear"],
         }
         return leg, vp, info
+
+    def _leg_start_s(self, award: Award, earliest_s: float) -> float:
+        """When an award's live leg starts, given the earliest start its upload allows."""
+        return earliest_s
 
     def _live_idle(self, sched: VehicleSchedule, idle: Idle, state: LiveState, now: float):
         """Plan the idle mission from the vehicle's newest reports: back onto the simulated track

@@ -453,7 +453,7 @@ class CoalitionSim:
         kind, p = f.kind, self.p
         legs = paths.sample_legs(  # the last attempt's legs (all clear unless attempts ran out)
             f.segs,
-            tender.t_es_s,
+            f.prob.t_start_s,
             f.speed[f.sol.assign],
             p.sample_ds_m,
             ["strike" if kind[k] == STRIKE else "transit" for k in range(len(kind))],
@@ -545,14 +545,14 @@ class CoalitionSim:
             f.opt_s += time.perf_counter() - t_opt  # the colony run plus any repairs
             if not sol.covered:
                 return f"needs not covered by {n} candidates"
-            sol = self._time_legs(tender, f, sol)
+            sol = self._time_legs(f, sol)
             bad = [k for k in range(len(kind)) if not f.clear[k]]
             if not bad:
                 return None
             self._exclude(tender, f, base, sol, bad)
         return None  # attempts ran out: the legs are flown as they are, marked not clear
 
-    def _time_legs(self, tender: Tender, f: _Formation, sol):
+    def _time_legs(self, f: _Formation, sol):
         """Exact threat-avoiding routes of the assignment, the solution re-evaluated on them (the
         latest member is the reference of lambda) and each leg stretched to its required time."""
         routes = f.plans.routes(sol.assign)
@@ -563,7 +563,7 @@ class CoalitionSim:
         sol = make_solution(sol.assign, f.prob, self.p)
         want = np.array(
             [
-                max(routes[k].length_m, f.speed[sol.assign[k]] * (sol.t_required_s[k] - tender.t_es_s))
+                max(routes[k].length_m, f.speed[sol.assign[k]] * (sol.t_required_s[k] - f.prob.t_start_s))
                 if f.kind[k] == STRIKE
                 else routes[k].length_m
                 for k in range(len(f.kind))
