@@ -54,11 +54,11 @@ def fleet(rng, n, x0, x1, y0, spacing, speed=12.0, radius=20.0, sep=8.0, columns
     out = []
     for k in range(n):
         gx, gy = goals[perm[k]]
-        # MAVLink has 255 system ids: a larger fleet is planning-only (no sysid)
+        # MAVLink has 255 system ids: a larger fleet takes 250 per network (fleet ids)
         out.append(
             {
                 "id": f"uav{k + 1}",
-                **({"sysid": k + 1} if n < 256 else {}),
+                **({"sysid": k + 1} if n < 256 else {"sysid": k % 250 + 1, "network": k // 250}),
                 "type": "multirotor",
                 "start": [float(starts[k][0]), float(starts[k][1]), float(30 + 5 * (k % 4))],
                 "goal": [float(gx), float(gy), float(30 + 5 * (perm[k] % 4))],

@@ -37,6 +37,7 @@ from pathlib import Path
 
 from gcs_planner.conformance import MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
+from gcs_planner.fleet_ids import network_of, wire_sysid
 from gcs_planner.flight_ops import (
     TrackRecorder,
     accel_lead_s,
@@ -53,6 +54,7 @@ from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_named
 from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
 from gcs_planner.mavlink.items import AUTOPILOTS
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.networks import open_networks
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan
@@ -93,6 +95,7 @@ class FlyResult:
     end_states: dict[int, str] = field(default_factory=dict)  # safe end: sysid -> what was done
     report_path: Path | None = None  # the flight report PNG (flight_report.py)
     log_error: str | None = None  # the flight log could not be written (full disk); the report stands
+    frames_received: int = 0  # MAVLink frames the link delivered (every one is handed to the log)
 
     @property
     def passed(self) -> bool:
@@ -121,13 +124,21 @@ def manned_traffic(scenario: Scenario, route_t0_s: float) -> list[MovingObstacle
 
 
 def check_flight(plan: Plan) -> None:
-    """What must hold before anything is sent: one sysid in 1..255 per vehicle, and every
-    vehicle's mission valid in both autopilots' conventions."""
+    """What must hold before anything is sent: one sysid in 1..255 per vehicle (per network: fleet
+    ids, mavlink/networks.py), and every vehicle's mission valid in both autopilots' conventions."""
     sysids = [vp.sysid for vp in plan.vehicles]
-    if 0 in sysids or len(set(sysids)) != len(sysids):
+    if any(wire_sysid(s) == 0 for s in sysids) or len(set(sysids)) != len(sysids):
         raise UserError(f"every vehicle needs its own MAVLink sysid in 1..255 to fly, got {sysids}")
+    empty = sorted(set(range(networks(plan))) - {network_of(s) for s in sysids})
+    if empty:
+        raise UserError(f"network {empty[0]} has no vehicle; number the networks 0, 1, ... without gaps")
     for conventions in AUTOPILOTS:
         build_missions(plan, {s: quirks_named(conventions) for s in sysids})
+
+
+def networks(plan: Plan) -> int:
+    """How many MAVLink networks the plan's vehicles are on (fleet ids, mavlink/networks.py)."""
+    return 1 + max((network_of(vp.sysid) for vp in plan.vehicles), default=0)
 
 
 class _KeptLog:
@@ -170,6 +181,9 @@ async def fly(
     options.out_dir.mkdir(parents=True, exist_ok=True)
     flight = _Flight(scenario, plan, options, vehicles, progress)
     with vehicles as urls:
+        if len(urls) != networks(plan):
+            raise UserError(f"the plan's vehicles are on {networks(plan)} MAVLink network(s), but"
+                            f" {len(urls)} were given: one --connect per network")  # fmt: skip
         await flight.run(urls)
     if flight.aborted is not None:
         if flight.end_states:
@@ -198,11 +212,13 @@ class _Flight:
         self.aborted: BaseException | None = None
         self.route_t0_s = 0.0
         self.status: VehicleStatus | None = None
+        self.frames_received = 0
 
-    async def run(self, urls: list[str]) -> None:
-        """Fly on the link to ``urls``; any failure or Ctrl-C ends safely, kept in ``aborted``."""
+    async def run(self, urls: list[list[str]]) -> None:
+        """Fly on the link to each network's ``urls``; any failure or Ctrl-C ends safely, kept in
+        ``aborted``."""
         plan = self.plan
-        link = await MavlinkLink.open(*urls)
+        link = await open_networks(urls)
         self.status = VehicleStatus(link, self.sysids)
         scenario_text = self.scenario.path.read_text() if self.scenario.path else None
         try:
@@ -285,6 +301,7 @@ class _Flight:
             logger.log_event({"event": "safe_end" if self.aborted else "end", "states": states})
         self.status.close()
         await link.close()
+        self.frames_received = link.frames_received
 
     def result(self, wall_s: float) -> FlyResult:
         """The conformance report, the flight report PNG and the .rrd of the flown log."""
@@ -316,7 +333,7 @@ class _Flight:
         log_error = self.log_errors[0] if self.log_errors else None
         return FlyResult(
             reports, self.uploads, self.mcap_path, rrd_path, self.tlog_path, wall_s, self.end_states,
-            report_path, log_error,
+            report_path, log_error, self.frames_received,
         )  # fmt: skip
 
 

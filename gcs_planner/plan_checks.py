@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from gcs_planner.fleet_ids import MAX_NETWORK, fleet_id
 from gcs_planner.geo import Origin
 from gcs_planner.validation import (
     MAX_ALT_M,
@@ -66,7 +67,7 @@ def vehicle_fields(d: Any) -> dict[str, Any]:
         raise InputError(f"missing field {missing[0]!r}")
     out: dict[str, Any] = {"vehicle_id": name(d["vehicle_id"], "vehicle_id")}
     where = out["vehicle_id"]
-    out["sysid"] = integer(d["sysid"], f"{where}: sysid", 0, 255)
+    out["sysid"] = integer(d["sysid"], f"{where}: sysid", 0, fleet_id(MAX_NETWORK, 255))  # a fleet id
     out["waypoints"] = _points(d["waypoints"], f"{where}: waypoints", MAX_WAYPOINTS)
     out["path"] = _points(d["path"], f"{where}: path", MAX_PATH_SAMPLES)
     n, m = len(out["waypoints"]), len(out["path"])

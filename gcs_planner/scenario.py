@@ -8,7 +8,9 @@ that reads them. Every error names the file, the field and the bad value.
     [origin]            lat_deg, lon_deg, alt_m (AMSL)
     [planner]           name = "priority_swarm", seed = 1, plus the planner's parameters (its Config)
     [[vehicles]]        id, sysid (MAVLink system id 1..255; 0 or absent = planning only, e.g. a
-                        500-UAV study), type ("multirotor" | "fixed_wing"), start = [x, y, z],
+                        500-UAV study), network (0..63, default 0: the --connect that reaches it,
+                        for fleets past one network's 254; Vehicle.sysid is then the fleet id
+                        network x 256 + sysid), type ("multirotor" | "fixed_wing"), start = [x, y, z],
                         goal = [x, y, z], speed_mps, turn_radius_m, min_alt_m, max_alt_m,
                         separation_m, priority
     [[obstacles.cylinders]]    x, y, radius_m, z_min_m (default 0), z_max_m, buffer_m
@@ -24,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from gcs_planner.errors import UserError
+from gcs_planner.fleet_ids import MAX_NETWORK, fleet_id
 from gcs_planner.geo import Origin
 from gcs_planner.validation import (
     MAX_ALT_M,
@@ -148,8 +151,8 @@ MANNED_MODE_KEYS = ("name", "history", "velocity_mps", "sigma_mps", "strength", 
 # [[vehicles]] keys: the common ones, the 4-D planner's timing and dynamics (deconflict4d), the
 # coalition planner's (coalition/model.py)
 VEHICLE_KEYS = (
-    ("id", "sysid", "type", "start", "goal", "speed_mps", "min_alt_m", "max_alt_m", "turn_radius_m")
-    + ("separation_m", "priority", "takeoff_s", "arrival_s")
+    ("id", "sysid", "network", "type", "start", "goal", "speed_mps", "min_alt_m", "max_alt_m")
+    + ("turn_radius_m", "separation_m", "priority", "takeoff_s", "arrival_s")
     + ("v_max_mps", "a_max_mps2", "climb_mps", "takeoff_settle_s", "descent_mps", "min_turn_radius_m")
     + ("max_time_error_s", "limit", "capabilities", "munitions", "heading_deg", "range_m")
 )
@@ -250,6 +253,9 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
         )
     if "id" not in d and sysid == 0:
         raise InputError(f"{where}: a vehicle needs an id or a sysid")
+    network = integer(d.get("network", 0), f"{where}.network", 0, MAX_NETWORK)
+    if network and not sysid:
+        raise InputError(f"{where}.network is {network}, but the vehicle has no sysid to be reached by")
     vid = name(d.get("id", f"uav{sysid}"), f"{where}.id")
     min_alt = number(d.get("min_alt_m", 10.0), f"{where}.min_alt_m", MIN_ALT_M, MAX_ALT_M)
     max_alt = number(d.get("max_alt_m", 120.0), f"{where}.max_alt_m", MIN_ALT_M, MAX_ALT_M)
@@ -257,7 +263,7 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
         raise InputError(f"{where}: min_alt_m {min_alt:g} is above max_alt_m {max_alt:g}")
     return Vehicle(
         id=vid,
-        sysid=sysid,
+        sysid=fleet_id(network, sysid),
         type=vtype,
         start=_point(d.get("start"), f"{where}.start"),
         goal=_point(d.get("goal"), f"{where}.goal"),

@@ -29,8 +29,9 @@ class VehicleSource(Protocol):
     simulated: bool
     speedup: float
 
-    def __enter__(self) -> list[str]:
-        """Start the vehicles (if this source runs them); the link URLs that reach them."""
+    def __enter__(self) -> list[list[str]]:
+        """Start the vehicles (if this source runs them); the link URLs that reach each network
+        (one list for a fleet of at most 254; fleet ids, mavlink/networks.py)."""
 
     def __exit__(self, *exc: object) -> None:
         """Stop what ``__enter__`` started."""
@@ -47,17 +48,18 @@ class VehicleSource(Protocol):
 
 
 class ConnectedVehicles:
-    """Vehicles this tool does not start: real autopilots or SITL reached at ``urls``."""
+    """Vehicles this tool does not start: real autopilots or SITL reached at ``urls``, or with
+    ``per_network``, each URL a network of its own (network k: the k-th URL)."""
 
     simulated = False
     speedup = 1.0
     lag_events = 0
 
-    def __init__(self, urls: Sequence[str]) -> None:
-        self.urls = list(urls)
+    def __init__(self, urls: Sequence[str], per_network: bool = False) -> None:
+        self.networks = [[u] for u in urls] if per_network else [list(urls)]
 
-    def __enter__(self) -> list[str]:
-        return self.urls
+    def __enter__(self) -> list[list[str]]:
+        return self.networks
 
     def __exit__(self, *exc: object) -> None:
         pass

@@ -82,9 +82,12 @@ class MockFleet:
         tick_s: float = 0.02,
         signing_key: bytes | None = None,
         flight: dict | None = None,
+        clock_zero_s: float | None = None,
     ) -> None:
         """``flight``: FlightRules fields to override for every vehicle (e.g. ``{"arm_ready_s": 0}`` in
-        a test about something else); the profile's real behaviour is the default."""
+        a test about something else); the profile's real behaviour is the default. ``clock_zero_s``:
+        the time.monotonic() (one clock for every process of the machine) at which simulated time
+        is 0, so that fleets in several processes share one simulated clock (default: the start)."""
         if (count is None) == (vehicles is None):
             raise ValueError("MockFleet needs exactly one of count= or vehicles=")
         if count is not None and not (isinstance(count, int) and 1 <= count <= 254):
@@ -126,6 +129,7 @@ class MockFleet:
         self.rates_hz = (rate_hz, status_rate_hz, home_rate_hz)
         self.lag_events = 0
         self.ticks = 0
+        self.clock_zero_s = clock_zero_s
         self._script: list[tuple[float, int, Callable[[MockFleet], None]]] = []
         self._script_counter = itertools.count()
         self._task: asyncio.Task | None = None
@@ -335,6 +339,8 @@ class MockFleet:
             telemetry.StreamSchedule(n, status_rate, now),
             telemetry.StreamSchedule(n, home_rate, now),
         )
+        if self.clock_zero_s is not None:  # on the ground until the first mission: nothing to step
+            self.world.sim_time_s = max(0.0, self.speedup * (time.monotonic() - self.clock_zero_s))
         self._wall_base, self._sim_base = now, self.world.sim_time_s
         while True:
             now = loop.time()

@@ -15,11 +15,14 @@ keeper to catch up. A fixed wing's home is its take-off climb run south of its f
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
 
+from gcs_planner.errors import UserError
+from gcs_planner.fleet_ids import network_of, wire_sysid
 from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.plan import VehiclePlan
 from sitl_mock.faults import LinkFaults
@@ -34,6 +37,7 @@ MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
 MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
 FLY_TAKEOFF_CLIMB_MPS = 2.0  # a fixed wing's take-off climb in `fly`: the rate its flight-time budget assumes
 HIL_TAKEOFF_CLIMB_MPS = 40.0  # coalition HIL: the take-off is not part of the measurement
+NETWORK_START_S = 5.0  # the networks' shared simulated clock starts this long after they are made [s]
 
 
 def airframe_for(vp: VehiclePlan) -> Airframe:
@@ -72,37 +76,57 @@ def _rate_hz(speedup: float) -> float:
 
 
 class _PlanFleet:
-    """What both fleets share: the VehicleSource methods over a started fleet."""
+    """What both fleets share: the VehicleSource methods over started fleets, one per network
+    (fleet ids, gcs_planner.mavlink.networks)."""
 
     simulated = True
 
-    def __init__(self, fleet: MockFleet | MockFleetProcess, airframes: dict[int, Airframe], speedup: float):
-        self.fleet, self.airframes, self.speedup = fleet, airframes, float(speedup)
+    def __init__(self, fleets: list, airframes: dict[int, Airframe], speedup: float):
+        self.fleets, self.airframes, self.speedup = fleets, airframes, float(speedup)
 
-    def __enter__(self) -> list[str]:
-        self.fleet.__enter__()
-        return [f"udpout:{h}:{p}" for h, p in self.fleet.addresses]
+    def __enter__(self) -> list[list[str]]:
+        started = []
+        try:
+            for fleet in self.fleets:
+                fleet.__enter__()
+                started.append(fleet)
+        except BaseException:
+            for fleet in started:
+                fleet.__exit__(None, None, None)
+            raise
+        return [[f"udpout:{h}:{p}" for h, p in fleet.addresses] for fleet in self.fleets]
 
     def __exit__(self, *exc: object) -> None:
-        self.fleet.__exit__(*exc)
+        for fleet in self.fleets:
+            fleet.__exit__(*exc)
 
     def accel_mps2(self, sysid: int) -> float:
         return self.airframes[sysid].accel_mps2
 
     def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
-        self.fleet.set_drift(sysid, east_mps, north_mps)
+        self.fleets[network_of(sysid)].set_drift(wire_sysid(sysid), east_mps, north_mps)
 
     def cut_link(self, sysid: int) -> None:
         """The vehicle's link goes dead both ways: to the GCS it is lost (it stops reporting)."""
-        self.fleet.set_faults(sysid, LinkFaults(loss=1.0))
+        self.fleets[network_of(sysid)].set_faults(wire_sysid(sysid), LinkFaults(loss=1.0))
 
     @property
     def lag_events(self) -> int:
-        return self.fleet.lag_events
+        return sum(fleet.lag_events for fleet in self.fleets)
+
+
+def _networks(specs: list[dict]) -> list[list[dict]]:
+    """The vehicle specs of each network 0..max, with their system ids on it."""
+    count = 1 + max(network_of(spec["sysid"]) for spec in specs)
+    out: list[list[dict]] = [[] for _ in range(count)]
+    for spec in specs:
+        out[network_of(spec["sysid"])].append({**spec, "sysid": wire_sysid(spec["sysid"])})
+    return out
 
 
 class MockVehicles(_PlanFleet):
-    """``fly``'s mock fleet, in a thread of this process, on one simulated clock."""
+    """``fly``'s mock fleet on one simulated clock: in a thread of this process, or, for a plan
+    over several networks (fleets past 254), one process per network sharing the clock."""
 
     def __init__(
         self,
@@ -122,8 +146,14 @@ class MockVehicles(_PlanFleet):
                 dict(sysid=vp.sysid, home=_home(vp, origin, run_m), vehicle_type=vp.vehicle_type,
                      profile=autopilot, airframe=frame)
             )  # fmt: skip
-        fleet = MockFleet(vehicles=specs, speedup=speedup, home=origin, rate_hz=_rate_hz(speedup))
-        super().__init__(fleet, airframes, speedup)
+        networks = _networks(specs)
+        options = dict(speedup=speedup, home=origin, rate_hz=_rate_hz(speedup))
+        if len(networks) == 1:
+            fleets = [MockFleet(vehicles=specs, **options)]
+        else:
+            zero = time.monotonic() + NETWORK_START_S
+            fleets = [MockFleetProcess(vehicles=n, clock_zero_s=zero, **options) for n in networks]
+        super().__init__(fleets, airframes, speedup)
 
 
 class MockVehiclesProcess(_PlanFleet):
@@ -145,5 +175,7 @@ class MockVehiclesProcess(_PlanFleet):
                 dict(sysid=vp.sysid, home=_home(vp, origin, run_m), vehicle_type="fixed_wing",
                      profile="ardupilot", airframe=frame)
             )  # fmt: skip
+        if len(_networks(specs)) > 1:
+            raise UserError("the coalition run flies one network: its vehicles need sysids 1..254")
         fleet = MockFleetProcess(vehicles=specs, speedup=speedup, home=origin, rate_hz=_rate_hz(speedup))
-        super().__init__(fleet, airframes, speedup)
+        super().__init__([fleet], airframes, speedup)

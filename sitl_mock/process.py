@@ -53,6 +53,10 @@ class MockFleetProcess:
         """MockFleet.set_faults in the child process."""
         self._conn.send(("set_faults", (sysid, faults)))
 
+    def set_drift(self, sysid: int | None, east_mps: float, north_mps: float) -> None:
+        """MockFleet.set_drift in the child process."""
+        self._conn.send(("set_drift", (sysid, east_mps, north_mps)))
+
     def __exit__(self, *exc: object) -> None:
         try:
             self._conn.send("stop")

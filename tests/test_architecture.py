@@ -18,9 +18,9 @@ MAX_FUNCTION_LINES = 80
 MAVLINK_CORE = {f"gcs_planner.mavlink.{m}" for m in ("types", "enums", "wire", "dialect", "framing")} | {
     f"gcs_planner.mavlink.{m}" for m in ("signing", "signing_streams", "readback")
 }
-# what the mock autopilot may use of gcs_planner: the MAVLink core, geodesy, plan types (its
-# plan-tuned fleets) and what those import
-MOCK_MAY_USE = MAVLINK_CORE | {"gcs_planner.geo", "gcs_planner.plan", "gcs_planner.errors"}
+# what the mock autopilot may use of gcs_planner: the MAVLink core, geodesy, fleet ids, plan types
+# (its plan-tuned fleets) and what those import
+MOCK_MAY_USE = MAVLINK_CORE | {f"gcs_planner.{m}" for m in ("geo", "plan", "errors", "fleet_ids")}
 
 
 def _modules() -> dict[str, Path]:

@@ -235,10 +235,10 @@ async def run_coalition_hil(
     run.vehicles = vehicles
     options.out_dir.mkdir(parents=True, exist_ok=True)
     scenario_text = scenario.path.read_text() if scenario.path else None
-    with vehicles as urls:
+    with vehicles as networks:
         # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
         # message lost when it overflows costs a re-send timer
-        link = await MavlinkLink.open(*urls, receive_buffer_bytes=RCVBUF_BYTES)
+        link = await MavlinkLink.open(*networks[0], receive_buffer_bytes=RCVBUF_BYTES)
         try:
             with FlightLogger(run.mcap_path, scenario.origin, run.initial, scenario_text) as logger:
                 await run.fly(link, logger)

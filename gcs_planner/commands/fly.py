@@ -24,7 +24,7 @@ from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
 from gcs_planner.conformance import format_report
 from gcs_planner.errors import UserError
-from gcs_planner.fly import FlyOptions, check_flight, fly
+from gcs_planner.fly import FlyOptions, check_flight, fly, networks
 from gcs_planner.plan import Plan
 from gcs_planner.planning import load_scenario
 from gcs_planner.progress import plan_with_progress, progress_bar
@@ -43,7 +43,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="URL",
-        help="real vehicles / SITL (udpout:HOST:PORT or udpin:HOST:PORT; repeatable)",
+        help="real vehicles / SITL (udpout:HOST:PORT or udpin:HOST:PORT; repeatable; for a plan over"
+        " several networks, one per network in order)",
     )
     p.add_argument(
         "--speedup",
@@ -162,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
         bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]
         print(f"warning: the planner reports infeasible paths for {bad}; flying anyway")
     if args.connect:
-        vehicles = ConnectedVehicles(args.connect)
+        vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1)
     else:
         vehicles = mock_vehicles("mock", plan.vehicles, origin=plan.origin, speedup=args.speedup,
                                  autopilot=args.autopilot)  # fmt: skip

@@ -1,6 +1,8 @@
 """FlightLogger: record a flight's MAVLink traffic, plan and scenario to one MCAP file.
 
-Layout (topics; ``{sysid}`` is the vehicle's MAVLink system id):
+Layout (topics; ``{sysid}`` is the vehicle's MAVLink system id; in a flight over several networks
+its fleet id, network x 256 + sysid (mavlink/networks.py), while its raw frames keep the system id
+they had on their network):
 
 - ``/mavlink/{sysid}/raw``: every frame exactly as received (encoding "mavlink", no schema);
   log time = receive time. This is the lossless record that replay re-emits byte for byte.
@@ -236,7 +238,10 @@ class FlightLogger:
             t_ns = round(t_s * 1e6) * 1000 if t_s >= _UNIX_TIME_MIN_S else self._to_ns(t_s)
             times.append(t_ns)
             raw = bytes(raw)
-            sysid = raw[5] if raw[0] == 0xFD and len(raw) > 5 else _frame_sysid(raw)
+            if msg is not None:  # its fleet id (mavlink/networks.py) where several networks share a log
+                sysid = msg.get_srcSystem()
+            else:
+                sysid = raw[5] if raw[0] == 0xFD and len(raw) > 5 else _frame_sysid(raw)
             channel = raw_channels.get(sysid)
             if channel is None:
                 channel = self._add_vehicle(sysid)

@@ -1,0 +1,122 @@
+"""Fleets over several MAVLink networks: system ids repeat, fleet ids do not (mavlink/networks.py)."""
+
+import asyncio
+from pathlib import Path
+
+import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+from gcs_planner.errors import UserError
+from gcs_planner.fly import FlyOptions, check_flight, fly
+from gcs_planner.mavlink.networks import open_networks
+from gcs_planner.planning import plan_scenario
+from gcs_planner.scenario import ScenarioError, load_scenario
+from gcs_planner.telemetry import read_flight
+from gcs_planner.vehicles import ConnectedVehicles
+from sitl_mock.fleet import MockFleet
+from sitl_mock.plan_fleet import MockVehicles
+
+STRAIGHT = Path(__file__).resolve().parents[1] / "missions" / "straight_4uav.toml"
+
+
+def _two_networks(tmp_path: Path, networks=(0, 0, 1, 1), sysids=(1, 2, 1, 2)) -> Path:
+    """straight_4uav with its vehicles on these networks and system ids."""
+    text = STRAIGHT.read_text()
+    for k, (net, sysid) in enumerate(zip(networks, sysids, strict=True), start=1):
+        text = text.replace(
+            f'id = "uav{k}"\nsysid = {k}\n', f'id = "uav{k}"\nsysid = {sysid}\nnetwork = {net}\n'
+        )
+    path = tmp_path / "two_networks.toml"
+    path.write_text(text)
+    return path
+
+
+def test_a_vehicle_on_network_1_is_named_by_its_fleet_id(tmp_path):
+    scenario = load_scenario(_two_networks(tmp_path))
+    assert [v.sysid for v in scenario.vehicles] == [1, 2, 257, 258]
+    bad = _two_networks(tmp_path, sysids=(1, 2, 0, 2))
+    with pytest.raises(ScenarioError, match=r"vehicles\[2\].network is 1, but the vehicle has no sysid"):
+        load_scenario(bad)
+    bad.write_text(STRAIGHT.read_text().replace("sysid = 1\n", "sysid = 1\nnetwork = 64\n"))
+    with pytest.raises(ScenarioError, match=r"vehicles\[0\].network"):
+        load_scenario(bad)
+
+
+def test_a_plan_with_an_empty_network_or_too_few_connections_is_refused(tmp_path):
+    plan = plan_scenario(load_scenario(_two_networks(tmp_path, networks=(0, 0, 2, 2))))
+    with pytest.raises(UserError, match="network 1 has no vehicle"):
+        check_flight(plan)
+    scenario = load_scenario(_two_networks(tmp_path))
+    plan = plan_scenario(scenario)
+    one_link = ConnectedVehicles(["udpout:127.0.0.1:9"])  # nothing listens: a send would time out
+    with pytest.raises(UserError, match=r"on 2 MAVLink network\(s\), but 1 were given"):
+        asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path / "out", rrd=False), one_link))
+    assert not (tmp_path / "out" / "flight.mcap").exists()
+
+
+def test_network_links_route_by_fleet_id():
+    """Two fleets whose only vehicle is sysid 1: each is reached, and heard, as itself."""
+
+    async def main():
+        with MockFleet(count=1) as a, MockFleet(count=1, vehicle_type="fixed_wing") as b:
+            urls = [[f"udpout:{h}:{p}" for h, p in fleet.addresses] for fleet in (a, b)]
+            link = await open_networks(urls, heartbeat_period_s=0.2)
+            heard: dict[int, set[int]] = {1: set(), 257: set()}
+            for vehicle in heard:
+                link.subscribe(
+                    lambda msg, raw, t, v=vehicle: heard[v].add(msg.get_srcSystem()), sysid=vehicle
+                )
+            beat = await link.wait_for(
+                lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 257, 5.0
+            )
+            assert beat.type == mavlink.MAV_TYPE_FIXED_WING
+            request = mavlink.MAVLink_command_long_message(
+                257,
+                1,
+                mavlink.MAV_CMD_REQUEST_MESSAGE,
+                0,
+                mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+                0,
+                0,
+                0,
+                0,
+                0,
+                0,
+            )
+            link.send(request)
+            assert request.target_system == 257  # the caller's message is left as it was
+            ack = await link.wait_for(
+                lambda m: m.get_type() == "COMMAND_ACK" and m.get_srcSystem() == 257, 5.0
+            )
+            assert ack.result == mavlink.MAV_RESULT_ACCEPTED
+            assert (
+                sorted(link.vehicles) == [1, 257]
+                and link.vehicles[257].mav_type == mavlink.MAV_TYPE_FIXED_WING
+            )
+            with pytest.raises(ValueError, match="network 2; this flight has 2"):
+                link.send(mavlink.MAVLink_command_long_message(513, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0))
+            await link.close()
+            assert heard == {1: {1}, 257: {257}}
+
+    asyncio.run(main())
+
+
+def test_a_fleet_over_two_networks_flies_each_vehicle_its_own_mission(tmp_path):
+    """Two mock processes, system ids 1 and 2 on each: every vehicle flies its own line (a merged
+    or swapped mission would break the cross-track bound) and the log keeps the four apart."""
+    scenario = load_scenario(_two_networks(tmp_path))
+    plan = plan_scenario(scenario)
+    vehicles = MockVehicles(plan.vehicles, plan.origin, speedup=10.0)
+    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles))
+    assert result.passed, [r.failures for r in result.reports]
+    assert sorted(r.sysid for r in result.reports if r.completed and r.cross_track_max_m < 5.0) == [
+        1,
+        2,
+        257,
+        258,
+    ]
+    flight = read_flight(result.mcap_path)
+    assert len(flight.frames) == result.frames_received  # every frame the link delivered is in the log
+    assert set(flight.positions) == {1, 2, 257, 258}
+    assert all(len(t) > 20 for t in flight.positions.values())
+    assert {e["sysid"] for _, e in flight.events if e.get("event") == "route_start"} == {1, 2, 257, 258}
