@@ -2,21 +2,30 @@
 
 Vehicle i (system id i) listens on 127.0.0.1:base_port+i-1 (``--host`` to change) and streams to
 whoever sends it a packet first, like ArduPilot SITL's udpin. One log line per vehicle at start.
+
+A fleet larger than ``--per-network`` (default 250; a MAVLink network has 254 system ids beside the
+GCS) runs as several networks, one process each on one shared simulated clock: network k holds
+vehicles k x per + 1 ... with system ids 1, 2, ... on consecutive ports, and one log line per
+network gives its ``--connect udpout:HOST:FIRST-LAST`` for `gcs-planner fly`.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import logging
 import signal
 import sys
+import threading
+import time
 
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.signing import key_from_passphrase
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.flight import AIRFRAMES
+from sitl_mock.process import MockFleetProcess
 from sitl_mock.profiles import PROFILES
 from sitl_mock.vehicle import DEFAULT_HOME
 
@@ -56,6 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="TEXT",
         help="MAVLink 2 signing: sign every frame and drop unsigned ones (key = SHA-256 of TEXT)",
     )
+    p.add_argument(
+        "--per-network", type=int, default=250, help="vehicles per MAVLink network (one process each) [250]"
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return p
 
@@ -66,14 +78,18 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO, format="%(asctime)s %(name)s: %(message)s"
     )
+    if not 1 <= args.per_network <= 254:
+        parser.error(f"--per-network must be in 1..254, got {args.per_network}")
     try:
         faults = LinkFaults(args.loss, args.delay, args.jitter, args.duplicate, args.reorder, args.seed)
-        fleet = MockFleet(
-            count=args.vehicles, base_port=args.base_port, speedup=args.speedup, home=args.home,
-            profile=args.profile, vehicle_type=args.vehicle_type, host=args.host, faults=faults,
-            rate_hz=args.rate,
+        options = dict(
+            speedup=args.speedup, home=args.home, profile=args.profile, vehicle_type=args.vehicle_type,
+            host=args.host, faults=faults, rate_hz=args.rate,
             signing_key=key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None,
         )  # fmt: skip
+        if args.vehicles > args.per_network:
+            return _serve_networks(args, options)
+        fleet = MockFleet(count=args.vehicles, base_port=args.base_port, **options)
     except ValueError as exc:
         parser.error(str(exc))
     try:
@@ -81,6 +97,31 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"sitl-mock: error: {exc}", file=sys.stderr)
         return 2
+    return 0
+
+
+def _serve_networks(args: argparse.Namespace, options: dict) -> int:
+    """The fleet as networks of ``--per-network`` vehicles, a process each (module docstring),
+    until SIGINT or SIGTERM."""
+    if args.base_port <= 0 or args.base_port + args.vehicles - 1 > 65535:
+        raise ValueError("a fleet over several networks needs --base-port > 0 with room for every vehicle")
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    zero = time.monotonic()
+    with contextlib.ExitStack() as stack:
+        for first in range(0, args.vehicles, args.per_network):
+            count = min(args.per_network, args.vehicles - first)
+            port = args.base_port + first
+            stack.enter_context(MockFleetProcess(count=count, base_port=port, clock_zero_s=zero, **options))
+            log.info(
+                "network %d: sysids 1..%d on udp %s:%d-%d (fly --connect udpout:%s:%d-%d)",
+                first // args.per_network, count, args.host, port, port + count - 1,
+                args.host, port, port + count - 1,
+            )  # fmt: skip
+        log.info("%d vehicles, speed-up %g; Ctrl-C to stop", args.vehicles, args.speedup)
+        stop.wait()
+        log.info("stopped")
     return 0
 
 

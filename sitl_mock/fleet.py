@@ -339,9 +339,10 @@ class MockFleet:
             telemetry.StreamSchedule(n, status_rate, now),
             telemetry.StreamSchedule(n, home_rate, now),
         )
-        if self.clock_zero_s is not None:  # on the ground until the first mission: nothing to step
-            self.world.sim_time_s = max(0.0, self.speedup * (time.monotonic() - self.clock_zero_s))
         self._wall_base, self._sim_base = now, self.world.sim_time_s
+        if self.clock_zero_s is not None:  # on the ground until the first mission: nothing to step
+            self._sim_base = self.speedup * (time.monotonic() - self.clock_zero_s)
+            self.world.sim_time_s = max(0.0, self._sim_base)
         while True:
             now = loop.time()
             self._advance(now)

@@ -37,7 +37,6 @@ MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
 MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
 FLY_TAKEOFF_CLIMB_MPS = 2.0  # a fixed wing's take-off climb in `fly`: the rate its flight-time budget assumes
 HIL_TAKEOFF_CLIMB_MPS = 40.0  # coalition HIL: the take-off is not part of the measurement
-NETWORK_START_S = 5.0  # the networks' shared simulated clock starts this long after they are made [s]
 
 
 def airframe_for(vp: VehiclePlan) -> Airframe:
@@ -151,7 +150,7 @@ class MockVehicles(_PlanFleet):
         if len(networks) == 1:
             fleets = [MockFleet(vehicles=specs, **options)]
         else:
-            zero = time.monotonic() + NETWORK_START_S
+            zero = time.monotonic()
             fleets = [MockFleetProcess(vehicles=n, clock_zero_s=zero, **options) for n in networks]
         super().__init__(fleets, airframes, speedup)
 

@@ -10,6 +10,7 @@ addresses and, after exit, its lag count.
 from __future__ import annotations
 
 import multiprocessing
+import signal
 
 __all__ = ["MockFleetProcess"]
 
@@ -21,6 +22,7 @@ def _serve(conn, kwargs: dict) -> None:
     ((method name, args)) until told to stop, send its lag count."""
     from sitl_mock.fleet import MockFleet
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the parent, which stops us
     with MockFleet(**kwargs) as fleet:
         conn.send(fleet.addresses)
         while (message := conn.recv()) != "stop":

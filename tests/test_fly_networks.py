@@ -1,14 +1,24 @@
 """Fleets over several MAVLink networks: system ids repeat, fleet ids do not (mavlink/networks.py)."""
 
 import asyncio
+import queue
+import random
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
+from child_process import child, group_alive
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
-from gcs_planner.fly import FlyOptions, check_flight, fly
+from gcs_planner.fly import FlyOptions, check_flight, end_summary, fly
 from gcs_planner.mavlink.networks import open_networks
+from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import ScenarioError, load_scenario
 from gcs_planner.telemetry import read_flight
@@ -66,10 +76,13 @@ def test_network_links_route_by_fleet_id():
                 link.subscribe(
                     lambda msg, raw, t, v=vehicle: heard[v].add(msg.get_srcSystem()), sysid=vehicle
                 )
-            beat = await link.wait_for(
-                lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == 257, 5.0
-            )
-            assert beat.type == mavlink.MAV_TYPE_FIXED_WING
+            beats = [
+                await link.wait_for(
+                    lambda m, v=v: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == v, 5.0
+                )
+                for v in (1, 257)
+            ]
+            assert [b.type for b in beats] == [mavlink.MAV_TYPE_QUADROTOR, mavlink.MAV_TYPE_FIXED_WING]
             request = mavlink.MAVLink_command_long_message(
                 257,
                 1,
@@ -120,3 +133,75 @@ def test_a_fleet_over_two_networks_flies_each_vehicle_its_own_mission(tmp_path):
     assert set(flight.positions) == {1, 2, 257, 258}
     assert all(len(t) > 20 for t in flight.positions.values())
     assert {e["sysid"] for _, e in flight.events if e.get("event") == "route_start"} == {1, 2, 257, 258}
+
+
+def _free_port_run(count: int) -> int:
+    """The first of ``count`` consecutive UDP ports on 127.0.0.1 that are free now."""
+    for base in random.Random().sample(range(20000, 60000, 16), 50):
+        socks = []
+        try:
+            for port in range(base, base + count):
+                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                socks.append(s)
+                s.bind(("127.0.0.1", port))
+            return base
+        except OSError:
+            continue
+        finally:
+            for s in socks:
+                s.close()
+    raise RuntimeError("no free port run")
+
+
+def test_sitl_mock_runs_one_process_per_network_reached_by_its_connect_range(tmp_path):
+    """`sitl-mock --vehicles 4 --per-network 2`: two processes, sysids 1-2 on each, and the two
+    --connect ranges it prints reach them as fleet ids 1, 2, 257, 258 on one shared clock; fly with
+    one --connect for the two-network plan is refused before anything is sent."""
+    base = _free_port_run(4)
+    cli = [sys.executable, "-m", "sitl_mock.cli", "--vehicles", "4", "--per-network", "2"]
+    with child([*cli, "--base-port", str(base)], stderr=subprocess.PIPE, text=True) as mock:
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(target=lambda: [lines.put(line) for line in mock.stderr], daemon=True).start()
+        urls = []
+        while len(urls) < 2:
+            line = lines.get(timeout=60)
+            if "--connect" in line:
+                urls.append(line.split("--connect ")[1].rstrip(")\n"))
+        assert urls == [f"udpout:127.0.0.1:{base}-{base + 1}", f"udpout:127.0.0.1:{base + 2}-{base + 3}"]
+
+        async def boot_times() -> dict[int, float]:
+            link = await open_networks([[url] for url in urls], heartbeat_period_s=0.2)
+            await request_streams(link, [1, 2, 257, 258])
+            times: dict[int, float] = {}
+
+            def on_frame(msg, raw, t_s) -> None:
+                if msg.get_type() == "GLOBAL_POSITION_INT":
+                    times[msg.get_srcSystem()] = msg.time_boot_ms / 1000.0 - time.monotonic()
+
+            link.subscribe(on_frame)
+            while len(times) < 4:
+                await asyncio.sleep(0.2)
+            await link.close()
+            return times
+
+        offsets = asyncio.run(asyncio.wait_for(boot_times(), 30.0))
+        assert sorted(offsets) == [1, 2, 257, 258]
+        assert max(offsets.values()) - min(offsets.values()) < 0.5  # one simulated clock (10 Hz reports)
+        argv = ["fly", str(_two_networks(tmp_path)), "-o", str(tmp_path / "out"), "--connect", urls[0]]
+        refused = subprocess.run(
+            [sys.executable, "-m", "gcs_planner.cli", *argv], capture_output=True, text=True
+        )
+        assert refused.returncode == 2 and "one --connect per network" in refused.stderr, refused.stderr
+        assert not (tmp_path / "out").exists()  # refused before anything was written
+        mock.send_signal(signal.SIGINT)
+        assert mock.wait(timeout=30) == 0
+    assert not group_alive(mock.pid)
+
+
+def test_the_end_states_of_a_large_fleet_fit_one_line():
+    states = {s: "landed (disarmed)" for s in [*range(1, 251), *range(257, 507)]} | {
+        7: "holding (mission complete)"
+    }
+    assert end_summary(states) == (
+        "sysid 1-6, 8-250, 257-506 landed (disarmed); sysid 7 holding (mission complete)"
+    )

@@ -66,7 +66,7 @@ from gcs_planner.mavlink.actions import change_speed, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
-from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.link import FLEET_RCVBUF_BYTES, MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.transfer import Timing
@@ -88,7 +88,6 @@ IDLE_LEAD_S = 10.0  # the next idle mission is uploaded this long before the las
 DEADLINE_HORIZON_S = 30.0  # leg-start deadlines searched this far ahead [s]
 UPLOAD_SAFETY = 1.5  # upload estimate = wall time per item x items x speed-up x this (docs/coalition.md)
 UPLOAD_WORKERS = 4
-RCVBUF_BYTES = 4 << 20  # GCS socket receive buffer (Linux caps it at net.core.rmem_max)
 # Mission transfers in flight: the defaults' 1.5 s COUNT re-send is 30 s of flight at speed-up 20
 UPLOAD_TIMING = Timing(count_retry_s=0.25, count_retries=12, ack_timeout_max_s=0.5, item_timeout_max_s=0.5)
 NEXT_REPORT_POLL_S = 0.005  # upload end stamped at the next position report, polled this often [s wall]
@@ -238,7 +237,7 @@ async def run_coalition_hil(
     with vehicles as networks:
         # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
         # message lost when it overflows costs a re-send timer
-        link = await MavlinkLink.open(*networks[0], receive_buffer_bytes=RCVBUF_BYTES)
+        link = await MavlinkLink.open(*networks[0], receive_buffer_bytes=FLEET_RCVBUF_BYTES)
         try:
             with FlightLogger(run.mcap_path, scenario.origin, run.initial, scenario_text) as logger:
                 await run.fly(link, logger)

@@ -24,7 +24,7 @@ from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
 from gcs_planner.conformance import format_report
 from gcs_planner.errors import UserError
-from gcs_planner.fly import FlyOptions, check_flight, fly, networks
+from gcs_planner.fly import FlyOptions, check_flight, check_networks, end_summary, fly, networks
 from gcs_planner.plan import Plan
 from gcs_planner.planning import load_scenario
 from gcs_planner.progress import plan_with_progress, progress_bar
@@ -154,6 +154,8 @@ def run(args: argparse.Namespace) -> int:
     plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
     drift = _drift(args.drift, [v.sysid for v in plan.vehicles])
     check_flight(plan)  # every mission, before anything is written or sent
+    if args.connect and networks(plan) > 1:
+        check_networks(plan, len(args.connect))
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -197,7 +199,7 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
     print(format_report(result.reports))
     if result.end_states:
-        print("end: " + ", ".join(f"sysid {s} {what}" for s, what in sorted(result.end_states.items())))
+        print(f"end: {end_summary(result.end_states)}")
     print(
         f"log: {result.mcap_path}  (open in Foxglove, or `gcs-planner replay {result.mcap_path} --rrd x.rrd`)"
     )

@@ -2,7 +2,8 @@
 
 ``await MavlinkLink.open("udpout:127.0.0.1:14550")`` talks to a vehicle that listens (ArduPilot SITL
 ``udpin``, our sitl-mock); several ``udpout`` URLs share one socket, so one link reaches a whole mock
-fleet (one port per vehicle). ``udpin:0.0.0.0:14550`` listens and answers every peer heard from.
+fleet (one port per vehicle); ``udpout:HOST:FIRST-LAST`` names one remote per port of a range.
+``udpin:0.0.0.0:14550`` listens and answers every peer heard from.
 ``serial:/dev/ttyUSB0:57600`` (baud optional, default 57600) opens a telemetry radio or an
 autopilot's USB port instead (serial_port.py); everything above the transport is the same.
 
@@ -54,13 +55,17 @@ from gcs_planner.mavlink.serial_port import DEFAULT_BAUD, SerialPort  # noqa: E4
 from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
-__all__ = ["DUPLICATE_WINDOW_S", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo", "parse_url"]
+__all__ = [
+    "DUPLICATE_WINDOW_S", "FLEET_RCVBUF_BYTES", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo",
+    "expand_ranges", "parse_url",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
 DUPLICATE_WINDOW_S = 5.0  # two addresses heard within this time with one sysid = duplicate [s]
+FLEET_RCVBUF_BYTES = 4 << 20  # a fleet link's socket receive buffer (Linux caps it at net.core.rmem_max)
 HEARTBEAT_PERIOD_S = 1.0
 _NOT_AUTOPILOT = mavlink.MAV_AUTOPILOT_INVALID  # HEARTBEAT of a camera, gimbal, companion or GCS
 
@@ -117,6 +122,27 @@ def parse_url(url: str) -> tuple[str, Address]:
     return kind, (host, port)
 
 
+MAX_PORT_RANGE = 4096  # ports one udpout range may name
+
+
+def expand_ranges(urls) -> list[str]:
+    """The URLs with each ``udpout:HOST:FIRST-LAST`` replaced by one udpout URL per port."""
+    out = []
+    for url in urls:
+        kind, _, rest = url.partition(":")
+        host, _, ports = rest.rpartition(":")
+        first, dash, last = ports.partition("-")
+        if kind != "udpout" or not dash:
+            out.append(url)
+            continue
+        if not (first.isdigit() and last.isdigit() and 0 < int(first) <= int(last) <= 65535):
+            raise ValueError(f"connection URL {url!r}: expected a port range FIRST-LAST within 1..65535")
+        if int(last) - int(first) >= MAX_PORT_RANGE:
+            raise ValueError(f"connection URL {url!r}: a range names at most {MAX_PORT_RANGE} ports")
+        out += [f"udpout:{host}:{port}" for port in range(int(first), int(last) + 1)]
+    return out
+
+
 class _Protocol(asyncio.DatagramProtocol):
     def __init__(self, link: MavlinkLink) -> None:
         self.link = link
@@ -165,7 +191,7 @@ class MavlinkLink:
         or open one serial port (a serial URL stands alone). ``signing_key``: sign and verify.
         ``receive_buffer_bytes``: the UDP socket's SO_RCVBUF, for bursts from large fleets (the
         kernel may cap it at net.core.rmem_max)."""
-        parsed = [parse_url(u) for u in (url, *more_urls)]
+        parsed = [parse_url(u) for u in expand_ranges((url, *more_urls))]
         link = cls(sysid, compid, signing_key)
         if any(kind == "serial" for kind, _ in parsed):
             if len(parsed) > 1:
