@@ -208,8 +208,12 @@ def test_online_flight_with_a_displaced_vehicle_and_a_lost_one(tmp_path):
     assert not result.failures, result.failures
     assert result.passed, [r for r in result.rows if not r.passed]
     (lost,) = result.lost_awards
-    again = [r for r in result.strikes if r.awarded_s > lost["time_s"] + 1.0]
-    assert len(again) == 1 and again[0].uav != lost["uav"] and again[0].passed
+    handed_on = [e for e in result.events if e["event"] in HANDED_ON and e.get("target") == "T1"]
+    retenders = [f for f in result.formations if f["retender"]]
+    assert len(retenders) == 1 and len(retenders[0]["online_members"]) == 1, (retenders, handed_on[-8:])
+    (member,) = retenders[0]["online_members"]
+    again = [r for r in result.strikes if r.uav == member]
+    assert member != lost["uav"] and len(again) == 1 and again[0].passed, (again, handed_on[-8:])
     assert len(result.strikes) == 8  # seven of the first coalition and the re-awarded one
     members = {e["uav"] for e in result.events if e["event"] == "award" and e["target"] == "T1"}
     assert "U8" not in members or all(r.passed for r in result.rows if r.uav == "U8")

@@ -57,7 +57,7 @@ from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = [
     "DUPLICATE_WINDOW_S", "FLEET_RCVBUF_BYTES", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo",
-    "expand_ranges", "parse_url",
+    "expand_ranges", "first_message", "parse_url",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -297,17 +297,7 @@ class MavlinkLink:
         self, predicate: Callable[[mavlink.MAVLink_message], bool], timeout_s: float
     ) -> mavlink.MAVLink_message:
         """The first message for which ``predicate`` is true; TimeoutError after ``timeout_s``."""
-        future: asyncio.Future = asyncio.get_running_loop().create_future()
-
-        def on_frame(msg: mavlink.MAVLink_message, raw: bytes, t_s: float) -> None:
-            if not future.done() and predicate(msg):
-                future.set_result(msg)
-
-        unsubscribe = self.subscribe(on_frame)
-        try:
-            return await asyncio.wait_for(future, timeout_s)
-        finally:
-            unsubscribe()
+        return await first_message(self.subscribe, predicate, timeout_s)
 
     def _on_datagram(self, data: bytes, addr: Address) -> None:
         """One datagram (or serial read): its frames, each decoded, verified, then delivered."""
@@ -385,6 +375,26 @@ class MavlinkLink:
 
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
+
+
+async def first_message(
+    subscribe: Callable[[Callback], Callable[[], None]],
+    predicate: Callable[[mavlink.MAVLink_message], bool],
+    timeout_s: float,
+) -> mavlink.MAVLink_message:
+    """The first message a ``subscribe(callback)`` delivers for which ``predicate`` is true;
+    TimeoutError after ``timeout_s``."""
+    future: asyncio.Future = asyncio.get_running_loop().create_future()
+
+    def on_frame(msg: mavlink.MAVLink_message, raw: bytes, t_s: float) -> None:
+        if not future.done() and predicate(msg):
+            future.set_result(msg)
+
+    unsubscribe = subscribe(on_frame)
+    try:
+        return await asyncio.wait_for(future, timeout_s)
+    finally:
+        unsubscribe()
 
 
 def _resolve(host: str) -> str:

@@ -19,9 +19,10 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.fleet_ids import fleet_id, network_of, wire_sysid
-from gcs_planner.mavlink.link import Address, Callback, MavlinkLink, VehicleInfo
+from gcs_planner.mavlink.link import Address, Callback, MavlinkLink, VehicleInfo, first_message
 
 __all__ = ["NetworkLinks", "open_networks"]
+
 
 async def open_networks(networks: Sequence[Sequence[str]], **options) -> MavlinkLink | NetworkLinks:
     """A MavlinkLink to one network's URLs, or NetworkLinks over several (``options``: MavlinkLink.open's)."""
@@ -105,17 +106,7 @@ class NetworkLinks:
 
     async def wait_for(self, predicate: Callable[[mavlink.MAVLink_message], bool], timeout_s: float):
         """The first message (in fleet ids) for which ``predicate`` is true; TimeoutError after timeout_s."""
-        future: asyncio.Future = asyncio.get_running_loop().create_future()
-
-        def on_frame(msg, raw: bytes, t_s: float) -> None:
-            if not future.done() and predicate(msg):
-                future.set_result(msg)
-
-        unsubscribe = self.subscribe(on_frame)
-        try:
-            return await asyncio.wait_for(future, timeout_s)
-        finally:
-            unsubscribe()
+        return await first_message(self.subscribe, predicate, timeout_s)
 
     def check_target(self, sysid: int) -> None:
         self._link(sysid).check_target(wire_sysid(sysid))
