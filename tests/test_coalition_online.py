@@ -195,14 +195,14 @@ def test_paper_scenario_flown_online_every_task_on_time_and_angle(tmp_path):
     assert {"tender", "bid", "formed", "award", "recon_done"} <= {e["event"] for e in logged}
 
 
-def test_online_flight_with_a_displaced_vehicle_and_a_lost_one(tmp_path):
+def test_online_flight_with_a_displaced_vehicle_a_lost_one_and_a_pop_up_threat(tmp_path):
     """T1's window: U8 flies 400 m off its plan until after the tender; the third awarded member's
-    link is cut 8 s after the award (mid-leg): its strike is re-awarded and flown. (A pop-up threat
-    is tested on the engine above: in flight, later legs planned around an injected threat near
-    the converging strike legs missed their time in 2 of 6 runs; docs/coalition.md, Left.)"""
+    link is cut 8 s after the award (mid-leg): its strike is re-awarded and flown; 2 s after the
+    award an 80 m pop-up threat is put across the fifth member's leg: that member's leg is
+    re-planned in flight, its flown track stays out of the threat and every strike is on time."""
     options = HilOptions(
         out_dir=tmp_path, speedup=5.0, online=True, targets=("T1",), offset_m={"U8": (400.0, 16.0)},
-        faults=(Fault("cut", "T1", 2, 8.0),),
+        faults=(Fault("cut", "T1", 2, 8.0), Fault("threat", "T1", 4, 2.0, 80.0)),
     )  # fmt: skip
     result = asyncio.run(run_online(load_scenario(SCENARIO), options, MockVehiclesProcess))
     assert not result.failures, result.failures
@@ -217,3 +217,12 @@ def test_online_flight_with_a_displaced_vehicle_and_a_lost_one(tmp_path):
     assert len(result.strikes) == 8  # seven of the first coalition and the re-awarded one
     members = {e["uav"] for e in result.events if e["event"] == "award" and e["target"] == "T1"}
     assert "U8" not in members or all(r.passed for r in result.rows if r.uav == "U8")
+    (threat,) = [e for e in result.events if e["event"] == "threat_appear" and e["radius_m"] == 80.0]
+    replanned = {e["uav"] for e in result.events if e["event"] == "replan" and e["t_s"] == threat["t_s"]}
+    assert replanned and replanned <= members, (threat, replanned)
+    sysids = {e["uav"]: e["sysid"] for e in result.events if e["event"] == "award"}
+    for uav in replanned:
+        t, xy = result.tracks[sysids[uav]]
+        after = t >= threat["t_s"]
+        miss = np.hypot(xy[after, 0] - threat["x"], xy[after, 1] - threat["y"]).min()
+        assert miss > threat["radius_m"], (uav, miss)
