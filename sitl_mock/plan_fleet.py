@@ -15,6 +15,7 @@ keeper to catch up. A fixed wing's home is its take-off climb run south of its f
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Sequence
 from dataclasses import replace
@@ -84,20 +85,14 @@ class _PlanFleet:
         self.fleets, self.airframes, self.speedup = fleets, airframes, float(speedup)
 
     def __enter__(self) -> list[list[str]]:
-        started = []
-        try:
+        with contextlib.ExitStack() as stack:  # a fleet that fails to start stops those started
             for fleet in self.fleets:
-                fleet.__enter__()
-                started.append(fleet)
-        except BaseException:
-            for fleet in started:
-                fleet.__exit__(None, None, None)
-            raise
+                stack.enter_context(fleet)
+            self._running = stack.pop_all()
         return [[f"udpout:{h}:{p}" for h, p in fleet.addresses] for fleet in self.fleets]
 
     def __exit__(self, *exc: object) -> None:
-        for fleet in self.fleets:
-            fleet.__exit__(*exc)
+        self._running.__exit__(*exc)
 
     def accel_mps2(self, sysid: int) -> float:
         return self.airframes[sysid].accel_mps2
