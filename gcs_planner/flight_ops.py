@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
+from collections.abc import Callable
 
 import numpy as np
 
@@ -32,7 +33,8 @@ from gcs_planner.plan import Plan
 from gcs_planner.timekeeping import ScheduleKeeper
 
 __all__ = [
-    "KEEPER_PERIOD_S", "TrackRecorder", "accel_lead_s", "build_missions", "keep_schedule", "route_seq",
+    "KEEPER_PERIOD_S", "FrameClock", "TrackRecorder", "accel_lead_s", "boot_clock", "build_missions",
+    "keep_schedule", "receive_clock", "route_seq",
     "start_routes", "take_off_all", "vehicle_quirks", "wait_for_vehicles", "wait_until_done",
 ]  # fmt: skip
 
@@ -47,12 +49,26 @@ NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
 
 
+FrameClock = Callable[[object, float], float]  # (message, receive time [Unix s]) -> flight time [s]
+
+
+def boot_clock(msg, t_s: float) -> float:
+    """The vehicle's own time_boot_ms: one simulated clock when the vehicles share it (the mock)."""
+    return msg.time_boot_ms / 1000.0
+
+
+def receive_clock(rate: float = 1.0, zero_s: float = 0.0) -> FrameClock:
+    """The GCS's receive time since ``zero_s``, times ``rate`` (the vehicles' speed-up): one clock
+    for vehicles that each boot on a clock of their own (real autopilots, several SITLs)."""
+    return lambda msg, t_s: (t_s - zero_s) * rate
+
+
 class TrackRecorder:
     """Collects each vehicle's positions from the link's frames (completion is VehicleStatus's)."""
 
-    def __init__(self, origin: Origin, sim_clock: bool, sysids) -> None:
+    def __init__(self, origin: Origin, clock: FrameClock, sysids) -> None:
         self.origin = origin
-        self.sim_clock = sim_clock
+        self.clock = clock
         self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in sysids}
         self.completed: dict[int, bool] = {}
 
@@ -60,8 +76,7 @@ class TrackRecorder:
         sysid = msg.get_srcSystem()
         if sysid not in self.samples or msg.get_type() != "GLOBAL_POSITION_INT":
             return
-        t = msg.time_boot_ms / 1000.0 if self.sim_clock else t_s
-        self.samples[sysid].append((t, msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
+        self.samples[sysid].append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
 
     def latest(self, sysid: int) -> tuple[float, np.ndarray] | None:
         """Time [s] and ENU position [m] of the vehicle's newest position report."""

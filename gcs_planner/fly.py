@@ -41,7 +41,9 @@ from gcs_planner.fleet_ids import network_of, wire_sysid
 from gcs_planner.flight_ops import (
     TrackRecorder,
     accel_lead_s,
+    boot_clock,
     build_missions,
+    receive_clock,
     start_routes,
     take_off_all,
     vehicle_quirks,
@@ -210,7 +212,8 @@ class _Flight:
         self.sysids = [vp.sysid for vp in plan.vehicles]
         self.mcap_path = options.out_dir / "flight.mcap"
         self.tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
-        self.recorder = TrackRecorder(plan.origin, vehicles.simulated, self.sysids)
+        clock = boot_clock if vehicles.simulated else receive_clock()
+        self.recorder = TrackRecorder(plan.origin, clock, self.sysids)
         self.quirks: dict[int, AutopilotQuirks] = {}
         self.uploads: dict[int, VehicleResult] = {}
         self.end_states: dict[int, str] = {}

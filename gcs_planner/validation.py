@@ -258,3 +258,18 @@ def number_flag(
 def _short(value: Any) -> str:
     text = repr(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+def sysids_flag(text: str) -> frozenset[int]:
+    """An argparse ``type``: system ids as "1,5,8" or ranges "1-3,7", each 1..255."""
+    ids: set[int] = set()
+    for part in text.split(","):
+        first, _, last = part.strip().partition("-")
+        try:
+            lo, hi = int(first), int(last or first)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be sysids like 1,5,8 or 1-3, got {text!r}") from None
+        if not 1 <= lo <= hi <= 255:
+            raise argparse.ArgumentTypeError(f"sysids are 1..255 and ranges run upwards, got {part!r}")
+        ids.update(range(lo, hi + 1))
+    return frozenset(ids)

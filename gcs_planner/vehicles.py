@@ -16,7 +16,7 @@ from typing import Protocol
 from gcs_planner.errors import UserError
 from gcs_planner.plan import VehiclePlan
 
-__all__ = ["ROUTE_ACCEL_MPS2", "ConnectedVehicles", "VehicleSource", "mock_vehicles"]
+__all__ = ["ROUTE_ACCEL_MPS2", "ConnectedVehicles", "MixedVehicles", "VehicleSource", "mock_vehicles"]
 
 ROUTE_ACCEL_MPS2 = 2.5  # real vehicles' assumed acceleration from the hover (ArduCopter WPNAV_ACCEL)
 ENTRY_POINT_GROUP = "gcs_planner.vehicle_sources"
@@ -49,14 +49,15 @@ class VehicleSource(Protocol):
 
 class ConnectedVehicles:
     """Vehicles this tool does not start: real autopilots or SITL reached at ``urls``, or with
-    ``per_network``, each URL a network of its own (network k: the k-th URL)."""
+    ``per_network``, each URL a network of its own (network k: the k-th URL). ``speedup``: the
+    rate their clocks run at (1 for real vehicles; SITL's --speedup)."""
 
     simulated = False
-    speedup = 1.0
     lag_events = 0
 
-    def __init__(self, urls: Sequence[str], per_network: bool = False) -> None:
+    def __init__(self, urls: Sequence[str], per_network: bool = False, speedup: float = 1.0) -> None:
         self.networks = [[u] for u in urls] if per_network else [list(urls)]
+        self.speedup = float(speedup)
 
     def __enter__(self) -> list[list[str]]:
         return self.networks
@@ -69,6 +70,44 @@ class ConnectedVehicles:
 
     def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
         raise UserError("--drift injects a fault into mock vehicles; it cannot act on connected vehicles")
+
+
+class MixedVehicles:
+    """Some vehicles connected (``connected``: real or SITL), the rest mock vehicles (``mock``),
+    on one network and one link. Their clocks differ, so the flight times frames on receipt
+    (``simulated`` is False); the mock runs at the connected vehicles' rate."""
+
+    simulated = False
+
+    def __init__(self, mock: VehicleSource, connected: ConnectedVehicles, mock_sysids: set[int]) -> None:
+        self.mock, self.connected, self.mock_sysids = mock, connected, mock_sysids
+        self.speedup = connected.speedup
+
+    def __enter__(self) -> list[list[str]]:
+        (mock_urls,) = self.mock.__enter__()
+        return [mock_urls + self.connected.networks[0]]
+
+    def __exit__(self, *exc: object) -> None:
+        self.mock.__exit__(*exc)
+
+    def _source(self, sysid: int) -> VehicleSource:
+        return self.mock if sysid in self.mock_sysids else self.connected
+
+    def accel_mps2(self, sysid: int) -> float:
+        return self._source(sysid).accel_mps2(sysid)
+
+    def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
+        self._source(sysid).set_drift(sysid, east_mps, north_mps)
+
+    def cut_link(self, sysid: int) -> None:
+        """A mock vehicle's link goes dead (fault injection); a connected vehicle's cannot be cut."""
+        if sysid not in self.mock_sysids:
+            raise UserError(f"sysid {sysid} is connected: only a mock vehicle's link can be cut")
+        self.mock.cut_link(sysid)
+
+    @property
+    def lag_events(self) -> int:
+        return self.mock.lag_events
 
 
 def mock_vehicles(kind: str, plans: Sequence[VehiclePlan], **options) -> VehicleSource:

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gcs_planner.coalition_hil.tracks import pose_at
+from gcs_planner.flight_ops import FrameClock, boot_clock
 from gcs_planner.geo import Origin, geodetic_to_enu
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.track import Leg
@@ -97,19 +98,18 @@ def live_state(rows, origin: Origin, max_rate_rps: float, fit_s: float = FIT_S) 
 
 
 class Telemetry:
-    """The newest GLOBAL_POSITION_INT reports of each vehicle (simulated clock)."""
+    """The newest GLOBAL_POSITION_INT reports of each vehicle, timed by ``clock`` (flight_ops)."""
 
-    def __init__(self, sysids, keep: int = 64) -> None:
+    def __init__(self, sysids, clock: FrameClock = boot_clock, keep: int = 64) -> None:
         self.rows = {s: deque(maxlen=keep) for s in sysids}
+        self.clock = clock
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
         if msg.get_type() != "GLOBAL_POSITION_INT":
             return
         rows = self.rows.get(msg.get_srcSystem())
         if rows is not None:
-            rows.append(
-                (msg.time_boot_ms / 1000.0, msg.lat / 1e7, msg.lon / 1e7, msg.vy / 100.0, msg.vx / 100.0)
-            )
+            rows.append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, msg.vy / 100.0, msg.vx / 100.0))
 
 
 def goal_pose(world, award: dict) -> np.ndarray:

@@ -321,7 +321,7 @@ class OnlineRun(_HilRun):
         add_prediction_errors(self.uploads, flown)
         result = HilResult(
             rows, self.uploads, self.mcap_path, self.t_start, wall_s, lag_events, self.failures + missing,
-            flown, self.flown_legs,
+            flown, self.flown_legs, end_states=self.end_states,
         )  # fmt: skip
         result.events = list(self.engine.events)
         result.formations = formation_rows(self.sim.events, self.engine.events, self.targets)
@@ -335,4 +335,3 @@ class OnlineRun(_HilRun):
 async def run_online(scenario: Scenario, options: HilOptions, vehicles_for: VehiclesFor) -> HilResult:
     """The online coalition run (module docstring) on ``vehicles_for``'s fleet."""
     return await run_coalition_hil(scenario, options, vehicles_for, OnlineRun)
-

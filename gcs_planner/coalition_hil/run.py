@@ -55,14 +55,16 @@ from gcs_planner.flight_ops import (
     KEEPER_PERIOD_S,
     NAV_TAKEOFF,
     TrackRecorder,
+    boot_clock,
+    receive_clock,
     start_routes,
     take_off_all,
     vehicle_quirks,
     wait_for_vehicles,
 )
-from gcs_planner.fly import HEARTBEAT_WAIT_S
+from gcs_planner.fly import HEARTBEAT_WAIT_S, REAL_HEARTBEAT_WAIT_S
 from gcs_planner.geo import Origin
-from gcs_planner.mavlink.actions import change_speed, start_mission_at
+from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
@@ -79,7 +81,10 @@ from gcs_planner.telemetry import FlightLogger
 from gcs_planner.timekeeping import ScheduleKeeper
 from gcs_planner.vehicles import VehicleSource
 
-__all__ = ["UPLOAD_SAFETY", "HilOptions", "HilResult", "UploadTiming", "VehiclesFor", "run_coalition_hil"]
+__all__ = [
+    "UPLOAD_SAFETY", "HilOptions", "HilResult", "UploadTiming", "VehiclesFor", "initial_plans",
+    "run_coalition_hil",
+]  # fmt: skip
 
 NAV_WAYPOINT = 16
 START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
@@ -137,6 +142,7 @@ class HilResult:
     released_awards: list[dict] = field(default_factory=list)  # online: awards handed on (late live leg)
     tender_compute_s: list[float] = field(default_factory=list)  # online: wall time per formation
     tender_cpu_s: list[float] = field(default_factory=list)  # online: CPU time per formation (closed tender)
+    end_states: dict[int, str] = field(default_factory=dict)  # connected vehicles: how each was left
 
     @property
     def strikes(self) -> list[TaskRow]:
@@ -232,6 +238,8 @@ async def run_coalition_hil(
     run = (runner or _HilRun)(scenario, options)
     vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
     run.vehicles = vehicles
+    if not vehicles.simulated:  # vehicles on clocks of their own: frames timed on receipt
+        run.recorder.clock = run.telemetry.clock = receive_clock(vehicles.speedup, time.time())
     options.out_dir.mkdir(parents=True, exist_ok=True)
     scenario_text = scenario.path.read_text() if scenario.path else None
     with vehicles as networks:
@@ -244,6 +252,11 @@ async def run_coalition_hil(
         finally:
             await link.close()
     return run.result(vehicles.lag_events, time.monotonic() - t_wall)
+
+
+def initial_plans(scenario: Scenario, options: HilOptions, runner: type | None = None) -> list[VehiclePlan]:
+    """The first mission of every vehicle the run flies (what ``vehicles_for`` gets)."""
+    return (runner or _HilRun)(scenario, options).initial.vehicles
 
 
 class _HilRun:
@@ -279,7 +292,7 @@ class _HilRun:
         self.uploads: list[dict] = []
         self.failures: list[str] = []
         self.flown_legs: dict[tuple[str, str], Leg] = {}
-        self.recorder = TrackRecorder(scenario.origin, True, list(self.missions))
+        self.recorder = TrackRecorder(scenario.origin, boot_clock, list(self.missions))
         self.telemetry = Telemetry(set(self.flying))
         self.keeper = ScheduleKeeper()
         self.current = {vp.sysid: vp for vp in self.initial.vehicles}
@@ -287,6 +300,7 @@ class _HilRun:
         self.due: list[_Job] = []
         self.queue: asyncio.PriorityQueue[tuple[tuple, int, _Job]] = asyncio.PriorityQueue()
         self.order = itertools.count()
+        self.end_states: dict[int, str] = {}  # connected vehicles: how each was left (safe end)
 
     # --- clocks and estimates ----------------------------------------------------------------
     def scenario_now(self) -> float:
@@ -318,12 +332,25 @@ class _HilRun:
 
     # --- the fleet ---------------------------------------------------------------------------
     async def fly(self, link: MavlinkLink, logger: FlightLogger) -> None:
-        """Upload the initial missions, take off, start the routes, then serve the awards."""
+        """Fly the run; connected vehicles (which nobody stops with the run) are then sent home,
+        however it ended (flight_ops' safe end: RTL when airborne)."""
         for subscriber in (logger, self.recorder, self.telemetry):
             link.subscribe(subscriber.on_frame)
-        await wait_for_vehicles(link, self.flying, HEARTBEAT_WAIT_S)
+        wait_s = HEARTBEAT_WAIT_S if self.vehicles.simulated else REAL_HEARTBEAT_WAIT_S
+        await wait_for_vehicles(link, self.flying, wait_s)
         self.quirks = vehicle_quirks(link, self.flying)
         status = VehicleStatus(link, self.flying)
+        try:
+            await self._fly(link, logger, status)
+        finally:
+            if not self.vehicles.simulated:
+                self.end_states = await asyncio.shield(safe_end(link, status, self.quirks))
+                states = {str(k): v for k, v in self.end_states.items()}
+                logger.log_event({"event": "safe_end", "states": states})
+            status.close()
+
+    async def _fly(self, link: MavlinkLink, logger: FlightLogger, status: VehicleStatus) -> None:
+        """Upload the initial missions, take off, start the routes, then serve the awards."""
         await request_streams(link, self.flying)
         t_up = time.monotonic()
         first = await upload_fleet(link, self.missions, workers=8)
@@ -529,7 +556,7 @@ class _HilRun:
         add_prediction_errors(self.uploads, flown)
         return HilResult(
             rows, self.uploads, self.mcap_path, self.t_start, wall_s, lag_events, self.failures + missing,
-            flown, self.flown_legs,
+            flown, self.flown_legs, end_states=self.end_states,
         )  # fmt: skip
 
 

@@ -1,5 +1,8 @@
 """Coalition HIL run: fly mock fixed wings and upload each coalition award to them in flight.
 
+--connect URL flies real ArduPlanes or SITL instead (all, or the --connected sysids, the others
+mock ones on the same link); --homes prints where each connected vehicle should start.
+
 By default the contract net runs online (gcs_planner/coalition_hil/online_run.py): every UAV of
 the scenario is a mock fixed wing, and who tenders, who bids and who wins which task, when and at
 which angle is decided in flight from the vehicles' telemetry; the event simulation is run too,
@@ -21,11 +24,15 @@ from pathlib import Path
 from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
 from gcs_planner.coalition_hil.online_run import OnlineRun
 from gcs_planner.coalition_hil.report import format_formations
+from gcs_planner.coalition_hil.run import initial_plans
+from gcs_planner.coalition_hil.starts import format_homes, starts
 from gcs_planner.commands.plan import SEED
 from gcs_planner.errors import UserError
+from gcs_planner.fly import end_summary
 from gcs_planner.planning import load_scenario
-from gcs_planner.validation import MAX_DURATION_S, number_flag, output_dir
-from gcs_planner.vehicles import mock_vehicles
+from gcs_planner.planning.coalition import load_world
+from gcs_planner.validation import MAX_DURATION_S, number_flag, output_dir, sysids_flag
+from gcs_planner.vehicles import ConnectedVehicles, MixedVehicles, mock_vehicles
 
 SPEEDUP = number_flag(0, 1000, lo_open=True)  # mock simulation speed-up
 
@@ -33,7 +40,30 @@ SPEEDUP = number_flag(0, 1000, lo_open=True)  # mock simulation speed-up
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="coalition scenario (e.g. missions/coalition_paper.toml)")
     p.add_argument("-o", "--out", default="out", help="output folder [out]")
-    p.add_argument("--speedup", type=SPEEDUP, default=5.0, help="mock simulation speed-up [5]")
+    p.add_argument(
+        "--speedup",
+        type=SPEEDUP,
+        default=None,
+        help="mock simulation speed-up; with --connect, the rate the connected vehicles run at (SITL"
+        " --speedup) [5; 1 with --connect]",
+    )
+    p.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="URL",
+        help="real vehicles / SITL (udpin:HOST:PORT or udpout:HOST:PORT; repeatable)",
+    )
+    p.add_argument(
+        "--connected",
+        type=sysids_flag,
+        default=None,
+        metavar="SYSIDS",
+        help="with --connect: the vehicles reached there (e.g. 1,5,8 or 1-3); the others are mock [all]",
+    )
+    p.add_argument(
+        "--homes", action="store_true", help="print each connected vehicle's start (SITL --home) and exit"
+    )
     p.add_argument("--seed", type=SEED, default=None, help="simulation seed (default: the file's)")
     p.add_argument("--targets", default="", help="comma-separated target ids whose awards are flown [all]")
     p.add_argument(
@@ -68,7 +98,31 @@ def mock_fleet_process(plans, origin, speedup):
     return mock_vehicles("mock-process", plans, origin=origin, speedup=speedup)
 
 
+def connected_fleet(urls: list[str], connected: frozenset[int] | None):
+    """The run's vehicles when some (``connected``; None: all) are reached at ``urls``: those
+    connected, the others mock fixed wings in their own process, all on one link."""
+
+    def vehicles_for(plans, origin, speedup):
+        reached = ConnectedVehicles(urls, speedup=speedup)
+        mock = [vp for vp in plans if connected is not None and vp.sysid not in connected]
+        if not mock:
+            return reached
+        return MixedVehicles(mock_fleet_process(mock, origin, speedup), reached, {vp.sysid for vp in mock})
+
+    return vehicles_for
+
+
+def _check_connected(args: argparse.Namespace, sysids: set[int]) -> None:
+    if args.connected is not None and not args.connect:
+        raise UserError("--connected names vehicles reached over --connect: give --connect URL too")
+    unknown = sorted((args.connected or set()) - sysids)
+    if unknown:
+        raise UserError(f"--connected: sysid {unknown} not in the scenario (its sysids: {sorted(sysids)})")
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.speedup is None:
+        args.speedup = 1.0 if args.connect else 5.0
     if args.speedup <= 0:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
     if args.upload_safety <= 0:
@@ -81,6 +135,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(
             f"{args.scenario}: [planner] name must be 'coalition', got {scenario.planner.get('name')!r}"
         )
+    _check_connected(args, {u.sysid for u in load_world(scenario).uavs})
     targets = tuple(t for t in args.targets.split(",") if t) or None
     options = HilOptions(
         out_dir=Path(args.out),
@@ -95,8 +150,12 @@ def run(args: argparse.Namespace) -> int:
         online=not args.offline,
     )
     runner = None if args.offline else OnlineRun
+    if args.homes:
+        print(format_homes(starts(initial_plans(scenario, options, runner), scenario.origin), args.connected))
+        return 0
+    vehicles_for = connected_fleet(args.connect, args.connected) if args.connect else mock_fleet_process
     try:
-        result = asyncio.run(run_coalition_hil(scenario, options, mock_fleet_process, runner))
+        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, runner))
     except TimeoutError as exc:  # the mock fleet's process did not start
         raise UserError(str(exc)) from None
     print(format_strike_report(result.rows))
@@ -107,6 +166,8 @@ def run(args: argparse.Namespace) -> int:
         print(format_formations(result.formations))
         cpu = max(result.tender_cpu_s, default=0.0)
         print(f"{len(result.tender_cpu_s)} formations in flight, CPU up to {cpu * 1000:.1f} ms each")
+    if result.end_states:
+        print(f"end: {end_summary(result.end_states)}")
     for f in result.failures:
         print(f"failure: {f}")
     return 0 if result.passed else 1

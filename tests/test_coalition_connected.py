@@ -1,0 +1,80 @@
+"""fly-coalition with connected vehicles (--connect): vehicles this tool does not start, on clocks of
+their own, some of them beside mock ones on one link, started where --homes says, sent home after."""
+
+import asyncio
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs_planner.cli import main
+from gcs_planner.coalition_hil import HilOptions
+from gcs_planner.coalition_hil.online_run import OnlineRun
+from gcs_planner.coalition_hil.run import initial_plans, run_coalition_hil
+from gcs_planner.coalition_hil.starts import CLIMB_RUN_PER_M
+from gcs_planner.commands.fly_coalition import connected_fleet
+from gcs_planner.geo import geodetic_to_enu
+from gcs_planner.scenario import load_scenario
+from gcs_planner.telemetry import read_flight
+from sitl_mock.plan_fleet import MockVehiclesProcess
+
+SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
+CONNECTED = frozenset({1, 8, 11, 13})  # U1 does T1's recon and leads its tender
+
+
+def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path):
+    """The connected vehicles are a second mock fleet process reached over --connect: its clock
+    (time_boot_ms) starts apart from the tool's own mock fleet, so only frames timed on receipt
+    put both on one flight clock, and every strike and assessment is still on time and angle."""
+    scenario = load_scenario(SCENARIO)
+    options = HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",), online=True)
+    plans = [vp for vp in initial_plans(scenario, options, OnlineRun) if vp.sysid in CONNECTED]
+    with MockVehiclesProcess(plans, scenario.origin, options.speedup) as networks:
+        vehicles_for = connected_fleet(networks[0], CONNECTED)
+        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, OnlineRun))
+    assert not result.failures, result.failures
+    assert len(result.rows) == 10 and all(r.passed for r in result.rows), result.rows
+    tenders = [e for e in result.events if e["event"] == "tender" and e["target"] == "T1"]
+    assert tenders and tenders[0]["uav"] == "U1", tenders[:1]  # recon on the connected U1's telemetry
+    assert set(result.end_states.values()) == {"returning (RTL)"}, result.end_states
+    flight = read_flight(result.mcap_path)
+    assert sorted(flight.positions) == list(range(1, 33)), sorted(flight.positions)
+    assert any(e["event"] == "safe_end" for _, e in flight.events)
+
+
+def test_homes_put_each_connected_plane_one_climb_run_behind_its_first_waypoint(capsys):
+    assert main(["fly-coalition", str(SCENARIO), "--targets", "T1", "--connect", "udpin:127.0.0.1:14550",
+                 "--connected", "1,8-9", "--homes"]) == 0  # fmt: skip
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[1] for line in lines] == ["1", "8", "9"]
+    scenario = load_scenario(SCENARIO)
+    options = HilOptions(targets=("T1",), online=True)
+    plans = {vp.sysid: vp for vp in initial_plans(scenario, options, OnlineRun)}
+    for line in lines:
+        lat, lon, alt, heading = map(float, line.split("--home ")[1].split()[0].split(","))
+        vp = plans[int(line.split()[1])]
+        x, y, z = geodetic_to_enu(lat, lon, alt, scenario.origin)
+        wp0, wp1 = vp.waypoints[0], vp.waypoints[1]
+        assert abs(z) < 0.5  # on the ground at the scenario's origin altitude
+        assert math.hypot(wp0[0] - x, wp0[1] - y) == pytest.approx(wp0[2] * CLIMB_RUN_PER_M, rel=1e-3)
+        along = np.degrees(np.arctan2(wp1[0] - wp0[0], wp1[1] - wp0[1])) % 360.0
+        towards = np.degrees(np.arctan2(wp0[0] - x, wp0[1] - y)) % 360.0
+        assert abs(math.remainder(heading - along, 360.0)) < 1.0
+        assert abs(math.remainder(towards - along, 360.0)) < 0.1  # the climb runs along the lead-in
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--connected", "1"], "--connected names vehicles reached over --connect"),
+        (["--connect", "udpin:127.0.0.1:14550", "--connected", "1,77"], "--connected: sysid [77] not in"),
+        (["--connect", "udpin:127.0.0.1:14550", "--connected", "3-1"], "ranges run upwards"),
+        (["--connect", "udpin:127.0.0.1:14550", "--connected", "0"], "sysids are 1..255"),
+    ],
+)
+def test_connected_vehicles_badly_named_are_refused_in_one_line(argv, message, capsys, tmp_path):
+    assert main(["fly-coalition", str(SCENARIO), "-o", str(tmp_path / "out"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
