@@ -38,6 +38,7 @@ from pathlib import Path
 from gcs_planner.conformance import MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of, wire_sysid
+from gcs_planner.flight_limits import check_limits, read_limits
 from gcs_planner.flight_ops import (
     TrackRecorder,
     accel_lead_s,
@@ -215,6 +216,7 @@ class _Flight:
         clock = boot_clock if vehicles.simulated else receive_clock()
         self.recorder = TrackRecorder(plan.origin, clock, self.sysids)
         self.quirks: dict[int, AutopilotQuirks] = {}
+        self.limits: dict = {}  # sysid: flight_limits.FlightLimits
         self.uploads: dict[int, VehicleResult] = {}
         self.end_states: dict[int, str] = {}
         self.log_errors: list[str] = []
@@ -257,6 +259,8 @@ class _Flight:
         missions = build_missions(self.plan, self.quirks)
         self.status.last_seq = {s: len(m) - 1 for s, m in missions.items()}
         await request_streams(link, self.sysids)
+        self.limits = await read_limits(link, self.sysids, self.quirks)
+        check_limits(self.plan.vehicles, self.limits, 1.0)
         progress = self.progress
         self.uploads = await upload_fleet(
             link,
@@ -295,6 +299,8 @@ class _Flight:
             keeper = ScheduleKeeper()
             for vp in plan.vehicles:
                 keeper.add(vp)
+            for sysid, lim in self.limits.items():
+                keeper.limit(sysid, lim.min_mps, lim.max_mps)
         await wait_until_done(
             link, self.recorder, self.status, plan, speedup, options.timeout_factor, self.progress, keeper,
             self.route_t0_s, self.quirks,

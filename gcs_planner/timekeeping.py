@@ -10,7 +10,9 @@ along-track error over ``horizon_s``.
 
 Choices: progress is the arc length of the nearest planned-path point, searched only ahead of the
 last progress (paths may cross themselves); the commanded speed is clamped to
-[``min_factor``, ``max_factor``] x the planned speed there; a new command is sent only when it
+[``min_factor``, ``max_factor``] x the planned speed there, and to the vehicle's own speed range
+where it has one (``limit``: ArduPlane refuses an airspeed outside it and keeps the old one); a
+new command is sent only when it
 differs from the last by more than ``deadband_mps`` (set-points are periodic, so a lost one is
 replaced by the next rather than retried).
 """
@@ -47,6 +49,11 @@ class ScheduleKeeper:
     max_factor: float = 1.3
     deadband_mps: float = 0.2
     routes: dict[int, _Route] = field(default_factory=dict)
+    ranges: dict[int, tuple[float, float]] = field(default_factory=dict)  # sysid: (lo, hi) [m/s]
+
+    def limit(self, sysid: int, lo_mps: float, hi_mps: float) -> None:
+        """Keep the vehicle's commands within [lo_mps, hi_mps] (its autopilot's speed range)."""
+        self.ranges[sysid] = (lo_mps, hi_mps)
 
     def add(self, vp: VehiclePlan) -> None:
         seg = np.linalg.norm(np.diff(vp.path, axis=0), axis=1)
@@ -87,6 +94,8 @@ class ScheduleKeeper:
         command = float(
             np.clip(nominal + error_m / self.horizon_s, self.min_factor * nominal, self.max_factor * nominal)
         )
+        if sysid in self.ranges:
+            command = float(np.clip(command, *self.ranges[sysid]))
         if abs(command - route.last_command_mps) <= self.deadband_mps:
             return None
         route.last_command_mps = command

@@ -22,7 +22,8 @@ Choices where the spec or the autopilots differ:
 - After the last item the vehicle holds (hover / loiter circle) in AUTO; mission_state COMPLETE.
 - Per autopilot (profiles.FlightRules): ArduCopter's final NAV_LAND ends in a disarm that resets
   the mission (no ITEM_REACHED, no COMPLETE); ArduPlane runs NAV_RETURN_TO_LAUNCH by switching
-  to mode RTL; ArduPlane reads DO_CHANGE_SPEED type 1 as a minimum ground speed.
+  to mode RTL; ArduPlane reads DO_CHANGE_SPEED type 1 as a minimum ground speed and ignores an
+  airspeed outside its AIRSPEED_MIN..AIRSPEED_MAX.
 - RTL: to home at max(current altitude, ``RTL_ALT_M`` above home), then a multirotor lands and
   disarms, a fixed wing circles home.
 - Item altitudes: frames GLOBAL(_INT) are AMSL, GLOBAL_RELATIVE_ALT(_INT) and the terrain frames
@@ -75,6 +76,7 @@ class Navigator:
         landed: Callable[[], None],
         flight: FlightRules,
         enter_mode: Callable[[str], bool],
+        airspeed_allowed: Callable[[float], bool] = lambda speed_mps: True,
     ) -> None:
         self.world, self.i, self.airframe = world, index, airframe
         self.home_enu_m = np.asarray(home_enu_m, dtype=float)
@@ -82,6 +84,7 @@ class Navigator:
         self._emit_reached, self._emit_progress = emit_reached, emit_progress
         self._emit_text, self._landed = emit_text, landed
         self.flight, self._enter_mode = flight, enter_mode
+        self._airspeed_allowed = airspeed_allowed
         self.items: list[MissionItem] = []
         self._targets = np.zeros((0, 3))
         self.seq = 0
@@ -280,6 +283,8 @@ class Navigator:
         elif cmd == DO_CHANGE_SPEED:
             if round(item.param1) == 1 and self.flight.groundspeed_is_minimum:
                 pass  # a minimum ground speed: the cruise speed stays
+            elif round(item.param1) == 0 and not self._airspeed_allowed(item.param2):
+                pass  # outside the plane's airspeed range: ignored (FlightRules.airspeed_range)
             elif item.param2 > 0:
                 kin.speed_cmd[i] = float(np.clip(item.param2, af.min_speed_mps, af.max_speed_mps))
             self._item_done(seq)

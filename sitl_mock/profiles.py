@@ -63,6 +63,10 @@ class FlightRules:
         item before NAV_TAKEOFF -> "Mission rejected: takeoff not first waypoint item", then
         arming TEMPORARILY_REJECTED and MISSION_START DENIED (PX4 FeasibilityChecker).
     signing_refused_armed: SETUP_SIGNING ignored while armed (PX4).
+    airspeed_range: parameters AIRSPEED_MIN / AIRSPEED_MAX / ROLL_LIMIT_DEG (the airframe's own
+        range and bank limit); a DO_CHANGE_SPEED airspeed outside the range is refused (command:
+        FAILED) and ignored in a mission, the speed unchanged (ArduPlane commands_logic.cpp
+        ``Plane::do_change_speed``; SITL's plane.parm: 10 / 30 m/s, 65 deg).
     params: the parameters the mock serves over PARAM_SET / PARAM_REQUEST_READ.
     """
 
@@ -79,6 +83,7 @@ class FlightRules:
     streams_by_request: bool = True
     rejects_position_before_takeoff: bool = False
     signing_refused_armed: bool = False
+    airspeed_range: bool = False
     takeoff_param: str | None = None
     params: dict[str, float] = field(default_factory=dict)
 
@@ -103,6 +108,7 @@ ARDUPLANE_FLIGHT = FlightRules(
     start_range=False,
     rtl_item_switches_mode=True,
     groundspeed_is_minimum=True,
+    airspeed_range=True,
     takeoff_param="TKOFF_ALT",
     params={"TKOFF_ALT": 50.0},
 )

@@ -135,6 +135,10 @@ class MockVehicle:
         )
         self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
         self.params = dict(self.flight.params)
+        if self.flight.airspeed_range:  # the airframe's limits, as a plane's parameters say them
+            af = self.airframe
+            self.params.update(AIRSPEED_MIN=af.min_speed_mps, AIRSPEED_MAX=af.max_speed_mps,
+                               ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad))  # fmt: skip
         if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
             self.params.setdefault("SYSID_ENFORCE", 0.0)
             self.params.setdefault("SYSID_MYGCS", 255.0)
@@ -190,7 +194,7 @@ class MockVehicle:
             world, index, self.airframe, self.home_enu_m, 1 if self.profile.home_at_seq0 else 0,
             emit_reached=self._emit_reached, emit_progress=self._emit_progress,
             emit_text=self.statustext, landed=self._on_landed, flight=self.flight,
-            enter_mode=self._set_mode_name,
+            enter_mode=self._set_mode_name, airspeed_allowed=self.airspeed_allowed,
         )  # fmt: skip
         if self.profile.home_at_seq0:
             h = self.home
@@ -551,6 +555,12 @@ class MockVehicle:
     def _cmd_rtl(self, *_: float) -> CommandResult:
         return CommandResult.ACCEPTED if self._set_mode_name("RTL") else CommandResult.FAILED
 
+    def airspeed_allowed(self, speed_mps: float) -> bool:
+        """False for an airspeed outside [AIRSPEED_MIN, AIRSPEED_MAX] where the rules have the range."""
+        if not self.flight.airspeed_range:
+            return True
+        return self.params["AIRSPEED_MIN"] <= speed_mps <= self.params["AIRSPEED_MAX"]
+
     def _cmd_change_speed(self, p1: float, p2: float, *_: float) -> CommandResult:
         """DO_CHANGE_SPEED as a command (param2 [m/s]; -1 or NaN: no change), clamped to the airframe."""
         if not math.isfinite(p2) or p2 < 0:
@@ -558,6 +568,8 @@ class MockVehicle:
         if round(p1) == 1 and self.flight.groundspeed_is_minimum:
             self.statustext(f"Set groundspeed {p2:.0f}")  # a minimum ground speed: cruise unchanged
             return CommandResult.ACCEPTED
+        if round(p1) == 0 and not self.airspeed_allowed(p2):
+            return CommandResult.FAILED
         af = self.airframe
         self._world.kin.speed_cmd[self.index] = float(np.clip(p2, af.min_speed_mps, af.max_speed_mps))
         return CommandResult.ACCEPTED

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import sitl_mock
 from gcs_planner.cli import main
 from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.online_run import OnlineRun
@@ -78,3 +79,18 @@ def test_connected_vehicles_badly_named_are_refused_in_one_line(argv, message, c
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_connected_plane_too_slow_for_the_scenario_is_refused_before_anything_is_sent(capsys, tmp_path):
+    """A stock plane (AIRSPEED_MAX 30 m/s) cannot fly the paper's 50 m/s UAVs: one line naming the
+    parameter, exit 2, and the plane is left disarmed without a mission."""
+    with sitl_mock.MockFleet(count=1, profile="ardupilot", vehicle_type="fixed_wing", speedup=20.0,
+                             home=load_scenario(SCENARIO).origin) as fleet:  # fmt: skip
+        ((host, port),) = fleet.addresses
+        argv = ["fly-coalition", str(SCENARIO), "--targets", "T1", "--connect", f"udpout:{host}:{port}",
+                "--connected", "1", "--speedup", "20", "-o", str(tmp_path)]  # fmt: skip
+        assert main(argv) == 2
+        plane = fleet.vehicles[0]
+        assert not plane.armed and len(plane.mission_server.items()) <= 1  # at most the home item
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s" in err[0]

@@ -7,17 +7,21 @@ import asyncio
 from pathlib import Path
 
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from test_cli_mission import SCENARIO
 
 import sitl_mock
 from gcs_planner.cli import main
+from gcs_planner.errors import UserError
+from gcs_planner.flight_limits import FlightLimits, check_limits, read_limits
+from gcs_planner.flight_ops import vehicle_quirks
 from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.preflight import arm_when_ready
+from gcs_planner.mavlink.preflight import arm_when_ready, read_param
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.mavlink.wpl import loads_wpl
 from gcs_planner.planning import plan_scenario
@@ -145,3 +149,45 @@ def test_a_lost_final_ack_ends_in_success_after_a_read_back(profile):
                 await link.close()
 
     asyncio.run(run())
+
+
+def test_arduplane_refuses_an_airspeed_outside_its_range_and_keeps_its_speed():
+    """Plane::do_change_speed: an airspeed outside [AIRSPEED_MIN, AIRSPEED_MAX] is refused; the
+    flight reads the range first (read_param) so that it never asks for one."""
+
+    async def run():
+        async with _fleet("ardupilot", "fixed_wing") as fleet:
+            link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
+            try:
+                await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 5.0)
+                quirks = vehicle_quirks(link, [1])
+                (lim,) = (await read_limits(link, [1], quirks)).values()
+                assert (lim.min_mps, lim.max_mps) == (12.0, 30.0)  # the mock airframe's range
+                assert await read_param(link, 1, "NO_SUCH_PARAM", retry_s=0.2) is None
+                kin, command = fleet.vehicles[0]._world.kin, CommandClient(link, 1, retries=0)
+                before = float(kin.speed_cmd[0])
+                with pytest.raises(CommandError, match="FAILED"):
+                    await command.command_long(mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 40.0, -1)
+                assert float(kin.speed_cmd[0]) == before
+                await command.command_long(mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 25.0, -1)
+                assert float(kin.speed_cmd[0]) == 25.0
+            finally:
+                await link.close()
+
+    asyncio.run(run())
+
+
+def test_a_plan_beyond_a_planes_limits_is_refused_naming_the_parameter():
+    plane = plan_scenario(load_scenario(MISSIONS / "straight_2fw.toml")).vehicles[0]
+    names = ("AIRSPEED_MIN", "AIRSPEED_MAX", "ROLL_LIMIT_DEG")
+    top = float(max(plane.speeds_mps))
+    roomy = FlightLimits(names, 1.0, 2 * top, 89.0)
+    check_limits([plane], {plane.sysid: roomy}, 1.5)
+    cases = [
+        (FlightLimits(names, 1.0, top * 1.2, 89.0), f"AIRSPEED_MAX is {top * 1.2:g} m/s, but the flight"),
+        (FlightLimits(names, top + 1.0, 2 * top, 89.0), "AIRSPEED_MIN is"),
+        (FlightLimits(names, 1.0, 2 * top, 1.0), "ROLL_LIMIT_DEG is 1 deg, but turns of"),
+    ]
+    for limits, message in cases:
+        with pytest.raises(UserError, match=message):
+            check_limits([plane], {plane.sysid: limits}, 1.5)

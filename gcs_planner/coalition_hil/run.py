@@ -51,6 +51,7 @@ from gcs_planner.coalition_hil.missions import (
 )
 from gcs_planner.coalition_hil.report import TaskRow, add_prediction_errors, task_rows
 from gcs_planner.errors import UserError
+from gcs_planner.flight_limits import check_limits, read_limits
 from gcs_planner.flight_ops import (
     KEEPER_PERIOD_S,
     NAV_TAKEOFF,
@@ -352,6 +353,10 @@ class _HilRun:
     async def _fly(self, link: MavlinkLink, logger: FlightLogger, status: VehicleStatus) -> None:
         """Upload the initial missions, take off, start the routes, then serve the awards."""
         await request_streams(link, self.flying)
+        limits = await read_limits(link, self.flying, self.quirks)
+        check_limits(self.initial.vehicles, limits, LEG_SPEED_FACTOR)  # live legs fly up to this x cruise
+        for sysid, lim in limits.items():
+            self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
         t_up = time.monotonic()
         first = await upload_fleet(link, self.missions, workers=8)
         bad = [s for s, r in first.items() if not r.ok]

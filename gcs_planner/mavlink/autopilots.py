@@ -58,6 +58,10 @@ class AutopilotQuirks:
     return_mode: str | None  # the mode that brings a vehicle home (safe end)
     land_mode: str | None  # the mode that lands it where it is (None: no such mode)
     readback: readback.Model
+    # parameters of the airspeed range and bank limit, [min m/s, max m/s, roll deg] (None: none):
+    # ArduPlane refuses a DO_CHANGE_SPEED airspeed outside [AIRSPEED_MIN, AIRSPEED_MAX]
+    # (commands_logic.cpp Plane::do_change_speed) and banks at most ROLL_LIMIT_DEG
+    flight_limits: tuple[str, str, str] | None = None
     # list types (mission_type) written in place as items arrive: a failed upload leaves a mix, so
     # the client reads the list back to say what the vehicle holds (ArduPilot's mission and rally:
     # MissionItemProtocol_Waypoints / _Rally replace_item; PX4 switches lists on completion only)
@@ -101,6 +105,7 @@ ARDUPLANE = AutopilotQuirks(
     land_mode=None,
     readback=readback.ARDUPLANE,
     stores_as_received=frozenset({0, 2}),
+    flight_limits=("AIRSPEED_MIN", "AIRSPEED_MAX", "ROLL_LIMIT_DEG"),
 )
 PX4 = AutopilotQuirks(
     name="PX4",

@@ -10,7 +10,9 @@ Choices:
   retried every ``ARM_RETRY_S`` until the deadline (ArduCopter refuses for ~40-45 s after boot,
   "Arm: Need Position Estimate"); the error names the autopilot's own last STATUSTEXT.
 - ``set_param``: PARAM_SET, confirmed by the PARAM_VALUE echo (ArduPilot and PX4 answer every
-  PARAM_SET with the parameter's new value), resent like a command.
+  PARAM_SET with the parameter's new value), resent like a command. ``read_param``:
+  PARAM_REQUEST_READ by name, resent the same way; ArduPilot does not answer for a name it does
+  not have (``GCS_MAVLINK::handle_param_request_read``), so no reply means None.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ from gcs_planner.mavlink.errors import CommandError, MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
-__all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "request_streams", "set_param"]
+__all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "read_param", "request_streams", "set_param"]
 
 log = logging.getLogger(__name__)
 
@@ -104,6 +106,26 @@ async def arm_when_ready(
         if waiting is not None:
             waiting(sysid, reason)
         await asyncio.sleep(min(ARM_RETRY_S / time_scale, max(0.0, deadline - loop.time())))
+
+
+async def read_param(
+    link: MavlinkLink, sysid: int, name: str, compid: int = 1, retry_s: float = COMMAND_RETRY_S
+) -> float | None:
+    """Parameter ``name``'s value, or None when the vehicle does not answer for it."""
+    link.check_target(sysid)
+
+    def answer(msg) -> bool:
+        return msg.get_type() == "PARAM_VALUE" and msg.get_srcSystem() == sysid and msg.param_id == name
+
+    for _ in range(COMMAND_RETRIES + 1):
+        waiting = asyncio.ensure_future(link.wait_for(answer, timeout_s=retry_s))
+        await asyncio.sleep(0)  # the matcher exists before the request goes out
+        link.send(mavlink.MAVLink_param_request_read_message(sysid, compid, name.encode(), -1))
+        try:
+            return float((await waiting).param_value)
+        except TimeoutError:
+            continue
+    return None
 
 
 async def set_param(

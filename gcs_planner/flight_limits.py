@@ -1,0 +1,84 @@
+"""A plane's airspeed range and bank limit, read from its autopilot, against what a flight asks of it.
+
+ArduPlane refuses a DO_CHANGE_SPEED airspeed outside [AIRSPEED_MIN, AIRSPEED_MAX] and keeps the
+speed it had (commands_logic.cpp ``Plane::do_change_speed``), so a plan beyond that range is flown
+at the wrong speed without a word; and it banks at most ROLL_LIMIT_DEG, so a tighter planned turn
+is flown wide. A flight therefore reads those parameters before anything is uploaded, refuses a
+plan outside them in one line, and clips schedule keeping to the range (timekeeping.ScheduleKeeper).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from gcs_planner.errors import UserError
+from gcs_planner.mavlink.autopilots import AutopilotQuirks
+from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.preflight import read_param
+from gcs_planner.plan import VehiclePlan
+
+__all__ = ["FlightLimits", "check_limits", "read_limits"]
+
+log = logging.getLogger(__name__)
+
+G_MPS2 = 9.80665
+
+
+@dataclass(frozen=True)
+class FlightLimits:
+    names: tuple[str, str, str]  # the parameters the values came from
+    min_mps: float
+    max_mps: float
+    roll_deg: float
+
+
+async def read_limits(
+    link: MavlinkLink, sysids: Sequence[int], quirks: dict[int, AutopilotQuirks]
+) -> dict[int, FlightLimits]:
+    """Each vehicle's limits, where its autopilot has them; a vehicle that does not answer for one
+    of the parameters (another firmware generation) is logged and left unchecked."""
+
+    async def one(sysid: int) -> FlightLimits | None:
+        names = quirks[sysid].flight_limits
+        values = await asyncio.gather(*(read_param(link, sysid, n) for n in names))
+        if None in values:
+            missing = [n for n, v in zip(names, values, strict=True) if v is None]
+            log.warning("sysid %d: no value for %s; its speed range is not checked", sysid, missing)
+            return None
+        return FlightLimits(names, *values)
+
+    asked = [s for s in sysids if quirks[s].flight_limits is not None]
+    found = await asyncio.gather(*(one(s) for s in asked))
+    return {s: lim for s, lim in zip(asked, found, strict=True) if lim is not None}
+
+
+def check_limits(plans: Sequence[VehiclePlan], limits: dict[int, FlightLimits], top_factor: float) -> None:
+    """UserError naming the parameter and its value when a plan asks a vehicle for a speed outside
+    its range (up to ``top_factor`` x the planned top speed: legs flown faster to be on time) or
+    a bank beyond its limit for the planned turn radius at that speed."""
+    for vp in plans:
+        lim = limits.get(vp.sysid)
+        flying = [float(v) for v in vp.speeds_mps if v > 0.0]
+        if lim is None or not flying:
+            continue
+        lo, hi = min(flying), max(flying) * top_factor
+        name_min, name_max, name_roll = lim.names
+        who = f"vehicle {vp.vehicle_id} (sysid {vp.sysid})"
+        if hi > lim.max_mps + 1e-6:
+            raise UserError(
+                f"{who}: {name_max} is {lim.max_mps:g} m/s, but the flight needs up to {hi:g} m/s"
+                f" ({max(flying):g} m/s planned x {top_factor:g}); raise it or fly slower vehicles"
+            )
+        if lo < lim.min_mps - 1e-6:
+            raise UserError(f"{who}: {name_min} is {lim.min_mps:g} m/s, but the plan flies {lo:g} m/s")
+        if vp.turn_radius_m > 0.0:
+            bank = math.degrees(math.atan(hi**2 / (G_MPS2 * vp.turn_radius_m)))
+            if bank > lim.roll_deg + 1e-6:
+                raise UserError(
+                    f"{who}: {name_roll} is {lim.roll_deg:g} deg, but turns of {vp.turn_radius_m:g} m at"
+                    f" {hi:g} m/s need {bank:.1f} deg"
+                )
