@@ -2,6 +2,7 @@
 their own, some of them beside mock ones on one link, started where --homes says, sent home after."""
 
 import asyncio
+import importlib.util
 import math
 from pathlib import Path
 
@@ -16,11 +17,15 @@ from gcs_planner.coalition_hil.run import initial_plans, run_coalition_hil
 from gcs_planner.coalition_hil.starts import CLIMB_RUN_PER_M
 from gcs_planner.commands.fly_coalition import connected_fleet
 from gcs_planner.geo import geodetic_to_enu
+from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
-SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
+BENCHMARKS = MISSIONS.parent / "benchmarks"
+SCENARIO = MISSIONS / "coalition_paper.toml"
+SITL_SCENARIO = MISSIONS / "coalition_sitl.toml"  # the paper's at the size of SITL's plane
 CONNECTED = frozenset({1, 8, 11, 13})  # U1 does T1's recon and leads its tender
 
 
@@ -28,7 +33,7 @@ def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path
     """The connected vehicles are a second mock fleet process reached over --connect: its clock
     (time_boot_ms) starts apart from the tool's own mock fleet, so only frames timed on receipt
     put both on one flight clock, and every strike and assessment is still on time and angle."""
-    scenario = load_scenario(SCENARIO)
+    scenario = load_scenario(SITL_SCENARIO)
     options = HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",), online=True)
     plans = [vp for vp in initial_plans(scenario, options, OnlineRun) if vp.sysid in CONNECTED]
     with MockVehiclesProcess(plans, scenario.origin, options.speedup) as networks:
@@ -94,3 +99,18 @@ def test_a_connected_plane_too_slow_for_the_scenario_is_refused_before_anything_
         assert not plane.armed and len(plane.mission_server.items()) <= 1  # at most the home item
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s" in err[0]
+
+
+def test_the_sitl_scenario_is_the_paper_scenario_scaled_with_the_same_timeline():
+    """missions/coalition_sitl.toml is what its generator makes of coalition_paper.toml, and its
+    simulated awards come at the paper scenario's times to the same UAVs."""
+    spec = importlib.util.spec_from_file_location("generator", BENCHMARKS / "make_coalition_sitl.py")
+    generator = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(generator)
+    assert generator.convert(SCENARIO.read_text()) == SITL_SCENARIO.read_text()
+    timelines = []
+    for path in (SCENARIO, SITL_SCENARIO):
+        result = simulate(load_world(load_scenario(path)), np.random.default_rng(3))
+        timelines.append([(e["target"], e["uav"], round(e["time_s"], 3)) for e in result.events
+                          if e["event"] == "award"])  # fmt: skip
+    assert len(timelines[0]) > 20 and timelines[0] == timelines[1]
