@@ -43,10 +43,10 @@ def starts(plans: list[VehiclePlan], origin: Origin) -> list[Start]:
 
 
 def format_homes(found: list[Start], sysids: frozenset[int] | None) -> str:
-    """One line per start (of ``sysids``; None: all) with its SITL ``--home`` and ``SYSID_THISMAV``."""
+    """One line per start (of ``sysids``; None: all) with its SITL ``--home`` and system id parameter."""
     return "\n".join(
         f"sysid {s.sysid} ({s.vehicle_id}): --home {s.home.lat_deg:.7f},{s.home.lon_deg:.7f},"
-        f"{s.home.alt_m:.1f},{s.heading_deg:.0f}  (SYSID_THISMAV {s.sysid})"
+        f"{s.home.alt_m:.1f},{s.heading_deg:.0f}  (MAV_SYSID {s.sysid}; SYSID_THISMAV before ArduPilot 4.7)"
         for s in found
         if sysids is None or s.sysid in sysids
     )
