@@ -108,10 +108,8 @@ async def arm_when_ready(
         await asyncio.sleep(min(ARM_RETRY_S / time_scale, max(0.0, deadline - loop.time())))
 
 
-async def read_param(
-    link: MavlinkLink, sysid: int, name: str, compid: int = 1, retry_s: float = COMMAND_RETRY_S
-) -> float | None:
-    """Parameter ``name``'s value, or None when the vehicle does not answer for it."""
+async def _param_value(link: MavlinkLink, sysid: int, name: str, request, retry_s: float) -> float | None:
+    """Send ``request`` until the vehicle answers with PARAM_VALUE for ``name``; None when it never does."""
     link.check_target(sysid)
 
     def answer(msg) -> bool:
@@ -120,12 +118,20 @@ async def read_param(
     for _ in range(COMMAND_RETRIES + 1):
         waiting = asyncio.ensure_future(link.wait_for(answer, timeout_s=retry_s))
         await asyncio.sleep(0)  # the matcher exists before the request goes out
-        link.send(mavlink.MAVLink_param_request_read_message(sysid, compid, name.encode(), -1))
+        link.send(request)
         try:
             return float((await waiting).param_value)
         except TimeoutError:
             continue
     return None
+
+
+async def read_param(
+    link: MavlinkLink, sysid: int, name: str, compid: int = 1, retry_s: float = COMMAND_RETRY_S
+) -> float | None:
+    """Parameter ``name``'s value, or None when the vehicle does not answer for it."""
+    request = mavlink.MAVLink_param_request_read_message(sysid, compid, name.encode(), -1)
+    return await _param_value(link, sysid, name, request, retry_s)
 
 
 async def set_param(
@@ -134,24 +140,12 @@ async def set_param(
     """Set parameter ``name`` to ``value`` (a REAL32); returns the value the vehicle echoed."""
     if not math.isfinite(value):
         raise UserError(f"parameter {name} must be a finite number, got {value!r}")
-    link.check_target(sysid)
-
-    def echoed(msg) -> bool:
-        return msg.get_type() == "PARAM_VALUE" and msg.get_srcSystem() == sysid and msg.param_id == name
-
-    for _ in range(COMMAND_RETRIES + 1):
-        waiting = asyncio.ensure_future(link.wait_for(echoed, timeout_s=retry_s))
-        await asyncio.sleep(0)  # the matcher exists before the request goes out
-        link.send(
-            mavlink.MAVLink_param_set_message(
-                sysid, compid, name.encode(), float(value), mavlink.MAV_PARAM_TYPE_REAL32
-            )
-        )
-        try:
-            reply = await waiting
-        except TimeoutError:
-            continue
-        if abs(reply.param_value - value) > 1e-3 * max(1.0, abs(value)):
-            raise UserError(f"vehicle {sysid} kept {name} = {reply.param_value:g}, asked for {value:g}")
-        return float(reply.param_value)
-    raise UserError(f"vehicle {sysid}: no PARAM_VALUE for {name} after {COMMAND_RETRIES + 1} PARAM_SETs")
+    request = mavlink.MAVLink_param_set_message(
+        sysid, compid, name.encode(), float(value), mavlink.MAV_PARAM_TYPE_REAL32
+    )
+    echoed = await _param_value(link, sysid, name, request, retry_s)
+    if echoed is None:
+        raise UserError(f"vehicle {sysid}: no PARAM_VALUE for {name} after {COMMAND_RETRIES + 1} PARAM_SETs")
+    if abs(echoed - value) > 1e-3 * max(1.0, abs(value)):
+        raise UserError(f"vehicle {sysid} kept {name} = {echoed:g}, asked for {value:g}")
+    return echoed
