@@ -9,7 +9,7 @@ import numpy as np
 
 from gcs_planner.coalition_hil import HilOptions, live_state, measure_task, plan_live_leg, run_coalition_hil
 from gcs_planner.geo import enu_to_geodetic
-from gcs_planner.planning.coalition import load_world
+from gcs_planner.planning.coalition import load_world, paths
 from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehiclesProcess
@@ -160,3 +160,37 @@ def test_fly_coalition_command_refuses_a_scenario_without_the_coalition_planner(
 
     assert main(["fly-coalition", str(SCENARIO.parent / "straight_4uav.toml")]) == 2
     assert "[planner] name must be 'coalition'" in capsys.readouterr().err
+
+
+def test_a_connected_vehicles_leg_ends_with_a_straight_run_in_when_it_can_still_arrive_on_time():
+    """ArduPlane's L1 controller lags a turn that ends at the goal pose (a SITL strike came in 23.5
+    deg off after an S-bend in its last 6 s): a connected vehicle's leg ends with RUN_IN_S straight
+    into the goal pose; a leg the run-in would make late goes without it."""
+    from gcs_planner.coalition_hil.live_legs import RUN_IN_S
+
+    world = load_world(load_scenario(SCENARIO))
+    award = {"uav": "U8", "target": "T1", "task": "strike", "t_s": 60.0, "time_s": 100.0, "angle_deg": 15.0}
+    uav = next(u for u in world.uavs if u.id == "U8")
+    target = np.asarray(next(tg for tg in world.targets if tg.id == "T1").xy)
+    goal_heading = math.radians(195.0)
+    q0 = np.array([target[0] + 900.0, target[1] - 900.0, math.radians(90.0)])  # off to the side
+
+    def final_turn_deg(leg) -> float:
+        to_end = np.r_[np.cumsum(np.hypot(*np.diff(leg.xy[::-1], axis=0).T))[::-1], 0.0]  # along the leg
+        near = to_end <= RUN_IN_S * uav.speed_mps - 1.0
+        return float(np.degrees(np.ptp(np.unwrap(leg.heading[near]))))
+
+    plain = plan_live_leg(world, award, q0, 10.0, 1.2)
+    assert final_turn_deg(plain) > 5.0  # without a run-in the leg turns into the goal pose
+    leg = plan_live_leg(world, award, q0, 10.0, 1.2, run_in_s=RUN_IN_S)
+    assert leg.info["run_in_s"] == RUN_IN_S and leg.info["clear"] and abs(leg.info["late_s"]) < 0.05
+    assert final_turn_deg(leg) < 0.1
+    assert abs(math.remainder(leg.heading[-1] - goal_heading, 2 * math.pi)) < 1e-6
+    assert np.hypot(*(leg.xy[-1] - plain.xy[-1])) < 1e-6 and abs(leg.t[-1] - plain.t[-1]) < 1e-6
+    goal = np.r_[plain.xy[-1], goal_heading]
+    shortest = paths.min_route(q0, goal, uav.r_min_m, [], world.params.kappa, world.params.sample_ds_m)
+    tight = {**award, "time_s": 10.0 + shortest.length_m / (1.2 * uav.speed_mps) + 0.01}  # just on time
+    late_with = plan_live_leg(world, tight, q0, 10.0, 1.2, run_in_s=RUN_IN_S)
+    late_without = plan_live_leg(world, tight, q0, 10.0, 1.2)
+    assert late_without.info["late_s"] < 0.05 and late_with.info["run_in_s"] == 0.0
+    assert np.array_equal(late_with.xy, late_without.xy)

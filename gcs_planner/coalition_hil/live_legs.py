@@ -30,7 +30,8 @@ import numpy as np
 
 from gcs_planner.coalition_hil.tracks import pose_at
 from gcs_planner.flight_ops import FrameClock, boot_clock
-from gcs_planner.geo import Origin, geodetic_to_enu
+from gcs_planner.geo import Origin, geodetic_to_enu, no_fix
+from gcs_planner.geometry.dubins import DubinsPath
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.track import Leg
 
@@ -38,6 +39,7 @@ __all__ = [
     "FIT_S",
     "LEG_SPEED_FACTOR",
     "SPEED_TRIES",
+    "RUN_IN_S",
     "LiveState",
     "Telemetry",
     "goal_pose",
@@ -52,6 +54,7 @@ FIT_S = 2.0  # turn rate fitted over this much of the newest course reports [s]
 SPEED_TRIES = (0.9, 1.1, 0.8, 1.2)  # other speeds / cruise for a live leg that cannot clear the threats
 LEG_SPEED_FACTOR = 1.2  # a live leg short of time may be planned up to this x cruise (mock top: 1.3)
 REJOIN_MIN_S = 10.0  # an idle mission rejoins the simulated track at least this long after its start [s]
+RUN_IN_S = 6.0  # straight flown into a connected vehicle's goal pose (ArduPlane's L1 settles on it) [s]
 
 
 @dataclass(frozen=True)
@@ -105,7 +108,7 @@ class Telemetry:
         self.clock = clock
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
-        if msg.get_type() != "GLOBAL_POSITION_INT":
+        if msg.get_type() != "GLOBAL_POSITION_INT" or no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
             return
         rows = self.rows.get(msg.get_srcSystem())
         if rows is not None:
@@ -123,23 +126,32 @@ def goal_pose(world, award: dict) -> np.ndarray:
 
 
 def timed_leg(
-    world, uav, q0, t0_s: float, goal, t_goal_s: float, known, kind: str, max_speed_factor=1.0
+    world, uav, q0, t0_s: float, goal, t_goal_s: float, known, kind: str, max_speed_factor=1.0,
+    run_in_m: float = 0.0,
 ) -> Leg:
     """A threat-avoiding Dubins leg from pose q0 at t0_s to pose goal at t_goal_s (poses: x, y,
     heading [rad]): at cruise when there is time; else the minimum route, flown up to
     max_speed_factor x cruise (info["speed_mps"]); if that is still too slow, late (info["late_s"]
     > 0). When the timing fallbacks find no threat-clear path of the length the speed asks for,
-    the other speeds of SPEED_TRIES (up to max_speed_factor) are tried."""
+    the other speeds of SPEED_TRIES (up to max_speed_factor) are tried. With run_in_m the leg
+    ends with a straight of that length into the goal pose."""
     p = world.params
-    route = paths.min_route(q0, goal, uav.r_min_m, known, p.kappa, p.sample_ds_m)
+    goal = np.asarray(goal, dtype=float)
+    run_in = _straight_into(goal, run_in_m, uav.r_min_m)
+    route_goal = run_in[0].start if run_in else goal
+    route = paths.min_route(q0, route_goal, uav.r_min_m, known, p.kappa, p.sample_ds_m)
     span_s = max(t_goal_s - t0_s, 1e-3)
-    speed = float(np.clip(route.length_m / span_s, uav.speed_mps, max_speed_factor * uav.speed_mps))
-    others = [f * uav.speed_mps for f in SPEED_TRIES if f * uav.speed_mps * span_s >= route.length_m]
+    need_m = route.length_m + run_in_m
+    speed = float(np.clip(need_m / span_s, uav.speed_mps, max_speed_factor * uav.speed_mps))
+    others = [f * uav.speed_mps for f in SPEED_TRIES if f * uav.speed_mps * span_s >= need_m]
+    run_in_clear = not run_in or bool(paths.chains_clear([run_in], known, p.sample_ds_m)[0])
     first = None
     for v in [speed, *(v for v in others if v <= max_speed_factor * uav.speed_mps and v != speed)]:
-        segs, clear = paths.timed_route(route, max(route.length_m, v * span_s), known, p.sample_ds_m)
+        timed_m = max(route.length_m, v * span_s - run_in_m)
+        segs, clear = paths.timed_route(route, timed_m, known, p.sample_ds_m)
+        segs = [*segs, *run_in]
         length = sum(seg.length for seg in segs)
-        attempt = (segs, bool(clear and route.clear), v)
+        attempt = (segs, bool(clear and route.clear and run_in_clear), v)
         first = first or attempt
         if attempt[1] and abs(length - v * span_s) < 0.05 * v:
             break
@@ -151,20 +163,36 @@ def timed_leg(
     return leg
 
 
+def _straight_into(goal: np.ndarray, length_m: float, r_m: float) -> list:
+    """[the straight Dubins path of length_m ending at pose goal], or [] for no length."""
+    if length_m <= 0.0:
+        return []
+    back = goal - length_m * np.array([math.cos(goal[2]), math.sin(goal[2]), 0.0])
+    return [DubinsPath(tuple(map(float, back)), "LSL", (0.0, length_m, 0.0), (r_m, math.inf, r_m))]
+
+
 def plan_live_leg(
-    world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0, known=None
+    world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0, known=None,
+    run_in_s: float = 0.0,
 ) -> Leg:
     """The award's leg from pose q0 (x, y, heading [rad]) at t0_s (see ``timed_leg``): to the strike
     entry pose, or to the assessment arc start followed by the assessment arc, arriving at
-    award["time_s"], around the known threats (default: the scenario's, known at the award)."""
+    award["time_s"], around the known threats (default: the scenario's, known at the award),
+    its last run_in_s x cruise metres straight into that pose (none if that leg would be late or
+    not clear; info["run_in_s"])."""
     p = world.params
     uav = next(u for u in world.uavs if u.id == award["uav"])
     target = next(t for t in world.targets if t.id == award["target"])
     if known is None:
         known = [th for th in world.threats if th.appear_s <= award["t_s"]]
     strike = award["task"] == "strike"
-    leg = timed_leg(world, uav, q0, t0_s, goal_pose(world, award), float(award["time_s"]), known,
-                    "strike" if strike else "transit", max_speed_factor)  # fmt: skip
+    kind = "strike" if strike else "transit"
+    for run_in in dict.fromkeys((run_in_s, 0.0)):  # without the run-in when it makes the leg late
+        leg = timed_leg(world, uav, q0, t0_s, goal_pose(world, award), float(award["time_s"]), known, kind,
+                        max_speed_factor, run_in * uav.speed_mps)  # fmt: skip
+        if leg.info["clear"] and leg.info["late_s"] < 0.05:
+            break
+    leg.info["run_in_s"] = run_in
     leg.info["target"] = target.id
     if strike:
         return leg
