@@ -22,7 +22,7 @@ import numpy as np
 
 from gcs_planner.conformance import Track
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, geodetic_to_enu
+from gcs_planner.geo import Origin, geodetic_to_enu, no_fix
 from gcs_planner.mavlink.actions import change_speed, start_mission_at, take_off
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for
 from gcs_planner.mavlink.errors import MavlinkError
@@ -75,6 +75,8 @@ class TrackRecorder:
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
         sysid = msg.get_srcSystem()
         if sysid not in self.samples or msg.get_type() != "GLOBAL_POSITION_INT":
+            return
+        if no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
             return
         self.samples[sysid].append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
 

@@ -45,6 +45,7 @@ log = logging.getLogger(__name__)
 
 MAX_CATCH_UP_WALL_S = 0.25
 _POSITION, _ATTITUDE = 33, 30  # GLOBAL_POSITION_INT, ATTITUDE message ids
+_NO_FIX = (0.0, 0.0, 0.0, 0.0, (0.0, 0.0, 0.0))  # lat, lon, alt, rel, vel before a position fix
 
 
 @dataclass(frozen=True)
@@ -400,7 +401,8 @@ class MockFleet:
             for k, i in enumerate(idx):
                 v = vehicles[i]
                 t_ms = v.time_boot_ms
-                v.send(telemetry.global_position_int(t_ms, lat[k], lon[k], alt[k], rel[k], vel[k], psi[k]))
+                fix = (lat[k], lon[k], alt[k], rel[k], vel[k]) if v.has_position else _NO_FIX
+                v.send(telemetry.global_position_int(t_ms, *fix, psi[k]))
                 if v.wants(_ATTITUDE):
                     v.send(telemetry.attitude(t_ms, roll[k], pitch[k], psi[k], rate[k]))
         for i in status.due(now).tolist():

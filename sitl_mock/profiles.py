@@ -44,6 +44,11 @@ class FlightRules:
     arm_ready_s: simulated seconds after boot before pre-arm checks pass (ArduCopter ~40-45 s: the
         EKF has no position estimate; PX4 ~5 s). Until then SYS_STATUS reports the PREARM_CHECK bit
         unhealthy and COMPONENT_ARM_DISARM is answered ``arm_refusal`` with ``not_ready_text``.
+    position_fix_s: simulated seconds after boot (at most arm_ready_s) before GLOBAL_POSITION_INT
+        carries a position; until then lat = lon = alt = relative_alt = 0. ArduPilot sends the
+        location whether ``get_location`` succeeded or not (GCS_Common.cpp
+        ``GCS_MAVLINK::send_global_position_int``); measured on ArduPlane SITL 4.8.0-dev: (0, 0),
+        then dead reckoning up to 0.0004 deg from it, until boot + 10 s, when its GPS is detected.
     auto_disarm_s: armed on the ground without taking off this long -> disarmed (ArduPilot
         DISARM_DELAY 10 s, PX4 COM_DISARM_PRFLT 10 s); not while a mission runs in AUTO.
     takeoff_command: MAV_CMD_NAV_TAKEOFF param7 is "above_home" (ArduCopter), "amsl" (PX4
@@ -86,11 +91,13 @@ class FlightRules:
     airspeed_range: bool = False
     takeoff_param: str | None = None
     params: dict[str, float] = field(default_factory=dict)
+    position_fix_s: float = 0.0
 
 
 ARDUCOPTER_FLIGHT = FlightRules(
     name="ArduCopter",
     arm_ready_s=40.0,
+    position_fix_s=10.0,
     arm_refusal=CommandResult.FAILED,
     not_ready_text="Arm: Need Position Estimate",
     auto_disarm_s=10.0,
@@ -101,6 +108,7 @@ ARDUCOPTER_FLIGHT = FlightRules(
 ARDUPLANE_FLIGHT = FlightRules(
     name="ArduPlane",
     arm_ready_s=40.0,
+    position_fix_s=10.0,
     arm_refusal=CommandResult.FAILED,
     not_ready_text="Arm: Need Position Estimate",
     auto_disarm_s=math.inf,  # ArduPlane has no ground auto-disarm by default

@@ -287,6 +287,12 @@ class MockVehicle:
             self._armed_at_s = math.inf
 
     @property
+    def has_position(self) -> bool:
+        """Its position reports carry a position (FlightRules.position_fix_s after boot)."""
+        fix_s = min(self.flight.position_fix_s, self.flight.arm_ready_s)
+        return self._world.sim_time_s - self.boot_sim_s >= fix_s
+
+    @property
     def ready_to_arm(self) -> bool:
         """Pre-arm checks pass (FlightRules.arm_ready_s after boot)."""
         return self._world.sim_time_s - self.boot_sim_s >= self.flight.arm_ready_s
@@ -324,7 +330,10 @@ class MockVehicle:
             self.send(self._mission_current())
 
     def send_home(self) -> None:
-        self.send(telemetry.home_position(self.home.lat_deg, self.home.lon_deg, self.home.alt_m))
+        """HOME_POSITION, once the vehicle has a position (ArduPilot GCS_Common.cpp
+        ``GCS_MAVLINK::send_home_position`` sends none before home is set)."""
+        if self.has_position:
+            self.send(telemetry.home_position(self.home.lat_deg, self.home.lon_deg, self.home.alt_m))
 
     def stream_home(self) -> None:
         """The periodic HOME_POSITION, when streamed."""

@@ -56,11 +56,14 @@ def make_plan(sysids: list[int]) -> Plan:
     return Plan(origin=ORIGIN, planner="straight", vehicles=vehicles)
 
 
-def flight_frames(sysids: list[int], samples: int, rate_hz: float = 10.0, t0_s: float = 1.7e9):
+def flight_frames(
+    sysids: list[int], samples: int, rate_hz: float = 10.0, t0_s: float = 1.7e9, no_fix_first: int = 0
+):
     """(msg, raw, t_s) for each vehicle flying east at 10 m/s, interleaved in time.
 
-    Each vehicle sends GLOBAL_POSITION_INT every sample, MISSION_CURRENT and HEARTBEAT every
-    10th sample, and one STATUSTEXT at the start.
+    Each vehicle sends GLOBAL_POSITION_INT every sample (the first ``no_fix_first`` at lat = lon =
+    alt = 0, as ArduPilot before it has a position), MISSION_CURRENT and HEARTBEAT every 10th
+    sample, and one STATUSTEXT at the start.
     """
     encoders = {s: mavlink.MAVLink(None, srcSystem=s, srcComponent=1) for s in sysids}
     parser = mavlink.MAVLink(None)
@@ -77,13 +80,15 @@ def flight_frames(sysids: list[int], samples: int, rate_hz: float = 10.0, t0_s: 
         t = t0_s + k / rate_hz
         for s in sysids:
             lat, lon, alt = enu_to_geodetic(10.0 * k / rate_hz, 10.0 * s, 30.0, ORIGIN)
+            if k < no_fix_first:
+                lat = lon = alt = 0.0
             msgs = [
                 mavlink.MAVLink_global_position_int_message(
                     int(k * 1000 / rate_hz),
                     round(lat * 1e7),
                     round(lon * 1e7),
                     round(alt * 1e3),
-                    30000,
+                    30000 if k >= no_fix_first else 0,
                     1000,
                     0,
                     0,

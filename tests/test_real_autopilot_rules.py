@@ -86,9 +86,9 @@ def test_a_failing_fly_leaves_every_vehicle_landed_or_returning_and_says_so(tmp_
     )
 
 
-def _fleet(profile: str, vehicle_type: str = "multirotor", **kw):
+def _fleet(profile: str, vehicle_type: str = "multirotor", speedup: float = 20.0, **kw):
     return sitl_mock.MockFleet(
-        count=1, profile=profile, vehicle_type=vehicle_type, home=ORIGIN, speedup=20.0, **kw
+        count=1, profile=profile, vehicle_type=vehicle_type, home=ORIGIN, speedup=speedup, **kw
     )
 
 
@@ -191,3 +191,46 @@ def test_a_plan_beyond_a_planes_limits_is_refused_naming_the_parameter():
     for limits, message in cases:
         with pytest.raises(UserError, match=message):
             check_limits([plane], {plane.sysid: limits}, 1.5)
+
+
+def test_arduplane_reports_no_position_until_its_gps_is_found_and_the_tool_keeps_none_of_it():
+    """ArduPilot sends GLOBAL_POSITION_INT at (0, 0) before it has a position (the first 10 s on
+    SITL) and no HOME_POSITION: the mock plays it; the flight's tracks, the live legs' telemetry and
+    the home altitude skip those reports."""
+    from gcs_planner.coalition_hil.live_legs import Telemetry
+    from gcs_planner.flight_ops import TrackRecorder, boot_clock
+    from gcs_planner.mavlink.preflight import request_streams
+
+    async def run():
+        async with _fleet("ardupilot", "fixed_wing", speedup=2.0) as fleet:  # 5 s wall before the fix
+            link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
+            recorder, telemetry = TrackRecorder(ORIGIN, boot_clock, [1]), Telemetry({1})
+            status = VehicleStatus(link, [1])
+            seen = []
+
+            def on_frame(msg, raw: bytes, t_s: float) -> None:
+                kind = msg.get_type()
+                if kind in ("GLOBAL_POSITION_INT", "HOME_POSITION"):
+                    home = status.tracks[1].home_amsl_m
+                    seen.append((kind, getattr(msg, "time_boot_ms", None), home, getattr(msg, "lat", None)))
+
+            for subscriber in (recorder.on_frame, telemetry.on_frame, on_frame):
+                link.subscribe(subscriber)
+            try:
+                await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 5.0)
+                await request_streams(link, [1])
+                await link.wait_for(lambda m: getattr(m, "time_boot_ms", 0) > 11_000 and m.lat != 0, 30.0)
+            finally:
+                await link.close()
+        return seen, recorder.samples[1], list(telemetry.rows[1])
+
+    seen, samples, rows = asyncio.run(run())
+    positions = [s for s in seen if s[0] == "GLOBAL_POSITION_INT"]
+    before = [s for s in positions if s[1] < 10_000]
+    assert before and all(s[3] == 0 for s in before)  # (0, 0) before the fix
+    first_home = next(i for i, s in enumerate(seen) if s[0] == "HOME_POSITION")
+    assert first_home > 0 and seen[first_home - 1][1] >= 10_000  # no HOME_POSITION before the fix
+    assert all(s[2] is None or abs(s[2] - ORIGIN.alt_m) < 1.0 for s in seen)  # never a home at 0 m
+    assert len(samples) == len(positions) - len(before) > 0 and len(rows) > 0
+    assert all(abs(lat - ORIGIN.lat_deg) < 0.01 for _, lat, _, _ in samples)
+    assert all(abs(lat - ORIGIN.lat_deg) < 0.01 for _, lat, _, _, _ in rows)

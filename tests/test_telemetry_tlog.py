@@ -7,7 +7,7 @@ import socket
 import struct
 import time
 
-from telemetry_frames import flight_frames
+from telemetry_frames import ORIGIN, flight_frames
 
 from gcs_planner.cli import main
 from gcs_planner.telemetry import read_flight, write_tlog
@@ -74,3 +74,19 @@ def test_import_tlog_round_trip(tmp_path):
 def test_import_missing_tlog_is_a_user_error(tmp_path, capsys):
     assert main(["import-tlog", str(tmp_path / "none.tlog")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_a_tlog_from_boot_keeps_the_reports_before_the_fix_but_no_position_from_them(tmp_path):
+    """ArduPilot's first position reports are at (0, 0) (GCS_MAVLINK::send_global_position_int):
+    the imported log keeps every frame, and neither the origin nor the tracks come from those."""
+    frames = flight_frames([1], samples=12, no_fix_first=3)
+    tlog, mcap = tmp_path / "boot.tlog", tmp_path / "boot.mcap"
+    _pymavlink_tlog(tlog, frames)
+    assert main(["import-tlog", str(tlog), "-o", str(mcap)]) == 0
+    flight = read_flight(mcap)
+    assert [f.data for f in flight.frames] == [raw for _, raw, _ in frames]
+    assert len(flight.positions[1]) == 9 and abs(flight.positions[1].lat_deg - ORIGIN.lat_deg).max() < 0.01
+    first = next(m for m, _, _ in frames if m.get_type() == "GLOBAL_POSITION_INT" and m.lat)
+    origin = flight.origin
+    assert (origin.lat_deg, origin.lon_deg) == (first.lat * 1e-7, first.lon * 1e-7)
+    assert abs(origin.alt_m - ORIGIN.alt_m) < 0.01

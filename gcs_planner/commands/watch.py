@@ -23,7 +23,7 @@ from gcs_planner.commands._mission_cli import open_link
 from gcs_planner.commands.fly import live_recording
 from gcs_planner.commands.import_log import parse_origin
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+from gcs_planner.geo import Origin, no_fix
 from gcs_planner.mavlink.preflight import request_streams
 
 FIRST_POSITION_TIMEOUT_S = 30.0
@@ -82,7 +82,8 @@ async def _watch(args: argparse.Namespace, mcap_path: Path, origin: Origin | Non
         heartbeat = await link.wait_for(_autopilot_heartbeat, FIRST_POSITION_TIMEOUT_S)
         await request_streams(link, [heartbeat.get_srcSystem()])  # ArduPilot streams what it is asked for
         first = await link.wait_for(
-            lambda m: m.get_type() == "GLOBAL_POSITION_INT" and (m.lat or m.lon), FIRST_POSITION_TIMEOUT_S
+            lambda m: m.get_type() == "GLOBAL_POSITION_INT" and not no_fix(m.lat * 1e-7, m.lon * 1e-7),
+            FIRST_POSITION_TIMEOUT_S,
         )
     except TimeoutError:
         await link.close()

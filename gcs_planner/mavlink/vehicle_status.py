@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.geo import no_fix
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.enums import MissionState
 from gcs_planner.mavlink.link import MavlinkLink
@@ -67,7 +68,7 @@ class VehicleStatus:
         if track is None:
             return
         kind = msg.get_type()
-        if kind == "GLOBAL_POSITION_INT":
+        if kind == "GLOBAL_POSITION_INT" and not no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
             track.rel_alt_m = msg.relative_alt / 1000.0
             track.home_amsl_m = (msg.alt - msg.relative_alt) / 1000.0
         elif kind == "STATUSTEXT":

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+from gcs_planner.geo import Origin, no_fix
 from gcs_planner.plan import Plan
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -253,7 +253,7 @@ def _boot_time_s(msg) -> float | None:
 
 def _origin_from_frames(frames) -> Origin:
     for _, msg, _ in frames:
-        if msg.get_type() == "GLOBAL_POSITION_INT" and (msg.lat or msg.lon):
+        if msg.get_type() == "GLOBAL_POSITION_INT" and not no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
             return Origin(msg.lat * 1e-7, msg.lon * 1e-7, (msg.alt - msg.relative_alt) * 1e-3)
     return Origin(0.0, 0.0, 0.0)
 

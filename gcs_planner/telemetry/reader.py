@@ -31,7 +31,7 @@ from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Me
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+from gcs_planner.geo import Origin, no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.validation import load_json
 
@@ -367,6 +367,9 @@ def _decode_positions(flight: Flight) -> None:
     for sysid, r in rows.items():
         # columns: t_ns, time_boot_ms, lat, lon, alt, relative_alt, vx, vy, vz, hdg
         a = np.asarray(r, dtype=np.int64)
+        a = a[~no_fix(a[:, 2] * 1e-7, a[:, 3] * 1e-7)]  # reports before the vehicle had a position
+        if not len(a):
+            continue
         hdg = a[:, 9].astype(float)
         flight.positions[sysid] = Track(
             t_s=a[:, 0] * 1e-9,
