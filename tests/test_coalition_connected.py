@@ -40,8 +40,12 @@ def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path
     plans = [vp for vp in initial_plans(scenario, options, OnlineRun) if vp.sysid in CONNECTED]
     with MockVehiclesProcess(plans, scenario.origin, options.speedup) as networks:
         vehicles_for = connected_fleet(networks[0], CONNECTED)
-        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, OnlineRun))
+        said: list[str] = []
+        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, OnlineRun, said.append))
     assert not result.failures, result.failures
+    stages = ("vehicles heard", "first missions uploaded", "routes started")
+    order = [next(i for i, line in enumerate(said) if stage in line) for stage in stages]
+    assert order == sorted(order), said  # the run's stages told as they come
     assert len(result.rows) == 10 and all(r.passed for r in result.rows), result.rows
     tenders = [e for e in result.events if e["event"] == "tender" and e["target"] == "T1"]
     assert tenders and tenders[0]["uav"] == "U1", tenders[:1]  # recon on the connected U1's telemetry

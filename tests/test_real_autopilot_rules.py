@@ -21,7 +21,7 @@ from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.preflight import arm_when_ready, read_param
+from gcs_planner.mavlink.preflight import arm_when_ready, read_param, request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.mavlink.wpl import loads_wpl
 from gcs_planner.planning import plan_scenario
@@ -199,7 +199,6 @@ def test_arduplane_reports_no_position_until_its_gps_is_found_and_the_tool_keeps
     the home altitude skip those reports."""
     from gcs_planner.coalition_hil.live_legs import Telemetry
     from gcs_planner.flight_ops import TrackRecorder, boot_clock
-    from gcs_planner.mavlink.preflight import request_streams
 
     async def run():
         async with _fleet("ardupilot", "fixed_wing", speedup=2.0) as fleet:  # 5 s wall before the fix
@@ -234,3 +233,27 @@ def test_arduplane_reports_no_position_until_its_gps_is_found_and_the_tool_keeps
     assert len(samples) == len(positions) - len(before) > 0 and len(rows) > 0
     assert all(abs(lat - ORIGIN.lat_deg) < 0.01 for _, lat, _, _ in samples)
     assert all(abs(lat - ORIGIN.lat_deg) < 0.01 for _, lat, _, _, _ in rows)
+
+
+def test_a_vehicle_not_ready_to_arm_is_said_to_wait_for_its_pre_arm_text_not_its_last_words():
+    """ArduPlane in TAKEOFF mode says "Mode TAKEOFF" after the GCS's mode change; while its pre-arm
+    checks fail, the wait line gives its last pre-arm text (PreArm / Arm / Preflight), not that."""
+
+    async def run():
+        async with _fleet("ardupilot", "fixed_wing", speedup=5.0) as fleet:
+            link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
+            status, reasons = VehicleStatus(link, [1]), []
+            try:
+                await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 5.0)
+                await request_streams(link, [1])
+                await link.wait_for(lambda m: m.get_type() == "SYS_STATUS", 5.0)
+                fleet.vehicles[0].statustext("PreArm: Need Position Estimate")
+                fleet.vehicles[0].statustext("Mode TAKEOFF")
+                await link.wait_for(lambda m: m.get_type() == "STATUSTEXT" and m.text.startswith("Mode"), 5.0)
+                await arm_when_ready(link, status, 1, 120.0, 5.0, lambda s, r: reasons.append(r))
+            finally:
+                await link.close()
+        return reasons
+
+    reasons = asyncio.run(run())
+    assert reasons and set(reasons) == {"PreArm: Need Position Estimate"}, reasons

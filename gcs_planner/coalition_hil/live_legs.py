@@ -178,8 +178,8 @@ def plan_live_leg(
     """The award's leg from pose q0 (x, y, heading [rad]) at t0_s (see ``timed_leg``): to the strike
     entry pose, or to the assessment arc start followed by the assessment arc, arriving at
     award["time_s"], around the known threats (default: the scenario's, known at the award),
-    its last run_in_s x cruise metres straight into that pose (none if that leg would be late or
-    not clear; info["run_in_s"])."""
+    its last run_in_s x cruise metres straight into that pose (half of it, or none, if that leg
+    would be late or not clear; info["run_in_s"])."""
     p = world.params
     uav = next(u for u in world.uavs if u.id == award["uav"])
     target = next(t for t in world.targets if t.id == award["target"])
@@ -187,7 +187,7 @@ def plan_live_leg(
         known = [th for th in world.threats if th.appear_s <= award["t_s"]]
     strike = award["task"] == "strike"
     kind = "strike" if strike else "transit"
-    for run_in in dict.fromkeys((run_in_s, 0.0)):  # without the run-in when it makes the leg late
+    for run_in in dict.fromkeys((run_in_s, run_in_s / 2.0, 0.0)):  # shorter when it makes the leg late
         leg = timed_leg(world, uav, q0, t0_s, goal_pose(world, award), float(award["time_s"]), known, kind,
                         max_speed_factor, run_in * uav.speed_mps)  # fmt: skip
         if leg.info["clear"] and leg.info["late_s"] < 0.05:

@@ -231,13 +231,20 @@ VehiclesFor = Callable[[list[VehiclePlan], Origin, float], VehicleSource]
 
 
 async def run_coalition_hil(
-    scenario: Scenario, options: HilOptions, vehicles_for: VehiclesFor, runner: type | None = None
+    scenario: Scenario,
+    options: HilOptions,
+    vehicles_for: VehiclesFor,
+    runner: type | None = None,
+    say: Callable[[str], None] | None = None,
 ) -> HilResult:
     """Simulate, fly the awarded vehicles (``vehicles_for(initial plans, origin, speed-up)``, the mock
     fleet from the CLI), upload each award as a leg planned from the vehicle's live state (or, with
-    ``replay_legs``, the simulation's leg). ``runner``: the run's class (online_run.OnlineRun)."""
+    ``replay_legs``, the simulation's leg). ``runner``: the run's class (online_run.OnlineRun);
+    ``say(line)``: where the run's stages are told (each vehicle not ready to arm, once per reason)."""
     t_wall = time.monotonic()
     run = (runner or _HilRun)(scenario, options)
+    if say is not None:
+        run.say = say
     vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
     run.vehicles = vehicles
     if not vehicles.simulated:  # vehicles on clocks of their own: frames timed on receipt
@@ -287,6 +294,7 @@ class _HilRun:
         scenario, options = self.scenario, self.options
         self.t_route0 = self.t_start - LEAD_IN_S  # scenario time of route time 0 (the lead-in start)
         self.run_in_s = 0.0  # straight into each goal pose (live_legs.RUN_IN_S for connected vehicles)
+        self.say: Callable[[str], None] = lambda line: None  # where the run's stages are told
         self.flying = sorted(vp.sysid for vp in initial)
         self.initial = Plan(scenario.origin, "coalition", initial)
         self.missions = {
@@ -360,21 +368,33 @@ class _HilRun:
         check_limits(self.initial.vehicles, limits, LEG_SPEED_FACTOR)  # live legs fly up to this x cruise
         for sysid, lim in limits.items():
             self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
+        n_items = sum(len(m) for m in self.missions.values())
+        self.say(f"{len(self.flying)} vehicles heard, within their limits; uploading {n_items} mission items")
         t_up = time.monotonic()
         first = await upload_fleet(link, self.missions, workers=8)
-        bad = [s for s, r in first.items() if not r.ok]
+        bad = {s: r.error for s, r in first.items() if not r.ok}
         if bad:
-            raise UserError(f"initial mission upload failed for sysid {bad}")
-        n_items = sum(len(m) for m in self.missions.values())
+            first_error = next(iter(bad.values()))
+            booting = "" if self.vehicles.simulated else "; a SITL answers uploads only once booted (~30 s)"
+            raise UserError(f"initial mission upload failed for sysid {sorted(bad)}: {first_error}{booting}")
         self.timing = UploadTiming((time.monotonic() - t_up) * min(8, len(self.missions)) / n_items)
+        self.say("first missions uploaded; arming and taking off")
         speedup = self.options.speedup
-        await take_off_all(link, self.initial, status, speedup, self.quirks)
+        said: dict[int, str] = {}
+
+        def waiting(stage: str, sysid: int, reason: str) -> None:
+            if said.get(sysid) != reason:
+                said[sysid] = reason
+                self.say(f"sysid {sysid} not ready to arm yet: {reason} (waiting)")
+
+        await take_off_all(link, self.initial, status, speedup, self.quirks, progress=waiting)
         lead_s = 2.0
         self.route_t0 = self.recorder.now_s() + lead_s
         no_lead = {s: 0.0 for s in self.flying}
         await start_routes(link, self.initial, self.missions, speedup, logger, lead_s, no_lead, self.quirks)
         for vp in self.initial.vehicles:
             self.keeper.add(vp)
+        self.say(f"routes started; flying scenario time {self.t_start:.0f}-{self.t_stop:.0f} s")
         await self._serve(link, logger)
 
     async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import sys
 from pathlib import Path
 
 from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
@@ -155,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     vehicles_for = connected_fleet(args.connect, args.connected) if args.connect else mock_fleet_process
     try:
-        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, runner))
+        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, runner, say=_say))
     except TimeoutError as exc:  # the mock fleet's process did not start
         raise UserError(str(exc)) from None
     print(format_strike_report(result.rows))
@@ -171,3 +172,7 @@ def run(args: argparse.Namespace) -> int:
     for f in result.failures:
         print(f"failure: {f}")
     return 0 if result.passed else 1
+
+
+def _say(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)

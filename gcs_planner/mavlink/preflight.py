@@ -37,6 +37,7 @@ log = logging.getLogger(__name__)
 
 ARM_RETRY_S = 2.0  # between arming attempts while the vehicle is not ready [s of vehicle time]
 _REFUSALS = (CommandResult.FAILED, CommandResult.TEMPORARILY_REJECTED, CommandResult.DENIED)
+PREARM_TEXTS = ("PreArm", "Arm", "Preflight")  # how ArduPilot and PX4 word a pre-arm failure
 M = mavlink
 FLIGHT_STREAMS: dict[int, float] = {  # message id -> rate [Hz] a flight needs
     M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
@@ -90,7 +91,7 @@ async def arm_when_ready(
     reason = ""
     while True:
         if track.prearm_ok is False:  # the vehicle says it is not ready: do not ask yet
-            reason = status.reason(sysid) or "pre-arm checks not passed"
+            reason = status.reason(sysid, prefixes=PREARM_TEXTS) or "pre-arm checks not passed"
         else:
             texts_before = track.text_count
             try:

@@ -108,7 +108,8 @@ class VehicleStatus:
         ):
             track.done = True
 
-    def reason(self, sysid: int, since: int = 0) -> str:
-        """The vehicle's newest STATUSTEXT after ``since`` texts (its own words for a refusal), or ''."""
-        texts = self.tracks[sysid].texts_since(since)
+    def reason(self, sysid: int, since: int = 0, prefixes: tuple[str, ...] = ("",)) -> str:
+        """The vehicle's newest STATUSTEXT after ``since`` texts that starts with one of ``prefixes``
+        (its own words for a refusal), or ''."""
+        texts = [t for t in self.tracks[sysid].texts_since(since) if t.startswith(prefixes)]
         return texts[-1] if texts else ""
