@@ -193,7 +193,7 @@ class AutopilotProfile:
     # AP_Mission::sanity_check_params: NaN/inf in params 1-4 of an item -> INVALID_PARAMn (NaN
     # allowed only where the command gives it a meaning, e.g. yaw of NAV_WAYPOINT / LAND / TAKEOFF)
     nan_params_rejected: bool = False
-    sysid_enforce_params: bool = False  # SYSID_ENFORCE / SYSID_MYGCS (GCS_MAVLINK_*::accept_packet)
+    sysid_enforce_params: bool = False  # MAV_OPTIONS bit 0 / MAV_GCS_SYSID (GCS_MAVLINK::accept_packet)
     second_uploader_result: MissionResult = MissionResult.DENIED
     same_partner_restarts: bool = True
     foreign_item_denied: bool = True

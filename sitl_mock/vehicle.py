@@ -140,8 +140,8 @@ class MockVehicle:
             self.params.update(AIRSPEED_MIN=af.min_speed_mps, AIRSPEED_MAX=af.max_speed_mps,
                                ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad))  # fmt: skip
         if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
-            self.params.setdefault("SYSID_ENFORCE", 0.0)
-            self.params.setdefault("SYSID_MYGCS", 255.0)
+            for name, value in (("MAV_OPTIONS", 0.0), ("MAV_GCS_SYSID", 255.0), ("MAV_GCS_SYSID_HI", 0.0)):
+                self.params.setdefault(name, value)
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission
         self._armed_at_s = math.inf  # sim time of arming while on the ground
@@ -367,12 +367,16 @@ class MockVehicle:
             handler(msg)
 
     def _refuses_sender(self, msg: mavlink.MAVLink_message) -> bool:
-        """SYSID_ENFORCE = 1: only the GCS system id SYSID_MYGCS (and radios) are heard
-        (ArduPilot ``GCS_MAVLINK_Copter::accept_packet``, the same in Plane and Rover)."""
-        if not self.params.get("SYSID_ENFORCE"):
+        """MAV_OPTIONS bit 0 (GCS_SYSID_ENFORCE; SYSID_ENFORCE before 4.7): only the GCS system ids
+        MAV_GCS_SYSID..MAV_GCS_SYSID_HI (SYSID_MYGCS before 4.7), the vehicle's own and radios are
+        heard (ArduPilot GCS_Common.cpp ``GCS_MAVLINK::accept_packet``, GCS.cpp ``GCS::sysid_is_gcs``)."""
+        if not int(self.params.get("MAV_OPTIONS", 0.0)) & 1:
             return False
+        sender, low = msg.get_srcSystem(), round(self.params.get("MAV_GCS_SYSID", 255.0))
+        high = round(self.params.get("MAV_GCS_SYSID_HI", 0.0))
+        gcs = sender == low if high <= low else low <= sender <= high
         radio = msg.get_type() in ("RADIO", "RADIO_STATUS")
-        return not radio and msg.get_srcSystem() != round(self.params.get("SYSID_MYGCS", 255.0))
+        return not (gcs or radio or sender == self.sysid)
 
     def _on_setup_signing(self, msg: mavlink.MAVLink_message) -> None:
         """Take the key (ArduPilot: an all-zero key with timestamp 0 turns signing off) and its

@@ -234,16 +234,16 @@ def test_junk_datagrams_between_valid_ones_cost_nothing_at_the_mock():
 
 def test_unsigned_mock_with_sysid_enforce_ignores_a_strangers_setup_signing():
     """Failure 4b: ArduPilot takes SETUP_SIGNING from anyone while signing is off; its defence is
-    SYSID_ENFORCE, which the mock now has (default off, as ArduPilot)."""
+    MAV_OPTIONS bit 0 (SYSID_ENFORCE before 4.7), which the mock has (default off, as ArduPilot)."""
 
     async def main():
         async with MockFleet(count=1) as fleet:
             vehicle = fleet.vehicle(1)
             operator, stranger = Peer(255, 190), Peer(66, 190)
             real32 = mavlink.MAV_PARAM_TYPE_REAL32
-            param = mavlink.MAVLink_param_set_message(1, 1, b"SYSID_ENFORCE", 1.0, real32)
+            param = mavlink.MAVLink_param_set_message(1, 1, b"MAV_OPTIONS", 1.0, real32)
             operator.send(operator.frame(param), vehicle.address)
-            await _until(lambda: vehicle.params["SYSID_ENFORCE"] == 1.0)
+            await _until(lambda: vehicle.params["MAV_OPTIONS"] == 1.0)
             stolen = key_from_passphrase("stranger")
             stranger.send(stranger.frame(setup_signing_message(stolen, 1)), vehicle.address)
             await _until(lambda: vehicle.link.peers[-1] == stranger.address)  # it decoded ...
