@@ -12,7 +12,8 @@ that reads them. Every error names the file, the field and the bad value.
                         for fleets past one network's 254; Vehicle.sysid is then the fleet id
                         network x 256 + sysid), type ("multirotor" | "fixed_wing"), start = [x, y, z],
                         goal = [x, y, z], speed_mps, turn_radius_m, min_alt_m, max_alt_m,
-                        separation_m, priority
+                        separation_m, priority, landing_mps (the final landing's descent rate at
+                        the goal; absent: the vehicle leaves the airspace on arrival)
     [[obstacles.cylinders]]    x, y, radius_m, z_min_m (default 0), z_max_m, buffer_m
     [[obstacles.hemispheres]]  x, y, z (default 0), radius_m  (radar domes)
     [bounds]            x = [min, max], y = [...], z = [...]
@@ -72,6 +73,7 @@ class Vehicle:
     max_alt_m: float = 120.0
     separation_m: float = 5.0
     priority: float = 1.0
+    landing_mps: float = 0.0  # descent rate of the landing at the goal (0: gone on arrival)
 
 
 @dataclass(frozen=True)
@@ -152,7 +154,7 @@ MANNED_MODE_KEYS = ("name", "history", "velocity_mps", "sigma_mps", "strength", 
 # coalition planner's (coalition/model.py)
 VEHICLE_KEYS = (
     ("id", "sysid", "network", "type", "start", "goal", "speed_mps", "min_alt_m", "max_alt_m")
-    + ("turn_radius_m", "separation_m", "priority", "takeoff_s", "arrival_s")
+    + ("turn_radius_m", "separation_m", "priority", "landing_mps", "takeoff_s", "arrival_s")
     + ("v_max_mps", "a_max_mps2", "climb_mps", "takeoff_settle_s", "descent_mps", "min_turn_radius_m")
     + ("max_time_error_s", "limit", "capabilities", "munitions", "heading_deg", "range_m")
 )
@@ -273,6 +275,7 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
         max_alt_m=max_alt,
         separation_m=number(d.get("separation_m", 5.0), f"{where}.separation_m", 0, MAX_RADIUS_M),
         priority=number(d.get("priority", 1.0), f"{where}.priority"),
+        landing_mps=number(d.get("landing_mps", 0.0), f"{where}.landing_mps", 0, MAX_SPEED_MPS),
     )
 
 

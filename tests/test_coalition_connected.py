@@ -16,11 +16,11 @@ from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.live_legs import RUN_IN_S
 from gcs_planner.coalition_hil.online_run import OnlineRun
 from gcs_planner.coalition_hil.run import initial_plans, run_coalition_hil
-from gcs_planner.coalition_hil.starts import CLIMB_RUN_PER_M
 from gcs_planner.commands.fly_coalition import connected_fleet
 from gcs_planner.geo import geodetic_to_enu
 from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.scenario import load_scenario
+from gcs_planner.starts import CLIMB_RUN_PER_M
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehiclesProcess
 

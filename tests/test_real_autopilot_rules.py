@@ -4,6 +4,7 @@ plays them by default, and the tool's answer to each: fly, upload --verify, clea
 from __future__ import annotations
 
 import asyncio
+import math
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,7 @@ from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.mavlink.wpl import loads_wpl
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
+from gcs_planner.starts import CLIMB_RUN_PER_M
 from sitl_mock.mission_server import Failure
 from sitl_mock.plan_fleet import MockVehicles
 
@@ -257,3 +259,27 @@ def test_a_vehicle_not_ready_to_arm_is_said_to_wait_for_its_pre_arm_text_not_its
 
     reasons = asyncio.run(run())
     assert reasons and set(reasons) == {"PreArm: Need Position Estimate"}, reasons
+
+
+@pytest.mark.parametrize(
+    ("scenario", "run_per_m"), [("straight_2fw.toml", CLIMB_RUN_PER_M), ("straight_4uav.toml", 0.0)]
+)
+def test_fly_homes_puts_a_plane_one_climb_run_behind_its_first_waypoint_and_a_copter_under_it(
+    scenario, run_per_m, capsys, tmp_path
+):
+    """A SITL plane's take-off climbs on its launch course (TAKEOFF mode): started at its first
+    waypoint, one flew 70 m off its route turning back to it; a multirotor climbs straight up."""
+    from gcs_planner.geo import geodetic_to_enu
+
+    out = tmp_path / "out"
+    assert main(["fly", str(MISSIONS / scenario), "--homes", "-o", str(out)]) == 0
+    plan = plan_scenario(load_scenario(MISSIONS / scenario))
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == len(plan.vehicles) and not out.exists()
+    for line, vp in zip(lines, plan.vehicles):
+        lat, lon, alt, heading = (float(v) for v in line.split("--home ")[1].split()[0].split(","))
+        x, y, _ = geodetic_to_enu(lat, lon, alt, plan.origin)
+        (x0, y0, z0), (x1, y1, _) = vp.waypoints[0], vp.waypoints[1]
+        assert abs(alt - plan.origin.alt_m) < 0.5 and f"MAV_SYSID {vp.sysid}" in line
+        assert math.hypot(x0 - x, y0 - y) == pytest.approx(z0 * run_per_m, abs=0.5)
+        assert abs(math.remainder(heading - math.degrees(math.atan2(x1 - x0, y1 - y0)), 360.0)) < 1.0

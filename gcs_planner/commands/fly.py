@@ -28,6 +28,7 @@ from gcs_planner.fly import FlyOptions, check_flight, check_networks, end_summar
 from gcs_planner.plan import Plan
 from gcs_planner.planning import load_scenario
 from gcs_planner.progress import plan_with_progress, progress_bar
+from gcs_planner.starts import format_homes, starts
 from gcs_planner.validation import MAX_RADIUS_M, MAX_SPEED_MPS, InputError, number, number_flag, output_dir
 from gcs_planner.vehicles import ConnectedVehicles, mock_vehicles
 
@@ -56,6 +57,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
     p.add_argument("--seed", type=SEED, default=None, help="planner seed (default: the file's)")
     p.add_argument("--tlog", action="store_true", help="also write OUT/flight.tlog")
+    p.add_argument(
+        "--homes", action="store_true", help="print each vehicle's start for SITL (--home) and exit"
+    )
     p.add_argument("--no-rrd", action="store_true", help="skip the Rerun .rrd")
     p.add_argument("--live", action="store_true", help="show the Rerun views while flying (spawns a viewer)")
     p.add_argument(
@@ -99,6 +103,7 @@ def _fly_coalition(args: argparse.Namespace) -> int:
     fly_coalition.add_arguments(parser)
     argv = [args.scenario, "--out", args.out, "--speedup", str(args.speedup or 5.0)]
     argv += ["--seed", str(args.seed)] if args.seed is not None else []
+    argv += ["--homes"] if args.homes else []
     print("coalition scenario: each award is uploaded to its vehicles in flight (gcs-planner fly-coalition)")
     return fly_coalition.run(parser.parse_args(argv))
 
@@ -152,6 +157,9 @@ def run(args: argparse.Namespace) -> int:
         return _fly_coalition(args)
     args.speedup = 10.0 if args.speedup is None else args.speedup
     plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
+    if args.homes:
+        print(format_homes(starts(plan.vehicles, plan.origin), None))
+        return 0
     drift = _drift(args.drift, [v.sysid for v in plan.vehicles])
     check_flight(plan)  # every mission, before anything is written or sent
     if args.connect and networks(plan) > 1:

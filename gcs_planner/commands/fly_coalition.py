@@ -26,12 +26,12 @@ from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_r
 from gcs_planner.coalition_hil.online_run import OnlineRun
 from gcs_planner.coalition_hil.report import format_formations
 from gcs_planner.coalition_hil.run import initial_plans
-from gcs_planner.coalition_hil.starts import format_homes, starts
 from gcs_planner.commands.plan import SEED
 from gcs_planner.errors import UserError
 from gcs_planner.fly import end_summary
 from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import load_world
+from gcs_planner.starts import format_homes, starts
 from gcs_planner.validation import MAX_DURATION_S, number_flag, output_dir, sysids_flag
 from gcs_planner.vehicles import ConnectedVehicles, MixedVehicles, mock_vehicles
 

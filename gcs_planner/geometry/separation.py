@@ -4,7 +4,9 @@ Trajectories are piecewise linear in time between their samples (a plan's ``path
 ``path_times_s``, seconds from the mission start with any take-off delay already included, as
 VehiclePlan documents). A vehicle occupies the airspace only while it
 flies, from its first to its last sample time: before take-off it is on the ground at its start,
-after arrival it has landed (a choice: the scenario's goals are landing spots, not hover points).
+after arrival it has landed (a choice: the scenario's goals are landing spots, not hover points),
+unless its scenario entry gives ``landing_mps``: a vehicle whose mission ends with a landing then
+occupies the column above its goal while it descends at that rate (``Trajectory.from_plan``).
 
 Separation check (``find_conflicts``), exact for the piecewise-linear motion sampled every
 ``step_s`` (<= 0.5 s): on each time slice a cKDTree over the flying vehicles finds candidate
@@ -79,10 +81,15 @@ class Trajectory:
         return out
 
     @classmethod
-    def from_plan(cls, vp, separation_m: float = 0.0) -> Trajectory:
-        """Trajectory of a VehiclePlan (path_times_s are seconds from the mission start, delay included)."""
+    def from_plan(cls, vp, separation_m: float = 0.0, landing_mps: float = 0.0) -> Trajectory:
+        """Trajectory of a VehiclePlan (path_times_s are seconds from the mission start, delay
+        included), with its final landing descended at landing_mps (> 0) when it lands."""
         times = np.asarray(vp.path_times_s, dtype=float)
-        return cls(vp.vehicle_id, times, np.asarray(vp.path, dtype=float), separation_m)
+        path = np.asarray(vp.path, dtype=float)
+        if landing_mps > 0 and vp.final_action == "land" and path[-1, 2] > 0:
+            times = np.append(times, times[-1] + path[-1, 2] / landing_mps)
+            path = np.vstack([path, [path[-1, 0], path[-1, 1], 0.0]])
+        return cls(vp.vehicle_id, times, path, separation_m)
 
 
 @dataclass(frozen=True)
@@ -201,7 +208,7 @@ def check_plan(
     for vp in plan.vehicles:
         veh = scenario.vehicle(vp.vehicle_id)
         traj = Trajectory.from_plan(vp, veh.separation_m)
-        trajs.append(_resample(traj, step_s))
+        trajs.append(_resample(Trajectory.from_plan(vp, veh.separation_m, veh.landing_mps), step_s))
         p = traj.positions_m
         a, b = p[:-1], p[1:]
         clear = obstacles.clearance(a, b)

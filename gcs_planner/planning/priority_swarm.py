@@ -533,19 +533,18 @@ def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.
     slices, pos, valid, _ = model.grid(dec)
     slices, pos = slices[valid[0]], pos[0, 1:-1][valid[0]]
     v = prob.vehicle
+    t_arrive = prob.t_offset + float(dec.total[0]) / v.speed_mps
     cols = []
     for col, t_a, sign in ((prob.pre, prob.delay_s, 1), (prob.post, None, -1)):
         if not len(col):
             continue
         top = prob.start if sign > 0 else prob.goal
-        dz = abs(top[2] - col[0, 2])
-        t_start = t_a if t_a is not None else prob.t_offset + float(dec.total[0]) / v.speed_mps
-        k = np.arange(
-            math.ceil(t_start / cfg.dt_s - 1e-9), math.floor((t_start + dz / v.speed_mps) / cfg.dt_s) + 1
-        )
-        frac = (k * cfg.dt_s - t_start) * v.speed_mps / max(dz, 1e-9)
         a, b = (col[0], top) if sign > 0 else (top, col[0])
-        cols.append((k, a + np.clip(frac, 0, 1)[:, None] * (b - a)))
+        cols.append(_column(a, b, t_a if t_a is not None else t_arrive, v.speed_mps, cfg.dt_s))
+    end = np.asarray(v.goal, dtype=float)
+    if v.landing_mps > 0 and end[2] > 0:  # the mission's final landing, descended at the goal
+        t_land = t_arrive + (abs(end[2] - prob.goal[2]) / v.speed_mps if len(prob.post) else 0.0)
+        cols.append(_column(end, np.array([end[0], end[1], 0.0]), t_land, v.landing_mps, cfg.dt_s))
     if cols:
         ks = np.concatenate([slices] + [c[0] for c in cols])
         ps = np.vstack([pos] + [c[1] for c in cols])
@@ -554,6 +553,14 @@ def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.
         keep = np.concatenate([[True], np.diff(ks) > 0])
         slices, pos = ks[keep], ps[keep]
     return slices, pos
+
+
+def _column(a: np.ndarray, b: np.ndarray, t_start: float, speed_mps: float, dt_s: float):
+    """Grid slices and positions of a vertical climb or descent from a to b starting at t_start."""
+    dz = abs(b[2] - a[2])
+    k = np.arange(math.ceil(t_start / dt_s - 1e-9), math.floor((t_start + dz / speed_mps) / dt_s) + 1)
+    frac = (k * dt_s - t_start) * speed_mps / max(dz, 1e-9)
+    return k, a + np.clip(frac, 0, 1)[:, None] * (b - a)
 
 
 def _run_round(problems, obstacles, cfg, rng, order, init, elites, previous, progress, frac0, frac1):

@@ -1,8 +1,10 @@
-"""Where a connected plane (real or SITL) starts, so that its take-off ends where its first mission begins.
+"""Where a connected vehicle (real or SITL) starts, so that its take-off ends where its mission begins.
 
-A plane takes off in ArduPlane's TAKEOFF mode, climbing on its launch heading, and its first
-mission is a straight lead-in (missions.first_mission). Its home is therefore on that line, one
-climb run before the lead-in start, facing along it: SITL takes it as ``--home lat,lon,alt,hdg``.
+A plane takes off in ArduPlane's TAKEOFF mode, climbing on its launch heading, and its mission's
+first leg (in a coalition run, a straight lead-in: coalition_hil.missions.first_mission) follows.
+Its home is therefore on that line, one climb run before the first waypoint, facing along it; a
+multirotor climbs straight up, so its home is under its first waypoint. SITL takes either as
+``--home lat,lon,alt,hdg`` (``fly --homes``, ``fly-coalition --homes``).
 """
 
 from __future__ import annotations
@@ -29,13 +31,14 @@ class Start:
 
 
 def starts(plans: list[VehiclePlan], origin: Origin) -> list[Start]:
-    """Each plan's start: one climb run before its first waypoint, facing its first leg."""
+    """Each plan's start, facing its first leg: a plane one climb run before its first waypoint, a
+    multirotor under it."""
     out = []
     for vp in plans:
         (x0, y0, z0), (x1, y1, _) = vp.waypoints[0], vp.waypoints[1]
-        d = math.hypot(x1 - x0, y1 - y0)
+        d = max(math.hypot(x1 - x0, y1 - y0), 1e-9)
         ux, uy = (x1 - x0) / d, (y1 - y0) / d
-        run = z0 * CLIMB_RUN_PER_M
+        run = z0 * CLIMB_RUN_PER_M if vp.vehicle_type == "fixed_wing" else 0.0
         lat, lon, alt = enu_to_geodetic(x0 - run * ux, y0 - run * uy, 0.0, origin)
         heading = math.degrees(math.atan2(ux, uy)) % 360.0
         out.append(Start(vp.sysid, vp.vehicle_id, Origin(float(lat), float(lon), float(alt)), heading))
