@@ -108,6 +108,7 @@ def test_a_connected_plane_too_slow_for_the_scenario_is_refused_before_anything_
         assert not plane.armed and len(plane.mission_server.items()) <= 1  # at most the home item
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s" in err[0]
+    assert "missions/coalition_sitl.toml" in err[0]  # what to fly on a stock SITL plane instead
 
 
 def test_the_sitl_scenario_is_its_generators_output_and_forms_every_coalition_of_the_paper():

@@ -365,7 +365,11 @@ class _HilRun:
         """Upload the initial missions, take off, start the routes, then serve the awards."""
         await request_streams(link, self.flying)
         limits = await read_limits(link, self.flying, self.quirks)
-        check_limits(self.initial.vehicles, limits, LEG_SPEED_FACTOR)  # live legs fly up to this x cruise
+        try:
+            check_limits(self.initial.vehicles, limits, LEG_SPEED_FACTOR)  # live legs fly up to this x cruise
+        except UserError as exc:
+            hint = "missions/coalition_sitl.toml is the paper scenario sized for SITL's stock plane"
+            raise UserError(f"{exc} ({hint})") from None
         for sysid, lim in limits.items():
             self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
         n_items = sum(len(m) for m in self.missions.values())
