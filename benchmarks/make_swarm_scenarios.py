@@ -19,6 +19,8 @@ ORIGIN = (47.397742, 8.545594, 488.0)
 
 
 def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
     if isinstance(v, str):
         return f'"{v}"'
     if isinstance(v, (list, tuple)):
@@ -46,7 +48,8 @@ def write(name: str, title: str, planner: dict, vehicles: list[dict], cylinders:
 
 def fleet(rng, n, x0, x1, y0, spacing, speed=12.0, radius=20.0, sep=8.0, columns=1, landing=None):
     """n vehicles: starts in `columns` lines at x0, goals at x1 in shuffled rows; ``landing``: the
-    descent rate [m/s] of each one's landing at its goal, for the planner to keep clear of."""
+    descent rate [m/s] of each one's landing at its goal; with it, each also waits for a delayed
+    departure hovering at its start (flown by ``fly``: the planner keeps clear of both)."""
     per = int(np.ceil(n / columns))
     rows = np.arange(per) * spacing + y0
     starts = [(x0 - 25.0 * (k // per), rows[k % per]) for k in range(n)]
@@ -69,7 +72,7 @@ def fleet(rng, n, x0, x1, y0, spacing, speed=12.0, radius=20.0, sep=8.0, columns
                 "max_alt_m": 120.0,
                 "separation_m": sep,
                 "priority": float(1 + (k % 3 == 0)),
-                **({"landing_mps": landing} if landing else {}),
+                **({"landing_mps": landing, "waits_airborne": True} if landing else {}),
             }
         )
     return out
@@ -134,7 +137,8 @@ def main() -> None:
     write("swarm40_urban", "40 UAVs, urban grid of towers of mixed height", planner40, veh, urban, bounds)
 
     rng = np.random.default_rng(500)
-    # flown by benchmarks/fly_swarm500.py: each lands at its goal at the mock multirotor's 1 m/s
+    # flown by benchmarks/fly_swarm500.py: each waits at its start in the air and lands at its goal
+    # at the mock multirotor's 1 m/s
     veh = fleet(rng, 500, 0.0, 2000.0, 0.0, 20.0, sep=5.0, columns=5, landing=1.0)
     ends = [v["start"][:2] for v in veh] + [v["goal"][:2] for v in veh]
     cyl = scatter(np.random.default_rng(501), 30, (300, 100), (1700, 1900), (25, 50), ends, min_gap=40)

@@ -12,8 +12,10 @@ that reads them. Every error names the file, the field and the bad value.
                         for fleets past one network's 254; Vehicle.sysid is then the fleet id
                         network x 256 + sysid), type ("multirotor" | "fixed_wing"), start = [x, y, z],
                         goal = [x, y, z], speed_mps, turn_radius_m, min_alt_m, max_alt_m,
-                        separation_m, priority, landing_mps (the final landing's descent rate at
-                        the goal; absent: the vehicle leaves the airspace on arrival)
+                        separation_m, priority; as `fly` flies it (absent: the paper's model):
+                        landing_mps (the landing's descent rate at the goal; absent: the vehicle
+                        leaves the airspace on arrival), waits_airborne (true: it waits for its
+                        take-off delay hovering at its start; absent: on the ground)
     [[obstacles.cylinders]]    x, y, radius_m, z_min_m (default 0), z_max_m, buffer_m
     [[obstacles.hemispheres]]  x, y, z (default 0), radius_m  (radar domes)
     [bounds]            x = [min, max], y = [...], z = [...]
@@ -74,6 +76,7 @@ class Vehicle:
     separation_m: float = 5.0
     priority: float = 1.0
     landing_mps: float = 0.0  # descent rate of the landing at the goal (0: gone on arrival)
+    waits_airborne: bool = False  # waits for its take-off delay hovering at its start
 
 
 @dataclass(frozen=True)
@@ -154,7 +157,7 @@ MANNED_MODE_KEYS = ("name", "history", "velocity_mps", "sigma_mps", "strength", 
 # coalition planner's (coalition/model.py)
 VEHICLE_KEYS = (
     ("id", "sysid", "network", "type", "start", "goal", "speed_mps", "min_alt_m", "max_alt_m")
-    + ("turn_radius_m", "separation_m", "priority", "landing_mps", "takeoff_s", "arrival_s")
+    + ("turn_radius_m", "separation_m", "priority", "landing_mps", "waits_airborne", "takeoff_s", "arrival_s")
     + ("v_max_mps", "a_max_mps2", "climb_mps", "takeoff_settle_s", "descent_mps", "min_turn_radius_m")
     + ("max_time_error_s", "limit", "capabilities", "munitions", "heading_deg", "range_m")
 )
@@ -276,7 +279,14 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
         separation_m=number(d.get("separation_m", 5.0), f"{where}.separation_m", 0, MAX_RADIUS_M),
         priority=number(d.get("priority", 1.0), f"{where}.priority"),
         landing_mps=number(d.get("landing_mps", 0.0), f"{where}.landing_mps", 0, MAX_SPEED_MPS),
+        waits_airborne=_flag(d.get("waits_airborne", False), f"{where}.waits_airborne"),
     )
+
+
+def _flag(value: Any, field: str) -> bool:
+    if not isinstance(value, bool):
+        raise InputError(f"{field} must be true or false, got {value!r}")
+    return value
 
 
 def _cylinder(c: dict[str, Any], where: str) -> Cylinder:

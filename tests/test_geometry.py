@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -162,3 +163,20 @@ def test_check_plan_finds_each_kind_of_violation():
         "b"
         in check_plan(Plan(Origin(47, 8, 0), "t", [good_a, climb]), sc, max_climb_rad=math.radians(30)).climb
     )
+
+
+def test_a_vehicle_waiting_airborne_for_its_departure_is_traffic_at_its_start():
+    """fly takes every multirotor up, then starts each route at its time: a vehicle delayed 10 s
+    hovers at its start meanwhile. The checker sees B pass over A's start then only with
+    waits_airborne (on the ground otherwise, the paper's model)."""
+    sc = _scenario()
+    a_start = np.array([50.0, -40.0, 30.0])
+    a = _vp("a", 1, [a_start, [50.0, -140.0, 30.0]])
+    a = dataclasses.replace(a, path_times_s=a.path_times_s + 10.0, times_s=a.times_s + 10.0)
+    b = _vp("b", 2, [[0.0, -40.0, 30.0], [100.0, -40.0, 30.0]])  # over A's start at t = 5 s
+    plan = Plan(Origin(47, 8, 0), "t", [a, b])
+    assert check_plan(plan, sc).ok
+    waiting = [dataclasses.replace(v, waits_airborne=True) for v in sc.vehicles]
+    hovering = dataclasses.replace(sc, vehicles=waiting)
+    conflicts = check_plan(plan, hovering).conflicts
+    assert [(c[0], c[1]) for c in conflicts] == [("a", "b")] and abs(conflicts[0][2] - 5.0) < 0.5, conflicts

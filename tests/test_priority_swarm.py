@@ -215,3 +215,19 @@ def test_a_landing_at_the_goal_is_traffic_for_the_planner_and_the_checker():
     assert [(c[0], c[1]) for c in conflicts] == [("a", "b")], conflicts
     seen = plan_scenario(landing, seed=2)
     assert check_plan(seen, landing).ok, check_plan(seen, landing).summary()
+
+
+def test_a_delayed_vehicle_that_waits_airborne_is_traffic_at_its_start_until_it_departs():
+    cfg = parse(Config, FAST, "planner")
+    common = dict(type="multirotor", speed_mps=10.0, turn_radius_m=20.0, min_alt_m=20.0, max_alt_m=60.0)
+    v = Vehicle(id="a", sysid=1, start=(0.0, 0.0, 30.0), goal=(200.0, 0.0, 30.0), waits_airborne=True,
+                **common)  # fmt: skip
+    scenario = Scenario("wait", Origin(47.0, 8.0, 0.0), dict(FAST), [v])
+    (prob,), *_ = prepare(scenario, cfg)
+    x = np.linspace(prob.start, prob.goal, prob.n_wp + 2)[1:-1].ravel()
+    prob.delay_s = 3.0
+    slices, pos = timed_samples(prob, x, cfg)
+    waiting = slices * cfg.dt_s < prob.delay_s
+    assert list(slices[waiting]) == list(range(6)) and np.allclose(pos[waiting], v.start)
+    grounded = dataclasses.replace(prob, vehicle=dataclasses.replace(v, waits_airborne=False))
+    assert timed_samples(grounded, x, cfg)[0][0] * cfg.dt_s >= prob.delay_s - 1e-9  # the paper's model

@@ -541,6 +541,9 @@ def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.
         top = prob.start if sign > 0 else prob.goal
         a, b = (col[0], top) if sign > 0 else (top, col[0])
         cols.append(_column(a, b, t_a if t_a is not None else t_arrive, v.speed_mps, cfg.dt_s))
+    if v.waits_airborne and prob.delay_s > 0:  # the delayed departure awaited hovering at the start
+        k = np.arange(0, math.ceil(prob.delay_s / cfg.dt_s - 1e-9))
+        cols.append((k, np.broadcast_to(np.asarray(v.start, dtype=float), (len(k), 3))))
     end = np.asarray(v.goal, dtype=float)
     if v.landing_mps > 0 and end[2] > 0:  # the mission's final landing, descended at the goal
         t_land = t_arrive + (abs(end[2] - prob.goal[2]) / v.speed_mps if len(prob.post) else 0.0)
