@@ -231,3 +231,20 @@ def test_a_delayed_vehicle_that_waits_airborne_is_traffic_at_its_start_until_it_
     assert list(slices[waiting]) == list(range(6)) and np.allclose(pos[waiting], v.start)
     grounded = dataclasses.replace(prob, vehicle=dataclasses.replace(v, waits_airborne=False))
     assert timed_samples(grounded, x, cfg)[0][0] * cfg.dt_s >= prob.delay_s - 1e-9  # the paper's model
+
+
+def test_the_repair_re_plans_the_vehicle_passing_one_that_waits_at_its_start():
+    """Delaying a vehicle that waits airborne at its start would keep it in the way: the repair
+    re-plans the other one, whatever their priorities; after departure, priority decides."""
+    from gcs_planner.planning.priority_swarm import _loser
+
+    cfg = parse(Config, FAST, "planner")
+    common = dict(type="multirotor", speed_mps=10.0, turn_radius_m=20.0, min_alt_m=20.0, max_alt_m=60.0)
+    a = Vehicle(id="a", sysid=1, start=(0.0, 0.0, 30.0), goal=(200.0, 0.0, 30.0), waits_airborne=True,
+                **common)  # fmt: skip
+    b = Vehicle(id="b", sysid=2, start=(-25.0, 0.0, 30.0), goal=(200.0, 20.0, 30.0), **common)
+    problems, *_ = prepare(Scenario("w", Origin(47.0, 8.0, 0.0), dict(FAST), [a, b]), cfg)
+    problems[0].delay_s = 5.0
+    rank = {0: 1, 1: 0}  # b plans first: a is the lower priority
+    assert _loser(problems, 0, 1, 2.0, rank) == 1  # b passes a while a waits
+    assert _loser(problems, 0, 1, 7.0, rank) == 0  # both flying: the lower priority

@@ -681,7 +681,7 @@ def repair_and_check(
             break
         ids = {p.vehicle.id: p.index for p in problems}
         in_conflict = {c[0] for c in report.conflicts} | {c[1] for c in report.conflicts}
-        losers = {max(ids[a], ids[b], key=lambda i: rank[i]) for a, b, *_ in report.conflicts}
+        losers = {_loser(problems, ids[a], ids[b], t, rank) for a, b, t, *_ in report.conflicts}
         losers |= {ids[v] for v in report.bad_vehicles() - in_conflict}
         for i in sorted(losers, key=lambda i: rank[i]):
             prob = problems[i]
@@ -721,6 +721,15 @@ def repair_and_check(
     plan_.metrics["check"] = report.summary()
     plan_.metrics["buffer_intrusions"] = report.buffer_intrusions
     return plan_
+
+
+def _loser(problems, a: int, b: int, t_s: float, rank: dict[int, int]) -> int:
+    """Which of two vehicles in conflict at t_s is re-planned: the one passing a vehicle that waits
+    at its start (waits_airborne; delaying the waiting one would not help), else the lower priority."""
+    for waiting, other in ((a, b), (b, a)):
+        if problems[waiting].vehicle.waits_airborne and t_s < problems[waiting].delay_s:
+            return other
+    return max(a, b, key=lambda i: rank[i])
 
 
 def plan(
