@@ -83,7 +83,9 @@ class Trajectory:
         return out
 
     @classmethod
-    def from_plan(cls, vp, separation_m: float = 0.0, landing_mps: float = 0.0, waits_airborne: bool = False):
+    def from_plan(
+        cls, vp, separation_m: float = 0.0, landing_mps: float = 0.0, waits_airborne: bool = False
+    ) -> Trajectory:
         """Trajectory of a VehiclePlan (path_times_s are seconds from the mission start, delay
         included), with its final landing descended at landing_mps (> 0) when it lands, and with
         waits_airborne its wait for a delayed departure hovered at its start."""
