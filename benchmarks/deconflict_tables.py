@@ -7,19 +7,23 @@ For 4-10 UAVs (missions/deconflict_{n}uav.toml) three configurations of the same
   iterations = PSO iterations + delay steps; trajectories adjusted = UAVs delayed;
 - Table 3, PSO + waypoints: the same capped PSO, then waypoint insertion (no delays), so the
   waypoint stage is measured on its own; iterations = PSO + insertion-PSO iterations.
-Each cell is the mean over --seeds seeds (planner seeds 1..k). Then the scaled 50 / 100 UAV
-scenarios with the full method (wall time to conflict-free; target for 100: < 300 s on 2 cores).
+Each cell is the mean over --seeds seeds (planner seeds 1..k), run through the sweep runner as
+studies/deconflict_table{1,2,3}.toml (--workers processes; rows kept in --out, so a rerun redoes
+no finished run). Then the scaled 50 / 100 UAV scenarios with the full method (wall time to
+conflict-free; target for 100: < 300 s on 2 cores).
 
     nice .venv/bin/python benchmarks/deconflict_tables.py [--seeds 3] [--sizes 4 ... 10]
-        [--scaled 50 100] [--stage-pso 5]
+        [--scaled 50 100] [--stage-pso 5] [--workers 2] [--out out]
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import logging
 import os
 import time
+from pathlib import Path
 
 import msgspec
 import numpy as np
@@ -27,11 +31,13 @@ import numpy as np
 from gcs_planner.planning import config_of
 from gcs_planner.planning.deconflict4d import build_problem, planner
 from gcs_planner.scenario import load_scenario
+from gcs_planner.sweep import load_study, run_study, summarise
 
 PAPER_T1 = {4: 50, 5: 104, 6: 140, 7: 149, 8: 150, 9: 150, 10: 150}
 PAPER_T2 = {4: (1, 22), 5: (2, 89), 6: (3, 165), 7: (4, 256), 8: (5, 442), 9: (6, 587), 10: (8, 767)}
 PAPER_T3 = {6: (5, 343), 7: (5, 174), 8: (5, 191), 9: (6, 311), 10: (8, 400)}
 MISSIONS = os.path.join(os.path.dirname(__file__), "..", "missions")
+STUDIES = Path(__file__).resolve().parents[1] / "studies"
 
 
 def _run(path: str, seed: int, **overrides) -> dict:
@@ -52,12 +58,23 @@ def _run(path: str, seed: int, **overrides) -> dict:
     }
 
 
-def _mean(rows: list[dict], key: str) -> float:
-    return float(np.mean([r[key] for r in rows]))
-
-
-def _free(rows: list[dict]) -> str:
-    return f"{sum(r['free'] for r in rows)}/{len(rows)}"
+def _table(number: int, sizes: list[int], seeds: list[int], stage_pso: int, out: Path, workers: int):
+    """studies/deconflict_table{number}.toml over these sizes and seeds through the sweep runner
+    (resumable: runs already in out's CSV are not redone); per size, (summary row, runs free)."""
+    study, base = load_study(STUDIES / f"deconflict_table{number}.toml")
+    grid = {**study.grid, "scenario": [f"../missions/deconflict_{n}uav.toml" for n in sizes]}
+    if number > 1:
+        grid["iterations"] = [stage_pso]
+    study = msgspec.structs.replace(study, grid=grid, seeds=seeds)
+    csv_path = out / (f"deconflict_table{number}" + (f"_pso{stage_pso}" if number > 1 else "") + ".csv")
+    run_study(study, base, csv_path, workers=workers)
+    rows = list(csv.DictReader(csv_path.open(newline="")))
+    by_size = {}
+    for entry, n in zip(summarise(study, csv_path), sizes, strict=True):
+        runs = [r for r in rows if r["scenario"] == entry["scenario"] and int(r["seed"]) in seeds]
+        free = sum(r["conflict_free"] == "True" and r["limits_ok"] == "True" for r in runs)
+        by_size[n] = (entry, f"{free}/{len(runs)}")
+    return by_size
 
 
 def main() -> None:
@@ -66,13 +83,14 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="*", default=list(range(4, 11)))
     ap.add_argument("--scaled", type=int, nargs="*", default=[50, 100])
     ap.add_argument("--stage-pso", type=int, default=5, help="PSO iterations before delays / waypoints")
+    ap.add_argument("--workers", type=int, default=2, help="sweep runner processes [2]")
+    ap.add_argument("--out", type=Path, default=Path("out"), help="folder of the sweeps' CSVs [out]")
     args = ap.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    seeds = range(1, args.seeds + 1)
-    only_pso = dict(use_delay=False, use_waypoints=False, max_rounds=1)
-    with_delay = dict(use_waypoints=False, max_rounds=1, iterations=args.stage_pso, early_stop=False)
-    with_wps = dict(use_delay=False, max_rounds=1, iterations=args.stage_pso, early_stop=False)
-    print(f"seeds {list(seeds)}; iterations are means; 'free' = runs conflict-free / runs")
+    seeds = list(range(1, args.seeds + 1))
+    args.out.mkdir(parents=True, exist_ok=True)
+    t1, t2, t3 = (_table(k, args.sizes, seeds, args.stage_pso, args.out, args.workers) for k in (1, 2, 3))
+    print(f"seeds {seeds}; iterations are means; 'free' = runs conflict-free / runs; s = CPU s per run")
     head = (
         f"{'UAVs':>4} | {'T1 paper':>8} {'PSO':>6} {'free':>4} {'s':>6} | {'T2 paper':>9} {'+delay':>7} "
         f"{'adj':>4} {'free':>4} {'s':>6} | {'T3 paper':>9} {'+wps':>6} {'added':>5} {'free':>4} {'s':>6}"
@@ -80,17 +98,14 @@ def main() -> None:
     print(head)
     print("-" * len(head))
     for n in args.sizes:
-        path = os.path.join(MISSIONS, f"deconflict_{n}uav.toml")
-        r1 = [_run(path, s, **only_pso) for s in seeds]
-        r2 = [_run(path, s, **with_delay) for s in seeds]
-        r3 = [_run(path, s, **with_wps) for s in seeds]
-        t2, t3 = PAPER_T2[n], PAPER_T3.get(n)
+        (r1, f1), (r2, f2), (r3, f3) = t1[n], t2[n], t3[n]
+        p2, p3 = PAPER_T2[n], PAPER_T3.get(n)
         cells = [
-            f"{n:>4} | {PAPER_T1[n]:>8} {_mean(r1, 'iters'):>6.1f} {_free(r1)} {_mean(r1, 'wall_s'):>6.2f}",
-            f"{f'{t2[0]} / {t2[1]}':>9} {_mean(r2, 'iters'):>7.1f} {_mean(r2, 'delayed'):>4.1f} {_free(r2)}"
-            f" {_mean(r2, 'wall_s'):>6.2f}",
-            f"{(f'{t3[0]} / {t3[1]}' if t3 else '-'):>9} {_mean(r3, 'iters'):>6.1f}"
-            f" {_mean(r3, 'waypoints'):>5.1f} {_free(r3)} {_mean(r3, 'wall_s'):>6.2f}",
+            f"{n:>4} | {PAPER_T1[n]:>8} {r1['iterations_total mean']:>6.1f} {f1} {r1['cpu_s mean']:>6.2f}",
+            f"{f'{p2[0]} / {p2[1]}':>9} {r2['iterations_total mean']:>7.1f}"
+            f" {r2['uavs_delayed mean']:>4.1f} {f2} {r2['cpu_s mean']:>6.2f}",
+            f"{(f'{p3[0]} / {p3[1]}' if p3 else '-'):>9} {r3['iterations_total mean']:>6.1f}"
+            f" {r3['waypoints_added mean']:>5.1f} {f3} {r3['cpu_s mean']:>6.2f}",
         ]
         print(" | ".join(cells), flush=True)
     if args.scaled:
