@@ -22,12 +22,13 @@ import numpy as np
 
 from gcs_planner.conformance import Track
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, geodetic_to_enu, no_fix
+from gcs_planner.geo import Origin, geodetic_to_enu
 from gcs_planner.mavlink.actions import change_speed, start_mission_at, take_off
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.units import no_fix
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan
 from gcs_planner.timekeeping import ScheduleKeeper

@@ -24,9 +24,7 @@ from functools import lru_cache
 import numpy as np
 from pyproj import Transformer
 
-__all__ = ["NO_FIX_DEG", "Origin", "enu_to_geodetic", "geodetic_to_enu", "no_fix", "wrap_pi"]
-
-NO_FIX_DEG = 0.01  # a reported position this near (0, 0) is no position (no_fix)
+__all__ = ["Origin", "enu_to_geodetic", "geodetic_to_enu", "wrap_pi"]
 
 
 @dataclass(frozen=True)
@@ -75,9 +73,3 @@ def _like(values, template):
 def wrap_pi(angle_rad):
     """Angles [rad] wrapped into [-pi, pi) (headings, turn angles), elementwise."""
     return (np.asarray(angle_rad) + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def no_fix(lat_deg, lon_deg):
-    """Where a reported position is within NO_FIX_DEG of (0, 0): ArduPilot's GLOBAL_POSITION_INT
-    before it has a position, (0, 0) and then its dead reckoning from there (docs/real-autopilots.md)."""
-    return (np.abs(lat_deg) < NO_FIX_DEG) & (np.abs(lon_deg) < NO_FIX_DEG)

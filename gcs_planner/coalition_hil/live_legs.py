@@ -30,8 +30,9 @@ import numpy as np
 
 from gcs_planner.coalition_hil.tracks import pose_at
 from gcs_planner.flight_ops import FrameClock, boot_clock
-from gcs_planner.geo import Origin, geodetic_to_enu, no_fix
+from gcs_planner.geo import Origin, geodetic_to_enu
 from gcs_planner.geometry.dubins import DubinsPath
+from gcs_planner.mavlink.units import no_fix
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.track import Leg
 

@@ -23,8 +23,9 @@ from gcs_planner.commands._mission_cli import open_link
 from gcs_planner.commands.fly import live_recording
 from gcs_planner.commands.import_log import parse_origin
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, no_fix
+from gcs_planner.geo import Origin
 from gcs_planner.mavlink.preflight import request_streams
+from gcs_planner.mavlink.units import no_fix
 
 FIRST_POSITION_TIMEOUT_S = 30.0
 

@@ -1,4 +1,4 @@
-"""MAVLink number conventions without numpy: degE7 rounding and DO_CHANGE_SPEED speed types.
+"""MAVLink number conventions without numpy: degE7 rounding, DO_CHANGE_SPEED speed types, no fix.
 
 Kept apart from items.py (numpy, pyproj) so that a short command reading a mission file starts fast.
 """
@@ -7,9 +7,10 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["SPEED_AIRSPEED", "SPEED_GROUNDSPEED", "e7", "half_away"]
+__all__ = ["NO_FIX_DEG", "SPEED_AIRSPEED", "SPEED_GROUNDSPEED", "e7", "half_away", "no_fix"]
 
 SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0  # MAV_CMD_DO_CHANGE_SPEED param1
+NO_FIX_DEG = 0.01  # a reported position this near (0, 0) is no position (no_fix)
 
 
 def e7(deg: float) -> int:
@@ -20,3 +21,10 @@ def e7(deg: float) -> int:
 def half_away(value: float) -> int:
     """One value rounded to the nearest int, halves away from zero."""
     return int(math.copysign(math.floor(abs(value) + 0.5), value))
+
+
+def no_fix(lat_deg, lon_deg):
+    """Where a reported position (floats or numpy arrays) is within NO_FIX_DEG of (0, 0): ArduPilot's
+    GLOBAL_POSITION_INT before it has a position, (0, 0) and then its dead reckoning from there
+    (docs/real-autopilots.md)."""
+    return (abs(lat_deg) < NO_FIX_DEG) & (abs(lon_deg) < NO_FIX_DEG)

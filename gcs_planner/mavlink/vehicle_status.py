@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.geo import no_fix
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.enums import MissionState
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.units import no_fix
 
 __all__ = ["PREARM_BIT", "VehicleStatus", "VehicleTrack"]
 

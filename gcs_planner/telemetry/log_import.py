@@ -24,7 +24,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, no_fix
+from gcs_planner.geo import Origin
+from gcs_planner.mavlink.units import no_fix
 from gcs_planner.plan import Plan
 
 os.environ.setdefault("MAVLINK20", "1")

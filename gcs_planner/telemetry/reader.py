@@ -31,7 +31,8 @@ from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Me
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, no_fix
+from gcs_planner.geo import Origin
+from gcs_planner.mavlink.units import no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.validation import load_json
 

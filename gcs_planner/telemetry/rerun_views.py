@@ -30,7 +30,8 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu, no_fix
+from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.mavlink.units import no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario, ScenarioError, parse_scenario
 from gcs_planner.telemetry.colors import vehicle_color

@@ -19,7 +19,8 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, no_fix
+from gcs_planner.geo import Origin
+from gcs_planner.mavlink.units import no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.telemetry.reader import RawFrame
 
