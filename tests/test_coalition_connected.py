@@ -13,7 +13,7 @@ import pytest
 import sitl_mock
 from gcs_planner.cli import main
 from gcs_planner.coalition_hil import HilOptions
-from gcs_planner.coalition_hil.live_legs import RUN_IN_S
+from gcs_planner.coalition_hil.live_legs import RUN_IN_S, TURN_FACTOR
 from gcs_planner.coalition_hil.online_run import OnlineRun
 from gcs_planner.coalition_hil.run import initial_plans, run_coalition_hil
 from gcs_planner.commands.fly_coalition import connected_fleet
@@ -54,8 +54,8 @@ def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path
     assert sorted(flight.positions) == list(range(1, 33)), sorted(flight.positions)
     assert any(e["event"] == "safe_end" for _, e in flight.events)
     awards = [e for _, e in flight.events if e["event"] == "upload" and e["kind"] == "award"]
-    run_ins = Counter(e["run_in_s"] for e in awards)
-    assert awards and run_ins[RUN_IN_S] >= len(awards) / 2, run_ins  # legs end straight into the goal
+    run_ins = Counter((e["run_in_s"], e["turn_factor"]) for e in awards)
+    assert awards and run_ins[RUN_IN_S, TURN_FACTOR] >= len(awards) / 2, run_ins  # wide turns, then straight
 
 
 def test_homes_put_each_connected_plane_one_climb_run_behind_its_first_waypoint(capsys):

@@ -194,3 +194,30 @@ def test_a_connected_vehicles_leg_ends_with_a_straight_run_in_when_it_can_still_
     late_without = plan_live_leg(world, tight, q0, 10.0, 1.2)
     assert late_without.info["late_s"] < 0.05 and late_with.info["run_in_s"] == 0.0
     assert np.array_equal(late_with.xy, late_without.xy)
+
+
+def test_a_connected_planes_leg_turns_wider_when_it_still_arrives_on_time():
+    """ArduPlane SITL overshot its turn onto the run-in line by 25-37 m on r_min arcs: a connected
+    plane's leg turns at TURN_FACTOR x r_min while that still arrives on time, else at r_min."""
+    from gcs_planner.coalition_hil.live_legs import RUN_IN_S, TURN_FACTOR
+
+    world = load_world(load_scenario(SCENARIO))
+    award = {"uav": "U8", "target": "T1", "task": "strike", "t_s": 60.0, "time_s": 100.0, "angle_deg": 15.0}
+    uav = next(u for u in world.uavs if u.id == "U8")
+    target = np.asarray(next(tg for tg in world.targets if tg.id == "T1").xy)
+    q0 = np.array([target[0] + 900.0, target[1] - 900.0, math.radians(90.0)])
+
+    def tightest_radius(leg) -> float:
+        ds = np.hypot(*np.diff(leg.xy, axis=0).T)
+        rate = np.abs(np.diff(np.unwrap(leg.heading))) / np.maximum(ds, 1e-9)
+        return float(1.0 / rate[ds > 1e-6].max())
+
+    wide = plan_live_leg(world, award, q0, 10.0, 1.2, run_in_s=RUN_IN_S, turn_factor=TURN_FACTOR)
+    assert wide.info["turn_factor"] == TURN_FACTOR and abs(wide.info["late_s"]) < 0.05, wide.info
+    assert tightest_radius(wide) >= 0.99 * TURN_FACTOR * uav.r_min_m
+    goal = np.r_[wide.xy[-1], wide.heading[-1]]
+    shortest = paths.min_route(q0, goal, uav.r_min_m, [], world.params.kappa, world.params.sample_ds_m)
+    tight = {**award, "time_s": 10.0 + shortest.length_m / (1.2 * uav.speed_mps) + 0.01}
+    late = plan_live_leg(world, tight, q0, 10.0, 1.2, run_in_s=RUN_IN_S, turn_factor=TURN_FACTOR)
+    assert late.info["turn_factor"] == 1.0 and late.info["late_s"] < 0.05
+    assert tightest_radius(late) < TURN_FACTOR * uav.r_min_m  # no time to turn wider

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,6 +41,7 @@ __all__ = [
     "LEG_SPEED_FACTOR",
     "SPEED_TRIES",
     "RUN_IN_S",
+    "TURN_FACTOR",
     "LiveState",
     "Telemetry",
     "goal_pose",
@@ -56,6 +57,7 @@ SPEED_TRIES = (0.9, 1.1, 0.8, 1.2)  # other speeds / cruise for a live leg that 
 LEG_SPEED_FACTOR = 1.2  # a live leg short of time may be planned up to this x cruise (mock top: 1.3)
 REJOIN_MIN_S = 10.0  # an idle mission rejoins the simulated track at least this long after its start [s]
 RUN_IN_S = 6.0  # straight flown into a connected vehicle's goal pose (ArduPlane's L1 settles on it) [s]
+TURN_FACTOR = 1.5  # a connected plane's legs turn at this x r_min (ArduPlane's L1 flies tight arcs wide)
 
 
 @dataclass(frozen=True)
@@ -174,13 +176,14 @@ def _straight_into(goal: np.ndarray, length_m: float, r_m: float) -> list:
 
 def plan_live_leg(
     world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0, known=None,
-    run_in_s: float = 0.0,
+    run_in_s: float = 0.0, turn_factor: float = 1.0,
 ) -> Leg:
     """The award's leg from pose q0 (x, y, heading [rad]) at t0_s (see ``timed_leg``): to the strike
     entry pose, or to the assessment arc start followed by the assessment arc, arriving at
     award["time_s"], around the known threats (default: the scenario's, known at the award),
-    its last run_in_s x cruise metres straight into that pose (half of it, or none, if that leg
-    would be late or not clear; info["run_in_s"])."""
+    its last run_in_s x cruise metres straight into that pose, its turns at turn_factor x r_min
+    (each tried shorter, then at r_min, if that leg would be late or not clear; info["run_in_s"],
+    info["turn_factor"])."""
     p = world.params
     uav = next(u for u in world.uavs if u.id == award["uav"])
     target = next(t for t in world.targets if t.id == award["target"])
@@ -188,12 +191,15 @@ def plan_live_leg(
         known = [th for th in world.threats if th.appear_s <= award["t_s"]]
     strike = award["task"] == "strike"
     kind = "strike" if strike else "transit"
-    for run_in in dict.fromkeys((run_in_s, run_in_s / 2.0, 0.0)):  # shorter when it makes the leg late
-        leg = timed_leg(world, uav, q0, t0_s, goal_pose(world, award), float(award["time_s"]), known, kind,
+    runs_in = dict.fromkeys((run_in_s, run_in_s / 2))
+    tries = [(f, r) for f in dict.fromkeys((turn_factor, 1.0)) for r in runs_in]
+    for factor, run_in in dict.fromkeys([*tries, (1.0, 0.0)]):  # gentler first; as the simulation's when late
+        wide = replace(uav, r_min_m=factor * uav.r_min_m)
+        leg = timed_leg(world, wide, q0, t0_s, goal_pose(world, award), float(award["time_s"]), known, kind,
                         max_speed_factor, run_in * uav.speed_mps)  # fmt: skip
         if leg.info["clear"] and leg.info["late_s"] < 0.05:
             break
-    leg.info["run_in_s"] = run_in
+    leg.info.update(run_in_s=run_in, turn_factor=factor)
     leg.info["target"] = target.id
     if strike:
         return leg

@@ -222,7 +222,8 @@ class OnlineRun(_HilRun):
                     break
                 threat = Threat(float(rest[j, 0]), float(rest[j, 1]), radius_m, now)
                 known = [*self.engine.known, threat]
-                live = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR, known, self.run_in_s)
+                live = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR, known, self.run_in_s,
+                                     self.turn_factor)  # fmt: skip
                 if live.info["clear"] and live.info["late_s"] <= 0.1:
                     self.engine.inject_threat(threat)
                     return True

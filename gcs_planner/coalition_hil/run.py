@@ -31,6 +31,7 @@ import numpy as np
 from gcs_planner.coalition_hil.live_legs import (
     LEG_SPEED_FACTOR,
     RUN_IN_S,
+    TURN_FACTOR,
     LiveState,
     Telemetry,
     goal_pose,
@@ -249,7 +250,7 @@ async def run_coalition_hil(
     run.vehicles = vehicles
     if not vehicles.simulated:  # vehicles on clocks of their own: frames timed on receipt
         run.recorder.clock = run.telemetry.clock = receive_clock(vehicles.speedup, time.time())
-        run.run_in_s = RUN_IN_S
+        run.run_in_s, run.turn_factor = RUN_IN_S, TURN_FACTOR
     options.out_dir.mkdir(parents=True, exist_ok=True)
     scenario_text = scenario.path.read_text() if scenario.path else None
     with vehicles as networks:
@@ -294,6 +295,7 @@ class _HilRun:
         scenario, options = self.scenario, self.options
         self.t_route0 = self.t_start - LEAD_IN_S  # scenario time of route time 0 (the lead-in start)
         self.run_in_s = 0.0  # straight into each goal pose (live_legs.RUN_IN_S for connected vehicles)
+        self.turn_factor = 1.0  # legs' turns x r_min (live_legs.TURN_FACTOR for connected vehicles)
         self.say: Callable[[str], None] = lambda line: None  # where the run's stages are told
         self.flying = sorted(vp.sysid for vp in initial)
         self.initial = Plan(scenario.origin, "coalition", initial)
@@ -529,7 +531,8 @@ class _HilRun:
         for _ in range(2):  # once more when the mission has more items than guessed
             t0 = self._leg_start_s(award, now + self.upload_estimate_s(items) + START_AHEAD_S)
             q0 = state.predict([t0])[0]
-            leg = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR, known, self.run_in_s)
+            leg = plan_live_leg(self.world, e, q0, t0, LEG_SPEED_FACTOR, known, self.run_in_s,
+                                self.turn_factor)  # fmt: skip
             if e["task"] == "strike" and not (leg.info["clear"] and abs(leg.info["late_s"]) < 0.05):
                 leg = onto_sim_leg(self.world, sched.uav, q0, t0, award.sim_leg, known) or leg
             prefix = _predicted_prefix(state, t0)
@@ -551,6 +554,7 @@ class _HilRun:
             "leg_late_s": round(leg.info["late_s"], 3),
             "clear": leg.info["clear"],
             "run_in_s": leg.info.get("run_in_s", 0.0),
+            "turn_factor": leg.info.get("turn_factor", 1.0),
         }
         return leg, vp, info
 
