@@ -54,8 +54,11 @@ def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path
     assert sorted(flight.positions) == list(range(1, 33)), sorted(flight.positions)
     assert any(e["event"] == "safe_end" for _, e in flight.events)
     awards = [e for _, e in flight.events if e["event"] == "upload" and e["kind"] == "award"]
-    run_ins = Counter((e["run_in_s"], e["turn_factor"]) for e in awards)
-    assert awards and run_ins[RUN_IN_S, TURN_FACTOR] >= len(awards) / 2, run_ins  # wide turns, then straight
+    legs = Counter((e["run_in_s"], e["turn_factor"]) for e in awards)
+    straight = sum(n for (run_in, _), n in legs.items() if run_in > 0)
+    wide = sum(n for (_, factor), n in legs.items() if factor == TURN_FACTOR)
+    assert awards and straight >= len(awards) / 2 and wide >= len(awards) / 4, legs  # where they fit in time
+    assert max(run_in for run_in, _ in legs) == RUN_IN_S, legs
 
 
 def test_homes_put_each_connected_plane_one_climb_run_behind_its_first_waypoint(capsys):
