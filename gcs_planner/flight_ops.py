@@ -28,7 +28,7 @@ from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.mavlink.units import no_fix
+from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan
 from gcs_planner.timekeeping import ScheduleKeeper
@@ -77,7 +77,7 @@ class TrackRecorder:
         sysid = msg.get_srcSystem()
         if sysid not in self.samples or msg.get_type() != "GLOBAL_POSITION_INT":
             return
-        if no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
+        if reports_no_fix(msg):
             return
         self.samples[sysid].append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
 

@@ -32,7 +32,7 @@ from gcs_planner.coalition_hil.tracks import pose_at
 from gcs_planner.flight_ops import FrameClock, boot_clock
 from gcs_planner.geo import Origin, geodetic_to_enu
 from gcs_planner.geometry.dubins import DubinsPath
-from gcs_planner.mavlink.units import no_fix
+from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.track import Leg
 
@@ -111,7 +111,7 @@ class Telemetry:
         self.clock = clock
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
-        if msg.get_type() != "GLOBAL_POSITION_INT" or no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
+        if msg.get_type() != "GLOBAL_POSITION_INT" or reports_no_fix(msg):
             return
         rows = self.rows.get(msg.get_srcSystem())
         if rows is not None:

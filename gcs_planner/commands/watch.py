@@ -25,7 +25,7 @@ from gcs_planner.commands.import_log import parse_origin
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.preflight import request_streams
-from gcs_planner.mavlink.units import no_fix
+from gcs_planner.mavlink.units import reports_no_fix
 
 FIRST_POSITION_TIMEOUT_S = 30.0
 
@@ -83,7 +83,7 @@ async def _watch(args: argparse.Namespace, mcap_path: Path, origin: Origin | Non
         heartbeat = await link.wait_for(_autopilot_heartbeat, FIRST_POSITION_TIMEOUT_S)
         await request_streams(link, [heartbeat.get_srcSystem()])  # ArduPilot streams what it is asked for
         first = await link.wait_for(
-            lambda m: m.get_type() == "GLOBAL_POSITION_INT" and not no_fix(m.lat * 1e-7, m.lon * 1e-7),
+            lambda m: m.get_type() == "GLOBAL_POSITION_INT" and not reports_no_fix(m),
             FIRST_POSITION_TIMEOUT_S,
         )
     except TimeoutError:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["NO_FIX_DEG", "SPEED_AIRSPEED", "SPEED_GROUNDSPEED", "e7", "half_away", "no_fix"]
+__all__ = ["NO_FIX_DEG", "SPEED_AIRSPEED", "SPEED_GROUNDSPEED", "e7", "half_away", "no_fix", "reports_no_fix"]
 
 SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0  # MAV_CMD_DO_CHANGE_SPEED param1
 NO_FIX_DEG = 0.01  # a reported position this near (0, 0) is no position (no_fix)
@@ -28,3 +28,8 @@ def no_fix(lat_deg, lon_deg):
     GLOBAL_POSITION_INT before it has a position, (0, 0) and then its dead reckoning from there
     (docs/real-autopilots.md)."""
     return (abs(lat_deg) < NO_FIX_DEG) & (abs(lon_deg) < NO_FIX_DEG)
+
+
+def reports_no_fix(msg) -> bool:
+    """A GLOBAL_POSITION_INT that carries no position yet (``no_fix`` of its degE7 lat, lon)."""
+    return no_fix(msg.lat * 1e-7, msg.lon * 1e-7)

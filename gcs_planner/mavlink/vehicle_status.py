@@ -23,7 +23,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.enums import MissionState
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.mavlink.units import no_fix
+from gcs_planner.mavlink.units import reports_no_fix
 
 __all__ = ["PREARM_BIT", "VehicleStatus", "VehicleTrack"]
 
@@ -68,7 +68,7 @@ class VehicleStatus:
         if track is None:
             return
         kind = msg.get_type()
-        if kind == "GLOBAL_POSITION_INT" and not no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
+        if kind == "GLOBAL_POSITION_INT" and not reports_no_fix(msg):
             track.rel_alt_m = msg.relative_alt / 1000.0
             track.home_amsl_m = (msg.alt - msg.relative_alt) / 1000.0
         elif kind == "STATUSTEXT":

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
-from gcs_planner.mavlink.units import no_fix
+from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.plan import Plan
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -254,7 +254,7 @@ def _boot_time_s(msg) -> float | None:
 
 def _origin_from_frames(frames) -> Origin:
     for _, msg, _ in frames:
-        if msg.get_type() == "GLOBAL_POSITION_INT" and not no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
+        if msg.get_type() == "GLOBAL_POSITION_INT" and not reports_no_fix(msg):
             return Origin(msg.lat * 1e-7, msg.lon * 1e-7, (msg.alt - msg.relative_alt) * 1e-3)
     return Origin(0.0, 0.0, 0.0)
 

@@ -31,7 +31,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.mavlink.units import no_fix
+from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario, ScenarioError, parse_scenario
 from gcs_planner.telemetry.colors import vehicle_color
@@ -305,7 +305,7 @@ class LiveRerunLogger:
         sysid = msg.get_srcSystem()
         self._count_link(sysid, msg.get_srcComponent(), msg.get_seq(), t_s)
         msg_id = msg.get_msgId()
-        if msg_id == 33 and not no_fix(msg.lat * 1e-7, msg.lon * 1e-7):  # GLOBAL_POSITION_INT with a position
+        if msg_id == 33 and not reports_no_fix(msg):  # GLOBAL_POSITION_INT with a position
             lat, lon, alt = msg.lat * 1e-7, msg.lon * 1e-7, msg.alt * 1e-3
             speed = float(np.hypot(msg.vx, msg.vy)) * 1e-2
             self.views.log_positions(sysid, [t_s], [lat], [lon], [alt], [msg.relative_alt * 1e-3], [speed])

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
-from gcs_planner.mavlink.units import no_fix
+from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.telemetry.reader import RawFrame
 
@@ -103,6 +103,6 @@ def import_tlog(
 
 def _origin_from_tlog(path: str | Path) -> Origin:
     for _, msg, _ in iter_tlog(path):
-        if msg.get_type() == "GLOBAL_POSITION_INT" and not no_fix(msg.lat * 1e-7, msg.lon * 1e-7):
+        if msg.get_type() == "GLOBAL_POSITION_INT" and not reports_no_fix(msg):
             return Origin(msg.lat * 1e-7, msg.lon * 1e-7, (msg.alt - msg.relative_alt) * 1e-3)
     return Origin(0.0, 0.0, 0.0)
