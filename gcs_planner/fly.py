@@ -63,6 +63,7 @@ from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
+from gcs_planner.telemetry.mcap_log import tlog_network_path
 from gcs_planner.timekeeping import ScheduleKeeper
 from gcs_planner.vehicles import VehicleSource
 
@@ -93,7 +94,7 @@ class FlyResult:
     uploads: dict[int, VehicleResult]
     mcap_path: Path
     rrd_path: Path | None
-    tlog_path: Path | None
+    tlog_paths: list[Path]  # one .tlog per MAVLink network (FlightLogger), empty without --tlog
     wall_time_s: float
     end_states: dict[int, str] = field(default_factory=dict)  # safe end: sysid -> what was done
     report_path: Path | None = None  # the flight report PNG (flight_report.py)
@@ -212,7 +213,9 @@ class _Flight:
         )  # fmt: skip
         self.sysids = [vp.sysid for vp in plan.vehicles]
         self.mcap_path = options.out_dir / "flight.mcap"
-        self.tlog_path = options.out_dir / "flight.tlog" if options.tlog else None
+        tlog = options.out_dir / "flight.tlog"
+        self.tlog_path = tlog if options.tlog else None
+        self.tlog_paths = [tlog_network_path(tlog, n) for n in range(networks(plan))] if options.tlog else []
         clock = boot_clock if vehicles.simulated else receive_clock()
         self.recorder = TrackRecorder(plan.origin, clock, self.sysids)
         self.quirks: dict[int, AutopilotQuirks] = {}
@@ -349,7 +352,7 @@ class _Flight:
             log_flight_to_rerun(read_flight(self.mcap_path), rrd_path)
         log_error = self.log_errors[0] if self.log_errors else None
         return FlyResult(
-            reports, self.uploads, self.mcap_path, rrd_path, self.tlog_path, wall_s, self.end_states,
+            reports, self.uploads, self.mcap_path, rrd_path, self.tlog_paths, wall_s, self.end_states,
             report_path, log_error, self.frames_received,
         )  # fmt: skip
 

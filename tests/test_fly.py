@@ -54,7 +54,7 @@ def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_p
     assert flight.plan is not None and [v.sysid for v in flight.plan.vehicles] == [1, 2, 3, 4]
     assert flight.origin == plan.origin and flight.scenario_text == SCENARIO.read_text()
     assert {e["sysid"] for _, e in flight.events if e.get("event") == "route_start"} == {1, 2, 3, 4}
-    assert result.rrd_path.stat().st_size > 1000 and result.tlog_path.stat().st_size > 1000
+    assert result.rrd_path.stat().st_size > 1000 and result.tlog_paths[0].stat().st_size > 1000
     assert result.report_path == tmp_path / "report.png" and result.report_path.stat().st_size > 20_000
 
 

@@ -11,8 +11,10 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from child_process import child, group_alive
+from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
@@ -120,7 +122,7 @@ def test_a_fleet_over_two_networks_flies_each_vehicle_its_own_mission(tmp_path):
     scenario = load_scenario(_two_networks(tmp_path))
     plan = plan_scenario(scenario)
     vehicles = MockVehicles(plan.vehicles, plan.origin, speedup=10.0)
-    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles))
+    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False, tlog=True), vehicles))
     assert result.passed, [r.failures for r in result.reports]
     assert sorted(r.sysid for r in result.reports if r.completed and r.cross_track_max_m < 5.0) == [
         1,
@@ -133,6 +135,21 @@ def test_a_fleet_over_two_networks_flies_each_vehicle_its_own_mission(tmp_path):
     assert set(flight.positions) == {1, 2, 257, 258}
     assert all(len(t) > 20 for t in flight.positions.values())
     assert {e["sysid"] for _, e in flight.events if e.get("event") == "route_start"} == {1, 2, 257, 258}
+    # a .tlog per network, each read by pymavlink's own reader: system ids 1 and 2, unique within it
+    assert result.tlog_paths == [tmp_path / "flight.tlog", tmp_path / "flight.net1.tlog"]
+    per_network = []
+    for path in result.tlog_paths:
+        reader = mavutil.mavlink_connection(str(path))
+        positions = {}
+        while (msg := reader.recv_match(type="GLOBAL_POSITION_INT")) is not None:
+            positions.setdefault(msg.get_srcSystem(), []).append(msg.lat)
+        per_network.append(positions)
+    assert [sorted(p) for p in per_network] == [[1, 2], [1, 2]]
+    for network, positions in enumerate(per_network):
+        for sysid, lats in positions.items():
+            fixed = [lat for lat in lats if abs(lat) > 100_000]  # the track skips no-fix (0, 0) reports
+            track = flight.positions[network * 256 + sysid]
+            assert fixed == np.round(track.lat_deg * 1e7).astype(int).tolist()
 
 
 def _free_port_run(count: int) -> int:
@@ -205,3 +222,42 @@ def test_the_end_states_of_a_large_fleet_fit_one_line():
     assert end_summary(states) == (
         "sysid 1-6, 8-250, 257-506 landed (disarmed); sysid 7 holding (mission complete)"
     )
+
+
+def _held(fleet: MockFleet, sysid: int) -> list:
+    return fleet.call(lambda: fleet.vehicle(sysid).mission_server.items(0))
+
+
+def test_upload_names_vehicles_by_fleet_id_with_one_connect_per_network(tmp_path, capsys):
+    """`upload plan.json --sysid all` of a two-network plan: system id 1 on each network gets its
+    own vehicle's mission (not the other's, not both merged); with one --connect it is refused in
+    one line before anything is sent."""
+    from gcs_planner.cli import main
+    from gcs_planner.mavlink import readback
+    from gcs_planner.mavlink.items import plan_to_items
+    from gcs_planner.mavlink.mission import compare_items
+
+    scenario = load_scenario(_two_networks(tmp_path))
+    plan = plan_scenario(scenario)
+    plan_path = tmp_path / "plan.json"
+    plan.save(plan_path)
+    base = _free_port_run(4)
+    with (
+        MockFleet(count=2, home=plan.origin, base_port=base) as a,
+        MockFleet(count=2, home=plan.origin, base_port=base + 2) as b,
+    ):
+        connects = [f"udpout:{f.addresses[0][0]}:{f.addresses[0][1]}-{f.addresses[1][1]}" for f in (a, b)]
+        one = ["upload", str(plan_path), "--sysid", "1,257", "--connect", connects[0]]
+        assert main(one) == 2
+        err = capsys.readouterr().err
+        assert "fleet id 257 is on MAVLink network 1" in err and err.count("\n") == 1
+        assert [_held(f, s) for f in (a, b) for s in (1, 2)] == [[]] * 4  # nothing was sent
+        argv = ["upload", str(plan_path), "--sysid", "all", *(x for c in connects for x in ("--connect", c))]
+        assert main(argv) == 0
+        rows = [line.split() for line in capsys.readouterr().out.splitlines() if "ACCEPTED" in line]
+        assert sorted(int(r[0]) for r in rows) == [1, 2, 257, 258]
+        for fleet, network in ((a, 0), (b, 1)):
+            for sysid in (1, 2):
+                vehicle = next(v for v in plan.vehicles if v.sysid == network * 256 + sysid)
+                sent = plan_to_items(vehicle, plan.origin, "ardupilot")
+                assert compare_items(sent, _held(fleet, sysid), readback.ARDUCOPTER, skip_home=True) is None

@@ -21,9 +21,11 @@ from collections.abc import AsyncIterator, Sequence
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
+from gcs_planner.fleet_ids import MAX_NETWORK, network_of, wire_sysid
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink
+from gcs_planner.mavlink.networks import NetworkLinks, open_networks
 from gcs_planner.mavlink.signing import key_from_passphrase
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.validation import number_flag
@@ -53,7 +55,8 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
             "--sysid",
             required=True,
             type=_sysids,
-            help="target system id (1..255), a list 1,2,5, or 'all' (every vehicle in plan.json)",
+            help="target system id (1..255), a list 1,2,5, or 'all' (every vehicle in plan.json); a"
+            " fleet id over 255 is network x 256 + sysid, with one --connect per network in order",
         )
     else:
         p.add_argument(
@@ -107,29 +110,60 @@ def _sysid(text: str) -> int:
     return value
 
 
+def _fleet_id(text: str) -> int:
+    """A system id, or a fleet id ``network x 256 + sysid`` (gcs_planner/fleet_ids.py)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be an integer 1..255 or a fleet id, got {text!r}") from None
+    if not (1 <= wire_sysid(value) <= 255 and 0 <= network_of(value) <= MAX_NETWORK):
+        raise argparse.ArgumentTypeError(
+            f"must be a system id 1..255 or a fleet id network x 256 + sysid (networks 0..{MAX_NETWORK}),"
+            f" got {value}"
+        )
+    return value
+
+
 def _sysids(text: str) -> list[int] | None:
-    """'3' -> [3]; '1,2,5' -> [1, 2, 5]; 'all' -> None."""
+    """'3' -> [3]; '1,2,5' -> [1, 2, 5]; 'all' -> None; fleet ids over 255 allowed."""
     if text.strip().lower() == "all":
         return None
-    ids = [_sysid(part.strip()) for part in text.split(",")]
+    ids = [_fleet_id(part.strip()) for part in text.split(",")]
     if len(set(ids)) != len(ids):
         raise argparse.ArgumentTypeError(f"system ids repeat in {text!r}")
     return ids
 
 
-async def open_link(args: argparse.Namespace) -> MavlinkLink:
+async def open_link(args: argparse.Namespace, networks: int = 1) -> MavlinkLink | NetworkLinks:
+    """The link to --connect's URLs; over ``networks`` > 1, NetworkLinks with one URL per network."""
+    per_network = [[url] for url in args.connect] if networks > 1 else [args.connect]
     try:
         key = key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None
         sysid, compid = getattr(args, "gcs_sysid", GCS_SYSID), getattr(args, "gcs_compid", GCS_COMPID)
-        return await MavlinkLink.open(*args.connect, signing_key=key, sysid=sysid, compid=compid)
+        return await open_networks(per_network, signing_key=key, sysid=sysid, compid=compid)
     except (OSError, ValueError) as exc:
         raise UserError(f"cannot open --connect {' '.join(args.connect)!r}: {exc}") from None
 
 
+def check_networks(args: argparse.Namespace, sysids: Sequence[int]) -> int:
+    """How many MAVLink networks ``sysids`` (fleet ids) span; UserError unless there is one
+    --connect per network when they span more than one."""
+    networks = max(network_of(s) for s in sysids) + 1
+    if networks > 1 and len(args.connect) != networks:
+        raise UserError(
+            f"--sysid: fleet id {max(sysids)} is on MAVLink network {networks - 1}; give one --connect"
+            f" per network 0..{networks - 1} in order ({len(args.connect)} given)"
+        )
+    return networks
+
+
 @contextlib.asynccontextmanager
-async def fleet_link(args: argparse.Namespace, sysids: Sequence[int]) -> AsyncIterator[MavlinkLink]:
-    """Open the link and wait until every vehicle in ``sysids`` sent a HEARTBEAT; always close."""
-    link = await open_link(args)
+async def fleet_link(
+    args: argparse.Namespace, sysids: Sequence[int]
+) -> AsyncIterator[MavlinkLink | NetworkLinks]:
+    """Open the link (one per network for fleet ids over 255) and wait until every vehicle in
+    ``sysids`` sent a HEARTBEAT; always close."""
+    link = await open_link(args, check_networks(args, sysids))
     try:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + args.heartbeat_timeout

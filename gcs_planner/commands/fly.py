@@ -56,7 +56,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
     p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
     p.add_argument("--seed", type=SEED, default=None, help="planner seed (default: the file's)")
-    p.add_argument("--tlog", action="store_true", help="also write OUT/flight.tlog")
+    p.add_argument("--tlog", action="store_true", help="also write OUT/flight.tlog (flight.netN.tlog for network N > 0)")
     p.add_argument(
         "--homes", action="store_true", help="print each vehicle's start for SITL (--home) and exit"
     )
@@ -215,8 +215,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"rerun: {result.rrd_path}  (open with `rerun {result.rrd_path}`)")
     if result.report_path:
         print(f"report: {result.report_path}  (map, cross-track and separation over time, conformance)")
-    if result.tlog_path:
-        print(f"tlog: {result.tlog_path}  (mavlogdump.py, MAVExplorer, QGroundControl)")
+    for tlog in result.tlog_paths:
+        print(f"tlog: {tlog}  (mavlogdump.py, MAVExplorer, QGroundControl)")
     verdict = "PASS" if result.passed else "FAIL"
     print(
         f"{verdict}: {sum(r.passed for r in result.reports)}/{len(result.reports)} vehicles conform"

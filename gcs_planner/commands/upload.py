@@ -13,7 +13,9 @@ and rally). A list FILE does not define is left as the vehicle has it, and the t
 
 Many vehicles: --sysid 1,2,3 or --sysid all (every vehicle of plan.json), with one --connect per
 vehicle port if they are on several; uploads run concurrently (--workers, default 8) with
-automatic retries (gcs_planner.mavlink.fleet) and one table row per vehicle and list.
+automatic retries (gcs_planner.mavlink.fleet) and one table row per vehicle and list. A fleet
+over several MAVLink networks names its vehicles by fleet id (network x 256 + sysid, as plan.json
+does) and takes one --connect per network in order, as `fly` does.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from gcs_planner.commands._mission_cli import (
     vehicle_link,
 )
 from gcs_planner.errors import UserError
+from gcs_planner.fleet_ids import network_of
 from gcs_planner.mavlink.files import MissionFile, load_plan_json, mission_input
 from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
 from gcs_planner.mavlink.mission import MissionClient
@@ -144,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     mf = read_input(args, "ardupilot", sysids[0])
     for line in mf.notes + absent_lists(mf, args.clear_absent):
         print(f"note: {line}")
-    if len(sysids) == 1:
+    if len(sysids) == 1 and network_of(sysids[0]) == 0:
         args.sysid = sysids[0]
         return asyncio.run(_upload_one(args))
     return asyncio.run(_upload_many(args, sysids))

@@ -45,6 +45,7 @@ from typing import IO
 import numpy as np
 
 from gcs_planner import __version__
+from gcs_planner.fleet_ids import network_of
 from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.plan import Plan
 from gcs_planner.telemetry.colors import vehicle_color
@@ -65,7 +66,7 @@ from gcs_planner.telemetry.schemas import (
     schema_bytes,
 )
 
-__all__ = ["FlightLogger"]
+__all__ = ["FlightLogger", "tlog_network_path"]
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +82,9 @@ class FlightLogger:
     path: MCAP file path or a binary stream (closed only if we opened it).
     origin: the scenario origin (ENU frame of the plan and obstacles).
     plan / scenario_text: stored as attachments and drawn as GeoJSON on the map.
-    tlog_path: also write the .tlog stream (8-byte big-endian Unix time [us] + raw frame).
+    tlog_path: also write the .tlog stream (8-byte big-endian Unix time [us] + raw frame). A tlog
+    holds one MAVLink network, where system ids are unique: the frames of fleet ids on network
+    n > 0 go to ``tlog_network_path(tlog_path, n)`` beside it.
     """
 
     def __init__(
@@ -101,7 +104,10 @@ class FlightLogger:
         self.flush_interval_s = flush_interval_s
         self.max_pending = max_pending
         self._writer = ChunkedMcapWriter(path, zstd_level=zstd_level, library=f"gcs-planner {__version__}")
-        self._tlog = open(tlog_path, "wb") if tlog_path is not None else None  # noqa: SIM115
+        self._tlog_path = Path(tlog_path) if tlog_path is not None else None
+        self._tlogs: dict[int, IO[bytes]] = {}
+        if self._tlog_path is not None:
+            self._tlogs[0] = open(self._tlog_path, "wb")  # noqa: SIM115
         self._pending: list[tuple[float, object, bytes]] = []
         self._lock = threading.Lock()  # guards _pending
         self._write_lock = threading.Lock()  # guards the writers
@@ -177,8 +183,8 @@ class FlightLogger:
             if batch:
                 self._encode(batch)
             self._writer.flush()
-            if self._tlog is not None:
-                self._tlog.flush()
+            for tlog in self._tlogs.values():
+                tlog.flush()
 
     @property
     def frames_logged(self) -> int:
@@ -201,8 +207,13 @@ class FlightLogger:
                 },
             )
             self._writer.finish()
-            if self._tlog is not None:
-                self._tlog.close()
+            for tlog in self._tlogs.values():
+                tlog.close()
+
+    @property
+    def tlog_paths(self) -> list[Path]:
+        """The .tlog files written, network 0's first."""
+        return [tlog_network_path(self._tlog_path, n) for n in sorted(self._tlogs)] if self._tlog_path else []
 
     # -- internals -------------------------------------------------------------------------------
     def _flush_loop(self) -> None:
@@ -230,8 +241,8 @@ class FlightLogger:
         counts = self._frames_per_sysid
         buckets: dict[int, list[bytes]] = {}
         times: list[int] = []
-        tlog_parts: list[bytes] = []
-        tlog = self._tlog
+        tlog_parts: dict[int, list[bytes]] = {}
+        tlog = self._tlog_path is not None
         header = MESSAGE_HEADER.pack
         opcode, fixed = MESSAGE_OPCODE, MESSAGE_FIXED_LEN
         for t_s, msg, raw in batch:
@@ -249,9 +260,11 @@ class FlightLogger:
             bucket.append(header(opcode, fixed + len(raw), channel, 0, t_ns, t_ns))
             bucket.append(raw)
             counts[sysid] += 1
-            if tlog is not None:
-                tlog_parts.append(_TLOG_TIME.pack((t_ns // 1000) & ~3))
-                tlog_parts.append(raw)
+            if tlog:
+                network = network_of(sysid)
+                parts = tlog_parts.get(network) or tlog_parts.setdefault(network, [])
+                parts.append(_TLOG_TIME.pack((t_ns // 1000) & ~3))
+                parts.append(raw)
             if msg is None:
                 continue
             entry = json_channels.get((sysid, type(msg)))
@@ -272,8 +285,14 @@ class FlightLogger:
                 bucket.append(data)
         if times:
             self._writer.add_packed(buckets, min(times), max(times))
-        if tlog_parts:
-            tlog.write(b"".join(tlog_parts))
+        for network, parts in tlog_parts.items():
+            self._tlog(network).write(b"".join(parts))
+
+    def _tlog(self, network: int) -> IO[bytes]:
+        file = self._tlogs.get(network)
+        if file is None:
+            file = self._tlogs[network] = open(tlog_network_path(self._tlog_path, network), "wb")  # noqa: SIM115
+        return file
 
     def _location_fix(self, sysid: int, msg, t_ns: int) -> bytes:
         """foxglove.LocationFix JSON; degE7 and mm printed with 7 and 3 decimals (exact)."""
@@ -357,6 +376,11 @@ class FlightLogger:
                 collection = {"type": "FeatureCollection", "features": features}
                 w.add_message(obstacles, self._start_ns, _geojson_message(collection))
         w.flush()
+
+
+def tlog_network_path(path: Path, network: int) -> Path:
+    """Network 0's .tlog is ``path``; network n's is ``flight.net{n}.tlog`` beside it."""
+    return path if network == 0 else path.with_name(f"{path.stem}.net{network}{path.suffix}")
 
 
 def _frame_sysid(raw: bytes) -> int:
