@@ -1,16 +1,19 @@
 """Reproduce Table 3 of seed 001 (ACMPSO): 100 independent runs each of BPSO, LPSO and ACMPSO.
 
-Prints, per variant (literal reading / documented tuned variant, see gcs_planner/planning/acmpso.py)
-and algorithm: mean wall time per run, mean fitness and fitness variance beside the paper's
-numbers, the best run's fitness and convergence iteration, and how many runs' best tracks violate
-a radar, an obstacle or terrain + h_safe on a dense resample (10 samples per km) of the 100-node
-track (the paper checks the nodes only). Optionally writes a convergence plot (PNG).
+Prints, per variant (literal reading / documented tuned variant / safe, see
+gcs_planner/planning/acmpso.py) and algorithm: mean CPU time per run, mean fitness and fitness
+variance beside the paper's numbers, the best run's fitness and convergence iteration, and how many
+runs' best tracks violate a radar, an obstacle or terrain + h_safe on a dense resample (10 samples
+per km) of the 100-node track (the paper checks the nodes only). Optionally writes a convergence
+plot (PNG).
 
     nice .venv/bin/python benchmarks/acmpso_table3.py --runs 100 --plot acmpso_convergence.png
 
-Variance is the sample variance (ddof = 1) of the runs' final fitness; times are one run on one
-core (BLAS threads pinned to 1; CPU time of the process, so other load on a shared machine does
-not inflate it), initialisation included.
+The runs are studies/acmpso_table3.toml through the sweep runner (task
+gcs_planner.planning.acmpso_study:table3_run, --workers processes); they are appended to --out as
+they finish, so a rerun, or `gcs-planner sweep studies/acmpso_table3.toml`, redoes no finished run.
+Variance is the sample variance (ddof = 1) of the runs' final fitness; times are one run's solver
+CPU time on one core (BLAS threads pinned to 1), initialisation included.
 """
 
 from __future__ import annotations
@@ -22,16 +25,21 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
+import csv  # noqa: E402
+import json  # noqa: E402
 import platform  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import msgspec  # noqa: E402
 import numpy as np  # noqa: E402
 
-from gcs_planner.planning.acmpso import ALGORITHMS, VARIANTS, Config, problem_from_scenario, solve  # noqa: E402
-from gcs_planner.planning.threat_env import validate_path  # noqa: E402
-from gcs_planner.scenario import load_scenario  # noqa: E402
+from gcs_planner.planning.acmpso import VARIANTS  # noqa: E402
+from gcs_planner.planning.acmpso_study import KINDS, TABLE_ORDER  # noqa: E402
+from gcs_planner.progress import counting_bar  # noqa: E402
+from gcs_planner.sweep import load_study, run_study, runs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+STUDY = ROOT / "studies" / "acmpso_table3.toml"
 # paper Table 3 (MATLAB R2014a, i7-8750H): mean time [s], mean fitness, fitness variance;
 # best-run convergence iteration read from its Fig. 4
 PAPER = {
@@ -39,40 +47,44 @@ PAPER = {
     "lpso": (11.591, 38.659, 0.392, 60),
     "acmpso": (11.726, 38.597, 0.318, 45),
 }
-ORDER = ("bpso", "lpso", "acmpso")
-KINDS = ("radar", "obstacle", "terrain")
 
 
-def run_variant(problem, env_m, unit_m: float, variant: str, runs: int, seed: int) -> dict[str, dict]:
-    out = {}
-    for a_idx, algorithm in enumerate(ORDER):
-        fitness, seconds, histories, violations, evaluations = [], [], [], [], []
-        for r in range(runs):
-            rng = np.random.default_rng([seed, VARIANTS.index(variant), a_idx, r])
-            res = solve(problem, algorithm, rng, variant)
-            fitness.append(res.fitness)
-            seconds.append(res.cpu_seconds)
-            histories.append(res.pso.history)
-            evaluations.append(res.pso.evaluations)
-            report = validate_path(env_m, res.nodes * unit_m, spacing=100.0)
-            violations.append(report.violations)
-        f = np.asarray(fitness)
-        best = int(np.argmin(f))
-        h = histories[best]
-        out[algorithm] = {
-            "fitness": f,
-            "seconds": np.asarray(seconds),
-            "histories": np.asarray(histories),
-            "best": best,
-            "conv_1pct": int(np.argmax(h <= h[-1] * 1.01)) + 1,
-            "last_improvement": int(np.flatnonzero(np.diff(h) < -1e-9).max(initial=-1)) + 2,
-            "evaluations": int(np.mean(evaluations)),
-            "viol": {k: sum(any(v.kind == k for v in vs) for vs in violations) for k in KINDS},
-            "depth": {
-                k: max((v.depth for vs in violations for v in vs if v.kind == k), default=0.0) for k in KINDS
-            },
-        }
-    return out
+def sweep_rows(variants: list[str], runs_each: int, collision: str, seed: int, out: Path, workers: int):
+    """The study's runs for these variants (run 0..runs_each - 1 of each algorithm), run where not
+    yet in ``out``; its rows, keyed by (variant, algorithm) and ordered by run."""
+    study, base = load_study(STUDY)
+    grid = {**study.grid, "variant": variants, "collision": [collision], "base_seed": [seed]}
+    study = msgspec.structs.replace(study, grid=grid, seeds=list(range(runs_each)))
+    with counting_bar("table 3 runs", "run") as progress:
+        run_study(study, base, out, workers, progress=progress)
+    wanted = {ident for ident, _, _ in runs(study)}
+    rows = [r for r in csv.DictReader(out.open(newline="")) if r["run_id"] in wanted]
+    failed = [r for r in rows if r["error"]]
+    if failed:
+        raise SystemExit(f"{len(failed)} runs failed; run {failed[0]['run_id']}: {failed[0]['error']}")
+    keyed: dict[tuple[str, str], list[dict]] = {}
+    for row in sorted(rows, key=lambda r: int(r["seed"])):
+        keyed.setdefault((row["variant"], row["algorithm"]), []).append(row)
+    return keyed
+
+
+def statistics(rows: list[dict]) -> dict:
+    """One algorithm's runs as the table's statistics."""
+    f = np.array([float(r["fitness"]) for r in rows])
+    histories = np.array([json.loads(r["history"]) for r in rows])
+    best = int(np.argmin(f))
+    h = histories[best]
+    return {
+        "fitness": f,
+        "seconds": np.array([float(r["cpu_seconds"]) for r in rows]),
+        "histories": histories,
+        "best": best,
+        "conv_1pct": int(np.argmax(h <= h[-1] * 1.01)) + 1,
+        "last_improvement": int(np.flatnonzero(np.diff(h) < -1e-9).max(initial=-1)) + 2,
+        "evaluations": int(np.mean([float(r["evaluations"]) for r in rows])),
+        "viol": {k: sum(r[f"{k}_violated"] == "True" for r in rows) for k in KINDS},
+        "depth": {k: max(float(r[f"{k}_depth_m"]) for r in rows) for k in KINDS},
+    }
 
 
 def print_table(results: dict[str, dict[str, dict]], runs: int) -> None:
@@ -84,7 +96,7 @@ def print_table(results: dict[str, dict[str, dict]], runs: int) -> None:
     print(head)
     print("-" * len(head))
     for variant, per_alg in results.items():
-        for algorithm in ORDER:
+        for algorithm in TABLE_ORDER:
             s = per_alg[algorithm]
             p = PAPER[algorithm]
             f = s["fitness"]
@@ -106,7 +118,7 @@ def print_table(results: dict[str, dict[str, dict]], runs: int) -> None:
         )
         times = "; ".join(
             f"{a} median {np.median(per_alg[a]['seconds']):.4f} min {per_alg[a]['seconds'].min():.4f}"
-            for a in ORDER
+            for a in TABLE_ORDER
         )
         print(f"  {variant}: CPU s per run: {times}")
         n = len(acm)
@@ -126,7 +138,7 @@ def plot(results: dict[str, dict[str, dict]], path: Path) -> None:
 
     fig, axes = plt.subplots(1, len(results), figsize=(6 * len(results), 4.2), squeeze=False)
     for ax, (variant, per_alg) in zip(axes[0], results.items(), strict=True):
-        for algorithm, colour in zip(ORDER, ("tab:gray", "tab:blue", "tab:red"), strict=True):
+        for algorithm, colour in zip(TABLE_ORDER, ("tab:gray", "tab:blue", "tab:red"), strict=True):
             s = per_alg[algorithm]
             it = np.arange(1, s["histories"].shape[1] + 1)
             ax.plot(it, s["histories"][s["best"]], color=colour, label=f"{algorithm.upper()} best run")
@@ -148,28 +160,25 @@ def plot(results: dict[str, dict[str, dict]], path: Path) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=100)
-    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: literal,tuned")
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated: literal,tuned,safe")
     ap.add_argument("--collision", default="literal", choices=("literal", "depth"))
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--scenario", type=Path, default=ROOT / "missions" / "acmpso_paper.toml")
+    ap.add_argument("--workers", type=int, default=2, help="sweep runner processes [2]")
+    ap.add_argument("--out", type=Path, default=Path("out/acmpso_table3.csv"), help="runs CSV, resumed")
     ap.add_argument("--plot", type=Path, help="write the convergence plot (PNG) here")
     args = ap.parse_args()
-    scenario = load_scenario(args.scenario)
-    params = Config(collision=args.collision)
-    problem, env_m = problem_from_scenario(scenario, scenario.vehicles[0], params)
     variants = [v.strip() for v in args.variants.split(",") if v.strip()]
     for v in variants:
         if v not in VARIANTS:
             ap.error(f"--variants: {v!r} is not one of {VARIANTS}")
-    assert set(ORDER) == set(ALGORITHMS)
     print(
         f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cpus, python"
         f" {platform.python_version()}, numpy {np.__version__}; runs={args.runs},"
         f" 50 particles x 100 iterations, collision={args.collision}, seed={args.seed}"
     )
-    results = {
-        v: run_variant(problem, env_m, params.length_unit_m, v, args.runs, args.seed) for v in variants
-    }
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    keyed = sweep_rows(variants, args.runs, args.collision, args.seed, args.out, args.workers)
+    results = {v: {a: statistics(keyed[v, a]) for a in TABLE_ORDER} for v in variants}
     print_table(results, args.runs)
     if args.plot:
         plot(results, args.plot)

@@ -1,32 +1,39 @@
 """Benchmark the priority swarm planner against PSO / DE / GWO baselines, and its scaling to 500 UAVs.
 
-    nice .venv/bin/python benchmarks/priority_swarm.py compare --out bench_swarm.json  # seeds 0..9
+    nice .venv/bin/python benchmarks/priority_swarm.py compare --out bench_swarm.csv  # seeds 0..9
     nice .venv/bin/python benchmarks/priority_swarm.py scale --out bench_scale.json
-    .venv/bin/python benchmarks/priority_swarm.py table bench_swarm.json bench_scale.json
+    .venv/bin/python benchmarks/priority_swarm.py table bench_swarm.csv bench_scale.json
 
-compare: for each 40-UAV scenario and seed, the method runs first; every baseline then gets the
-same evaluation budget per UAV (the method's total evaluations / UAVs). Results are appended to
-the JSON file after every run (a long run can be read while it goes). Budget flags override the
-scenario's [planner] table so the study fits on a shared 2-core machine.
-scale: the method on a 40-UAV subset of swarm500 and on all 500 UAVs (time per UAV, growth).
+compare: studies/priority_swarm_compare.toml through the sweep runner (--workers processes; the
+CSV is appended as runs finish, so a rerun redoes no finished run). Each run is one scenario and
+seed: the method first, then every baseline with the same evaluation budget per UAV (the method's
+total evaluations / UAVs). Budget flags override the scenario's [planner] table so the study fits
+on a shared 2-core machine.
+scale: the method on a 40-UAV subset of swarm500 and on all 500 UAVs (time per UAV, growth), one
+plan at a time so that its wall time is the planner's own.
 """
 
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import sys
 import time
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from gcs_planner.planning import config_of
-from gcs_planner.planning.baselines import METHODS, plan_baseline
+from gcs_planner.planning.baselines import METHODS
 from gcs_planner.planning.priority_swarm import plan as plan_method
+from gcs_planner.progress import counting_bar
 from gcs_planner.scenario import load_scenario
+from gcs_planner.sweep import load_study, run_study
 
 MISSIONS = Path(__file__).resolve().parent.parent / "missions"
+STUDY = MISSIONS.parent / "studies" / "priority_swarm_compare.toml"
 SCENARIOS = ("swarm40_open", "swarm40_cylinders", "swarm40_passages", "swarm40_urban")
 
 
@@ -37,9 +44,7 @@ def _record(plan, scenario: str, method: str, seed: int, cpu_s: float) -> dict:
         "method": method,
         "seed": seed,
         "cost": m["cost_total"],
-        "feasible": m["feasible_count"],
-        "vehicles": len(plan.vehicles),
-        "evaluations": m["evaluations"],
+        "feasible": m["feasible_count"] / len(plan.vehicles),
         "iterations_to_1pct": m["iterations_to_1pct"],
         "wall_s": m["wall_time_s"],
         "cpu_s": cpu_s,
@@ -54,21 +59,38 @@ def _append(out: Path, rec: dict) -> None:
 
 
 def compare(args) -> None:
-    scenarios = {name: load_scenario(MISSIONS / f"{name}.toml") for name in args.scenarios}
-    for scenario in scenarios.values():
-        scenario.planner.update(particles=args.particles, iterations=args.iterations, rounds=args.rounds)
-        scenario.planner.update(rrt_iterations=args.rrt_iterations)
-    for seed in args.seeds:  # seeds outermost: a cut-short run still covers every scenario
-        for name, scenario in scenarios.items():
-            cpu = time.process_time()
-            plan = plan_method(scenario, config_of(scenario), np.random.default_rng(seed))
-            rec = _record(plan, name, "priority_swarm", seed, time.process_time() - cpu)
-            _append(args.out, rec)
-            budget = rec["evaluations"] // len(scenario.vehicles)
-            for method in args.baselines:
-                cpu = time.process_time()
-                base = plan_baseline(scenario, np.random.default_rng(seed), method, budget)
-                _append(args.out, _record(base, name, method, seed, time.process_time() - cpu))
+    study, base = load_study(STUDY)
+    grid = {
+        "scenario": [f"../missions/{name}.toml" for name in args.scenarios],
+        "baselines": [",".join(args.baselines)],
+        "particles": [args.particles],
+        "iterations": [args.iterations],
+        "rounds": [args.rounds],
+        "rrt_iterations": [args.rrt_iterations],
+    }
+    study = msgspec.structs.replace(study, grid=grid, seeds=args.seeds)
+    with counting_bar("comparing", "run") as progress:
+        run_study(study, base, args.out, args.workers, progress=progress)
+
+
+def _compared_rows(path: Path) -> list[dict]:
+    """compare's CSV as one record per (run, method) that ran."""
+    records = []
+    for row in csv.DictReader(path.open(newline="")):
+        for method in ("priority_swarm", *METHODS):
+            if row["error"] or not row.get(f"{method}.cost_total"):
+                continue
+            records.append({
+                "scenario": Path(row["scenario"]).stem,
+                "method": method,
+                "seed": int(row["seed"]),
+                "cost": float(row[f"{method}.cost_total"]),
+                "feasible": float(row[f"{method}.feasible_fraction"]),
+                "iterations_to_1pct": float(row[f"{method}.iterations_to_1pct"]),
+                "wall_s": float(row[f"{method}.wall_time_s"]),
+                "cpu_s": float(row[f"{method}.cpu_s"]),
+            })  # fmt: skip
+    return records
 
 
 def scale(args) -> None:
@@ -87,8 +109,8 @@ def scale(args) -> None:
 
 def table(args) -> None:
     rows = []
-    for path in args.files:
-        rows += json.loads(Path(path).read_text())
+    for path in map(Path, args.files):
+        rows += _compared_rows(path) if path.suffix == ".csv" else json.loads(path.read_text())
     keys = sorted(
         {(r["scenario"], r["method"]) for r in rows}, key=lambda k: (k[0], k[1] != "priority_swarm", k[1])
     )
@@ -99,14 +121,13 @@ def table(args) -> None:
     for sc, method in keys:
         sel = [r for r in rows if r["scenario"] == sc and r["method"] == method]
         cost = np.array([r["cost"] for r in sel])
-        feas = np.array([r["feasible"] / r["vehicles"] for r in sel])
-        all_ok = np.mean([r["feasible"] == r["vehicles"] for r in sel])
+        feas = np.array([r["feasible"] for r in sel])
         print(
             f"| {sc} | {method} | {len(sel)} | {cost.mean():.2f} | {cost.std():.2f} |"
-            f" {100 * feas.mean():.1f} % | {100 * all_ok:.0f} % |"
+            f" {100 * feas.mean():.1f} % | {100 * np.mean(feas == 1.0):.0f} % |"
             f" {np.mean([r['iterations_to_1pct'] for r in sel]):.1f} |"
             f" {np.mean([r['wall_s'] for r in sel]):.1f} |"
-            f" {np.mean([r.get('cpu_s', np.nan) for r in sel]):.1f} |"
+            f" {np.mean([r['cpu_s'] for r in sel]):.1f} |"
         )
 
 
@@ -121,7 +142,8 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--rounds", type=int, default=2)
     c.add_argument("--rrt-iterations", type=int, default=200)
     c.add_argument("--baselines", nargs="*", default=list(METHODS), choices=METHODS)
-    c.add_argument("--out", type=Path, default=Path("bench_swarm.json"))
+    c.add_argument("--workers", type=int, default=2, help="sweep runner processes [2]")
+    c.add_argument("--out", type=Path, default=Path("bench_swarm.csv"), help="results CSV, resumed")
     s = sub.add_parser("scale")
     s.add_argument("--sizes", type=int, nargs="+", default=[40, 500])
     s.add_argument("--seed", type=int, default=1)

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+from collections.abc import Callable, Iterator
 
 from tqdm import tqdm
 
@@ -12,6 +14,24 @@ def progress_bar(total: float, desc: str, unit: str = "it") -> tqdm:
     """A tqdm bar that stays silent when stderr is not a terminal or CI is set."""
     quiet = bool(os.environ.get("CI")) or not sys.stderr.isatty()
     return tqdm(total=total, desc=desc, unit=unit, disable=quiet, leave=False)
+
+
+@contextlib.contextmanager
+def counting_bar(desc: str, unit: str = "it") -> Iterator[Callable[[int, int], None]]:
+    """A ``progress(done, total)`` callback (sweep.run_study's) drawing a bar opened on its first call."""
+    bar: tqdm | None = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        bar = bar or progress_bar(total, desc, unit)
+        bar.n = done
+        bar.refresh()
+
+    try:
+        yield progress
+    finally:
+        if bar is not None:
+            bar.close()
 
 
 def plan_with_progress(scenario, seed: int | None = None):

@@ -137,11 +137,19 @@ def metric(values: dict[str, Any], name: str) -> Any:
     return values
 
 
-def _done(out: Path) -> set[str]:
-    if not out.exists():
+def _done(out: Path, columns: list[str]) -> set[str]:
+    """The runs already in ``out``; UserError if its columns are not ``columns`` (another study's
+    file: its rows would be misread, and new rows written under the wrong heads)."""
+    if not out.exists() or out.stat().st_size == 0:
         return set()
     with out.open(newline="") as f:
-        return {row["run_id"] for row in csv.DictReader(f)}
+        reader = csv.DictReader(f)
+        if reader.fieldnames != columns:
+            raise UserError(
+                f"{out}: its columns are not this study's (grid and metrics {columns[len(FIXED_COLUMNS):]});"
+                " give another output file"
+            )
+        return {row["run_id"] for row in reader}
 
 
 def run_study(
@@ -155,10 +163,10 @@ def run_study(
 ) -> int:
     """Run every run not yet in ``out`` (local processes, or the Dask scheduler at ``scheduler``:
     an address, or "local" for a LocalCluster of ``workers``); the number of runs done now."""
-    done = _done(out)
-    todo = [r for r in runs(study) if r[0] not in done][:max_runs]
     columns = FIXED_COLUMNS + sorted(study.grid) + [m for m in study.metrics if m != "cpu_s"]
-    new_file = not out.exists()
+    done = _done(out, columns)
+    todo = [r for r in runs(study) if r[0] not in done][:max_runs]
+    new_file = not out.exists() or out.stat().st_size == 0
     with out.open("a", newline="") as f, _executor(scheduler, workers) as submit:
         writer = csv.DictWriter(f, columns, extrasaction="ignore")
         if new_file:
@@ -246,11 +254,18 @@ _FLAGS = {"True": 1.0, "False": 0.0}  # a met / unmet condition counts as 1 / 0
 
 
 def _number(text: str) -> float:
-    return _FLAGS[text] if text in _FLAGS else float(text)
+    """A cell as a number; NaN for one that is not (a metric kept whole, e.g. a JSON history)."""
+    if text in _FLAGS:
+        return _FLAGS[text]
+    try:
+        return float(text)
+    except ValueError:
+        return math.nan
 
 
 def _numbers(rows: list[dict[str, str]], name: str) -> list[float]:
-    """The metric's values over the runs that ran and defined it (NaN: undefined for that run)."""
+    """The metric's numeric values over the runs that ran and defined it (NaN: undefined for that
+    run, or not a number)."""
     cells = (_number(r[name]) for r in rows if not r["error"] and r.get(name) not in (None, ""))
     return [v for v in cells if not math.isnan(v)]
 

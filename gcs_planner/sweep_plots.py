@@ -8,13 +8,17 @@ from gcs_planner.sweep import Study, marginals
 
 
 def write_plots(study: Study, results: Path, path: Path) -> Path | None:
-    """One row per metric, one column per grid key: mean +- standard deviation over the runs with
-    each value of the key (the other keys and the seeds pooled). None when the grid is empty."""
+    """One row per numeric metric, one column per grid key: mean +- standard deviation over the runs
+    with each value of the key (the other keys and the seeds pooled). None when there is nothing to
+    draw (no grid, no numeric metric)."""
     keys = sorted(study.grid)
     if not keys:
         return None
     curves = marginals(study, results)
-    metrics = list(dict.fromkeys(m for m, _ in curves))
+    numeric = [m for (m, _key), points in curves.items() if any(count for *_, count in points)]
+    metrics = list(dict.fromkeys(numeric))  # a metric with no number (a JSON history) is not drawn
+    if not metrics:
+        return None
     import matplotlib
 
     matplotlib.use("Agg")

@@ -175,14 +175,19 @@ def test_the_compare_task_gives_a_baseline_the_methods_counted_budget_on_the_sam
 
     path = MISSIONS / "swarm_small.toml"
     params = {**FAST, "rounds": 1, "rrt_iterations": 60}
-    method = compare_run(path, {**params, "method": "priority_swarm"}, 4)
-    de = compare_run(path, {**params, "method": "de"}, 4)
+    runs = compare_run(path, {**params, "baselines": "de"}, 4)
+    assert sorted(runs) == ["de", "priority_swarm"]
+    method, de = runs["priority_swarm"], runs["de"]
     scenario = load_scenario(path)
     scenario.planner.update(params)
+    assert method["cost_total"] == plan_scenario(scenario, seed=4).metrics["cost_total"]
     budget = method["evaluations"] // len(scenario.vehicles)
     direct = plan_baseline(scenario, np.random.default_rng(4), "de", budget).metrics
     assert de["cost_total"] == direct["cost_total"] and de["evaluations"] == direct["evaluations"]
     assert de["evaluations"] <= method["evaluations"] and de["method"] == "de"
+    assert de["cpu_s"] > 0 and method["cpu_s"] > 0
+    with pytest.raises(ValueError, match="'abc' is not one of pso, de, gwo"):
+        compare_run(path, {**params, "baselines": "de,abc"}, 4)
 
 
 def test_ablation_switches_remove_the_rrt_start_and_the_priority_order():

@@ -154,3 +154,40 @@ def test_a_study_task_runs_instead_of_the_planner_and_a_misspelt_one_is_refused(
     path.write_text(path.read_text().replace("montecarlo:run", "montecarlo:rnu"))
     with pytest.raises(UserError, match="task 'gcs_planner.planning.coalition.montecarlo:rnu' is not"):
         load_study(path)
+
+
+def test_an_output_file_of_another_study_is_refused_before_any_run(tmp_path):
+    out = tmp_path / "r.csv"
+    study, base = load_study(_study(tmp_path, "waypoint_spacing_m = [100.0]"))
+    run_study(study, base, out, workers=1, max_runs=1)
+    before = out.read_text()
+    other, base = load_study(_study(tmp_path, "waypoint_spacing_m = [100.0]\nparticles = [6]"))
+    with pytest.raises(UserError, match="r.csv: its columns are not this study's"):
+        run_study(other, base, out, workers=1)
+    assert out.read_text() == before  # nothing appended under the wrong heads
+
+
+def test_table3_runs_through_the_runner_as_solved_directly_with_a_history_kept_whole(tmp_path):
+    """benchmarks/acmpso_table3.py's runs: the sweep row of (tuned, lpso, run 3) is the run solved
+    with its generator; its JSON history is the PSO's, and the summary leaves it out."""
+    import json
+
+    import msgspec
+    import numpy as np
+
+    from gcs_planner.planning.acmpso import solve
+    from gcs_planner.planning.acmpso_study import _problem
+
+    study, base = load_study(MISSIONS.parent / "studies" / "acmpso_table3.toml")
+    grid = {**study.grid, "algorithm": ["lpso"], "variant": ["tuned"]}
+    study = msgspec.structs.replace(study, seeds=[3], grid=grid)
+    out = tmp_path / "t3.csv"
+    run_study(study, base, out, workers=1)
+    (row,) = _rows(out)
+    problem, _, _ = _problem(MISSIONS / "acmpso_paper.toml", "literal")
+    direct = solve(problem, "lpso", np.random.default_rng([0, 1, 1, 3]), "tuned")
+    assert not row["error"] and float(row["fitness"]) == direct.fitness
+    assert json.loads(row["history"]) == direct.pso.history.tolist()
+    assert row["radar_violated"] in ("True", "False")
+    (summary,) = summarise(study, out)
+    assert summary["fitness mean"] == direct.fitness and math.isnan(summary["history mean"])

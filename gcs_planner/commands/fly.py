@@ -56,7 +56,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
     p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
     p.add_argument("--seed", type=SEED, default=None, help="planner seed (default: the file's)")
-    p.add_argument("--tlog", action="store_true", help="also write OUT/flight.tlog (flight.netN.tlog for network N > 0)")
+    p.add_argument(
+        "--tlog", action="store_true", help="also write OUT/flight.tlog (flight.netN.tlog for network N > 0)"
+    )
     p.add_argument(
         "--homes", action="store_true", help="print each vehicle's start for SITL (--home) and exit"
     )

@@ -7,7 +7,7 @@ import csv
 from pathlib import Path
 
 from gcs_planner.errors import UserError
-from gcs_planner.progress import progress_bar
+from gcs_planner.progress import counting_bar
 from gcs_planner.sweep import load_study, run_study, summarise
 from gcs_planner.sweep_plots import write_plots
 from gcs_planner.validation import output_file
@@ -29,19 +29,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         out = Path("out") / f"{args.study.stem}.csv"
         out.parent.mkdir(parents=True, exist_ok=True)
-    bar = None
-
-    def progress(done: int, total: int) -> None:
-        nonlocal bar
-        bar = bar or progress_bar(total, "sweeping", "run")
-        bar.n = done
-        bar.refresh()
-
-    try:
+    with counting_bar("sweeping", "run") as progress:
         ran = run_study(study, base, out, args.workers, args.scheduler, progress)
-    finally:
-        if bar is not None:
-            bar.close()
     summary = summarise(study, out)
     summary_path = out.with_name(out.stem + "_summary.csv")
     with summary_path.open("w", newline="") as f:

@@ -152,16 +152,28 @@ def plan_baseline(
 
 
 def compare_run(scenario_path: Path, params: dict[str, Any], seed: int) -> dict[str, Any]:
-    """A sweep task for seed 000's comparison (studies/priority_swarm_compare.toml):
-    ``params["method"]`` is "priority_swarm" or one of METHODS, the rest go to [planner]. A
-    baseline gets the method's counted evaluations per UAV on the same seed, so the method is
-    planned first, as benchmarks/priority_swarm.py compare does once for all baselines."""
+    """A sweep task for seed 000's comparison (studies/priority_swarm_compare.toml): the method,
+    then every baseline of ``params["baselines"]`` (comma-separated, default all of METHODS) with
+    the method's counted evaluations per UAV on the same seed; the rest of ``params`` go to
+    [planner]. Metrics per method, nested under its name ("pso.cost_total"), with its CPU time."""
     params = dict(params)
-    method = params.pop("method")
+    methods = [m.strip() for m in str(params.pop("baselines", ",".join(METHODS))).split(",") if m.strip()]
+    unknown = sorted(set(methods) - set(METHODS))
+    if unknown:
+        raise ValueError(f"baselines: {unknown[0]!r} is not one of {', '.join(METHODS)}")
     scenario = load_scenario(scenario_path)
     scenario.planner.update(params)
+    cpu = time.process_time()
     result = plan(scenario, config_of(scenario), np.random.default_rng(seed))
-    if method != "priority_swarm":
-        budget = result.metrics["evaluations"] // len(scenario.vehicles)
+    out = {"priority_swarm": _compared(result, time.process_time() - cpu)}
+    budget = result.metrics["evaluations"] // len(scenario.vehicles)
+    for method in methods:
+        cpu = time.process_time()
         result = plan_baseline(scenario, np.random.default_rng(seed), method, budget)
-    return {**result.metrics, "feasible_fraction": result.metrics["feasible_count"] / len(result.vehicles)}
+        out[method] = _compared(result, time.process_time() - cpu)
+    return out
+
+
+def _compared(result: Plan, cpu_s: float) -> dict[str, Any]:
+    return {**result.metrics, "feasible_fraction": result.metrics["feasible_count"] / len(result.vehicles),
+            "cpu_s": cpu_s}  # fmt: skip
