@@ -18,7 +18,13 @@ Models (choices where the brief leaves them open):
   under the acceleration limit stays close to the corner, like ArduCopter's corner speed limit.
 - Fixed wing: constant airspeed (the commanded speed, clamped to [min, max]); heading rate
   limited to ``g tan(max_bank) / v``, which bounds the turn radius below by ``v^2 / (g tan
-  max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Loiter is a
+  max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Between
+  waypoints it turns towards the target (pursuit, the planner's own model), or, with
+  ``l1_period_s`` > 0, tracks the line from the previous waypoint as ArduPlane's L1 controller
+  does (``AP_L1_Control::update_waypoint``: L1 distance ``damping x period x groundspeed / pi``,
+  lateral acceleration ``4 damping^2 v^2 / L1 x sin(Nu)``, capture angle limited to 45 deg, the
+  previous waypoint as the line's start, ``Plane::set_next_WP``). The L1 plane turns late and
+  overshoots a turn onto a new line, as ArduPlane SITL does (docs/coalition.md). Loiter is a
   clockwise circle (ArduPilot's default direction): turn-rate feed-forward ``v / R`` plus a
   lateral correction ``atan(K_CIRCLE (d - R) / R)``. Landing spirals down on the loiter circle
   at ``land_speed_mps``.
@@ -37,13 +43,15 @@ import numpy as np
 
 from gcs_planner.geo import wrap_pi
 
-__all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
+__all__ = ["AIRFRAMES", "SITL_L1_PERIOD_S", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
 
 G_MPS2 = 9.80665
 KP_POS = 1.0  # [1/s] position -> velocity gain near a stop point
 KP_ALT = 1.0  # [1/s] altitude error -> climb rate gain
 KP_PSI = 1.5  # [1/s] heading error -> turn rate gain (saturates at the bank limit)
 K_CIRCLE = 2.0  # loiter circle radial correction gain [-]
+L1_DAMPING = 0.75  # NAVL1_DAMPING default (AP_L1_Control.cpp var_info)
+SITL_L1_PERIOD_S = 15.0  # NAVL1_PERIOD of ArduPlane SITL's plane (Tools/autotest/models/plane.parm)
 GROUND_TOL_M = 0.05  # touchdown when within this height of the ground
 ALT_TOL_M = 0.5  # takeoff reaches its altitude within this tolerance
 LINE_MIN_H_M = 1.0  # below this horizontal distance to the target a leg is flown as a vertical move
@@ -64,6 +72,7 @@ class Airframe:
     land_speed_mps: float
     accept_radius_m: float
     loiter_radius_m: float
+    l1_period_s: float = 0.0  # fixed wing: 0 = pursuit; > 0 = ArduPlane's L1 (NAVL1_PERIOD)
 
     @property
     def min_turn_radius_m(self) -> float:
@@ -144,6 +153,7 @@ class Kinematics:
         self.climb = np.array([a.climb_rate_mps for a in airframes])
         self.sink = np.array([a.sink_rate_mps for a in airframes])
         self.land_speed = np.array([a.land_speed_mps for a in airframes])
+        self.l1_period = np.array([a.l1_period_s for a in airframes])
         self.pos = np.array(ground_enu_m, dtype=float).reshape(n, 3).copy()
         self.ground_z = self.pos[:, 2].copy()
         self.vel = np.zeros((n, 3))
@@ -178,8 +188,10 @@ class Kinematics:
         corner_speed_mps: in PASS mode a multirotor slows to this speed by the target, so it can
         round the corner to the next leg within its acceleration limit.
         """
+        following = self.mode[i] in (_GOTO, _PASS) and mode in (_GOTO, _PASS)
+        # an L1 plane tracks the line from the waypoint it was flying to (Plane::set_next_WP)
+        self.leg_from[i] = self.target[i] if following and self.l1_period[i] > 0 else self.pos[i]
         self.mode[i] = mode
-        self.leg_from[i] = self.pos[i]
         self.target[i] = self.pos[i] if target_m is None else target_m
         self.arrival[i] = arrival
         self.corner_speed[i] = corner_speed_mps
@@ -313,6 +325,10 @@ class Kinematics:
         psi_des = np.where(mode == _CLIMB, psi, psi_des)
         max_rate = G_MPS2 * self.tan_bank[m] / v
         rate = KP_PSI * wrap_pi(psi_des - psi)
+        l1 = (self.l1_period[m] > 0) & ((mode == _GOTO) | (mode == _PASS))
+        if l1.any():
+            ground = np.column_stack([v * np.cos(psi), v * np.sin(psi)]) + self.wind[m][:, :2]
+            rate = np.where(l1, _l1_turn_rate(pos, self.leg_from[m], tgt, ground, self.l1_period[m]), rate)
         if circling.any():
             rate = rate - circling * v / self.loiter_r[m]  # feed-forward of the clockwise orbit
         rate = np.clip(rate, -max_rate, max_rate)
@@ -329,6 +345,39 @@ class Kinematics:
         self.roll[m] = -np.arctan(rate * v / G_MPS2)
         self.pitch[m] = np.arcsin(vz / v)
         self.psi[m] = psi
+
+
+def _l1_turn_rate(
+    pos: np.ndarray, a: np.ndarray, b: np.ndarray, ground: np.ndarray, period_s: np.ndarray
+) -> np.ndarray:
+    """ArduPlane's L1 waypoint guidance (AP_L1_Control::update_waypoint, without its integrator
+    and indecision guard) as a turn rate [rad/s, counter-clockwise] along the line a -> b; the
+    controller's NE cross products are ENU ones with the sign turned."""
+    gs = np.maximum(np.hypot(ground[:, 0], ground[:, 1]), 0.1)
+    l1_dist = np.maximum(0.3183099 * L1_DAMPING * period_s * gs, 0.1)
+    ab = b[:, :2] - a[:, :2]
+    ab_len = np.hypot(ab[:, 0], ab[:, 1])
+    ab = np.where((ab_len > 1e-6)[:, None], ab / np.maximum(ab_len, 1e-6)[:, None], ground / gs[:, None])
+    a_air = pos[:, :2] - a[:, :2]
+
+    def cross(u: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+
+    def dot(u: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return u[:, 0] * w[:, 0] + u[:, 1] * w[:, 1]
+
+    def towards(point: np.ndarray) -> np.ndarray:  # Nu of flying straight at ``point``
+        to = point[:, :2] - pos[:, :2]
+        to = to / np.maximum(np.hypot(to[:, 0], to[:, 1]), 1e-6)[:, None]
+        return np.arctan2(cross(ground, to), dot(ground, to))
+
+    sine_nu1 = np.clip(cross(a_air, ab) / l1_dist, -0.7071, 0.7071)
+    nu = np.arcsin(sine_nu1) + np.arctan2(cross(ground, ab), dot(ground, ab))
+    a_dist, along = np.hypot(a_air[:, 0], a_air[:, 1]), dot(a_air, ab)
+    nu = np.where((a_dist > l1_dist) & (along / np.maximum(a_dist, 1.0) < -0.7071), towards(a), nu)
+    nu = np.where(along > ab_len + 3.0 * gs, towards(b), nu)
+    nu = np.clip(nu, -np.pi / 2, np.pi / 2)
+    return 4.0 * L1_DAMPING**2 * gs / l1_dist * np.sin(nu)
 
 
 def _rows(mask: np.ndarray) -> np.ndarray | slice:

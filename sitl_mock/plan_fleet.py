@@ -153,9 +153,13 @@ class MockVehicles(_PlanFleet):
 class MockVehiclesProcess(_PlanFleet):
     """The coalition HIL run's fleet: mock fixed wings in their own process (module docstring),
     each with the bank for its minimum turn radius at the keeper's top speed (CATCH_UP_FACTOR x
-    cruise), so catching up does not widen turns."""
+    cruise), so catching up does not widen turns. ``l1_period_s`` > 0 flies them with ArduPlane's
+    L1 guidance (sitl_mock.flight; SITL_L1_PERIOD_S is the SITL plane's): a stand-in for ArduPlane
+    SITL's lag in turns."""
 
-    def __init__(self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float = 10.0) -> None:
+    def __init__(
+        self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float = 10.0, l1_period_s: float = 0.0
+    ) -> None:
         airframes, specs = {}, []
         for vp in plans:
             cruise = float(vp.speeds_mps[0])
@@ -163,7 +167,9 @@ class MockVehiclesProcess(_PlanFleet):
             frame = airframe_for(vp)
             bank = float(np.arctan((CATCH_UP_FACTOR * cruise) ** 2 / vp.turn_radius_m / G_MPS2))
             bank = max(frame.max_bank_rad, bank)
-            frame = replace(frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS)
+            frame = replace(
+                frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS, l1_period_s=l1_period_s
+            )
             airframes[vp.sysid] = frame
             specs.append(
                 dict(sysid=vp.sysid, home=_home(vp, origin, run_m), vehicle_type="fixed_wing",
