@@ -321,7 +321,7 @@ async def stub_fly(scenario, plan, options, vehicles, progress=None):
 
     for conventions in AUTOPILOTS:
         build_missions(plan, {vp.sysid: quirks_named(conventions) for vp in plan.vehicles})
-    return FlyResult([], {}, options.out_dir / "flight.mcap", None, None, 0.0)
+    return FlyResult([], {}, options.out_dir / "flight.mcap", None, [], 0.0)
 
 
 def problems(outcome: Outcome) -> list[str]:
