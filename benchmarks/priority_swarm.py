@@ -78,7 +78,7 @@ def _compared_rows(path: Path) -> list[dict]:
     records = []
     for row in csv.DictReader(path.open(newline="")):
         for method in ("priority_swarm", *METHODS):
-            if row["error"] or not row.get(f"{method}.cost_total"):
+            if row["error"] or row.get(f"{method}.cost_total", "") in ("", "nan"):  # not run
                 continue
             records.append({
                 "scenario": Path(row["scenario"]).stem,
