@@ -22,7 +22,6 @@ from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.scenario import load_scenario
 from gcs_planner.starts import CLIMB_RUN_PER_M
 from gcs_planner.telemetry import read_flight
-from sitl_mock.flight import SITL_L1_PERIOD_S
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
@@ -35,12 +34,11 @@ CONNECTED = frozenset({1, 8, 11, 13})  # U1 does T1's recon and leads its tender
 def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path):
     """The connected vehicles are a second mock fleet process reached over --connect: its clock
     (time_boot_ms) starts apart from the tool's own mock fleet, so only frames timed on receipt
-    put both on one flight clock, and its planes fly ArduPlane's L1 guidance, which turns wide as
-    the SITL plane does; every strike and assessment is still on time and angle."""
+    put both on one flight clock, and every strike and assessment is still on time and angle."""
     scenario = load_scenario(SITL_SCENARIO)
     options = HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",), online=True)
     plans = [vp for vp in initial_plans(scenario, options, OnlineRun) if vp.sysid in CONNECTED]
-    with MockVehiclesProcess(plans, scenario.origin, options.speedup, SITL_L1_PERIOD_S) as networks:
+    with MockVehiclesProcess(plans, scenario.origin, options.speedup) as networks:
         vehicles_for = connected_fleet(networks[0], CONNECTED)
         said: list[str] = []
         result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, OnlineRun, said.append))
