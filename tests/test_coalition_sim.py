@@ -137,3 +137,16 @@ def test_an_excluded_member_takes_its_lookalikes_off_the_task(world):
     sixty = next(e for e in awards if e["angle_deg"] == 60.0)
     assert sixty["task"] == "strike" and sixty["uav"] not in off
     assert len(awards) == 12 and all(result.award_legs[("T2", e["uav"])].info["clear"] for e in awards)
+
+
+def test_no_uav_loiters_tighter_than_its_turn_radius():
+    """coalition_sitl's loiter radius (120 m) is below U13 / U16's r_min (133 m): they loiter at r_min."""
+    world = load_world(load_scenario(MISSION.with_name("coalition_sitl.toml")))
+    assert any(u.r_min_m > world.params.loiter_radius_m for u in world.uavs)
+    result = simulate(world, np.random.default_rng(3))
+    for u, track in zip(world.uavs, result.tracks, strict=True):
+        _, _, legs = track.history(result.t_end_s)
+        for leg in (leg for leg in legs if leg.kind == "loiter" and leg.t.size > 2):
+            turn_rate = np.abs(np.diff(np.unwrap(leg.heading)) / np.diff(leg.t))
+            radius = u.speed_mps / np.maximum(turn_rate, 1e-9)
+            assert radius.min() >= u.r_min_m * 0.99, (u.id, radius.min(), u.r_min_m)

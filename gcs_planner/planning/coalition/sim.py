@@ -235,22 +235,22 @@ class CoalitionSim:
             station = tgt + self.p.station_radius_m * np.array([math.cos(b), math.sin(b)])
             margin = [
                 math.hypot(station[0] - t.x, station[1] - t.y)
-                - self.p.loiter_radius_m
+                - self._loiter_radius(u)
                 - self.p.kappa * t.radius_m
                 for t in self.known
             ]
             if min(margin, default=1.0) > 0:
                 break
         a = math.atan2(q0[1] - station[1], q0[0] - station[0])
-        goal = paths.arc_start_pose(station, a, self.p.loiter_radius_m)[0]
-        if math.hypot(*(goal[:2] - q0[:2])) < 2 * self.p.loiter_radius_m:
+        goal = paths.arc_start_pose(station, a, self._loiter_radius(u))[0]
+        if math.hypot(*(goal[:2] - q0[:2])) < 2 * self._loiter_radius(u):
             return  # already there
         route = paths.min_route(q0, goal, u.r_min_m, self.known, self.p.kappa)
         segs, clear = paths.timed_route(route, route.length_m, self.known)
         leg = paths.sample_segments(
             segs, self.now, u.speed_mps, self.p.sample_ds_m, "transit", {"clear": clear}
         )
-        s.track.start_leg(leg, self._circle_loiter(station, self.p.loiter_radius_m, leg, u.speed_mps))
+        s.track.start_leg(leg, self._circle_loiter(station, self._loiter_radius(u), leg, u.speed_mps))
 
     # ---- recon
     def _on_target_appear(self, target: Target) -> None:
@@ -290,6 +290,11 @@ class CoalitionSim:
         self.log("recon_start", uav=u.id, target=target.id, arrive_s=round(float(leg.t[-1]), 3))
         self.at(float(arc.t[-1]), "recon_done", uav=i, target=target)
         self._on_restation()
+
+    def _loiter_radius(self, u) -> float:
+        """The idle loiter radius of a UAV: the scenario's, or its r_min where that is wider (no UAV
+        turns tighter than r_min; a real plane told to loiter tighter flies wider and out of step)."""
+        return max(self.p.loiter_radius_m, u.r_min_m)
 
     def _circle_loiter(self, centre, radius, leg: Leg, speed) -> Loiter:
         end = leg.xy[-1]
@@ -725,11 +730,11 @@ class CoalitionSim:
     def _clear_loiter(self, x: float, y: float, h: float, t_s: float, u) -> Loiter:
         """Loiter through a pose: turn left or right, whichever circle clears the known threats."""
         for direction in (1.0, -1.0):
-            lo = Loiter.through(x, y, h, t_s, self.p.loiter_radius_m, u.speed_mps, direction)
+            lo = Loiter.through(x, y, h, t_s, self._loiter_radius(u), u.speed_mps, direction)
             ring = lo.state(np.linspace(lo.t0_s, lo.t0_s + 2 * math.pi * lo.radius_m / u.speed_mps, 64))
             if paths.clearance_m(ring[:, :2], self.known) >= 0:
                 return lo
-        return Loiter.through(x, y, h, t_s, self.p.loiter_radius_m, u.speed_mps, 1.0)
+        return Loiter.through(x, y, h, t_s, self._loiter_radius(u), u.speed_mps, 1.0)
 
     def _on_strike(self, uav: int, award: Award) -> None:
         s = self.st[uav]
