@@ -12,11 +12,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.errors import UserError
+from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.plan import VehiclePlan
 
-__all__ = ["CLIMB_RUN_PER_M", "Start", "format_homes", "starts"]
+__all__ = ["CLIMB_RUN_PER_M", "MAX_START_OFFSET_M", "Start", "check_starts", "format_homes", "starts"]
 
+MAX_START_OFFSET_M = 1000.0  # a connected vehicle further than this from its start is refused [m]
 # ground run per metre of climb: ArduPlane's TAKEOFF mode climbs at TECS_CLMB_MAX (5 m/s) at
 # about its cruise airspeed (22 m/s in SITL's plane model)
 CLIMB_RUN_PER_M = 22.0 / 5.0
@@ -53,3 +55,19 @@ def format_homes(found: list[Start], sysids: frozenset[int] | None) -> str:
         for s in found
         if sysids is None or s.sysid in sysids
     )
+
+
+def check_starts(found: list[Start], positions: dict[int, tuple[float, float]], hint: str) -> None:
+    """Refuse (UserError) when a vehicle's reported position (lat, lon [deg]) is more than
+    MAX_START_OFFSET_M from its start: its take-off would not end where its mission begins (a SITL
+    started without ``--home`` is at its default home, another continent). hint: how to start it."""
+    for s in found:
+        if s.sysid not in positions:
+            continue
+        east, north, _ = geodetic_to_enu(*positions[s.sysid], s.home.alt_m, s.home)
+        off = math.hypot(east, north)
+        if off > MAX_START_OFFSET_M:
+            raise UserError(
+                f"sysid {s.sysid} ({s.vehicle_id}) is {off / 1000:,.1f} km from its start "
+                f"{s.home.lat_deg:.7f},{s.home.lon_deg:.7f} ({hint})"
+            )

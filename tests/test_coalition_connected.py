@@ -17,11 +17,14 @@ from gcs_planner.coalition_hil.live_legs import RUN_IN_S, TURN_FACTOR
 from gcs_planner.coalition_hil.online_run import OnlineRun
 from gcs_planner.coalition_hil.run import initial_plans, run_coalition_hil
 from gcs_planner.commands.fly_coalition import connected_fleet
-from gcs_planner.geo import geodetic_to_enu
+from gcs_planner.errors import UserError
+from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.plan import VehiclePlan
 from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.scenario import load_scenario
-from gcs_planner.starts import CLIMB_RUN_PER_M
+from gcs_planner.starts import CLIMB_RUN_PER_M, MAX_START_OFFSET_M, check_starts, starts
 from gcs_planner.telemetry import read_flight
+from sitl_mock.flight import SITL_L1_PERIOD_S
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
@@ -32,13 +35,14 @@ CONNECTED = frozenset({1, 8, 11, 13})  # U1 does T1's recon and leads its tender
 
 
 def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path):
-    """The connected vehicles are a second mock fleet process reached over --connect: its clock
-    (time_boot_ms) starts apart from the tool's own mock fleet, so only frames timed on receipt
-    put both on one flight clock, and every strike and assessment is still on time and angle."""
+    """The connected vehicles are a second mock fleet process reached over --connect, flying
+    ArduPlane's L1 guidance (which overshoots a turn onto a line): its clock (time_boot_ms) starts
+    apart from the tool's own mock fleet, so only frames timed on receipt put both on one flight
+    clock, and every strike and assessment is still on time and angle."""
     scenario = load_scenario(SITL_SCENARIO)
     options = HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",), online=True)
     plans = [vp for vp in initial_plans(scenario, options, OnlineRun) if vp.sysid in CONNECTED]
-    with MockVehiclesProcess(plans, scenario.origin, options.speedup) as networks:
+    with MockVehiclesProcess(plans, scenario.origin, options.speedup, SITL_L1_PERIOD_S) as networks:
         vehicles_for = connected_fleet(networks[0], CONNECTED)
         said: list[str] = []
         result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, OnlineRun, said.append))
@@ -55,10 +59,8 @@ def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path
     assert any(e["event"] == "safe_end" for _, e in flight.events)
     awards = [e for _, e in flight.events if e["event"] == "upload" and e["kind"] == "award"]
     legs = Counter((e["run_in_s"], e["turn_factor"]) for e in awards)
-    straight = sum(n for (run_in, _), n in legs.items() if run_in > 0)
-    wide = sum(n for (_, factor), n in legs.items() if factor == TURN_FACTOR)
-    assert awards and straight >= len(awards) / 2 and wide >= len(awards) / 4, legs  # where they fit in time
-    assert max(run_in for run_in, _ in legs) == RUN_IN_S, legs
+    # the awarded times allow for the run-in and wide turns (OnlineContractNet.plan_turns_at)
+    assert awards and legs[RUN_IN_S, TURN_FACTOR] >= 0.9 * len(awards), legs
 
 
 def test_homes_put_each_connected_plane_one_climb_run_behind_its_first_waypoint(capsys):
@@ -112,6 +114,38 @@ def test_a_connected_plane_too_slow_for_the_scenario_is_refused_before_anything_
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s" in err[0]
     assert "missions/coalition_sitl.toml" in err[0]  # what to fly on a stock SITL plane instead
+
+
+def test_a_connected_plane_away_from_its_start_is_refused_before_anything_is_sent(capsys, tmp_path):
+    """A SITL started without --home is at ArduPilot's default home (CMAC, Canberra), not one climb
+    run behind its first waypoint: one line naming the vehicle, its distance and --homes, exit 2,
+    and the plane is left disarmed without a mission."""
+    cmac = Origin(-35.363261, 149.165230, 584.0)
+    with sitl_mock.MockFleet(count=1, profile="ardupilot", vehicle_type="fixed_wing", speedup=20.0,
+                             home=cmac) as fleet:  # fmt: skip
+        ((host, port),) = fleet.addresses
+        argv = ["fly-coalition", str(SITL_SCENARIO), "--targets", "T1", "--connect", f"udpout:{host}:{port}",
+                "--connected", "1", "--speedup", "20", "-o", str(tmp_path)]  # fmt: skip
+        assert main(argv) == 2
+        plane = fleet.vehicles[0]
+        assert not plane.armed and len(plane.mission_server.items()) <= 1  # at most the home item
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sysid 1 (U1) is 8," in err[0] and "km from its start" in err[0], err
+    assert "--homes" in err[0]
+
+
+def test_a_start_within_the_bound_passes_and_one_beyond_it_is_named():
+    (start,) = starts([_plan(0.0)], Origin(31.5, 105.0, 500.0))
+    near = enu_to_geodetic(0.0, -0.9 * MAX_START_OFFSET_M, 0.0, start.home)[:2]
+    far = enu_to_geodetic(0.0, -1.1 * MAX_START_OFFSET_M, 0.0, start.home)[:2]
+    check_starts([start], {1: near, 2: far}, "hint")  # sysid 2 has no start: not checked
+    with pytest.raises(UserError, match=r"sysid 1 \(V1\) is 1.1 km from its start .* \(hint\)"):
+        check_starts([start], {1: far}, "hint")
+
+
+def _plan(x0: float) -> VehiclePlan:
+    waypoints = np.array([[x0, 0.0, 100.0], [x0, 500.0, 100.0]])
+    return VehiclePlan("V1", 1, waypoints, [0.0, 25.0], [0.0, 20.0], waypoints, [0.0, 25.0], "fixed_wing")
 
 
 def test_the_sitl_scenario_is_its_generators_output_and_forms_every_coalition_of_the_paper():

@@ -116,6 +116,10 @@ class OnlineRun(_HilRun):
                         self._end_s(), None)  # fmt: skip
             self.due.append(_Job(first_chunk, (2, first_chunk), "idle", s, idle, 0))
 
+    def connect(self, speedup: float) -> None:
+        super().connect(speedup)
+        self.engine.plan_turns_at(self.turn_factor)
+
     # --- the engine's view of the fleet (online.LiveFleet) -----------------------------------
     def state(self, i: int) -> LiveState | None:
         uav = self.world.uavs[i]

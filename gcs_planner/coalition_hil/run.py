@@ -80,6 +80,7 @@ from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.planning.coalition import load_world, paths, simulate
 from gcs_planner.planning.coalition.track import Leg
 from gcs_planner.scenario import Scenario
+from gcs_planner.starts import check_starts, starts
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.timekeeping import ScheduleKeeper
 from gcs_planner.vehicles import VehicleSource
@@ -100,6 +101,7 @@ UPLOAD_WORKERS = 4
 UPLOAD_TIMING = Timing(count_retry_s=0.25, count_retries=12, ack_timeout_max_s=0.5, item_timeout_max_s=0.5)
 NEXT_REPORT_POLL_S = 0.005  # upload end stamped at the next position report, polled this often [s wall]
 NEXT_REPORT_TIMEOUT_S = 2.0
+START_FIX_WAIT_S = 30.0  # a connected vehicle's start is checked once it reports a position [s wall]
 LOGGED_EVENTS = ("tender", "bid", "not_bidding", "late_bid_ignored", "formed", "formation_failed", "award")
 
 
@@ -248,9 +250,8 @@ async def run_coalition_hil(
         run.say = say
     vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
     run.vehicles = vehicles
-    if not vehicles.simulated:  # vehicles on clocks of their own: frames timed on receipt
-        run.recorder.clock = run.telemetry.clock = receive_clock(vehicles.speedup, time.time())
-        run.run_in_s, run.turn_factor = RUN_IN_S, TURN_FACTOR
+    if not vehicles.simulated:
+        run.connect(vehicles.speedup)
     options.out_dir.mkdir(parents=True, exist_ok=True)
     scenario_text = scenario.path.read_text() if scenario.path else None
     with vehicles as networks:
@@ -316,6 +317,12 @@ class _HilRun:
         self.order = itertools.count()
         self.end_states: dict[int, str] = {}  # connected vehicles: how each was left (safe end)
 
+    def connect(self, speedup: float) -> None:
+        """Fly vehicles on clocks of their own (frames timed on receipt), whose guidance lags a turn
+        (legs with a run-in and wide turns)."""
+        self.recorder.clock = self.telemetry.clock = receive_clock(speedup, time.time())
+        self.run_in_s, self.turn_factor = RUN_IN_S, TURN_FACTOR
+
     # --- clocks and estimates ----------------------------------------------------------------
     def scenario_now(self) -> float:
         return self.recorder.now_s() - self.route_t0 + self.t_route0
@@ -374,6 +381,8 @@ class _HilRun:
             raise UserError(f"{exc} ({hint})") from None
         for sysid, lim in limits.items():
             self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
+        if not self.vehicles.simulated:
+            await self._check_starts()
         n_items = sum(len(m) for m in self.missions.values())
         self.say(f"{len(self.flying)} vehicles heard, within their limits; uploading {n_items} mission items")
         t_up = time.monotonic()
@@ -402,6 +411,21 @@ class _HilRun:
             self.keeper.add(vp)
         self.say(f"routes started; flying scenario time {self.t_start:.0f}-{self.t_stop:.0f} s")
         await self._serve(link, logger)
+
+    async def _check_starts(self) -> None:
+        """Refuse, before anything is sent, a vehicle that is not where --homes starts it; wait up
+        to START_FIX_WAIT_S for the positions (ArduPilot reports none for ~10 s after boot)."""
+        rows = self.telemetry.rows
+        deadline = time.monotonic() + START_FIX_WAIT_S
+        while not all(rows[s] for s in self.flying) and time.monotonic() < deadline:
+            await asyncio.sleep(0.2)
+        unfixed = [s for s in self.flying if not rows[s]]
+        if unfixed:
+            self.say(f"sysid {unfixed} report no position yet: their starts are not checked")
+        where = {s: r[-1][1:3] for s, r in rows.items() if r}
+        name = self.scenario.path.name if self.scenario.path else "SCENARIO"
+        hint = f"start it there: fly-coalition {name} --connect ... --homes prints each --home"
+        check_starts(starts(self.initial.vehicles, self.scenario.origin), where, hint)
 
     async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
         """Until the window ends: log the simulation's events as they come due, queue the awards
