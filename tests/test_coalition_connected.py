@@ -24,7 +24,6 @@ from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.scenario import load_scenario
 from gcs_planner.starts import CLIMB_RUN_PER_M, MAX_START_OFFSET_M, check_starts, starts
 from gcs_planner.telemetry import read_flight
-from sitl_mock.flight import SITL_L1_PERIOD_S
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
@@ -35,14 +34,13 @@ CONNECTED = frozenset({1, 8, 11, 13})  # U1 does T1's recon and leads its tender
 
 
 def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path):
-    """The connected vehicles are a second mock fleet process reached over --connect, flying
-    ArduPlane's L1 guidance (which overshoots a turn onto a line): its clock (time_boot_ms) starts
-    apart from the tool's own mock fleet, so only frames timed on receipt put both on one flight
-    clock, and every strike and assessment is still on time and angle."""
+    """The connected vehicles are a second mock fleet process reached over --connect: its clock
+    (time_boot_ms) starts apart from the tool's own mock fleet, so only frames timed on receipt
+    put both on one flight clock, and every strike and assessment is still on time and angle."""
     scenario = load_scenario(SITL_SCENARIO)
     options = HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",), online=True)
     plans = [vp for vp in initial_plans(scenario, options, OnlineRun) if vp.sysid in CONNECTED]
-    with MockVehiclesProcess(plans, scenario.origin, options.speedup, SITL_L1_PERIOD_S) as networks:
+    with MockVehiclesProcess(plans, scenario.origin, options.speedup) as networks:
         vehicles_for = connected_fleet(networks[0], CONNECTED)
         said: list[str] = []
         result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, OnlineRun, said.append))
@@ -59,8 +57,10 @@ def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path
     assert any(e["event"] == "safe_end" for _, e in flight.events)
     awards = [e for _, e in flight.events if e["event"] == "upload" and e["kind"] == "award"]
     legs = Counter((e["run_in_s"], e["turn_factor"]) for e in awards)
-    # the awarded times allow for the run-in and wide turns (OnlineContractNet.plan_turns_at)
-    assert awards and legs[RUN_IN_S, TURN_FACTOR] >= 0.9 * len(awards), legs
+    straight = sum(n for (run_in, _), n in legs.items() if run_in > 0)
+    wide = sum(n for (_, factor), n in legs.items() if factor == TURN_FACTOR)
+    assert awards and straight >= len(awards) / 2 and wide >= len(awards) / 4, legs  # where they fit in time
+    assert max(run_in for run_in, _ in legs) == RUN_IN_S, legs
 
 
 def test_homes_put_each_connected_plane_one_climb_run_behind_its_first_waypoint(capsys):
@@ -135,7 +135,7 @@ def test_a_connected_plane_away_from_its_start_is_refused_before_anything_is_sen
 
 
 def test_a_start_within_the_bound_passes_and_one_beyond_it_is_named():
-    (start,) = starts([_plan(0.0)], Origin(31.5, 105.0, 500.0))
+    (start,) = starts([_plan()], Origin(31.5, 105.0, 500.0))
     near = enu_to_geodetic(0.0, -0.9 * MAX_START_OFFSET_M, 0.0, start.home)[:2]
     far = enu_to_geodetic(0.0, -1.1 * MAX_START_OFFSET_M, 0.0, start.home)[:2]
     check_starts([start], {1: near, 2: far}, "hint")  # sysid 2 has no start: not checked
@@ -143,8 +143,8 @@ def test_a_start_within_the_bound_passes_and_one_beyond_it_is_named():
         check_starts([start], {1: far}, "hint")
 
 
-def _plan(x0: float) -> VehiclePlan:
-    waypoints = np.array([[x0, 0.0, 100.0], [x0, 500.0, 100.0]])
+def _plan() -> VehiclePlan:
+    waypoints = np.array([[0.0, 0.0, 100.0], [0.0, 500.0, 100.0]])
     return VehiclePlan("V1", 1, waypoints, [0.0, 25.0], [0.0, 20.0], waypoints, [0.0, 25.0], "fixed_wing")
 
 

@@ -12,7 +12,8 @@ import pytest
 
 from gcs_planner.plan import Plan
 from gcs_planner.planning import plan_scenario
-from gcs_planner.planning.coalition import leg_vehicle_plan, load_world, simulate
+from gcs_planner.planning.coalition import leg_vehicle_plan, load_world, paths, simulate
+from gcs_planner.planning.coalition.sim import CoalitionSim
 from gcs_planner.scenario import load_scenario
 
 MISSION = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
@@ -150,3 +151,25 @@ def test_no_uav_loiters_tighter_than_its_turn_radius():
             turn_rate = np.abs(np.diff(np.unwrap(leg.heading)) / np.diff(leg.t))
             radius = u.speed_mps / np.maximum(turn_rate, 1e-9)
             assert radius.min() >= u.r_min_m * 0.99, (u.id, radius.min(), u.r_min_m)
+
+
+def test_an_approach_allowance_leaves_each_strike_leg_that_much_longer_than_its_shortest_route(world):
+    """approach_s (connected planes: their run-in) is flown on top of each member's shortest route,
+    so the strike waits for it; with none, the latest member of a coalition has no slack."""
+    spare = {}
+    for approach_s in (0.0, 6.0):
+        sim = CoalitionSim(world, np.random.default_rng(3))
+        sim.approach_s = approach_s
+        result = sim.run()
+        spare[approach_s] = []
+        for (_, uid), leg in result.award_legs.items():
+            if leg.kind != "strike":
+                continue
+            u = next(u for u in world.uavs if u.id == uid)
+            known = [th for th in world.threats if th.appear_s <= leg.t[0]]
+            q0 = np.array([*leg.xy[0], leg.heading[0]])
+            q1 = np.array([*leg.xy[-1], leg.heading[-1]])
+            shortest = paths.min_route(q0, q1, u.r_min_m, known, world.params.kappa).length_m
+            spare[approach_s].append((leg.t[-1] - leg.t[0]) - shortest / u.speed_mps)
+    assert min(spare[0.0]) < 1.0  # some member flies its shortest route
+    assert min(spare[6.0]) > 6.0 - 0.5, sorted(spare[6.0])[:3]

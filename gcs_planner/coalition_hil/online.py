@@ -31,8 +31,11 @@ Choices (the paper does not model loss):
 - a re-tendered task goes to a vehicle that had no award for that target (so not back to the
   member released from it); a member whose timed leg cannot clear the threats leaves every task
   of that kind, not only the one it was given.
-- with connected vehicles (real planes, SITL), turns are planned at ``live_legs.TURN_FACTOR`` x
-  r_min from the flight's start (``plan_turns_at``): their live legs turn that wide where they fit.
+- with connected vehicles (real planes, SITL), every member's leg is given ``approach_s`` (the
+  run's run-in, live_legs.RUN_IN_S) on top of its shortest route, so that the awarded times leave
+  room for the run-in and wide turns its live leg flies first. Planning the turns wide instead
+  (r_min x TURN_FACTOR in bids and formations) was tried: near the goal a wide Dubins path is
+  often a loop longer, and T1's strikes moved from 100.8 s to 175-233 s.
 - pop-up threats come from the scenario's timeline or ``inject_threat`` while running; as in the
   simulation, every active leg that crosses one is re-planned to the same goal and time.
 """
@@ -102,12 +105,6 @@ class OnlineContractNet(CoalitionSim):
         """From t_s on, poses come from the fleet's telemetry."""
         self.live_from_s = t_s
         self._live_mark = len(self.compute_s)
-
-    def plan_turns_at(self, factor: float) -> None:
-        """From now on plan every vehicle's turns (bids, formations, legs) at factor x its r_min: the
-        turn its live legs fly first (connected planes, live_legs.TURN_FACTOR), so that the awarded
-        times leave room for it. The world's UAVs, which the live legs start from, keep theirs."""
-        self.uavs = [replace(u, r_min_m=factor * u.r_min_m) for u in self.w.uavs]
 
     def advance(self, t_s: float) -> None:
         self._states.clear()  # one live state per vehicle per step

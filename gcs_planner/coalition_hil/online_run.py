@@ -118,7 +118,7 @@ class OnlineRun(_HilRun):
 
     def connect(self, speedup: float) -> None:
         super().connect(speedup)
-        self.engine.plan_turns_at(self.turn_factor)
+        self.engine.approach_s = self.run_in_s
 
     # --- the engine's view of the fleet (online.LiveFleet) -----------------------------------
     def state(self, i: int) -> LiveState | None:

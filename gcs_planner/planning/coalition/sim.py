@@ -133,6 +133,7 @@ class CoalitionSim:
     def __init__(self, world: World, rng: np.random.Generator) -> None:
         self.w, self.p, self.rng = world, world.params, rng
         self.uavs = world.uavs
+        self.approach_s = 0.0  # flight time each member's leg is given on top of its shortest route [s]
         self.now = 0.0
         self.heap: list = []
         self.seq = 0
@@ -504,7 +505,7 @@ class CoalitionSim:
         rmin = np.array([self.uavs[i].r_min_m for i in cands])
         L = paths.shortest_lengths(
             np.repeat(poses, K, 0), np.tile(goals, (n, 1)), np.repeat(rmin, K)
-        ).reshape(n, K)
+        ).reshape(n, K) + self.approach_s * speed[:, None]
         prob = CoalitionProblem(
             length_m=L,
             speed_mps=speed,
@@ -538,7 +539,8 @@ class CoalitionSim:
             t_opt = time.perf_counter()
             fixed = None
             if sol is not None and p.method == "aco":  # re-cover only the excluded members' tasks
-                prob.length_m = np.where(np.isinf(base), np.inf, f.plans.lengths(f.L))
+                allowance = self.approach_s * f.speed[:, None]  # routed lengths, with _formation's allowance
+                prob.length_m = np.where(np.isinf(base), np.inf, f.plans.lengths(f.L - allowance) + allowance)
                 fixed = repair(sol.assign, bad, sol.t_required_s, prob, p)
                 prob.length_m = base.copy()
             if fixed is not None:
@@ -563,7 +565,7 @@ class CoalitionSim:
         routes = f.plans.routes(sol.assign)
         exact = f.L.copy()
         for k in range(len(f.kind)):
-            exact[sol.assign[k], k] = routes[k].length_m
+            exact[sol.assign[k], k] = routes[k].length_m + self.approach_s * f.speed[sol.assign[k]]
         f.prob.length_m = exact
         sol = make_solution(sol.assign, f.prob, self.p)
         want = np.array(
