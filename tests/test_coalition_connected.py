@@ -100,38 +100,37 @@ def test_connected_vehicles_badly_named_are_refused_in_one_line(argv, message, c
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
-def test_a_connected_plane_too_slow_for_the_scenario_is_refused_before_anything_is_sent(capsys, tmp_path):
-    """A stock plane (AIRSPEED_MAX 30 m/s) cannot fly the paper's 50 m/s UAVs: one line naming the
-    parameter, exit 2, and the plane is left disarmed without a mission."""
+CMAC = Origin(-35.363261, 149.165230, 584.0)  # ArduPilot SITL's default home (Tools/autotest/locations.txt)
+
+
+@pytest.mark.parametrize(
+    ("scenario", "home", "fragments"),
+    [
+        # a stock plane (AIRSPEED_MAX 30 m/s) cannot fly the paper's 50 m/s UAVs; the line says
+        # what to fly on a stock SITL plane instead
+        (SCENARIO, None, ["(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s",
+                          "missions/coalition_sitl.toml"]),
+        # a SITL started without --home is at CMAC, not one climb run behind its first waypoint
+        (SITL_SCENARIO, CMAC, ["sysid 1 (U1) is 8,", "km from its start", "--homes"]),
+    ],
+    ids=["too-slow", "away-from-start"],
+)
+def test_a_connected_plane_that_cannot_fly_the_run_is_refused_before_anything_is_sent(
+    scenario, home, fragments, capsys, tmp_path
+):
+    """One line naming the vehicle and what is wrong, exit 2, and the plane is left disarmed
+    without a mission."""
+    home = home or load_scenario(scenario).origin
     with sitl_mock.MockFleet(count=1, profile="ardupilot", vehicle_type="fixed_wing", speedup=20.0,
-                             home=load_scenario(SCENARIO).origin) as fleet:  # fmt: skip
+                             home=home) as fleet:  # fmt: skip
         ((host, port),) = fleet.addresses
-        argv = ["fly-coalition", str(SCENARIO), "--targets", "T1", "--connect", f"udpout:{host}:{port}",
+        argv = ["fly-coalition", str(scenario), "--targets", "T1", "--connect", f"udpout:{host}:{port}",
                 "--connected", "1", "--speedup", "20", "-o", str(tmp_path)]  # fmt: skip
         assert main(argv) == 2
         plane = fleet.vehicles[0]
         assert not plane.armed and len(plane.mission_server.items()) <= 1  # at most the home item
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s" in err[0]
-    assert "missions/coalition_sitl.toml" in err[0]  # what to fly on a stock SITL plane instead
-
-
-def test_a_connected_plane_away_from_its_start_is_refused_before_anything_is_sent(capsys, tmp_path):
-    """A SITL started without --home is at ArduPilot's default home (CMAC, Canberra), not one climb
-    run behind its first waypoint: one line naming the vehicle, its distance and --homes, exit 2,
-    and the plane is left disarmed without a mission."""
-    cmac = Origin(-35.363261, 149.165230, 584.0)
-    with sitl_mock.MockFleet(count=1, profile="ardupilot", vehicle_type="fixed_wing", speedup=20.0,
-                             home=cmac) as fleet:  # fmt: skip
-        ((host, port),) = fleet.addresses
-        argv = ["fly-coalition", str(SITL_SCENARIO), "--targets", "T1", "--connect", f"udpout:{host}:{port}",
-                "--connected", "1", "--speedup", "20", "-o", str(tmp_path)]  # fmt: skip
-        assert main(argv) == 2
-        plane = fleet.vehicles[0]
-        assert not plane.armed and len(plane.mission_server.items()) <= 1  # at most the home item
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "sysid 1 (U1) is 8," in err[0] and "km from its start" in err[0], err
-    assert "--homes" in err[0]
+    assert len(err) == 1 and all(f in err[0] for f in fragments), err
 
 
 def test_a_start_within_the_bound_passes_and_one_beyond_it_is_named():
