@@ -21,7 +21,7 @@ from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.preflight import read_param
 from gcs_planner.plan import VehiclePlan
 
-__all__ = ["FlightLimits", "check_limits", "read_limits"]
+__all__ = ["FlightLimits", "check_limits", "read_l1_periods", "read_limits"]
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +54,16 @@ async def read_limits(
     asked = [s for s in sysids if quirks[s].flight_limits is not None]
     found = await asyncio.gather(*(one(s) for s in asked))
     return {s: lim for s, lim in zip(asked, found, strict=True) if lim is not None}
+
+
+async def read_l1_periods(
+    link: MavlinkLink, sysids: Sequence[int], quirks: dict[int, AutopilotQuirks]
+) -> dict[int, float]:
+    """The period [s] of each plane's L1 waypoint guidance (``AutopilotQuirks.l1_period``), for
+    the vehicles whose autopilot has one and answers with a positive value."""
+    asked = [s for s in sysids if quirks[s].l1_period is not None]
+    found = await asyncio.gather(*(read_param(link, s, quirks[s].l1_period) for s in asked))
+    return {s: float(v) for s, v in zip(asked, found, strict=True) if v is not None and v > 0.0}
 
 
 def check_limits(plans: Sequence[VehiclePlan], limits: dict[int, FlightLimits], top_factor: float) -> None:

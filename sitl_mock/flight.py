@@ -42,6 +42,7 @@ from enum import IntEnum
 import numpy as np
 
 from gcs_planner.geo import wrap_pi
+from gcs_planner.l1_guidance import l1_turn_rate
 
 __all__ = ["AIRFRAMES", "SITL_L1_PERIOD_S", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
 
@@ -50,7 +51,6 @@ KP_POS = 1.0  # [1/s] position -> velocity gain near a stop point
 KP_ALT = 1.0  # [1/s] altitude error -> climb rate gain
 KP_PSI = 1.5  # [1/s] heading error -> turn rate gain (saturates at the bank limit)
 K_CIRCLE = 2.0  # loiter circle radial correction gain [-]
-L1_DAMPING = 0.75  # NAVL1_DAMPING default (AP_L1_Control.cpp var_info)
 SITL_L1_PERIOD_S = 15.0  # NAVL1_PERIOD of ArduPlane SITL's plane (Tools/autotest/models/plane.parm)
 GROUND_TOL_M = 0.05  # touchdown when within this height of the ground
 ALT_TOL_M = 0.5  # takeoff reaches its altitude within this tolerance
@@ -328,7 +328,7 @@ class Kinematics:
         l1 = (self.l1_period[m] > 0) & ((mode == _GOTO) | (mode == _PASS))
         if l1.any():
             ground = np.column_stack([v * np.cos(psi), v * np.sin(psi)]) + self.wind[m][:, :2]
-            rate = np.where(l1, _l1_turn_rate(pos, self.leg_from[m], tgt, ground, self.l1_period[m]), rate)
+            rate = np.where(l1, l1_turn_rate(pos, self.leg_from[m], tgt, ground, self.l1_period[m]), rate)
         if circling.any():
             rate = rate - circling * v / self.loiter_r[m]  # feed-forward of the clockwise orbit
         rate = np.clip(rate, -max_rate, max_rate)
@@ -345,39 +345,6 @@ class Kinematics:
         self.roll[m] = -np.arctan(rate * v / G_MPS2)
         self.pitch[m] = np.arcsin(vz / v)
         self.psi[m] = psi
-
-
-def _l1_turn_rate(
-    pos: np.ndarray, a: np.ndarray, b: np.ndarray, ground: np.ndarray, period_s: np.ndarray
-) -> np.ndarray:
-    """ArduPlane's L1 waypoint guidance (AP_L1_Control::update_waypoint, without its integrator
-    and indecision guard) as a turn rate [rad/s, counter-clockwise] along the line a -> b; the
-    controller's NE cross products are ENU ones with the sign turned."""
-    gs = np.maximum(np.hypot(ground[:, 0], ground[:, 1]), 0.1)
-    l1_dist = np.maximum(0.3183099 * L1_DAMPING * period_s * gs, 0.1)
-    ab = b[:, :2] - a[:, :2]
-    ab_len = np.hypot(ab[:, 0], ab[:, 1])
-    ab = np.where((ab_len > 1e-6)[:, None], ab / np.maximum(ab_len, 1e-6)[:, None], ground / gs[:, None])
-    a_air = pos[:, :2] - a[:, :2]
-
-    def cross(u: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
-
-    def dot(u: np.ndarray, w: np.ndarray) -> np.ndarray:
-        return u[:, 0] * w[:, 0] + u[:, 1] * w[:, 1]
-
-    def towards(point: np.ndarray) -> np.ndarray:  # Nu of flying straight at ``point``
-        to = point[:, :2] - pos[:, :2]
-        to = to / np.maximum(np.hypot(to[:, 0], to[:, 1]), 1e-6)[:, None]
-        return np.arctan2(cross(ground, to), dot(ground, to))
-
-    sine_nu1 = np.clip(cross(a_air, ab) / l1_dist, -0.7071, 0.7071)
-    nu = np.arcsin(sine_nu1) + np.arctan2(cross(ground, ab), dot(ground, ab))
-    a_dist, along = np.hypot(a_air[:, 0], a_air[:, 1]), dot(a_air, ab)
-    nu = np.where((a_dist > l1_dist) & (along / np.maximum(a_dist, 1.0) < -0.7071), towards(a), nu)
-    nu = np.where(along > ab_len + 3.0 * gs, towards(b), nu)
-    nu = np.clip(nu, -np.pi / 2, np.pi / 2)
-    return 4.0 * L1_DAMPING**2 * gs / l1_dist * np.sin(nu)
 
 
 def _rows(mask: np.ndarray) -> np.ndarray | slice:

@@ -138,7 +138,8 @@ class MockVehicle:
         if self.flight.airspeed_range:  # the airframe's limits, as a plane's parameters say them
             af = self.airframe
             self.params.update(AIRSPEED_MIN=af.min_speed_mps, AIRSPEED_MAX=af.max_speed_mps,
-                               ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad))  # fmt: skip
+                               ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad),
+                               NAVL1_PERIOD=af.l1_period_s)  # fmt: skip
         if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
             for name, value in (("MAV_OPTIONS", 0.0), ("MAV_GCS_SYSID", 255.0), ("MAV_GCS_SYSID_HI", 0.0)):
                 self.params.setdefault(name, value)

@@ -20,13 +20,14 @@ shorter than a loiter lap.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import partial
 
 import numpy as np
 
 from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, SPEED_TRIES
 from gcs_planner.coalition_hil.tracks import continue_turn, drop_spikes, slice_track
+from gcs_planner.l1_guidance import shape_waypoints
 from gcs_planner.plan import VehiclePlan
 from gcs_planner.planning.coalition.track import Leg
 
@@ -41,6 +42,7 @@ __all__ = [
     "build_schedules",
     "first_mission",
     "idle_mission",
+    "shape_for_l1",
 ]
 
 AFTER_GOAL_S = 2.0  # simulated track flown after an award leg; the idle upload follows [s]
@@ -235,3 +237,17 @@ def idle_mission(
     ts = np.r_[np.concatenate(parts_t), ext_t + late]
     xys = np.vstack([*parts_xy, ext_xy])
     return _piece_plan(uav, ts, xys, t_route0, dt_s, list(prefix_wp_s) + [float(leg.t[0])])
+
+
+def shape_for_l1(vp: VehiclePlan, period_s: float, max_bank_rad: float) -> VehiclePlan:
+    """The mission with its waypoints moved so that a plane flying ArduPlane's L1 guidance with
+    NAVL1_PERIOD period_s, from the start of the mission's path, follows that path
+    (``l1_guidance.shape_waypoints``): such a plane flies a turn wide and is still converging on
+    the line after it, where a leg's goal pose lies."""
+    path = vp.path[:, :2]
+    pose = (*path[0], math.atan2(*(path[1] - path[0])[::-1]))
+    waypoints = vp.waypoints.copy()
+    waypoints[1:, :2] = shape_waypoints(
+        pose, vp.speeds_mps[1:], vp.waypoints[1:, :2], path, period_s, vp.acceptance_radius_m, max_bank_rad
+    )
+    return replace(vp, waypoints=waypoints)

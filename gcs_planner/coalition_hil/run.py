@@ -50,10 +50,11 @@ from gcs_planner.coalition_hil.missions import (
     award_mission,
     build_schedules,
     idle_mission,
+    shape_for_l1,
 )
 from gcs_planner.coalition_hil.report import TaskRow, add_prediction_errors, task_rows
 from gcs_planner.errors import UserError
-from gcs_planner.flight_limits import check_limits, read_limits
+from gcs_planner.flight_limits import check_limits, read_l1_periods, read_limits
 from gcs_planner.flight_ops import (
     KEEPER_PERIOD_S,
     NAV_TAKEOFF,
@@ -316,6 +317,7 @@ class _HilRun:
         self.queue: asyncio.PriorityQueue[tuple[tuple, int, _Job]] = asyncio.PriorityQueue()
         self.order = itertools.count()
         self.end_states: dict[int, str] = {}  # connected vehicles: how each was left (safe end)
+        self.l1: dict[int, tuple[float, float]] = {}  # L1 planes: NAVL1_PERIOD [s], bank limit [rad]
 
     def connect(self, speedup: float) -> None:
         """Fly vehicles on clocks of their own (frames timed on receipt), whose guidance lags a turn
@@ -381,6 +383,9 @@ class _HilRun:
             raise UserError(f"{exc} ({hint})") from None
         for sysid, lim in limits.items():
             self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
+        if not self.vehicles.simulated:
+            periods = await read_l1_periods(link, self.flying, self.quirks)
+            self.l1 = {s: (p, math.radians(limits[s].roll_deg)) for s, p in periods.items() if s in limits}
         if not self.vehicles.simulated:
             await self._check_starts()
         n_items = sum(len(m) for m in self.missions.values())
@@ -566,6 +571,7 @@ class _HilRun:
             if self.upload_estimate_s(n) <= self.upload_estimate_s(items) + 0.5:
                 break
             items = n
+        vp, shaped = self._for_guidance(vp)
         plan_wall_s = time.monotonic() - t_plan
         self.timing.plan_wall_s = 0.5 * self.timing.plan_wall_s + 0.5 * plan_wall_s
         info = {
@@ -579,8 +585,19 @@ class _HilRun:
             "clear": leg.info["clear"],
             "run_in_s": leg.info.get("run_in_s", 0.0),
             "turn_factor": leg.info.get("turn_factor", 1.0),
+            **shaped,
         }
         return leg, vp, info
+
+    def _for_guidance(self, vp: VehiclePlan) -> tuple[VehiclePlan, dict]:
+        """vp with its waypoints shaped for the vehicle's L1 guidance, if it flies one, and for
+        the upload's log entry how far the waypoints moved (l1_shift_m)."""
+        l1 = self.l1.get(vp.sysid)
+        if l1 is None:
+            return vp, {}
+        shaped = shape_for_l1(vp, *l1)
+        shift = np.hypot(*(shaped.waypoints - vp.waypoints)[:, :2].T)
+        return shaped, {"l1_shift_m": round(float(shift.max()), 1)}
 
     def _leg_start_s(self, award: Award, earliest_s: float) -> float:
         """When an award's live leg starts, given the earliest start its upload allows."""
@@ -596,6 +613,7 @@ class _HilRun:
         prefix = _predicted_prefix(state, t0)
         vp = idle_mission(sched, idle, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
                           np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
+        vp, shaped = self._for_guidance(vp)
         info = {
             "plan_wall_ms": round(1000.0 * (time.monotonic() - t_plan), 1),
             "t0_s": round(t0, 3),
@@ -604,6 +622,7 @@ class _HilRun:
             "covered_s": round(min(idle.end_s, float(leg.t[-1]) + IDLE_SPAN_S), 3),
             "leg_late_s": round(leg.info["late_s"], 3),
             "clear": leg.info["clear"],
+            **shaped,
         }
         return vp, info
 

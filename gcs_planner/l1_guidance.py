@@ -1,0 +1,181 @@
+"""ArduPlane's L1 waypoint guidance, and how a plane flying it follows a list of waypoints.
+
+ArduPlane steers along the line from the previous waypoint to the next one with the L1 law
+(``AP_L1_Control::update_waypoint``) and moves to the next waypoint once within its acceptance
+radius or past the current one's finish line (``Plane::verify_nav_wp``, ``Plane::set_next_WP``).
+Such a plane turns late and overshoots a turn onto a new line, so a leg that ends soon after a
+turn arrives off its heading. ``predict_flight`` flies a waypoint list with that law (for the
+mock's L1 planes and for the planner), and ``shape_waypoints`` moves a mission's waypoints so
+that the predicted flight follows the planned path (docs/coalition.md, "L1 shaping").
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["L1_DAMPING", "l1_turn_rate", "predict_flight", "shape_waypoints"]
+
+L1_DAMPING = 0.75  # NAVL1_DAMPING default (AP_L1_Control.cpp var_info)
+G_MPS2 = 9.80665
+PREDICT_DT_S = 0.1  # ArduPlane navigates at 10 Hz (Plane::navigate in the scheduler table)
+SHAPE_ITERATIONS = 8
+SHAPE_GAIN = 0.7  # share of the predicted cross-track error moved off each waypoint per iteration
+SHAPE_MAX_SHIFT_M = 80.0  # no waypoint moves further than this from the planned path
+
+
+def l1_turn_rate(pos: np.ndarray, a: np.ndarray, b: np.ndarray, ground: np.ndarray, period_s) -> np.ndarray:
+    """ArduPlane's L1 waypoint guidance (AP_L1_Control::update_waypoint, without its integrator
+    and indecision guard) as a turn rate [rad/s, counter-clockwise] along the line a -> b, for
+    rows of vehicles (ENU positions, ground velocities); the controller's NE cross products are
+    ENU ones with the sign turned."""
+    gs = np.maximum(np.hypot(ground[:, 0], ground[:, 1]), 0.1)
+    l1_dist = np.maximum(0.3183099 * L1_DAMPING * period_s * gs, 0.1)
+    ab = b[:, :2] - a[:, :2]
+    ab_len = np.hypot(ab[:, 0], ab[:, 1])
+    ab = np.where((ab_len > 1e-6)[:, None], ab / np.maximum(ab_len, 1e-6)[:, None], ground / gs[:, None])
+    a_air = pos[:, :2] - a[:, :2]
+
+    def cross(u: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0]
+
+    def dot(u: np.ndarray, w: np.ndarray) -> np.ndarray:
+        return u[:, 0] * w[:, 0] + u[:, 1] * w[:, 1]
+
+    def towards(point: np.ndarray) -> np.ndarray:  # Nu of flying straight at ``point``
+        to = point[:, :2] - pos[:, :2]
+        to = to / np.maximum(np.hypot(to[:, 0], to[:, 1]), 1e-6)[:, None]
+        return np.arctan2(cross(ground, to), dot(ground, to))
+
+    sine_nu1 = np.clip(cross(a_air, ab) / l1_dist, -0.7071, 0.7071)
+    nu = np.arcsin(sine_nu1) + np.arctan2(cross(ground, ab), dot(ground, ab))
+    a_dist, along = np.hypot(a_air[:, 0], a_air[:, 1]), dot(a_air, ab)
+    nu = np.where((a_dist > l1_dist) & (along / np.maximum(a_dist, 1.0) < -0.7071), towards(a), nu)
+    nu = np.where(along > ab_len + 3.0 * gs, towards(b), nu)
+    nu = np.clip(nu, -np.pi / 2, np.pi / 2)
+    return 4.0 * L1_DAMPING**2 * gs / l1_dist * np.sin(nu)
+
+
+def predict_flight(
+    pose, speed_mps, waypoints: np.ndarray, period_s: float, accept_m: float, max_bank_rad: float,
+    roll_tau_s: float = 0.0, dt_s: float = PREDICT_DT_S,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The track of a plane at pose (x, y, heading [rad]) flying ``waypoints`` (N, 2) [m] in order
+    at ground speed ``speed_mps`` [m/s] (one, or one per waypoint: the speed flown to it) with L1
+    guidance of NAVL1_PERIOD ``period_s``: samples every dt_s [s] of (x, y, heading), and for
+    each waypoint the sample index at which it was reached (within accept_m, or past its finish
+    line). The first line starts at the plane. The bank follows the guidance's demand (up to
+    max_bank_rad) with the time constant roll_tau_s."""
+    x, y, psi = (float(v) for v in pose[:3])
+    wps = np.asarray(waypoints, dtype=float)[:, :2]
+    ax, ay = x, y
+    speeds = np.broadcast_to(np.asarray(speed_mps, dtype=float), (len(wps),))
+    bank, k = 0.0, 0
+    out, reached = [(x, y, psi)], np.full(len(wps), -1)
+    steps = int(math.ceil(_path_length(pose, wps) * 1.5 / (float(speeds.min()) * dt_s))) + 50
+    max_tan = math.tan(max_bank_rad)
+    lag = dt_s / roll_tau_s if roll_tau_s > 0 else 1.0
+    for _ in range(steps):
+        bx, by = wps[k]
+        dx, dy = bx - x, by - y
+        if dx * dx + dy * dy <= accept_m * accept_m or dx * (bx - ax) + dy * (by - ay) < 0.0:
+            reached[k] = len(out) - 1
+            k += 1
+            if k == len(wps):
+                break
+            ax, ay = bx, by
+            continue
+        v = float(speeds[k])
+        demand = max(-max_tan, min(max_tan, _l1_rate(x, y, psi, ax, ay, bx, by, v, period_s) * v / G_MPS2))
+        bank += lag * (demand - bank)
+        psi += G_MPS2 * bank / v * dt_s
+        x += v * math.cos(psi) * dt_s
+        y += v * math.sin(psi) * dt_s
+        out.append((x, y, psi))
+    return np.asarray(out), reached
+
+
+def shape_waypoints(
+    pose, speed_mps, waypoints: np.ndarray, path_xy: np.ndarray, period_s: float, accept_m: float,
+    max_bank_rad: float, roll_tau_s: float = 0.0,
+) -> np.ndarray:
+    """Waypoints moved across the planned path ``path_xy`` (dense, in flight order) so that the
+    L1 flight ``predict_flight`` gives passes each original waypoint's place on the path: each
+    iteration moves every waypoint by SHAPE_GAIN x the predicted cross-track error where the
+    flight crosses that place's normal (iterative learning control against the model)."""
+    wps = np.asarray(waypoints, dtype=float)[:, :2].copy()
+    path_xy = np.asarray(path_xy, dtype=float)[:, :2]
+    normals = _normals(path_xy, wps)
+    best, best_err = wps.copy(), math.inf
+    for _ in range(SHAPE_ITERATIONS):
+        flown, _ = predict_flight(pose, speed_mps, wps, period_s, accept_m, max_bank_rad, roll_tau_s)
+        err = _cross_errors(flown[:, :2], waypoints[:, :2], normals)
+        score = float(np.sqrt(np.nanmean(err**2))) if np.isfinite(err).any() else math.inf
+        if score < best_err:
+            best, best_err = wps.copy(), score
+        shift = np.nan_to_num(err) * SHAPE_GAIN
+        offset = np.einsum("ij,ij->i", wps - waypoints[:, :2], normals) - shift
+        wps = waypoints[:, :2] + np.clip(offset, -SHAPE_MAX_SHIFT_M, SHAPE_MAX_SHIFT_M)[:, None] * normals
+    return best
+
+
+def _l1_rate(x, y, psi, ax, ay, bx, by, v: float, period_s: float) -> float:
+    """``l1_turn_rate`` for one plane in floats (the predictor's inner loop)."""
+    gx, gy = v * math.cos(psi), v * math.sin(psi)
+    l1_dist = max(0.3183099 * L1_DAMPING * period_s * v, 0.1)
+    abx, aby = bx - ax, by - ay
+    ab_len = math.hypot(abx, aby)
+    if ab_len > 1e-6:
+        abx, aby = abx / ab_len, aby / ab_len
+    else:
+        abx, aby = gx / v, gy / v
+    px, py = x - ax, y - ay
+    a_dist, along = math.hypot(px, py), px * abx + py * aby
+    if a_dist > l1_dist and along / max(a_dist, 1.0) < -0.7071:
+        nu = _towards(gx, gy, ax - x, ay - y)
+    elif along > ab_len + 3.0 * v:
+        nu = _towards(gx, gy, bx - x, by - y)
+    else:
+        sine_nu1 = max(-0.7071, min(0.7071, (px * aby - py * abx) / l1_dist))
+        nu = math.asin(sine_nu1) + math.atan2(gx * aby - gy * abx, gx * abx + gy * aby)
+    nu = max(-math.pi / 2, min(math.pi / 2, nu))
+    return 4.0 * L1_DAMPING**2 * v / l1_dist * math.sin(nu)
+
+
+def _towards(gx: float, gy: float, tx: float, ty: float) -> float:
+    return math.atan2(gx * ty - gy * tx, gx * tx + gy * ty)
+
+
+def _path_length(pose, wps: np.ndarray) -> float:
+    pts = np.vstack([np.asarray(pose[:2], dtype=float), wps])
+    return float(np.hypot(*np.diff(pts, axis=0).T).sum())
+
+
+def _normals(path_xy: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Left unit normals of the path at the path sample nearest each point."""
+    tangent = np.gradient(path_xy, axis=0)
+    tangent /= np.maximum(np.hypot(*tangent.T), 1e-9)[:, None]
+    nearest = np.argmin(((points[:, None, :] - path_xy[None, :, :]) ** 2).sum(-1), axis=1)
+    t = tangent[nearest]
+    return np.column_stack([-t[:, 1], t[:, 0]])
+
+
+def _cross_errors(flown: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Signed distance along each normal (left +) from each point to where the flown track
+    crosses that point's normal line, nearest the point; NaN where it never crosses within
+    SHAPE_MAX_SHIFT_M x 2."""
+    out = np.full(len(points), np.nan)
+    tangents = np.column_stack([normals[:, 1], -normals[:, 0]])
+    for i, (p, n, t) in enumerate(zip(points, normals, tangents)):
+        rel = flown - p
+        along, across = rel @ t, rel @ n
+        j = np.nonzero((along[:-1] <= 0.0) & (along[1:] > 0.0))[0]
+        if not len(j):
+            continue
+        f = along[j] / (along[j] - along[j + 1])
+        cross_at = across[j] + f * (across[j + 1] - across[j])
+        cross_at = cross_at[np.abs(cross_at) < 2 * SHAPE_MAX_SHIFT_M]
+        if len(cross_at):
+            out[i] = cross_at[np.argmin(np.abs(cross_at))]
+    return out
