@@ -21,7 +21,7 @@ from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.preflight import read_param
 from gcs_planner.plan import VehiclePlan
 
-__all__ = ["FlightLimits", "check_limits", "read_l1_periods", "read_limits"]
+__all__ = ["FlightLimits", "check_limits", "read_l1_params", "read_limits"]
 
 log = logging.getLogger(__name__)
 
@@ -56,14 +56,23 @@ async def read_limits(
     return {s: lim for s, lim in zip(asked, found, strict=True) if lim is not None}
 
 
-async def read_l1_periods(
+async def read_l1_params(
     link: MavlinkLink, sysids: Sequence[int], quirks: dict[int, AutopilotQuirks]
-) -> dict[int, float]:
-    """The period [s] of each plane's L1 waypoint guidance (``AutopilotQuirks.l1_period``), for
-    the vehicles whose autopilot has one and answers with a positive value."""
-    asked = [s for s in sysids if quirks[s].l1_period is not None]
-    found = await asyncio.gather(*(read_param(link, s, quirks[s].l1_period) for s in asked))
-    return {s: float(v) for s, v in zip(asked, found, strict=True) if v is not None and v > 0.0}
+) -> dict[int, tuple[float, float]]:
+    """The period [s] of each plane's L1 waypoint guidance and its roll controller's time constant
+    [s] (``AutopilotQuirks.l1_params``), for the vehicles whose autopilot has them and answers
+    with a positive period."""
+
+    async def one(sysid: int) -> tuple[float | None, ...]:
+        return tuple(await asyncio.gather(*(read_param(link, sysid, n) for n in quirks[sysid].l1_params)))
+
+    asked = [s for s in sysids if quirks[s].l1_params is not None]
+    found = await asyncio.gather(*(one(s) for s in asked))
+    return {
+        s: (float(period), float(tau or 0.0))
+        for s, (period, tau) in zip(asked, found, strict=True)
+        if period is not None and period > 0.0
+    }
 
 
 def check_limits(plans: Sequence[VehiclePlan], limits: dict[int, FlightLimits], top_factor: float) -> None:

@@ -12,10 +12,14 @@ that the predicted flight follows the planned path (docs/coalition.md, "L1 shapi
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["L1_DAMPING", "l1_turn_rate", "predict_flight", "shape_waypoints"]
+__all__ = [
+    "ARDUPLANE_SITL", "L1_DAMPING", "L1Response", "TurnGain", "l1_turn_rate", "predict_flight",
+    "shape_waypoints",
+]  # fmt: skip
 
 L1_DAMPING = 0.75  # NAVL1_DAMPING default (AP_L1_Control.cpp var_info)
 G_MPS2 = 9.80665
@@ -23,6 +27,61 @@ PREDICT_DT_S = 0.1  # ArduPlane navigates at 10 Hz (Plane::navigate in the sched
 SHAPE_ITERATIONS = 8
 SHAPE_GAIN = 0.7  # share of the predicted cross-track error moved off each waypoint per iteration
 SHAPE_MAX_SHIFT_M = 80.0  # no waypoint moves further than this from the planned path
+GAIN_MIN_BANK_RAD = math.radians(5.0)  # turn samples below this bank say little of the gain
+GAIN_MEMORY = 0.995  # weight left on the older turn samples at each new one (~20 s at 10 Hz)
+GAIN_MIN_WEIGHT = 0.5  # sum of squared coordinated rates [(rad/s)^2] (~3 s turning at 10 deg/s) to tell
+GAIN_RANGE = (0.3, 1.5)  # a gain told is clipped to this
+
+
+@dataclass(frozen=True)
+class L1Response:
+    """How a plane flies ArduPlane's L1 guidance: its NAVL1_PERIOD [s], the share of the turn rate
+    the guidance demands that the airframe achieves, and the time constant [s] of its bank."""
+
+    period_s: float
+    turn_gain: float = 1.0
+    roll_tau_s: float = 0.0
+
+
+# ArduPlane SITL's stock plane (NAVL1_PERIOD 15, Tools/autotest/models/plane.parm): turn gain and
+# bank lag fitted to its flown goals after 180 deg turns (docs/coalition.md, "L1 shaping")
+ARDUPLANE_SITL = L1Response(15.0, 0.7, 0.25)
+
+
+class TurnGain:
+    """A plane's turn gain learnt in flight: its turn rate (course change between position
+    reports, on its own clock) against the coordinated rate of its reported bank, g tan(roll) / v,
+    least squares with a forgetting factor. ArduPlane SITL's plane turns at 0.75 of it (measured:
+    roll 33.3 deg at 21.4 m/s, 12.9 deg/s against 17.3 deg/s); a real airframe in coordinated
+    turns at about 1."""
+
+    def __init__(self) -> None:
+        self.roll_rad = 0.0
+        self._last: tuple[float, float] | None = None  # time [s], course [rad] of the newest report
+        self._num = self._den = 0.0
+
+    def attitude(self, roll_rad: float) -> None:
+        """The newest reported roll (right wing down positive)."""
+        self.roll_rad = roll_rad
+
+    def velocity(self, t_s: float, v_east: float, v_north: float) -> None:
+        """A position report's time [s, the vehicle's clock] and ground velocity [m/s]."""
+        speed, course = math.hypot(v_east, v_north), math.atan2(v_north, v_east)
+        last, self._last = self._last, (t_s, course)
+        dt = t_s - last[0] if last else 0.0
+        if not 0.0 < dt < 1.0 or speed < 5.0 or abs(self.roll_rad) < GAIN_MIN_BANK_RAD:
+            return
+        rate = math.remainder(course - last[1], 2 * math.pi) / dt
+        coordinated = -G_MPS2 * math.tan(self.roll_rad) / speed  # CCW; a right bank turns clockwise
+        self._num = GAIN_MEMORY * self._num + rate * coordinated
+        self._den = GAIN_MEMORY * self._den + coordinated * coordinated
+
+    @property
+    def value(self) -> float | None:
+        """The gain, once enough banked flight has been seen; else None."""
+        if self._den < GAIN_MIN_WEIGHT:
+            return None
+        return min(max(self._num / self._den, GAIN_RANGE[0]), GAIN_RANGE[1])
 
 
 def l1_turn_rate(pos: np.ndarray, a: np.ndarray, b: np.ndarray, ground: np.ndarray, period_s) -> np.ndarray:
@@ -58,24 +117,25 @@ def l1_turn_rate(pos: np.ndarray, a: np.ndarray, b: np.ndarray, ground: np.ndarr
 
 
 def predict_flight(
-    pose, speed_mps, waypoints: np.ndarray, period_s: float, accept_m: float, max_bank_rad: float,
-    roll_tau_s: float = 0.0, dt_s: float = PREDICT_DT_S,
+    pose, speed_mps, waypoints: np.ndarray, response: L1Response, accept_m: float, max_bank_rad: float,
+    dt_s: float = PREDICT_DT_S,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The track of a plane at pose (x, y, heading [rad]) flying ``waypoints`` (N, 2) [m] in order
     at ground speed ``speed_mps`` [m/s] (one, or one per waypoint: the speed flown to it) with L1
-    guidance of NAVL1_PERIOD ``period_s``: samples every dt_s [s] of (x, y, heading), and for
-    each waypoint the sample index at which it was reached (within accept_m, or past its finish
-    line). The first line starts at the plane. The bank follows the guidance's demand (up to
-    max_bank_rad) with the time constant roll_tau_s."""
+    guidance, as ``response`` says: samples every dt_s [s] of (x, y, heading), and for each
+    waypoint the sample index at which it was reached (within accept_m, or past its finish line).
+    The first line starts at the plane. The bank follows the guidance's demand (up to
+    max_bank_rad) with the response's lag, and turns the plane at its gain."""
     x, y, psi = (float(v) for v in pose[:3])
     wps = np.asarray(waypoints, dtype=float)[:, :2]
     ax, ay = x, y
     speeds = np.broadcast_to(np.asarray(speed_mps, dtype=float), (len(wps),))
-    bank, k = 0.0, 0
+    tan_bank, k = 0.0, 0
     out, reached = [(x, y, psi)], np.full(len(wps), -1)
     steps = int(math.ceil(_path_length(pose, wps) * 1.5 / (float(speeds.min()) * dt_s))) + 50
     max_tan = math.tan(max_bank_rad)
-    lag = dt_s / roll_tau_s if roll_tau_s > 0 else 1.0
+    lag = min(1.0, dt_s / response.roll_tau_s) if response.roll_tau_s > 0 else 1.0
+    gain, period_s = response.turn_gain, response.period_s
     for _ in range(steps):
         bx, by = wps[k]
         dx, dy = bx - x, by - y
@@ -88,8 +148,8 @@ def predict_flight(
             continue
         v = float(speeds[k])
         demand = max(-max_tan, min(max_tan, _l1_rate(x, y, psi, ax, ay, bx, by, v, period_s) * v / G_MPS2))
-        bank += lag * (demand - bank)
-        psi += G_MPS2 * bank / v * dt_s
+        tan_bank += lag * (demand - tan_bank)
+        psi += gain * G_MPS2 * tan_bank / v * dt_s
         x += v * math.cos(psi) * dt_s
         y += v * math.sin(psi) * dt_s
         out.append((x, y, psi))
@@ -97,8 +157,8 @@ def predict_flight(
 
 
 def shape_waypoints(
-    pose, speed_mps, waypoints: np.ndarray, path_xy: np.ndarray, period_s: float, accept_m: float,
-    max_bank_rad: float, roll_tau_s: float = 0.0,
+    pose, speed_mps, waypoints: np.ndarray, path_xy: np.ndarray, response: L1Response, accept_m: float,
+    max_bank_rad: float,
 ) -> np.ndarray:
     """Waypoints moved across the planned path ``path_xy`` (dense, in flight order) so that the
     L1 flight ``predict_flight`` gives passes each original waypoint's place on the path: each
@@ -109,7 +169,7 @@ def shape_waypoints(
     normals = _normals(path_xy, wps)
     best, best_err = wps.copy(), math.inf
     for _ in range(SHAPE_ITERATIONS):
-        flown, _ = predict_flight(pose, speed_mps, wps, period_s, accept_m, max_bank_rad, roll_tau_s)
+        flown, _ = predict_flight(pose, speed_mps, wps, response, accept_m, max_bank_rad)
         err = _cross_errors(flown[:, :2], waypoints[:, :2], normals)
         score = float(np.sqrt(np.nanmean(err**2))) if np.isfinite(err).any() else math.inf
         if score < best_err:

@@ -19,12 +19,13 @@ Models (choices where the brief leaves them open):
 - Fixed wing: constant airspeed (the commanded speed, clamped to [min, max]); heading rate
   limited to ``g tan(max_bank) / v``, which bounds the turn radius below by ``v^2 / (g tan
   max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Between
-  waypoints it turns towards the target (pursuit, the planner's own model), or, with
-  ``l1_period_s`` > 0, tracks the line from the previous waypoint as ArduPlane's L1 controller
-  does (``AP_L1_Control::update_waypoint``: L1 distance ``damping x period x groundspeed / pi``,
-  lateral acceleration ``4 damping^2 v^2 / L1 x sin(Nu)``, capture angle limited to 45 deg, the
-  previous waypoint as the line's start, ``Plane::set_next_WP``). The L1 plane turns late and
-  overshoots a turn onto a new line, as ArduPlane SITL does (docs/coalition.md). Loiter is a
+  waypoints it turns towards the target (pursuit, the planner's own model), or, with an ``l1``
+  response, tracks the line from the previous waypoint as ArduPlane's L1 controller does
+  (gcs_planner.l1_guidance: ``AP_L1_Control::update_waypoint``, the previous waypoint as the
+  line's start, ``Plane::set_next_WP``), its bank lagging the demand and its turn at the
+  airframe's gain (``l1_guidance.ARDUPLANE_SITL``: fitted to ArduPlane SITL's plane). The L1
+  plane flies arcs wide and overshoots a turn onto a new line, as ArduPlane SITL does
+  (docs/coalition.md). Loiter is a
   clockwise circle (ArduPilot's default direction): turn-rate feed-forward ``v / R`` plus a
   lateral correction ``atan(K_CIRCLE (d - R) / R)``. Landing spirals down on the loiter circle
   at ``land_speed_mps``.
@@ -42,16 +43,15 @@ from enum import IntEnum
 import numpy as np
 
 from gcs_planner.geo import wrap_pi
-from gcs_planner.l1_guidance import l1_turn_rate
+from gcs_planner.l1_guidance import L1Response, l1_turn_rate
 
-__all__ = ["AIRFRAMES", "SITL_L1_PERIOD_S", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
+__all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
 
 G_MPS2 = 9.80665
 KP_POS = 1.0  # [1/s] position -> velocity gain near a stop point
 KP_ALT = 1.0  # [1/s] altitude error -> climb rate gain
 KP_PSI = 1.5  # [1/s] heading error -> turn rate gain (saturates at the bank limit)
 K_CIRCLE = 2.0  # loiter circle radial correction gain [-]
-SITL_L1_PERIOD_S = 15.0  # NAVL1_PERIOD of ArduPlane SITL's plane (Tools/autotest/models/plane.parm)
 GROUND_TOL_M = 0.05  # touchdown when within this height of the ground
 ALT_TOL_M = 0.5  # takeoff reaches its altitude within this tolerance
 LINE_MIN_H_M = 1.0  # below this horizontal distance to the target a leg is flown as a vertical move
@@ -72,7 +72,7 @@ class Airframe:
     land_speed_mps: float
     accept_radius_m: float
     loiter_radius_m: float
-    l1_period_s: float = 0.0  # fixed wing: 0 = pursuit; > 0 = ArduPlane's L1 (NAVL1_PERIOD)
+    l1: L1Response | None = None  # fixed wing: None = pursuit; else ArduPlane's L1 guidance, flown so
 
     @property
     def min_turn_radius_m(self) -> float:
@@ -153,7 +153,10 @@ class Kinematics:
         self.climb = np.array([a.climb_rate_mps for a in airframes])
         self.sink = np.array([a.sink_rate_mps for a in airframes])
         self.land_speed = np.array([a.land_speed_mps for a in airframes])
-        self.l1_period = np.array([a.l1_period_s for a in airframes])
+        self.l1_period = np.array([a.l1.period_s if a.l1 else 0.0 for a in airframes])
+        self.l1_gain = np.array([a.l1.turn_gain if a.l1 else 1.0 for a in airframes])
+        self.roll_tau = np.array([a.l1.roll_tau_s if a.l1 else 0.0 for a in airframes])
+        self.l1_bank = np.zeros(n)  # L1 planes: tan of the bank, lagging the guidance's demand
         self.pos = np.array(ground_enu_m, dtype=float).reshape(n, 3).copy()
         self.ground_z = self.pos[:, 2].copy()
         self.vel = np.zeros((n, 3))
@@ -326,12 +329,11 @@ class Kinematics:
         max_rate = G_MPS2 * self.tan_bank[m] / v
         rate = KP_PSI * wrap_pi(psi_des - psi)
         l1 = (self.l1_period[m] > 0) & ((mode == _GOTO) | (mode == _PASS))
-        if l1.any():
-            ground = np.column_stack([v * np.cos(psi), v * np.sin(psi)]) + self.wind[m][:, :2]
-            rate = np.where(l1, l1_turn_rate(pos, self.leg_from[m], tgt, ground, self.l1_period[m]), rate)
         if circling.any():
             rate = rate - circling * v / self.loiter_r[m]  # feed-forward of the clockwise orbit
         rate = np.clip(rate, -max_rate, max_rate)
+        if l1.any():
+            rate = np.where(l1, self._l1_rate(m, l1, pos, tgt, psi, v, dt_s), rate)
         psi = wrap_pi(psi + rate * dt_s)
         landing = mode == _LAND
         target_z = np.where(landing, self.ground_z[m], tgt[:, 2])
@@ -342,9 +344,23 @@ class Kinematics:
         v_h = np.sqrt(v * v - vz * vz)
         self.vel[m] = np.column_stack([v_h * np.cos(psi), v_h * np.sin(psi), vz])
         self.turn_rate[m] = rate
-        self.roll[m] = -np.arctan(rate * v / G_MPS2)
+        self.roll[m] = -np.arctan(rate * v / (G_MPS2 * self.l1_gain[m]))  # the bank that turns it so
         self.pitch[m] = np.arcsin(vz / v)
         self.psi[m] = psi
+
+    def _l1_rate(self, m, l1: np.ndarray, pos, tgt, psi, v, dt_s: float) -> np.ndarray:
+        """Turn rate of the rows on L1 guidance (mask l1 within rows m): the guidance's demand as a
+        bank within the limit, lagging by the airframe's time constant, turning at its gain."""
+        ground = np.column_stack([v * np.cos(psi), v * np.sin(psi)]) + self.wind[m][:, :2]
+        tan_max = self.tan_bank[m]
+        demand = np.clip(l1_turn_rate(pos, self.leg_from[m], tgt, ground, self.l1_period[m]) * v / G_MPS2,
+                         -tan_max, tan_max)  # fmt: skip
+        tau = self.roll_tau[m]
+        lag = np.where(tau > 0, np.minimum(1.0, dt_s / np.maximum(tau, 1e-9)), 1.0)
+        bank = self.l1_bank[m]
+        bank = np.where(l1, bank + lag * (demand - bank), 0.0)
+        self.l1_bank[m] = bank
+        return self.l1_gain[m] * G_MPS2 * bank / v
 
 
 def _rows(mask: np.ndarray) -> np.ndarray | slice:

@@ -25,6 +25,7 @@ import numpy as np
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of, wire_sysid
 from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.l1_guidance import L1Response
 from gcs_planner.plan import VehiclePlan
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
@@ -153,12 +154,13 @@ class MockVehicles(_PlanFleet):
 class MockVehiclesProcess(_PlanFleet):
     """The coalition HIL run's fleet: mock fixed wings in their own process (module docstring),
     each with the bank for its minimum turn radius at the keeper's top speed (CATCH_UP_FACTOR x
-    cruise), so catching up does not widen turns. ``l1_period_s`` > 0 flies them with ArduPlane's
-    L1 guidance (sitl_mock.flight; SITL_L1_PERIOD_S is the SITL plane's): a stand-in for ArduPlane
-    SITL's lag in turns."""
+    cruise), so catching up does not widen turns. With an ``l1`` response they fly ArduPlane's
+    L1 guidance (sitl_mock.flight; ``l1_guidance.ARDUPLANE_SITL`` is the SITL plane's): a stand-in
+    for ArduPlane SITL's wide turns."""
 
     def __init__(
-        self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float = 10.0, l1_period_s: float = 0.0
+        self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float = 10.0,
+        l1: L1Response | None = None,
     ) -> None:
         airframes, specs = {}, []
         for vp in plans:
@@ -168,7 +170,7 @@ class MockVehiclesProcess(_PlanFleet):
             bank = float(np.arctan((CATCH_UP_FACTOR * cruise) ** 2 / vp.turn_radius_m / G_MPS2))
             bank = max(frame.max_bank_rad, bank)
             frame = replace(
-                frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS, l1_period_s=l1_period_s
+                frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS, l1=l1
             )
             airframes[vp.sysid] = frame
             specs.append(

@@ -71,9 +71,10 @@ class FlightRules:
     airspeed_range: parameters AIRSPEED_MIN / AIRSPEED_MAX / ROLL_LIMIT_DEG (the airframe's own
         range and bank limit); a DO_CHANGE_SPEED airspeed outside the range is refused (command:
         FAILED) and ignored in a mission, the speed unchanged (ArduPlane commands_logic.cpp
-        ``Plane::do_change_speed``; SITL's plane.parm: 10 / 30 m/s, 65 deg); and NAVL1_PERIOD,
-        the period of its L1 waypoint guidance (AP_L1_Control), 0 where the mock plane flies its
-        pursuit guidance instead (ArduPlane has no such value: the mock says so).
+        ``Plane::do_change_speed``; SITL's plane.parm: 10 / 30 m/s, 65 deg); and NAVL1_PERIOD /
+        RLL2SRV_TCONST, the period of its L1 waypoint guidance (AP_L1_Control) and the lag of its
+        bank (plane.parm: 15 s, 0.25 s), both 0 where the mock plane flies its pursuit guidance
+        instead (ArduPlane has no such values: the mock says so).
     params: the parameters the mock serves over PARAM_SET / PARAM_REQUEST_READ.
     """
 

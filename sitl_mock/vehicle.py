@@ -139,7 +139,8 @@ class MockVehicle:
             af = self.airframe
             self.params.update(AIRSPEED_MIN=af.min_speed_mps, AIRSPEED_MAX=af.max_speed_mps,
                                ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad),
-                               NAVL1_PERIOD=af.l1_period_s)  # fmt: skip
+                               NAVL1_PERIOD=af.l1.period_s if af.l1 else 0.0,
+                               RLL2SRV_TCONST=af.l1.roll_tau_s if af.l1 else 0.0)  # fmt: skip
         if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
             for name, value in (("MAV_OPTIONS", 0.0), ("MAV_GCS_SYSID", 255.0), ("MAV_GCS_SYSID_HI", 0.0)):
                 self.params.setdefault(name, value)

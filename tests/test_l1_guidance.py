@@ -1,5 +1,6 @@
 """The L1 flight predictor against the mock's L1 plane, and waypoints shaped with it."""
 
+import itertools
 import math
 from dataclasses import replace
 
@@ -7,13 +8,19 @@ import numpy as np
 import pytest
 
 from gcs_planner.coalition_hil.missions import shape_for_l1
-from gcs_planner.l1_guidance import predict_flight, shape_waypoints
+from gcs_planner.l1_guidance import (
+    ARDUPLANE_SITL,
+    G_MPS2,
+    L1Response,
+    TurnGain,
+    predict_flight,
+    shape_waypoints,
+)
 from gcs_planner.plan import VehiclePlan
 from sitl_mock.flight import AIRFRAMES, Arrival, Guidance, Kinematics
 
 DT = 0.05
 SPEED = 20.0
-PERIOD = 15.0  # ArduPlane SITL's NAVL1_PERIOD (Tools/autotest/models/plane.parm)
 BANK = math.radians(45.0)
 R = 100.0
 
@@ -28,21 +35,23 @@ def _goal_leg(run_in_m: float):
     path = np.vstack([arc, line])
     s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path, axis=0).T))]
     s_goal = math.pi * R + run_in_m
-    at = np.r_[np.arange(1, 6) * math.pi * R / 6, s_goal + np.array([-30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 40.0])]
+    near_goal = s_goal + np.array([-30.0, -20.0, -10.0, 0.0, 10.0, 20.0, 40.0])
+    at = np.r_[np.arange(1, 6) * math.pi * R / 6, near_goal]
     wps = np.column_stack([np.interp(at, s, path[:, 0]), np.interp(at, s, path[:, 1])])
     return path, wps, np.array([-run_in_m, 2 * R])
 
 
-def _mock_flight(waypoints: np.ndarray, accept_m: float) -> np.ndarray:
+def _mock_flight(waypoints: np.ndarray, response: L1Response, each_step=lambda kin: None) -> np.ndarray:
     """The mock's L1 plane (sitl_mock.flight.Kinematics) flying the waypoints from the origin,
-    heading east: its positions every DT."""
-    kin = Kinematics([replace(AIRFRAMES["fixed_wing"], l1_period_s=PERIOD, max_bank_rad=BANK)], np.zeros((1, 3)))
+    heading east, each accepted within 15 m or once passed: its positions every DT."""
+    kin = Kinematics([replace(AIRFRAMES["fixed_wing"], l1=response, max_bank_rad=BANK)], np.zeros((1, 3)))
     kin.pos[0], kin.psi[0], kin.speed_cmd[0] = [0.0, 0.0, 50.0], 0.0, SPEED
     track = [kin.pos[0, :2].copy()]
     for wp in waypoints:
-        kin.command(0, Guidance.PASS, np.array([*wp, 50.0]), Arrival.RADIUS_2D, accept_radius_m=accept_m)
+        kin.command(0, Guidance.PASS, np.array([*wp, 50.0]), Arrival.RADIUS_2D, accept_radius_m=15.0)
         while not kin.arrived()[0]:
             kin.step(DT)
+            each_step(kin)
             track.append(kin.pos[0, :2].copy())
     return np.array(track)
 
@@ -55,13 +64,14 @@ def _at_goal(track: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
     return float(np.hypot(*(track[k] - goal))), abs(math.remainder(heading - 180.0, 360.0))
 
 
-def test_the_predicted_flight_is_the_mock_l1_planes_flight():
+@pytest.mark.parametrize("response", [L1Response(15.0), ARDUPLANE_SITL], ids=["l1", "sitl-plane"])
+def test_the_predicted_flight_is_the_mock_l1_planes_flight(response):
     """Two integrations of ArduPlane's waypoint following (Plane::verify_nav_wp's acceptance
     radius and finish line, the previous waypoint as the line's start): the predictor's and the
     mock fleet's kinematics agree to within a metre over a turn onto a line."""
     path, wps, _ = _goal_leg(60.0)
-    mock = _mock_flight(wps, 15.0)
-    predicted, reached = predict_flight((0.0, 0.0, 0.0), SPEED, wps, PERIOD, 15.0, BANK, dt_s=DT)
+    mock = _mock_flight(wps, response)
+    predicted, reached = predict_flight((0.0, 0.0, 0.0), SPEED, wps, response, 15.0, BANK, dt_s=DT)
     assert (reached >= 0).all() and np.all(np.diff(reached) > 0)
     n = min(len(mock), len(predicted))
     assert np.hypot(*(mock[:n] - predicted[:n, :2]).T).max() < 1.0
@@ -70,14 +80,14 @@ def test_the_predicted_flight_is_the_mock_l1_planes_flight():
 
 @pytest.mark.parametrize("run_in_m", [0.0, 60.0])
 def test_shaped_waypoints_bring_an_l1_plane_onto_its_goal_pose_after_a_turn(run_in_m):
-    """ArduPlane's L1 guidance flies a turn wide and is still converging on the line at a goal
-    shortly after it; the waypoints moved by shape_waypoints bring the mock's L1 plane (flown
-    apart from the predictor) through the goal on its heading."""
+    """ArduPlane SITL's plane flies a turn wide and is still converging on the line at a goal
+    shortly after it; the waypoints moved by shape_waypoints bring the mock's plane with its
+    response (flown apart from the predictor) through the goal on its heading."""
     path, wps, goal = _goal_leg(run_in_m)
-    miss, dh = _at_goal(_mock_flight(wps, 15.0), goal)
+    miss, dh = _at_goal(_mock_flight(wps, ARDUPLANE_SITL), goal)
     assert dh > 5.0 or miss > 8.0, (miss, dh)  # the plain waypoints: off the goal pose
-    shaped = shape_waypoints((0.0, 0.0, 0.0), SPEED, wps, path, PERIOD, 15.0, BANK)
-    miss_s, dh_s = _at_goal(_mock_flight(shaped, 15.0), goal)
+    shaped = shape_waypoints((0.0, 0.0, 0.0), SPEED, wps, path, ARDUPLANE_SITL, 15.0, BANK)
+    miss_s, dh_s = _at_goal(_mock_flight(shaped, ARDUPLANE_SITL), goal)
     assert miss_s < 3.0 and dh_s < 2.0 and dh_s < dh / 3, (miss_s, dh_s, miss, dh)
     assert np.hypot(*(shaped - wps).T).max() < 60.0  # moved across the path, not elsewhere
 
@@ -88,11 +98,43 @@ def test_a_shaped_mission_keeps_its_items_times_and_first_waypoint():
     waypoints = np.column_stack([np.vstack([[0.0, 0.0], wps]), np.full(n, 50.0)])
     vp = VehiclePlan("U1", 1, waypoints, np.arange(n) * 5.0, np.full(n, SPEED),
                      np.column_stack([path, np.full(len(path), 50.0)]), np.arange(len(path)) * 0.1,
-                     "fixed_wing", turn_radius_m=R, final_action="loiter", acceptance_radius_m=15.0)  # fmt: skip
-    shaped = shape_for_l1(vp, PERIOD, BANK)
+                     "fixed_wing", turn_radius_m=R, acceptance_radius_m=15.0)  # fmt: skip
+    shaped = shape_for_l1(vp, ARDUPLANE_SITL, BANK)
     assert shaped.waypoints.shape == vp.waypoints.shape
     np.testing.assert_array_equal(shaped.waypoints[0], vp.waypoints[0])
     np.testing.assert_array_equal(shaped.waypoints[:, 2], vp.waypoints[:, 2])
     np.testing.assert_array_equal(shaped.times_s, vp.times_s)
     np.testing.assert_array_equal(shaped.path, vp.path)
     assert np.hypot(*(shaped.waypoints - vp.waypoints)[:, :2].T).max() > 1.0
+
+
+@pytest.mark.parametrize("gain", [0.75, 1.0])
+@pytest.mark.parametrize("side", [1.0, -1.0], ids=["right", "left"])
+def test_the_turn_gain_is_learnt_from_bank_and_course_reports(gain, side):
+    """A plane banked 30 deg at 20 m/s turning at gain x the coordinated rate (clockwise for a
+    right bank): the estimate is that gain once 3 s of the turn were seen; straight flight tells
+    nothing."""
+    estimate = TurnGain()
+    roll = side * math.radians(30.0)
+    rate = -side * gain * G_MPS2 * math.tan(abs(roll)) / SPEED
+    for k in range(100):  # straight: no bank, no gain
+        estimate.velocity(0.1 * k, SPEED, 0.0)
+    assert estimate.value is None
+    estimate.attitude(roll)
+    for k in range(100, 160):
+        course = rate * 0.1 * (k - 100)
+        estimate.velocity(0.1 * k, SPEED * math.cos(course), SPEED * math.sin(course))
+    assert estimate.value == pytest.approx(gain, rel=0.02)
+
+
+def test_the_mock_sitl_plane_reports_the_bank_that_turns_it_at_its_gain():
+    """The mock's stand-in for ArduPlane SITL's plane banks more than a coordinated turn needs
+    (SITL: 33.3 deg for 12.9 deg/s at 21.4 m/s): the gain learnt from its reports is its own."""
+    estimate, steps = TurnGain(), itertools.count(1)
+
+    def report(kin: Kinematics) -> None:
+        estimate.attitude(float(kin.roll[0]))
+        estimate.velocity(DT * next(steps), *kin.vel[0, :2])
+
+    _mock_flight(_goal_leg(60.0)[1][:5], ARDUPLANE_SITL, report)  # the arc
+    assert estimate.value == pytest.approx(ARDUPLANE_SITL.turn_gain, abs=0.02)

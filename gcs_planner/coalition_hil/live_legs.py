@@ -32,6 +32,7 @@ from gcs_planner.coalition_hil.tracks import pose_at
 from gcs_planner.flight_ops import FrameClock, boot_clock
 from gcs_planner.geo import Origin, geodetic_to_enu
 from gcs_planner.geometry.dubins import DubinsPath
+from gcs_planner.l1_guidance import TurnGain
 from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.track import Leg
@@ -104,18 +105,25 @@ def live_state(rows, origin: Origin, max_rate_rps: float, fit_s: float = FIT_S) 
 
 
 class Telemetry:
-    """The newest GLOBAL_POSITION_INT reports of each vehicle, timed by ``clock`` (flight_ops)."""
+    """The newest GLOBAL_POSITION_INT reports of each vehicle, timed by ``clock`` (flight_ops), and
+    each vehicle's turn gain learnt from them and its ATTITUDE reports (l1_guidance.TurnGain)."""
 
     def __init__(self, sysids, clock: FrameClock = boot_clock, keep: int = 64) -> None:
         self.rows = {s: deque(maxlen=keep) for s in sysids}
+        self.turn_gains = {s: TurnGain() for s in sysids}
         self.clock = clock
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
-        if msg.get_type() != "GLOBAL_POSITION_INT" or reports_no_fix(msg):
+        kind, gain = msg.get_type(), self.turn_gains.get(msg.get_srcSystem())
+        if gain is None:
             return
-        rows = self.rows.get(msg.get_srcSystem())
-        if rows is not None:
-            rows.append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, msg.vy / 100.0, msg.vx / 100.0))
+        if kind == "ATTITUDE":
+            gain.attitude(msg.roll)
+        elif kind == "GLOBAL_POSITION_INT" and not reports_no_fix(msg):
+            east, north = msg.vy / 100.0, msg.vx / 100.0
+            row = (self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, east, north)
+            self.rows[msg.get_srcSystem()].append(row)
+            gain.velocity(msg.time_boot_ms / 1000.0, east, north)
 
 
 def goal_pose(world, award: dict) -> np.ndarray:

@@ -27,7 +27,7 @@ import numpy as np
 
 from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, SPEED_TRIES
 from gcs_planner.coalition_hil.tracks import continue_turn, drop_spikes, slice_track
-from gcs_planner.l1_guidance import shape_waypoints
+from gcs_planner.l1_guidance import L1Response, shape_waypoints
 from gcs_planner.plan import VehiclePlan
 from gcs_planner.planning.coalition.track import Leg
 
@@ -239,15 +239,15 @@ def idle_mission(
     return _piece_plan(uav, ts, xys, t_route0, dt_s, list(prefix_wp_s) + [float(leg.t[0])])
 
 
-def shape_for_l1(vp: VehiclePlan, period_s: float, max_bank_rad: float) -> VehiclePlan:
-    """The mission with its waypoints moved so that a plane flying ArduPlane's L1 guidance with
-    NAVL1_PERIOD period_s, from the start of the mission's path, follows that path
+def shape_for_l1(vp: VehiclePlan, response: L1Response, max_bank_rad: float) -> VehiclePlan:
+    """The mission with its waypoints moved so that a plane flying ArduPlane's L1 guidance as
+    ``response`` says, from the start of the mission's path, follows that path
     (``l1_guidance.shape_waypoints``): such a plane flies a turn wide and is still converging on
     the line after it, where a leg's goal pose lies."""
     path = vp.path[:, :2]
     pose = (*path[0], math.atan2(*(path[1] - path[0])[::-1]))
     waypoints = vp.waypoints.copy()
     waypoints[1:, :2] = shape_waypoints(
-        pose, vp.speeds_mps[1:], vp.waypoints[1:, :2], path, period_s, vp.acceptance_radius_m, max_bank_rad
+        pose, vp.speeds_mps[1:], vp.waypoints[1:, :2], path, response, vp.acceptance_radius_m, max_bank_rad
     )
     return replace(vp, waypoints=waypoints)

@@ -54,7 +54,7 @@ from gcs_planner.coalition_hil.missions import (
 )
 from gcs_planner.coalition_hil.report import TaskRow, add_prediction_errors, task_rows
 from gcs_planner.errors import UserError
-from gcs_planner.flight_limits import check_limits, read_l1_periods, read_limits
+from gcs_planner.flight_limits import check_limits, read_l1_params, read_limits
 from gcs_planner.flight_ops import (
     KEEPER_PERIOD_S,
     NAV_TAKEOFF,
@@ -68,6 +68,7 @@ from gcs_planner.flight_ops import (
 )
 from gcs_planner.fly import HEARTBEAT_WAIT_S, REAL_HEARTBEAT_WAIT_S
 from gcs_planner.geo import Origin
+from gcs_planner.l1_guidance import L1Response
 from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
@@ -317,7 +318,8 @@ class _HilRun:
         self.queue: asyncio.PriorityQueue[tuple[tuple, int, _Job]] = asyncio.PriorityQueue()
         self.order = itertools.count()
         self.end_states: dict[int, str] = {}  # connected vehicles: how each was left (safe end)
-        self.l1: dict[int, tuple[float, float]] = {}  # L1 planes: NAVL1_PERIOD [s], bank limit [rad]
+        # planes on L1 guidance: NAVL1_PERIOD [s], RLL2SRV_TCONST [s], bank limit [rad]
+        self.l1: dict[int, tuple[float, float, float]] = {}
 
     def connect(self, speedup: float) -> None:
         """Fly vehicles on clocks of their own (frames timed on receipt), whose guidance lags a turn
@@ -384,8 +386,8 @@ class _HilRun:
         for sysid, lim in limits.items():
             self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
         if not self.vehicles.simulated:
-            periods = await read_l1_periods(link, self.flying, self.quirks)
-            self.l1 = {s: (p, math.radians(limits[s].roll_deg)) for s, p in periods.items() if s in limits}
+            l1 = await read_l1_params(link, self.flying, self.quirks)
+            self.l1 = {s: (*p, math.radians(limits[s].roll_deg)) for s, p in l1.items() if s in limits}
         if not self.vehicles.simulated:
             await self._check_starts()
         n_items = sum(len(m) for m in self.missions.values())
@@ -592,12 +594,14 @@ class _HilRun:
     def _for_guidance(self, vp: VehiclePlan) -> tuple[VehiclePlan, dict]:
         """vp with its waypoints shaped for the vehicle's L1 guidance, if it flies one, and for
         the upload's log entry how far the waypoints moved (l1_shift_m)."""
-        l1 = self.l1.get(vp.sysid)
-        if l1 is None:
+        if vp.sysid not in self.l1:
             return vp, {}
-        shaped = shape_for_l1(vp, *l1)
+        period_s, tau_s, bank_rad = self.l1[vp.sysid]
+        gain = self.telemetry.turn_gains[vp.sysid].value
+        shaped = shape_for_l1(vp, L1Response(period_s, gain or 1.0, tau_s), bank_rad)
         shift = np.hypot(*(shaped.waypoints - vp.waypoints)[:, :2].T)
-        return shaped, {"l1_shift_m": round(float(shift.max()), 1)}
+        told = None if gain is None else round(gain, 3)
+        return shaped, {"l1_shift_m": round(float(shift.max()), 1), "turn_gain": told}
 
     def _leg_start_s(self, award: Award, earliest_s: float) -> float:
         """When an award's live leg starts, given the earliest start its upload allows."""

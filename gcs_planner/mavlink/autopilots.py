@@ -62,8 +62,9 @@ class AutopilotQuirks:
     # ArduPlane refuses a DO_CHANGE_SPEED airspeed outside [AIRSPEED_MIN, AIRSPEED_MAX]
     # (commands_logic.cpp Plane::do_change_speed) and banks at most ROLL_LIMIT_DEG
     flight_limits: tuple[str, str, str] | None = None
-    # the period of its L1 waypoint guidance [s] (None: no L1): AP_L1_Control's NAVL1_PERIOD
-    l1_period: str | None = None
+    # parameters of its L1 waypoint guidance's period [s] and its roll controller's time constant [s]
+    # (None: no L1 guidance): AP_L1_Control's NAVL1_PERIOD, AP_RollController's RLL2SRV_TCONST
+    l1_params: tuple[str, str] | None = None
     # list types (mission_type) written in place as items arrive: a failed upload leaves a mix, so
     # the client reads the list back to say what the vehicle holds (ArduPilot's mission and rally:
     # MissionItemProtocol_Waypoints / _Rally replace_item; PX4 switches lists on completion only)
@@ -108,7 +109,7 @@ ARDUPLANE = AutopilotQuirks(
     readback=readback.ARDUPLANE,
     stores_as_received=frozenset({0, 2}),
     flight_limits=("AIRSPEED_MIN", "AIRSPEED_MAX", "ROLL_LIMIT_DEG"),
-    l1_period="NAVL1_PERIOD",
+    l1_params=("NAVL1_PERIOD", "RLL2SRV_TCONST"),
 )
 PX4 = AutopilotQuirks(
     name="PX4",
