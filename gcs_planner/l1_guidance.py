@@ -145,6 +145,8 @@ def predict_flight(
             if k == len(wps):
                 break
             ax, ay = bx, by
+            if (x - wps[k, 0]) * (wps[k, 0] - ax) + (y - wps[k, 1]) * (wps[k, 1] - ay) > 0.0:
+                ax, ay = x, y  # already past the next one's finish line: from here (Plane::set_next_WP)
             continue
         v = float(speeds[k])
         demand = max(-max_tan, min(max_tan, _l1_rate(x, y, psi, ax, ay, bx, by, v, period_s) * v / G_MPS2))
@@ -158,12 +160,13 @@ def predict_flight(
 
 def shape_waypoints(
     pose, speed_mps, waypoints: np.ndarray, path_xy: np.ndarray, response: L1Response, accept_m: float,
-    max_bank_rad: float,
+    max_bank_rad: float, keep_first: int = 0,
 ) -> np.ndarray:
     """Waypoints moved across the planned path ``path_xy`` (dense, in flight order) so that the
     L1 flight ``predict_flight`` gives passes each original waypoint's place on the path: each
-    iteration moves every waypoint by SHAPE_GAIN x the predicted cross-track error where the
-    flight crosses that place's normal (iterative learning control against the model)."""
+    iteration moves every waypoint but the first keep_first by SHAPE_GAIN x the predicted
+    cross-track error where the flight crosses that place's normal (iterative learning control
+    against the model)."""
     wps = np.asarray(waypoints, dtype=float)[:, :2].copy()
     path_xy = np.asarray(path_xy, dtype=float)[:, :2]
     normals = _normals(path_xy, wps)
@@ -175,6 +178,7 @@ def shape_waypoints(
         if score < best_err:
             best, best_err = wps.copy(), score
         shift = np.nan_to_num(err) * SHAPE_GAIN
+        shift[:keep_first] = 0.0
         offset = np.einsum("ij,ij->i", wps - waypoints[:, :2], normals) - shift
         wps = waypoints[:, :2] + np.clip(offset, -SHAPE_MAX_SHIFT_M, SHAPE_MAX_SHIFT_M)[:, None] * normals
     return best

@@ -192,10 +192,14 @@ class Kinematics:
         round the corner to the next leg within its acceleration limit.
         """
         following = self.mode[i] in (_GOTO, _PASS) and mode in (_GOTO, _PASS)
-        # an L1 plane tracks the line from the waypoint it was flying to (Plane::set_next_WP)
-        self.leg_from[i] = self.target[i] if following and self.l1_period[i] > 0 else self.pos[i]
+        target = self.pos[i] if target_m is None else target_m
+        # an L1 plane tracks the line from the waypoint it was flying to, or from where it is when
+        # it is already past the new waypoint's finish line on that line (Plane::set_next_WP)
+        line_from = self.target[i]
+        past = np.dot(self.pos[i, :2] - target[:2], target[:2] - line_from[:2]) > 0.0
+        self.leg_from[i] = line_from if following and self.l1_period[i] > 0 and not past else self.pos[i]
         self.mode[i] = mode
-        self.target[i] = self.pos[i] if target_m is None else target_m
+        self.target[i] = target
         self.arrival[i] = arrival
         self.corner_speed[i] = corner_speed_mps
         if accept_radius_m is not None:

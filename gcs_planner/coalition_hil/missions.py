@@ -53,6 +53,7 @@ TURN_STEP_DEG = 30.0  # a waypoint every this much turn of the planned path
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
 APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a goal pose (and 1 s after)
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
+SHAPE_AFTER_S = 4.0  # an L1 plane's waypoints this soon after its mission starts stay on the path [s]
 
 
 @dataclass
@@ -239,15 +240,23 @@ def idle_mission(
     return _piece_plan(uav, ts, xys, t_route0, dt_s, list(prefix_wp_s) + [float(leg.t[0])])
 
 
-def shape_for_l1(vp: VehiclePlan, response: L1Response, max_bank_rad: float) -> VehiclePlan:
-    """The mission with its waypoints moved so that a plane flying ArduPlane's L1 guidance as
-    ``response`` says, from the start of the mission's path, follows that path
-    (``l1_guidance.shape_waypoints``): such a plane flies a turn wide and is still converging on
-    the line after it, where a leg's goal pose lies."""
+def shape_for_l1(vp: VehiclePlan, response: L1Response, max_bank_rad: float, from_s: float) -> VehiclePlan:
+    """The mission with its waypoints after route time from_s (where the vehicle starts flying
+    it) moved so that a plane flying ArduPlane's L1 guidance as ``response`` says, on the path
+    at from_s, follows the path from there (``l1_guidance.shape_waypoints``): such a plane flies
+    a turn wide and is still converging on the line after it, where a leg's goal pose lies.
+    The waypoints before from_s + SHAPE_AFTER_S stay on the path: the plane starts the mission
+    towards one of them, on a line from its last mission's waypoint (``Plane::set_next_WP``),
+    which the prediction does not know."""
     path = vp.path[:, :2]
-    pose = (*path[0], math.atan2(*(path[1] - path[0])[::-1]))
+    k = int(np.searchsorted(vp.path_times_s, from_s).clip(1, len(path) - 1))
+    pose = (*path[k - 1], math.atan2(*(path[k] - path[k - 1])[::-1]))
+    after = np.nonzero(vp.times_s > vp.path_times_s[k - 1])[0]
     waypoints = vp.waypoints.copy()
-    waypoints[1:, :2] = shape_waypoints(
-        pose, vp.speeds_mps[1:], vp.waypoints[1:, :2], path, response, vp.acceptance_radius_m, max_bank_rad
-    )
+    if len(after):
+        keep = int(np.count_nonzero(vp.times_s[after] <= from_s + SHAPE_AFTER_S))
+        waypoints[after, :2] = shape_waypoints(
+            pose, vp.speeds_mps[after], vp.waypoints[after, :2], path[k - 1 :], response,
+            vp.acceptance_radius_m, max_bank_rad, keep,
+        )  # fmt: skip
     return replace(vp, waypoints=waypoints)

@@ -573,7 +573,7 @@ class _HilRun:
             if self.upload_estimate_s(n) <= self.upload_estimate_s(items) + 0.5:
                 break
             items = n
-        vp, shaped = self._for_guidance(vp)
+        vp, shaped = self._for_guidance(vp, t0)
         plan_wall_s = time.monotonic() - t_plan
         self.timing.plan_wall_s = 0.5 * self.timing.plan_wall_s + 0.5 * plan_wall_s
         info = {
@@ -591,14 +591,15 @@ class _HilRun:
         }
         return leg, vp, info
 
-    def _for_guidance(self, vp: VehiclePlan) -> tuple[VehiclePlan, dict]:
-        """vp with its waypoints shaped for the vehicle's L1 guidance, if it flies one, and for
-        the upload's log entry how far the waypoints moved (l1_shift_m)."""
+    def _for_guidance(self, vp: VehiclePlan, t0_s: float) -> tuple[VehiclePlan, dict]:
+        """vp with its waypoints after t0_s (scenario time: where it starts flying it) shaped for
+        the vehicle's L1 guidance, if it flies one, and for the upload's log entry how far the
+        waypoints moved (l1_shift_m)."""
         if vp.sysid not in self.l1:
             return vp, {}
         period_s, tau_s, bank_rad = self.l1[vp.sysid]
         gain = self.telemetry.turn_gains[vp.sysid].value
-        shaped = shape_for_l1(vp, L1Response(period_s, gain or 1.0, tau_s), bank_rad)
+        shaped = shape_for_l1(vp, L1Response(period_s, gain or 1.0, tau_s), bank_rad, t0_s - self.t_route0)
         shift = np.hypot(*(shaped.waypoints - vp.waypoints)[:, :2].T)
         told = None if gain is None else round(gain, 3)
         return shaped, {"l1_shift_m": round(float(shift.max()), 1), "turn_gain": told}
@@ -617,7 +618,7 @@ class _HilRun:
         prefix = _predicted_prefix(state, t0)
         vp = idle_mission(sched, idle, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
                           np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
-        vp, shaped = self._for_guidance(vp)
+        vp, shaped = self._for_guidance(vp, t0)
         info = {
             "plan_wall_ms": round(1000.0 * (time.monotonic() - t_plan), 1),
             "t0_s": round(t0, 3),
