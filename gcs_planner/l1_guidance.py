@@ -27,6 +27,7 @@ PREDICT_DT_S = 0.1  # ArduPlane navigates at 10 Hz (Plane::navigate in the sched
 SHAPE_ITERATIONS = 8
 SHAPE_GAIN = 0.7  # share of the predicted cross-track error moved off each waypoint per iteration
 SHAPE_MAX_SHIFT_M = 80.0  # no waypoint moves further than this from the planned path
+LOOP_FACTOR, LOOP_SLACK_M = 1.3, 30.0  # a flight this much longer than the path between two places loops
 GAIN_MIN_BANK_RAD = math.radians(5.0)  # turn samples below this bank say little of the gain
 GAIN_MEMORY = 0.995  # weight left on the older turn samples at each new one (~20 s at 10 Hz)
 GAIN_MIN_WEIGHT = 0.5  # sum of squared coordinated rates [(rad/s)^2] (~3 s turning at 10 deg/s) to tell
@@ -166,21 +167,26 @@ def shape_waypoints(
     L1 flight ``predict_flight`` gives passes each original waypoint's place on the path: each
     iteration moves every waypoint but the first keep_first by SHAPE_GAIN x the predicted
     cross-track error where the flight crosses that place's normal (iterative learning control
-    against the model)."""
-    wps = np.asarray(waypoints, dtype=float)[:, :2].copy()
+    against the model). The iterate with the smallest RMS error is kept; one whose flight loops
+    (much longer than the path between two places) is never kept, and the next iterate goes
+    half way back to the best."""
+    places = np.asarray(waypoints, dtype=float)[:, :2]
     path_xy = np.asarray(path_xy, dtype=float)[:, :2]
-    normals = _normals(path_xy, wps)
-    best, best_err = wps.copy(), math.inf
+    normals, path_s = _path_places(path_xy, places)
+    wps, best, best_score = places.copy(), places.copy(), math.inf
     for _ in range(SHAPE_ITERATIONS):
         flown, _ = predict_flight(pose, speed_mps, wps, response, accept_m, max_bank_rad)
-        err = _cross_errors(flown[:, :2], waypoints[:, :2], normals)
-        score = float(np.sqrt(np.nanmean(err**2))) if np.isfinite(err).any() else math.inf
-        if score < best_err:
-            best, best_err = wps.copy(), score
+        err, flown_s = _crossings(flown[:, :2], places, normals)
+        score = _score(err, flown_s, path_s)
+        if score < best_score:
+            best, best_score = wps.copy(), score
+        if not math.isfinite(score):
+            wps = 0.5 * (best + wps)
+            continue
         shift = np.nan_to_num(err) * SHAPE_GAIN
         shift[:keep_first] = 0.0
-        offset = np.einsum("ij,ij->i", wps - waypoints[:, :2], normals) - shift
-        wps = waypoints[:, :2] + np.clip(offset, -SHAPE_MAX_SHIFT_M, SHAPE_MAX_SHIFT_M)[:, None] * normals
+        offset = np.einsum("ij,ij->i", wps - places, normals) - shift
+        wps = places + np.clip(offset, -SHAPE_MAX_SHIFT_M, SHAPE_MAX_SHIFT_M)[:, None] * normals
     return best
 
 
@@ -216,30 +222,45 @@ def _path_length(pose, wps: np.ndarray) -> float:
     return float(np.hypot(*np.diff(pts, axis=0).T).sum())
 
 
-def _normals(path_xy: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Left unit normals of the path at the path sample nearest each point."""
+def _path_places(path_xy: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Left unit normals of the path at the path sample nearest each point, and that sample's
+    distance along the path [m]."""
     tangent = np.gradient(path_xy, axis=0)
     tangent /= np.maximum(np.hypot(*tangent.T), 1e-9)[:, None]
     nearest = np.argmin(((points[:, None, :] - path_xy[None, :, :]) ** 2).sum(-1), axis=1)
     t = tangent[nearest]
-    return np.column_stack([-t[:, 1], t[:, 0]])
+    s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path_xy, axis=0).T))]
+    return np.column_stack([-t[:, 1], t[:, 0]]), s[nearest]
 
 
-def _cross_errors(flown: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """Signed distance along each normal (left +) from each point to where the flown track
-    crosses that point's normal line, nearest the point; NaN where it never crosses within
-    SHAPE_MAX_SHIFT_M x 2."""
-    out = np.full(len(points), np.nan)
+def _crossings(flown: np.ndarray, points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the flown track crosses each point's normal line, in order (the first crossing
+    after the previous point's, within SHAPE_MAX_SHIFT_M x 2 of the point): the signed distance
+    along the normal (left +) and the flown distance there [m]; NaN where it does not cross."""
+    err, at = np.full(len(points), np.nan), np.full(len(points), np.nan)
+    flown_s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(flown, axis=0).T))]
     tangents = np.column_stack([normals[:, 1], -normals[:, 0]])
+    start = 0
     for i, (p, n, t) in enumerate(zip(points, normals, tangents)):
-        rel = flown - p
+        rel = flown[start:] - p
         along, across = rel @ t, rel @ n
         j = np.nonzero((along[:-1] <= 0.0) & (along[1:] > 0.0))[0]
-        if not len(j):
-            continue
-        f = along[j] / (along[j] - along[j + 1])
-        cross_at = across[j] + f * (across[j + 1] - across[j])
-        cross_at = cross_at[np.abs(cross_at) < 2 * SHAPE_MAX_SHIFT_M]
-        if len(cross_at):
-            out[i] = cross_at[np.argmin(np.abs(cross_at))]
-    return out
+        f = along[j] / np.minimum(along[j] - along[j + 1], -1e-12)  # in [0, 1)
+        cross = across[j] + f * (across[j + 1] - across[j])
+        near = np.nonzero(np.abs(cross) < 2 * SHAPE_MAX_SHIFT_M)[0]
+        if len(near):
+            k = int(near[0])
+            start += int(j[k])
+            err[i], at[i] = cross[k], flown_s[start] + f[k] * (flown_s[start + 1] - flown_s[start])
+    return err, at
+
+
+def _score(err: np.ndarray, flown_s: np.ndarray, path_s: np.ndarray) -> float:
+    """RMS cross-track error at the places crossed; infinite when the flight loops: between two
+    places crossed it flies more than LOOP_FACTOR x the path's length there + LOOP_SLACK_M."""
+    ok = np.isfinite(err)
+    if not ok.any():
+        return math.inf
+    if np.any(np.diff(flown_s[ok]) > LOOP_FACTOR * np.diff(path_s[ok]) + LOOP_SLACK_M):
+        return math.inf
+    return float(np.sqrt(np.mean(err[ok] ** 2)))
