@@ -168,16 +168,16 @@ def shape_waypoints(
     iteration moves every waypoint but the first keep_first by SHAPE_GAIN x the predicted
     cross-track error where the flight crosses that place's normal (iterative learning control
     against the model). The iterate with the smallest RMS error is kept; one whose flight loops
-    (much longer than the path between two places) is never kept, and the next iterate goes
-    half way back to the best."""
+    (much longer than the path between two places, or not at the last waypoint in 1.5 x the
+    path's time) is never kept, and the next iterate goes half way back to the best."""
     places = np.asarray(waypoints, dtype=float)[:, :2]
     path_xy = np.asarray(path_xy, dtype=float)[:, :2]
     normals, path_s = _path_places(path_xy, places)
     wps, best, best_score = places.copy(), places.copy(), math.inf
     for _ in range(SHAPE_ITERATIONS):
-        flown, _ = predict_flight(pose, speed_mps, wps, response, accept_m, max_bank_rad)
+        flown, reached = predict_flight(pose, speed_mps, wps, response, accept_m, max_bank_rad)
         err, flown_s = _crossings(flown[:, :2], places, normals)
-        score = _score(err, flown_s, path_s)
+        score = _score(err, flown_s, path_s) if reached[-1] >= 0 else math.inf
         if score < best_score:
             best, best_score = wps.copy(), score
         if not math.isfinite(score):

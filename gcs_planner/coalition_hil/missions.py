@@ -50,6 +50,7 @@ PRE_AWARD_EXTEND_S = 30.0  # continuation of a pre-award mission at its last tur
 LEAD_IN_S = 20.0  # straight lead-in to the window start, flown from the take-off point [s]
 IDLE_SPAN_S = 40.0  # an idle mission covers at most this much simulated track; the next one follows [s]
 TURN_STEP_DEG = 30.0  # a waypoint every this much turn of the planned path
+MIN_GAP_M = 7.5  # a turn or time waypoint this close to the one before is left out (half the acceptance)
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
 APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a goal pose (and 1 s after)
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
@@ -86,14 +87,23 @@ class VehicleSchedule:
 
 def _waypoint_index(t: np.ndarray, xy: np.ndarray, dt_s: float, forced) -> np.ndarray:
     """Indices of the waypoints: every TURN_STEP_DEG of turn, at least every dt_s, the samples
-    nearest the forced times, and the last sample."""
+    nearest the forced times, and the last sample; a turn or time waypoint closer than
+    MIN_GAP_M to the waypoint before is left out (a leg of a few metres has no direction to
+    steer along, and a plane reaches both ends at once)."""
     h = np.unwrap(np.arctan2(*np.diff(xy, axis=0).T[::-1])) if len(t) > 1 else np.zeros(1)
     turn = np.r_[0.0, np.cumsum(np.abs(np.diff(h)))]
     by_turn = np.searchsorted(turn, np.arange(0.0, turn[-1], math.radians(TURN_STEP_DEG)), side="left")
     by_time = np.searchsorted(t, np.arange(t[0], t[-1], dt_s), side="right") - 1
-    forced_idx = [int(np.argmin(np.abs(t - f))) for f in forced if t[0] <= f <= t[-1]]
-    idx = np.r_[by_turn, by_time, np.asarray(forced_idx, dtype=int), len(t) - 1]
-    return np.unique(np.clip(idx, 0, len(t) - 1)).astype(int)
+    forced_idx = {int(np.argmin(np.abs(t - f))) for f in forced if t[0] <= f <= t[-1]} | {len(t) - 1}
+    keep: list[int] = []
+    for i in np.unique(np.clip(np.r_[by_turn, by_time, sorted(forced_idx)], 0, len(t) - 1)).astype(int):
+        if keep and np.hypot(*(xy[i] - xy[keep[-1]])) < MIN_GAP_M:
+            if i not in forced_idx:
+                continue
+            if keep[-1] not in forced_idx and len(keep) > 1:
+                keep.pop()
+        keep.append(int(i))
+    return np.asarray(keep, dtype=int)
 
 
 def _speeds(t: np.ndarray, xy: np.ndarray, keep: np.ndarray, cruise_mps: float) -> np.ndarray:
