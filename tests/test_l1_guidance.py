@@ -95,16 +95,23 @@ def test_shaped_waypoints_bring_an_l1_plane_onto_its_goal_pose_after_a_turn(run_
     assert np.hypot(*(shaped - wps).T).max() < 60.0  # moved across the path, not elsewhere
 
 
-def test_a_shaped_mission_keeps_its_items_times_and_first_waypoint():
+def test_a_shaped_mission_keeps_its_items_times_and_first_waypoints():
+    """Shaping moves waypoints across the path, nothing else, and none that the plane flies to
+    before or just after it starts the mission (its line then starts at the last mission's
+    waypoint, which the prediction does not know)."""
     path, wps, _ = _goal_leg(60.0)
-    n = len(wps) + 1
-    waypoints = np.column_stack([np.vstack([[0.0, 0.0], wps]), np.full(n, 50.0)])
-    vp = VehiclePlan("U1", 1, waypoints, np.arange(n) * 5.0, np.full(n, SPEED),
-                     np.column_stack([path, np.full(len(path), 50.0)]), np.arange(len(path)) * 0.1,
-                     "fixed_wing", turn_radius_m=R, acceptance_radius_m=15.0)  # fmt: skip
-    shaped = shape_for_l1(vp, ARDUPLANE_SITL, BANK, vp.times_s[2] + 0.5)
+    wps = np.vstack([[0.0, 0.0], wps])
+    path_t = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path, axis=0).T))] / SPEED
+    times = path_t[np.argmin(np.hypot(*(wps[:, None, :] - path[None, :, :]).transpose(2, 0, 1)), axis=1)]
+    up = np.full((len(wps), 1), 50.0)
+    vp = VehiclePlan("U1", 1, np.hstack([wps, up]), times, np.full(len(wps), SPEED),
+                     np.column_stack([path, np.full(len(path), 50.0)]), path_t, "fixed_wing", turn_radius_m=R,
+                     acceptance_radius_m=15.0)  # fmt: skip
+    from_s = 2.0
+    shaped = shape_for_l1(vp, ARDUPLANE_SITL, BANK, from_s)
     assert shaped.waypoints.shape == vp.waypoints.shape
-    kept = vp.times_s <= vp.times_s[2] + 0.5 + SHAPE_AFTER_S  # before it starts flying it, and just after
+    kept = vp.times_s <= from_s + SHAPE_AFTER_S
+    assert 1 < kept.sum() < len(kept)
     np.testing.assert_array_equal(shaped.waypoints[kept], vp.waypoints[kept])
     np.testing.assert_array_equal(shaped.waypoints[:, 2], vp.waypoints[:, 2])
     np.testing.assert_array_equal(shaped.times_s, vp.times_s)
