@@ -12,7 +12,7 @@ that the predicted flight follows the planned path (docs/coalition.md, "L1 shapi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -27,6 +27,7 @@ PREDICT_DT_S = 0.1  # ArduPlane navigates at 10 Hz (Plane::navigate in the sched
 SHAPE_ITERATIONS = 8
 SHAPE_GAIN = 0.7  # share of the predicted cross-track error moved off each waypoint per iteration
 SHAPE_MAX_SHIFT_M = 80.0  # no waypoint moves further than this from the planned path
+ROBUST_GAINS = (0.85, 1.15)  # shaped waypoints must not loop with the turn gain off by this factor
 LOOP_FACTOR, LOOP_SLACK_M = 1.3, 30.0  # a flight this much longer than the path between two places loops
 GAIN_MIN_BANK_RAD = math.radians(5.0)  # turn samples below this bank say little of the gain
 GAIN_MEMORY = 0.995  # weight left on the older turn samples at each new one (~20 s at 10 Hz)
@@ -167,17 +168,26 @@ def shape_waypoints(
     L1 flight ``predict_flight`` gives passes each original waypoint's place on the path: each
     iteration moves every waypoint but the first keep_first by SHAPE_GAIN x the predicted
     cross-track error where the flight crosses that place's normal (iterative learning control
-    against the model). The iterate with the smallest RMS error is kept; one whose flight loops
-    (much longer than the path between two places, or not at the last waypoint in 1.5 x the
-    path's time) is never kept, and the next iterate goes half way back to the best."""
+    against the model). The iterate with the smallest worst RMS error over the response and the
+    response with its turn gain x ROBUST_GAINS is kept; one whose flight loops under any of them
+    (turns half a turn more or less than the path, is much longer than the path between two
+    places, or is not at the last waypoint in 1.5 x the path's time) is never kept, and the next
+    iterate goes half way back to the best."""
     places = np.asarray(waypoints, dtype=float)[:, :2]
     path_xy = np.asarray(path_xy, dtype=float)[:, :2]
-    normals, path_s = _path_places(path_xy, places)
+    normals, path_s, path_turn = _path_places(path_xy, places)
+    responses = [response, *(replace(response, turn_gain=f * response.turn_gain) for f in ROBUST_GAINS)]
     wps, best, best_score = places.copy(), places.copy(), math.inf
     for _ in range(SHAPE_ITERATIONS):
-        flown, reached = predict_flight(pose, speed_mps, wps, response, accept_m, max_bank_rad)
-        err, flown_s = _crossings(flown[:, :2], places, normals)
-        score = _score(err, flown_s, path_s) if reached[-1] >= 0 else math.inf
+        score, err = 0.0, None
+        for model in responses:
+            flown, reached = predict_flight(pose, speed_mps, wps, model, accept_m, max_bank_rad)
+            errors, flown_s = _crossings(flown[:, :2], places, normals)
+            loops = reached[-1] < 0 or abs(flown[-1, 2] - flown[0, 2] - path_turn) > math.pi
+            score = max(score, math.inf if loops else _score(errors, flown_s, path_s))
+            err = errors if err is None else err
+            if not math.isfinite(score):
+                break
         if score < best_score:
             best, best_score = wps.copy(), score
         if not math.isfinite(score):
@@ -222,15 +232,16 @@ def _path_length(pose, wps: np.ndarray) -> float:
     return float(np.hypot(*np.diff(pts, axis=0).T).sum())
 
 
-def _path_places(path_xy: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Left unit normals of the path at the path sample nearest each point, and that sample's
-    distance along the path [m]."""
+def _path_places(path_xy: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """Left unit normals of the path at the path sample nearest each point, that sample's
+    distance along the path [m], and the path's turn [rad, CCW] up to the last point's sample."""
     tangent = np.gradient(path_xy, axis=0)
     tangent /= np.maximum(np.hypot(*tangent.T), 1e-9)[:, None]
     nearest = np.argmin(((points[:, None, :] - path_xy[None, :, :]) ** 2).sum(-1), axis=1)
     t = tangent[nearest]
     s = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path_xy, axis=0).T))]
-    return np.column_stack([-t[:, 1], t[:, 0]]), s[nearest]
+    heading = np.unwrap(np.arctan2(tangent[:, 1], tangent[:, 0]))
+    return np.column_stack([-t[:, 1], t[:, 0]]), s[nearest], float(heading[nearest[-1]] - heading[0])
 
 
 def _crossings(flown: np.ndarray, points: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

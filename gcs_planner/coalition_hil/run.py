@@ -592,9 +592,10 @@ class _HilRun:
         return leg, vp, info
 
     def _for_guidance(self, vp: VehiclePlan, t0_s: float) -> tuple[VehiclePlan, dict]:
-        """vp with its waypoints after t0_s (scenario time: where it starts flying it) shaped for
-        the vehicle's L1 guidance, if it flies one, and for the upload's log entry how far the
-        waypoints moved (l1_shift_m)."""
+        """An award mission with its waypoints after t0_s (scenario time: where the vehicle starts
+        flying it) shaped for the vehicle's L1 guidance, if it flies one, and for the upload's log
+        entry how far the waypoints moved (l1_shift_m) and the turn gain used. Idle missions,
+        judged by nothing, are flown as planned."""
         if vp.sysid not in self.l1:
             return vp, {}
         period_s, tau_s, bank_rad = self.l1[vp.sysid]
@@ -618,7 +619,6 @@ class _HilRun:
         prefix = _predicted_prefix(state, t0)
         vp = idle_mission(sched, idle, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
                           np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
-        vp, shaped = self._for_guidance(vp, t0)
         info = {
             "plan_wall_ms": round(1000.0 * (time.monotonic() - t_plan), 1),
             "t0_s": round(t0, 3),
@@ -627,7 +627,6 @@ class _HilRun:
             "covered_s": round(min(idle.end_s, float(leg.t[-1]) + IDLE_SPAN_S), 3),
             "leg_late_s": round(leg.info["late_s"], 3),
             "clear": leg.info["clear"],
-            **shaped,
         }
         return vp, info
 
