@@ -25,6 +25,7 @@ L1_DAMPING = 0.75  # NAVL1_DAMPING default (AP_L1_Control.cpp var_info)
 G_MPS2 = 9.80665
 PREDICT_DT_S = 0.1  # ArduPlane navigates at 10 Hz (Plane::navigate in the scheduler table)
 SHAPE_ITERATIONS = 8
+SHAPE_DONE_M = 1.0  # shaping stops once the predicted RMS cross-track error is below this
 SHAPE_GAIN = 0.7  # share of the predicted cross-track error moved off each waypoint per iteration
 SHAPE_MAX_SHIFT_M = 80.0  # no waypoint moves further than this from the planned path
 ROBUST_GAINS = (0.85, 1.15)  # shaped waypoints must not loop with the turn gain off by this factor
@@ -168,28 +169,32 @@ def shape_waypoints(
     L1 flight ``predict_flight`` gives passes each original waypoint's place on the path: each
     iteration moves every waypoint but the first keep_first by SHAPE_GAIN x the predicted
     cross-track error where the flight crosses that place's normal (iterative learning control
-    against the model). The iterate with the smallest worst RMS error over the response and the
-    response with its turn gain x ROBUST_GAINS is kept; one whose flight loops under any of them
-    (turns half a turn more or less than the path, is much longer than the path between two
-    places, or is not at the last waypoint in 1.5 x the path's time) is never kept, and the next
-    iterate goes half way back to the best."""
+    against the model). The iterate with the smallest RMS error is kept, but none whose flight
+    loops (turns half a turn more or less than the path, is much longer than the path between
+    two places, or is not at the last waypoint in 1.5 x the path's time) under the response or
+    under the response with its turn gain x ROBUST_GAINS; after a looping iterate the next goes
+    half way back to the best. It stops early once the error is below SHAPE_DONE_M."""
     places = np.asarray(waypoints, dtype=float)[:, :2]
     path_xy = np.asarray(path_xy, dtype=float)[:, :2]
     normals, path_s, path_turn = _path_places(path_xy, places)
-    responses = [response, *(replace(response, turn_gain=f * response.turn_gain) for f in ROBUST_GAINS)]
+    others = [replace(response, turn_gain=f * response.turn_gain) for f in ROBUST_GAINS]
+
+    def flight(model: L1Response) -> tuple[float, np.ndarray]:  # RMS error (inf: loops), errors
+        flown, reached = predict_flight(pose, speed_mps, wps, model, accept_m, max_bank_rad)
+        errors, flown_s = _crossings(flown[:, :2], places, normals)
+        if reached[-1] < 0 or abs(flown[-1, 2] - flown[0, 2] - path_turn) > math.pi:
+            return math.inf, errors
+        return _score(errors, flown_s, path_s), errors
+
     wps, best, best_score = places.copy(), places.copy(), math.inf
     for _ in range(SHAPE_ITERATIONS):
-        score, err = 0.0, None
-        for model in responses:
-            flown, reached = predict_flight(pose, speed_mps, wps, model, accept_m, max_bank_rad)
-            errors, flown_s = _crossings(flown[:, :2], places, normals)
-            loops = reached[-1] < 0 or abs(flown[-1, 2] - flown[0, 2] - path_turn) > math.pi
-            score = max(score, math.inf if loops else _score(errors, flown_s, path_s))
-            err = errors if err is None else err
-            if not math.isfinite(score):
-                break
+        score, err = flight(response)
+        if score < best_score and any(math.isinf(flight(model)[0]) for model in others):
+            score = math.inf
         if score < best_score:
             best, best_score = wps.copy(), score
+        if best_score < SHAPE_DONE_M:
+            break
         if not math.isfinite(score):
             wps = 0.5 * (best + wps)
             continue

@@ -54,7 +54,7 @@ MIN_GAP_M = 7.5  # a turn or time waypoint this close to the one before is left 
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
 APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a goal pose (and 1 s after)
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
-SHAPE_AFTER_S = 4.0  # an L1 plane's waypoints this soon after its mission starts stay on the path [s]
+SHAPE_AFTER_S = 8.0  # an L1 plane's waypoints this soon after its mission starts stay on the path [s]
 
 
 @dataclass
@@ -255,16 +255,17 @@ def shape_for_l1(vp: VehiclePlan, response: L1Response, max_bank_rad: float, fro
     it) moved so that a plane flying ArduPlane's L1 guidance as ``response`` says, on the path
     at from_s, follows the path from there (``l1_guidance.shape_waypoints``): such a plane flies
     a turn wide and is still converging on the line after it, where a leg's goal pose lies.
-    The waypoints before from_s + SHAPE_AFTER_S stay on the path: the plane starts the mission
-    towards one of them, on a line from its last mission's waypoint (``Plane::set_next_WP``),
-    which the prediction does not know."""
+    The waypoints before from_s + SHAPE_AFTER_S (and the first two after from_s) stay on the
+    path: the plane starts the mission towards one of them, later when the upload is slow, on a
+    line from its last mission's waypoint (``Plane::set_next_WP``), which the prediction does
+    not know; started towards a waypoint off its track it can circle it for good."""
     path = vp.path[:, :2]
     k = int(np.searchsorted(vp.path_times_s, from_s).clip(1, len(path) - 1))
     pose = (*path[k - 1], math.atan2(*(path[k] - path[k - 1])[::-1]))
     after = np.nonzero(vp.times_s > vp.path_times_s[k - 1])[0]
     waypoints = vp.waypoints.copy()
     if len(after):
-        keep = int(np.count_nonzero(vp.times_s[after] <= from_s + SHAPE_AFTER_S))
+        keep = max(int(np.count_nonzero(vp.times_s[after] <= from_s + SHAPE_AFTER_S)), 2)
         waypoints[after, :2] = shape_waypoints(
             pose, vp.speeds_mps[after], vp.waypoints[after, :2], path[k - 1 :], response,
             vp.acceptance_radius_m, max_bank_rad, keep,
