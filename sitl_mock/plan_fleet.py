@@ -167,7 +167,8 @@ class MockVehiclesProcess(_PlanFleet):
             cruise = float(vp.speeds_mps[0])
             run_m = climb_run_m(cruise, HIL_TAKEOFF_CLIMB_MPS, float(vp.waypoints[0, 2]))
             frame = airframe_for(vp)
-            bank = float(np.arctan((CATCH_UP_FACTOR * cruise) ** 2 / vp.turn_radius_m / G_MPS2))
+            gain = l1.turn_gain if l1 else 1.0  # an airframe turning at less than its bank's rate banks more
+            bank = float(np.arctan((CATCH_UP_FACTOR * cruise) ** 2 / vp.turn_radius_m / G_MPS2 / gain))
             bank = max(frame.max_bank_rad, bank)
             frame = replace(
                 frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS, l1=l1
