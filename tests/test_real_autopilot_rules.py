@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -14,10 +15,11 @@ from test_cli_mission import SCENARIO
 import sitl_mock
 from gcs_planner.cli import main
 from gcs_planner.errors import UserError
-from gcs_planner.flight_limits import FlightLimits, check_limits, read_limits
+from gcs_planner.flight_limits import FlightLimits, check_limits, read_l1_params, read_limits
 from gcs_planner.flight_ops import vehicle_quirks
 from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.geo import Origin
+from gcs_planner.l1_guidance import ARDUPLANE_SITL
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandError
 from gcs_planner.mavlink.link import MavlinkLink
@@ -28,6 +30,7 @@ from gcs_planner.mavlink.wpl import loads_wpl
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
 from gcs_planner.starts import CLIMB_RUN_PER_M
+from sitl_mock.flight import AIRFRAMES
 from sitl_mock.mission_server import Failure
 from sitl_mock.plan_fleet import MockVehicles
 
@@ -173,6 +176,31 @@ def test_arduplane_refuses_an_airspeed_outside_its_range_and_keeps_its_speed():
                 assert float(kin.speed_cmd[0]) == before
                 await command.command_long(mavlink.MAV_CMD_DO_CHANGE_SPEED, 0, 25.0, -1)
                 assert float(kin.speed_cmd[0]) == 25.0
+            finally:
+                await link.close()
+
+    asyncio.run(run())
+
+
+def test_a_plane_on_l1_guidance_gives_its_period_and_roll_lag_and_a_pursuit_plane_none():
+    """ArduPlane's NAVL1_PERIOD and RLL2SRV_TCONST (plane.parm: 15 s, 0.25 s) say how a plane
+    follows waypoints; the flight reads them to shape its missions (l1_guidance). The mock's
+    pursuit plane, which has no L1 guidance, answers 0 and is left alone."""
+    planes = [
+        dict(sysid=s, home=ORIGIN, vehicle_type="fixed_wing", profile="ardupilot",
+             airframe=replace(AIRFRAMES["fixed_wing"], l1=l1))
+        for s, l1 in ((1, ARDUPLANE_SITL), (2, None))
+    ]  # fmt: skip
+
+    async def run():
+        async with sitl_mock.MockFleet(vehicles=planes, home=ORIGIN, speedup=20.0) as fleet:
+            link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
+            try:
+                for sysid in (1, 2):
+                    heard = lambda m, s=sysid: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == s  # noqa: E731
+                    await link.wait_for(heard, 5.0)
+                quirks = vehicle_quirks(link, [1, 2])
+                assert await read_l1_params(link, [1, 2], quirks) == {1: (15.0, 0.25)}
             finally:
                 await link.close()
 
