@@ -20,7 +20,10 @@ MAVLINK_CORE = {f"gcs_planner.mavlink.{m}" for m in ("types", "enums", "wire", "
 }
 # what the mock autopilot may use of gcs_planner: the MAVLink core, geodesy, fleet ids, plan types
 # (its plan-tuned fleets) and what those import
-MOCK_MAY_USE = MAVLINK_CORE | {f"gcs_planner.{m}" for m in ("geo", "plan", "errors", "fleet_ids")}
+# l1_guidance: the mock's L1 planes fly the same ArduPlane guidance law the planner predicts with
+MOCK_MAY_USE = MAVLINK_CORE | {
+    f"gcs_planner.{m}" for m in ("geo", "plan", "errors", "fleet_ids", "l1_guidance")
+}
 
 
 def _modules() -> dict[str, Path]:
@@ -97,7 +100,7 @@ def test_gcs_planner_never_imports_the_mock():
     assert offenders == [], "the flight code gets its vehicles from a VehicleSource (gcs_planner/vehicles.py)"
 
 
-def test_the_mock_uses_only_the_mavlink_core_geodesy_and_plans():
+def test_the_mock_uses_only_the_mavlink_core_geodesy_plans_and_the_l1_law():
     used = {d for m in MODULES_OF["sitl_mock"] for d in GRAPH[m]} - set(MODULES_OF["sitl_mock"])
     assert used <= MOCK_MAY_USE, sorted(used - MOCK_MAY_USE)
 
