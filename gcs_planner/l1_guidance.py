@@ -54,9 +54,8 @@ ARDUPLANE_SITL = L1Response(15.0, 0.7, 0.25)
 class TurnGain:
     """A plane's turn gain learnt in flight: its turn rate (course change between position
     reports, on its own clock) against the coordinated rate of its reported bank, g tan(roll) / v,
-    least squares with a forgetting factor. ArduPlane SITL's plane turns at 0.75 of it (measured:
-    roll 33.3 deg at 21.4 m/s, 12.9 deg/s against 17.3 deg/s); a real airframe in coordinated
-    turns at about 1."""
+    least squares with a forgetting factor. An airframe in coordinated turns has about 1;
+    ArduPlane SITL's plane 0.7-0.8 (docs/coalition.md, "L1 shaping")."""
 
     def __init__(self) -> None:
         self.roll_rad = 0.0

@@ -98,6 +98,27 @@ def test_upload_end_is_stamped_at_the_first_report_after_the_upload():
     assert frozen == 7.0  # no report at all: gives up after the timeout
 
 
+def test_a_mission_starts_at_the_first_waypoint_that_is_ahead_in_time_and_in_front_of_the_plane():
+    """A mission uploaded late starts at a waypoint still ahead by its planned time; one the plane
+    has already flown past (it is ahead of the schedule) is skipped: ArduPlane started towards a
+    waypoint behind it turns back for it (Plane::set_next_WP), and a mock SITL plane circled one."""
+    from gcs_planner.coalition_hil.run import _first_ahead
+    from gcs_planner.geo import Origin
+    from gcs_planner.mavlink.items import plan_to_items
+    from gcs_planner.plan import VehiclePlan
+
+    xs = np.arange(6) * 100.0  # east at 20 m/s: a waypoint every 5 s
+    wps = np.column_stack([xs, np.zeros(6), np.full(6, 100.0)])
+    vp = VehiclePlan("U1", 1, wps, xs / 20.0, np.full(6, 20.0), wps, xs / 20.0, "fixed_wing",
+                     turn_radius_m=100.0, final_action="loiter", acceptance_radius_m=15.0)  # fmt: skip
+    items = plan_to_items(vp, Origin(31.5, 105.0, 500.0), "ardupilot")
+    takeoff = next(it.seq for it in items if it.command == 22)  # stands for waypoint 0
+    seq_of = [takeoff] + [it.seq for it in items if it.command == 16 and it.seq > takeoff]
+    on_time = _first_ahead(items, vp, 6.0, 1.0)  # the waypoint at 200 m is due at 10 s
+    ahead_of_schedule = _first_ahead(items, vp, 6.0, 1.0, (230.0, 0.0, 0.0))  # the plane is at 230 m
+    assert (on_time, ahead_of_schedule) == (seq_of[2], seq_of[3])
+
+
 def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_path):
     """At the HIL run's default speed-up (5x). At 10x one strike in 10-20 runs came 2-3 s late when
     the machine was busy: an upload's wall time is then ten times as much flight."""

@@ -160,15 +160,22 @@ class HilResult:
         return bool(self.rows) and all(r.passed for r in self.rows) and not self.failures
 
 
-def _first_ahead(items, vp: VehiclePlan, route_now_s: float, margin_s: float) -> int:
-    """Seq of the first NAV_WAYPOINT (after take-off) whose planned time is still ahead."""
+def _first_ahead(items, vp: VehiclePlan, route_now_s: float, margin_s: float, pose=None) -> int:
+    """Seq of the first NAV_WAYPOINT (after take-off) whose planned time is still ahead and, given
+    the vehicle's pose (x, y, course [rad]), that lies in front of it: a plane started towards a
+    waypoint behind it turns back for it (``Plane::set_next_WP``) and can circle it."""
     after = next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
     seqs = [i for i in range(after, len(items)) if items[i].command == NAV_WAYPOINT]
-    times = vp.times_s[len(vp.waypoints) - len(seqs) :]  # the take-off item stands for waypoint 0
+    first = len(vp.waypoints) - len(seqs)  # the take-off item stands for waypoint 0
+    times = vp.times_s[first:]
     if len(seqs) == 0 or len(times) != len(seqs):
         return after
-    ahead = np.nonzero(times >= route_now_s + margin_s)[0]
-    return seqs[int(ahead[0])] if len(ahead) else seqs[-1]
+    ahead = times >= route_now_s + margin_s
+    if pose is not None:
+        along = (vp.waypoints[first:, :2] - np.asarray(pose[:2])) @ [math.cos(pose[2]), math.sin(pose[2])]
+        ahead &= along > 0.0
+    index = np.nonzero(ahead)[0]
+    return seqs[int(index[0])] if len(index) else seqs[-1]
 
 
 def _select_awards(result, options: HilOptions, seed: int) -> tuple[list[dict], float, float]:
@@ -339,6 +346,13 @@ class _HilRun:
         state = live_state(rows, self.scenario.origin, 1.05 * uav.speed_mps / uav.r_min_m)
         return replace(state, t_s=state.t_s - self.route_t0 + self.t_route0)
 
+    def _pose(self, uav) -> tuple[float, float, float] | None:
+        """The vehicle's newest reported position and course (x, y [m], course [rad]), if any."""
+        if not self.telemetry.rows[uav.sysid]:
+            return None
+        state = self.vehicle_state(uav)
+        return state.x_m, state.y_m, state.course_rad
+
     def known_threats(self, t_s: float) -> list:
         """The threats the legs planned at t_s avoid: the scenario's, known by then."""
         return [th for th in self.world.threats if th.appear_s <= t_s]
@@ -388,7 +402,6 @@ class _HilRun:
         if not self.vehicles.simulated:
             l1 = await read_l1_params(link, self.flying, self.quirks)
             self.l1 = {s: (*p, math.radians(limits[s].roll_deg)) for s, p in l1.items() if s in limits}
-        if not self.vehicles.simulated:
             await self._check_starts()
         n_items = sum(len(m) for m in self.missions.values())
         self.say(f"{len(self.flying)} vehicles heard, within their limits; uploading {n_items} mission items")
@@ -507,7 +520,8 @@ class _HilRun:
                 self.timing.items = len(items)
             else:
                 self.timing.idle_items = len(items)
-            seq = _first_ahead(items, vp, self.scenario_now() - self.t_route0, START_AHEAD_S)
+            pose = self._pose(sched.uav)
+            seq = _first_ahead(items, vp, self.scenario_now() - self.t_route0, START_AHEAD_S, pose)
             await start_mission_at(link, sysid, self.quirks[sysid], seq, len(items) - 1)
             self.current[sysid] = vp
             self.keeper.add(vp)
