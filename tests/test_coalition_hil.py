@@ -100,8 +100,9 @@ def test_upload_end_is_stamped_at_the_first_report_after_the_upload():
 
 def test_a_mission_starts_at_the_first_waypoint_that_is_ahead_in_time_and_in_front_of_the_plane():
     """A mission uploaded late starts at a waypoint still ahead by its planned time; one the plane
-    has already flown past (it is ahead of the schedule) is skipped: ArduPlane started towards a
-    waypoint behind it turns back for it (Plane::set_next_WP), and a mock SITL plane circled one."""
+    has just flown past (behind it and near) is skipped: ArduPlane started towards a waypoint
+    behind it turns back for it (Plane::set_next_WP), and a mock SITL plane circled one. A plane
+    far off the path still starts at the due one (the replayed simulation legs)."""
     from gcs_planner.coalition_hil.run import _first_ahead
     from gcs_planner.geo import Origin
     from gcs_planner.mavlink.items import plan_to_items
@@ -116,7 +117,8 @@ def test_a_mission_starts_at_the_first_waypoint_that_is_ahead_in_time_and_in_fro
     seq_of = [takeoff] + [it.seq for it in items if it.command == 16 and it.seq > takeoff]
     on_time = _first_ahead(items, vp, 6.0, 1.0)  # the waypoint at 200 m is due at 10 s
     ahead_of_schedule = _first_ahead(items, vp, 6.0, 1.0, (230.0, 0.0, 0.0))  # the plane is at 230 m
-    assert (on_time, ahead_of_schedule) == (seq_of[2], seq_of[3])
+    far_off = _first_ahead(items, vp, 6.0, 1.0, (250.0, -400.0, 0.0))  # 400 m off the path: due one
+    assert (on_time, ahead_of_schedule, far_off) == (seq_of[2], seq_of[3], seq_of[2])
 
 
 def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_path):

@@ -94,6 +94,7 @@ __all__ = [
 
 NAV_WAYPOINT = 16
 START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
+PASSED_WITHIN_M = 150.0  # a due waypoint behind the plane and this close was just flown past [m]
 PREFIX_DT_S = 2.0  # waypoint spacing on the predicted turn before a live leg [s]
 IDLE_LEAD_S = 10.0  # the next idle mission is uploaded this long before the last one's track ends [s]
 DEADLINE_HORIZON_S = 30.0  # leg-start deadlines searched this far ahead [s]
@@ -162,8 +163,10 @@ class HilResult:
 
 def _first_ahead(items, vp: VehiclePlan, route_now_s: float, margin_s: float, pose=None) -> int:
     """Seq of the first NAV_WAYPOINT (after take-off) whose planned time is still ahead and, given
-    the vehicle's pose (x, y, course [rad]), that lies in front of it: a plane started towards a
-    waypoint behind it turns back for it (``Plane::set_next_WP``) and can circle it."""
+    the vehicle's pose (x, y, course [rad]), that it has not just flown past (behind it, within
+    PASSED_WITHIN_M: a late upload): a plane started towards a waypoint just behind it turns back
+    for it (``Plane::set_next_WP``) and can circle it. A vehicle far from the mission's path still
+    starts at the waypoint that is due."""
     after = next(i for i, it in enumerate(items) if it.command == NAV_TAKEOFF) + 1
     seqs = [i for i in range(after, len(items)) if items[i].command == NAV_WAYPOINT]
     first = len(vp.waypoints) - len(seqs)  # the take-off item stands for waypoint 0
@@ -172,8 +175,9 @@ def _first_ahead(items, vp: VehiclePlan, route_now_s: float, margin_s: float, po
         return after
     ahead = times >= route_now_s + margin_s
     if pose is not None:
-        along = (vp.waypoints[first:, :2] - np.asarray(pose[:2])) @ [math.cos(pose[2]), math.sin(pose[2])]
-        ahead &= along > 0.0
+        rel = vp.waypoints[first:, :2] - np.asarray(pose[:2])
+        behind = rel @ [math.cos(pose[2]), math.sin(pose[2])] <= 0.0
+        ahead &= ~(behind & (np.hypot(rel[:, 0], rel[:, 1]) < PASSED_WITHIN_M))
     index = np.nonzero(ahead)[0]
     return seqs[int(index[0])] if len(index) else seqs[-1]
 
