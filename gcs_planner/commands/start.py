@@ -19,6 +19,7 @@ from gcs_planner.commands.upload import add_clear_absent_argument, prepare
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
+from gcs_planner.mavlink.errors import MissionRejectedError
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.preflight import arm_when_ready
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
@@ -75,16 +76,37 @@ async def _start(args: argparse.Namespace) -> int:
             steps.append(
                 ("arm", lambda: arm_when_ready(link, status, args.sysid, args.arm_timeout, waiting=waiting))
             )
-        steps.append(("mission start", lambda: command.mission_start(0, 0)))
+        armed_here = not args.no_arm
+        steps.append(("mission start", lambda: _start_or_disarm(command, status, args.sysid, armed_here)))
         for name, step in steps:
             t0 = time.monotonic()
             try:
                 await step()
-            except UserError:
-                print(f"{name:<16} {'FAILED':<10} {time.monotonic() - t0:>7.2f}")
+            except UserError as exc:
+                verdict = "REJECTED" if isinstance(exc, MissionRejectedError) else "FAILED"
+                print(f"{name:<16} {verdict:<10} {time.monotonic() - t0:>7.2f}")
                 raise
             print(f"{name:<16} {'OK':<10} {time.monotonic() - t0:>7.2f}")
     return 0
+
+
+async def _start_or_disarm(
+    command: CommandClient, status: VehicleStatus, sysid: int, armed_here: bool
+) -> None:
+    """MISSION_START; when the vehicle refuses it (PX4 with a mission its check rejected) a vehicle
+    this command armed is disarmed again - never left armed on the ground - and the error carries
+    the vehicle's own words."""
+    texts_before = status.tracks[sysid].text_count
+    try:
+        await command.mission_start(0, 0)
+    except UserError as exc:
+        disarmed = ""
+        if armed_here:
+            await command.disarm()
+            disarmed = "; disarmed it again"
+        reason = status.reason(sysid, texts_before)
+        said = f" (it said {reason!r})" if reason else ""
+        raise UserError(f"vehicle {sysid} refused the mission start: {exc}{said}{disarmed}") from exc
 
 
 def _bound(upload, items, mission_type):

@@ -34,6 +34,7 @@ from gcs_planner.commands._mission_cli import (
 )
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of
+from gcs_planner.mavlink.errors import MissionRejectedError
 from gcs_planner.mavlink.files import MissionFile, load_plan_json, mission_input
 from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
 from gcs_planner.mavlink.mission import MissionClient
@@ -153,6 +154,11 @@ def run(args: argparse.Namespace) -> int:
     return asyncio.run(_upload_many(args, sysids))
 
 
+def outcome_word(error: Exception | None) -> str:
+    """The result column of an upload that did not succeed."""
+    return "REJECTED" if isinstance(error, MissionRejectedError) else "FAILED"
+
+
 async def _upload_one(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
         autopilot = autopilot_of(heartbeat, args.autopilot)
@@ -166,8 +172,9 @@ async def _upload_one(args: argparse.Namespace) -> int:
             name = mission_type.name.lower()
             try:
                 result = await client.upload(items, mission_type=mission_type, verify=args.verify)
-            except UserError:
-                print(f"{name:<8} {len(items):>6} {'FAILED':<10} {'-':>10} {time.monotonic() - t0:>7.2f}")
+            except UserError as exc:
+                verdict = outcome_word(exc)
+                print(f"{name:<8} {len(items):>6} {verdict:<10} {'-':>10} {time.monotonic() - t0:>7.2f}")
                 raise
             elapsed_s = time.monotonic() - t0
             print(
@@ -207,7 +214,7 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int]) -> int:
             r = per_vehicle[sysid]
             name = mission_type.name.lower()
             count = len(by_type[mission_type][sysid])
-            verdict = "ACCEPTED" if r.ok else "FAILED"
+            verdict = "ACCEPTED" if r.ok else outcome_word(r.error)
             row = f"{sysid:>5} {name:<8} {count:>6} {verdict:<10} {r.attempts:>5} {r.opaque_id:>10}"
             print(f"{row} {r.elapsed_s:>7.2f}")
             if not r.ok:

@@ -69,6 +69,11 @@ class AutopilotQuirks:
     # the client reads the list back to say what the vehicle holds (ArduPilot's mission and rally:
     # MissionItemProtocol_Waypoints / _Rally replace_item; PX4 switches lists on completion only)
     stores_as_received: frozenset[int] = frozenset({0, 1, 2})
+    # how long after its MISSION_ACK the autopilot may still refuse a mission [s], and the words it
+    # refuses with (lower case): PX4's navigator runs its FeasibilityChecker on the stored mission
+    # after the transfer and says "Mission rejected: ..." (e.g. "takeoff not first waypoint item")
+    verdict_after_ack_s: float = 0.0
+    rejection_texts: tuple[str, ...] = ()
 
     @property
     def home_at_seq0(self) -> bool:
@@ -127,6 +132,8 @@ PX4 = AutopilotQuirks(
     land_mode="LAND",
     readback=readback.PX4,
     stores_as_received=frozenset(),
+    verdict_after_ack_s=1.0,
+    rejection_texts=("mission rejected", "mission invalid"),
 )
 GENERIC = AutopilotQuirks(
     name="MAVLink",

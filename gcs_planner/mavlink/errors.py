@@ -32,6 +32,7 @@ __all__ = [
     "MissionError",
     "MissionInputError",
     "MissionProtocolError",
+    "MissionRejectedError",
     "MissionTimeoutError",
     "NoSpaceError",
     "OperationCancelledError",
@@ -167,6 +168,11 @@ class MissionInputError(MissionError):
 
 class VerifyError(MissionError):
     """Read-back after upload differs from what was uploaded (beyond the rounding tolerance)."""
+
+
+class MissionRejectedError(MissionError):
+    """The vehicle ACKed the list, then its own check refused to fly it (PX4's feasibility check):
+    it holds the list but will not start it. The message carries the autopilot's words."""
 
 
 class DuplicateSysidError(MavlinkError):

@@ -50,6 +50,7 @@ from gcs_planner.mavlink.errors import (
     CommandTimeoutError,
     MissionError,
     MissionInputError,
+    MissionRejectedError,
     VerifyError,
     mission_type_name,
 )
@@ -65,6 +66,7 @@ from gcs_planner.mavlink.transfer import (
     UploadTransfer,
 )
 from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.mavlink.verdict import VerdictWatch
 
 __all__ = ["MissionClient", "UploadResult", "compare_items"]
 
@@ -122,9 +124,32 @@ class MissionClient:
         items = list(items)
         t0 = time.monotonic()
         transfer = self._transfer(UploadTransfer, items=items, mission_type=mission_type, partial=partial)
-        outcome = await self._run(transfer)
+        judged = self.quirks if mission_type == MissionType.MISSION else GENERIC
+        watch = VerdictWatch(self.link, self.sysid, judged)
+        try:
+            outcome = await self._run(transfer)
+            written = written_slice(transfer, items, partial)
+            result = await self._accepted(transfer, outcome, items, written, verify, t0)
+            rejection = await watch.rejection()
+        finally:
+            watch.close()
+        if rejection is not None:
+            raise MissionRejectedError(
+                f"vehicle {self.sysid} REJECTED the mission after its ACK: {rejection!r}; it holds the"
+                " mission but will not fly it",
+                sysid=self.sysid,
+                mission_type=mission_type,
+            )
+        return result
+
+    async def _accepted(
+        self, transfer: UploadTransfer, outcome: Outcome, items: list[MissionItem], written: slice,
+        verify: bool, t0: float,
+    ) -> UploadResult:  # fmt: skip
+        """The transfer's outcome as an UploadResult, proved by a read-back where the ACK was lost
+        or ``verify`` asks; raises what went wrong, with what the vehicle holds now."""
+        mission_type = transfer.mission_type
         opaque_id, ack_lost, verified = outcome.opaque_id, False, False
-        written = slice(transfer.first, transfer.first + len(items)) if partial else slice(None)
         if outcome.error is not None:
             if not outcome.ack_lost:
                 raise await self._what_it_holds(outcome.error, transfer, items, written)
@@ -339,6 +364,11 @@ class MissionClient:
     def _difference(self, sent: Sequence[MissionItem], got: Sequence[MissionItem]) -> str | None:
         q = self.quirks
         return compare_items(sent, got, q.readback, skip_home=q.home_at_seq0)
+
+
+def written_slice(transfer: UploadTransfer, items: Sequence[MissionItem], partial: bool) -> slice:
+    """The part of the vehicle's list an upload writes: all of it, or a partial write's seqs."""
+    return slice(transfer.first, transfer.first + len(items)) if partial else slice(None)
 
 
 def _describe(

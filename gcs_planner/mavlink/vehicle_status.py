@@ -23,6 +23,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.enums import MissionState
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.statustext import TextAssembler
 from gcs_planner.mavlink.units import reports_no_fix
 
 __all__ = ["PREARM_BIT", "VehicleStatus", "VehicleTrack"]
@@ -58,6 +59,7 @@ class VehicleStatus:
         self.link = link
         self.tracks = {s: VehicleTrack() for s in sysids}
         self.last_seq: dict[int, int] = {}
+        self._texts = TextAssembler()
         self._unsubscribe = link.subscribe(self.on_frame)
 
     def close(self) -> None:
@@ -72,8 +74,10 @@ class VehicleStatus:
             track.rel_alt_m = msg.relative_alt / 1000.0
             track.home_amsl_m = (msg.alt - msg.relative_alt) / 1000.0
         elif kind == "STATUSTEXT":
-            track.texts.append(msg.text.rstrip("\x00"))
-            track.text_count += 1
+            text = self._texts.feed(msg)
+            if text is not None:
+                track.texts.append(text)
+                track.text_count += 1
         elif kind == "SYS_STATUS":
             if msg.onboard_control_sensors_present & PREARM_BIT:
                 track.prearm_ok = bool(msg.onboard_control_sensors_health & PREARM_BIT)

@@ -1,0 +1,90 @@
+"""A mission the autopilot refuses after its MISSION_ACK (PX4's feasibility check) is reported
+REJECTED with the vehicle's own words, and `start` never leaves such a vehicle armed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gcs_planner.cli import main
+from gcs_planner.geo import Origin
+from gcs_planner.mavlink.items import plan_to_items
+from gcs_planner.mavlink.statustext import TextAssembler
+from gcs_planner.mavlink.wpl import dumps_wpl
+from gcs_planner.plan import VehiclePlan
+
+sitl_mock = pytest.importorskip("sitl_mock")
+
+ORIGIN = Origin(47.397742, 8.545594, 488.0)
+TEXT = "Mission rejected: takeoff not first waypoint item"
+
+
+@pytest.fixture(scope="module")
+def fleet():
+    with sitl_mock.MockFleet(vehicles=[{"profile": "px4"}], home=ORIGIN, speedup=20.0,
+                             flight={"arm_ready_s": 0}) as f:  # fmt: skip
+        yield f
+
+
+def px4_items():
+    wps = np.array([[0.0, 0.0, 0.0], [80.0, 0.0, 20.0], [160.0, 0.0, 25.0]])
+    times = np.array([0.0, 8.0, 16.0])
+    vp = VehiclePlan("a", 1, wps, times, np.array([0.0, 10.0, 10.0]), wps, times)
+    return plan_to_items(vp, ORIGIN, "px4")
+
+
+def argv(fleet):
+    host, port = fleet.vehicle(1).address
+    return ["--connect", f"udpout:{host}:{port}", "--sysid", "1", "--autopilot", "px4"]
+
+
+def state(fleet):
+    return fleet.call(lambda: fleet.vehicle(1).state)
+
+
+def test_a_mission_refused_after_its_ack_is_rejected_and_start_does_not_arm(fleet, tmp_path, capsys):
+    items = px4_items()
+    waypoint_first = [items[2], *items]  # a waypoint before the NAV_TAKEOFF (row 0 is the home)
+    bad = tmp_path / "bad.waypoints"
+    bad.write_text(dumps_wpl([items[1], *waypoint_first]))
+    assert main(["upload", *argv(fleet), str(bad)]) == 2
+    captured = capsys.readouterr()
+    assert "REJECTED" in captured.out and "ACCEPTED" not in captured.out
+    assert TEXT in captured.err and captured.err.count("\n") == 1
+
+    assert main(["start", *argv(fleet), str(bad)]) == 2
+    captured = capsys.readouterr()
+    assert "REJECTED" in captured.out and "arm" not in captured.out.split("REJECTED")[1]
+    assert not state(fleet).armed
+
+    # uploaded earlier, started now: the vehicle arms, refuses MISSION_START and is disarmed again
+    assert main(["start", *argv(fleet)]) == 2
+    err = capsys.readouterr().err
+    assert "refused the mission start" in err and "disarmed it again" in err
+    assert not state(fleet).armed
+
+    good = tmp_path / "good.waypoints"
+    good.write_text(dumps_wpl([items[1], *items]))
+    assert main(["upload", *argv(fleet), str(good)]) == 0
+    assert "ACCEPTED" in capsys.readouterr().out
+
+
+class _Chunk:
+    def __init__(self, text: str, text_id: int, seq: int, sysid: int = 1) -> None:
+        self.text, self.id, self.chunk_seq, self._sysid = text, text_id, seq, sysid
+
+    def get_srcSystem(self) -> int:  # noqa: N802 - pymavlink's name
+        return self._sysid
+
+    def get_srcComponent(self) -> int:  # noqa: N802
+        return 1
+
+
+def test_split_statustexts_are_whole_or_not_at_all():
+    long = "Preflight Fail: " + "x" * 40 + " and the rest of it"
+    chunks = [long[:50], long[50:]]
+    texts = TextAssembler()
+    assert texts.feed(_Chunk(chunks[0], 7, 0)) is None
+    assert texts.feed(_Chunk(chunks[1], 7, 1)) == long
+    assert texts.feed(_Chunk("t", 9, 1)) is None  # the tail of a text whose head was lost
+    assert texts.feed(_Chunk("Armed", 0, 0)) == "Armed"
