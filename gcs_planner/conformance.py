@@ -15,6 +15,12 @@ Choices:
   planning buffer, hemisphere radius); negative means inside.
 - Manned traffic (MovingObstacle) is checked at every flown sample against its true,
   constant-velocity track; the bound is its own ``min_distance_m``.
+- Schedule: a deconflicted plan is separated in time as much as in space, so each vehicle's
+  along-track time error is bounded. At every planned path point (one per ``SCHEDULE_STEP_S`` of
+  plan time) the vehicle's time of closest approach is taken, in order along the route, and
+  compared with the route start plus the point's planned time (see ``schedule_errors_s``).
+  Telemetry that does not show the route flown in order is a failure, never a pass.
+- A NaN (no data, impossible positions) is never within a bound: every comparison fails on it.
 """
 
 from __future__ import annotations
@@ -73,6 +79,7 @@ class VehicleReport:
     flight_time_s: float
     planned_time_s: float
     failures: list[str] = field(default_factory=list)
+    schedule_error_s: float = np.nan  # the worst along-track time error, signed (+ = late) [s]
 
     @property
     def passed(self) -> bool:
@@ -122,6 +129,33 @@ def route_window(track: Track, planned: np.ndarray, acceptance_m: float) -> slic
     reached = np.flatnonzero(d_end <= acceptance_m)
     end = start + (int(reached[0]) if len(reached) else int(np.argmin(d_end)))
     return slice(start, end + 1)
+
+
+SCHEDULE_STEP_S = 1.0  # planned time between the path points the schedule is checked at [s]
+MAX_SCHEDULE_ERROR_S = 3.0  # default bound on the along-track time error [s] (docs/real-autopilots.md)
+
+
+def schedule_errors_s(track: Track, vp, route_t0_s: float, near_m: float) -> np.ndarray:
+    """Flown minus planned time at path points ``SCHEDULE_STEP_S`` apart (+ = late) [s].
+
+    Each point's flown time is that of the track's closest sample within ``near_m`` of it, in the
+    first stretch of samples that comes that near after the previous point's match (so a route
+    that passes a place twice is matched in order); a point never come near is NaN.
+    """
+    times = np.arange(vp.path_times_s[0], vp.path_times_s[-1] + 1e-9, SCHEDULE_STEP_S)
+    points = np.stack([np.interp(times, vp.path_times_s, vp.path[:, k]) for k in range(3)], axis=1)
+    errors = np.full(len(times), np.nan)
+    i = 0
+    for k, (point, planned_s) in enumerate(zip(points, times)):
+        d = np.linalg.norm(track.positions[i:] - point, axis=1)
+        near = np.flatnonzero(d <= near_m)
+        if not len(near):
+            continue
+        leave = np.flatnonzero(d[near[0] :] > near_m)
+        stretch = slice(near[0], near[0] + (int(leave[0]) if len(leave) else len(d) - near[0]))
+        i += stretch.start + int(np.argmin(d[stretch]))
+        errors[k] = track.times_s[i] - (route_t0_s + planned_s)
+    return errors
 
 
 def _obstacle_clearance_m(positions: np.ndarray, cylinders, hemispheres) -> float:
@@ -175,8 +209,11 @@ def conformance_report(
     acceptance_m: float | None = None,
     min_airborne_alt_m: float = 1.0,
     step_s: float = 0.1,
+    route_t0_s: float | None = None,
+    max_schedule_error_s: float = MAX_SCHEDULE_ERROR_S,
 ) -> list[VehicleReport]:
-    """Per-vehicle report; ``failures`` lists every bound broken (empty = passed)."""
+    """Per-vehicle report; ``failures`` lists every bound broken (empty = passed). ``route_t0_s``:
+    when the routes' time 0 was, on the tracks' clock (None: the schedule is not checked)."""
     airborne = {}
     for sysid, tr in tracks.items():
         up = tr.positions[:, 2] >= min_airborne_alt_m
@@ -186,68 +223,83 @@ def conformance_report(
     reports = []
     for vp in plan.vehicles:
         tr = airborne.get(vp.sysid)
-        failures: list[str] = []
         if tr is None:
-            reports.append(
-                VehicleReport(
-                    vp.vehicle_id,
-                    vp.sysid,
-                    False,
-                    np.nan,
-                    np.nan,
-                    np.nan,
-                    np.nan,
-                    np.nan,
-                    0.0,
-                    float(vp.times_s[-1] - vp.times_s[0]),
-                    ["never airborne"],
-                )
-            )
+            planned_s, nan = float(vp.times_s[-1] - vp.times_s[0]), np.nan
+            reports.append(VehicleReport(vp.vehicle_id, vp.sysid, False, nan, nan, nan, nan, nan, 0.0,
+                                         planned_s, ["never airborne"]))  # fmt: skip
             continue
         accept = route_acceptance_m(vp, acceptance_m)
         window = route_window(tr, vp.path, accept)
         xt = point_to_polyline_m(tr.positions[window], vp.path)
         xt_max = float(xt.max()) if len(xt) else np.inf
-        xt_mean = float(xt.mean()) if len(xt) else np.inf
-        clearance = _obstacle_clearance_m(tr.positions, cylinders, hemispheres)
+        failures: list[str] = []
         if not tr.mission_completed:
             failures.append("mission not completed")
-        if xt_max > max_cross_track_m:
+        if not xt_max <= max_cross_track_m:
             failures.append(f"cross-track {xt_max:.1f} m > {max_cross_track_m:.1f} m")
+        late_s = np.nan
+        if route_t0_s is not None:
+            route = Track(tr.times_s[window], tr.positions[window])
+            late_s, problem = _schedule_verdict(route, vp, route_t0_s, max_cross_track_m + accept,
+                                                max_schedule_error_s)  # fmt: skip
+            failures += [problem] if problem else []
+        clearance = _obstacle_clearance_m(tr.positions, cylinders, hemispheres)
+        traffic_m = _traffic_m(tr, traffic, failures)
         bound = separation_m.get(vp.sysid, 0.0)
-        if separation[vp.sysid] < bound:
+        if not separation[vp.sysid] >= bound:
             failures.append(f"separation {separation[vp.sysid]:.1f} m < {bound:.1f} m")
-        if clearance < 0.0:
+        if not clearance >= 0.0:
             failures.append(f"entered an obstacle by {-clearance:.1f} m")
-        traffic_m = np.inf
-        for other in traffic:
-            d = float(np.linalg.norm(tr.positions - other.positions(tr.times_s), axis=1).min())
-            traffic_m = min(traffic_m, d)
-            if d < other.min_distance_m:
-                failures.append(f"{other.name} within {d:.1f} m < {other.min_distance_m:.1f} m")
         reports.append(
             VehicleReport(
                 vehicle_id=vp.vehicle_id,
                 sysid=vp.sysid,
                 completed=tr.mission_completed,
                 cross_track_max_m=xt_max,
-                cross_track_mean_m=xt_mean,
+                cross_track_mean_m=float(xt.mean()) if len(xt) else np.inf,
                 min_separation_m=separation[vp.sysid],
                 min_obstacle_clearance_m=clearance,
                 min_traffic_distance_m=traffic_m,
                 flight_time_s=float(tr.times_s[window][-1] - tr.times_s[window][0]) if len(xt) else 0.0,
                 planned_time_s=float(vp.times_s[-1] - vp.times_s[0]),
                 failures=failures,
+                schedule_error_s=late_s,
             )
         )
     return reports
+
+
+def _traffic_m(track: Track, traffic: list[MovingObstacle], failures: list[str]) -> float:
+    """The nearest any traffic came [m]; each one within its bound is added to ``failures``."""
+    nearest = np.inf
+    for other in traffic:
+        d = float(np.linalg.norm(track.positions - other.positions(track.times_s), axis=1).min())
+        nearest = min(nearest, d)
+        if not d >= other.min_distance_m:
+            failures.append(f"{other.name} within {d:.1f} m < {other.min_distance_m:.1f} m")
+    return nearest
+
+
+def _schedule_verdict(
+    track: Track, vp, route_t0_s: float, near_m: float, bound_s: float
+) -> tuple[float, str]:
+    """(worst signed time error, the failure in words or '')."""
+    errors = schedule_errors_s(track, vp, route_t0_s, near_m)
+    missed = int(np.isnan(errors).sum())
+    if missed:
+        return np.nan, f"route not flown in order: {missed} of {len(errors)} path points never come near"
+    worst = float(errors[np.argmax(np.abs(errors))])
+    if not abs(worst) <= bound_s:
+        word = "late" if worst > 0 else "early"
+        return worst, f"schedule {abs(worst):.1f} s {word} > {bound_s:.1f} s"
+    return worst, ""
 
 
 def format_report(reports: list[VehicleReport]) -> str:
     """The report as a fixed-width table, one row per vehicle."""
     head = (
         f"{'vehicle':<8} {'sysid':>5} {'done':>5} {'xt_max_m':>9} {'xt_mean_m':>9} {'min_sep_m':>9}"
-        f" {'clear_m':>8} {'traffic_m':>9} {'flown_s':>8} {'plan_s':>7}  result"
+        f" {'clear_m':>8} {'traffic_m':>9} {'flown_s':>8} {'plan_s':>7} {'late_s':>6}  result"
     )
     rows = [head]
     for r in reports:
@@ -255,6 +307,7 @@ def format_report(reports: list[VehicleReport]) -> str:
         rows.append(
             f"{r.vehicle_id:<8} {r.sysid:>5} {'yes' if r.completed else 'no':>5} {r.cross_track_max_m:>9.2f}"
             f" {r.cross_track_mean_m:>9.2f} {r.min_separation_m:>9.1f} {r.min_obstacle_clearance_m:>8.1f}"
-            f" {r.min_traffic_distance_m:>9.1f} {r.flight_time_s:>8.1f} {r.planned_time_s:>7.1f}  {verdict}"
+            f" {r.min_traffic_distance_m:>9.1f} {r.flight_time_s:>8.1f} {r.planned_time_s:>7.1f}"
+            f" {r.schedule_error_s:>6.1f}  {verdict}"
         )
     return "\n".join(rows)

@@ -35,7 +35,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gcs_planner.conformance import MovingObstacle, VehicleReport, conformance_report
+from gcs_planner.clock_check import MIN_SPAN_S, ClockRate
+from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of, wire_sysid
 from gcs_planner.flight_limits import check_limits, read_limits
@@ -62,6 +63,7 @@ from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario
+from gcs_planner.starts import START_FIX_WAIT_S, check_starts, starts
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.telemetry.mcap_log import tlog_network_path
 from gcs_planner.timekeeping import ScheduleKeeper
@@ -82,6 +84,7 @@ class FlyOptions:
     tlog: bool = False
     rrd: bool = True
     max_cross_track_m: float = 15.0
+    max_schedule_error_s: float = MAX_SCHEDULE_ERROR_S
     drift_mps: dict[int, tuple[float, float]] = field(default_factory=dict)  # mock fault injection
     timeout_factor: float = 2.0
     keep_schedule: bool = True
@@ -227,6 +230,7 @@ class _Flight:
         self.route_t0_s = 0.0
         self.status: VehicleStatus | None = None
         self.frames_received = 0
+        self.clocks = ClockRate(self.sysids)
 
     async def run(self, urls: list[list[str]]) -> None:
         """Fly on the link to each network's ``urls``; any failure or Ctrl-C ends safely, kept in
@@ -246,6 +250,7 @@ class _Flight:
         with _KeptLog(flight_log, self.log_errors) as logger:
             link.subscribe(logger.on_frame)
             link.subscribe(self.recorder.on_frame)
+            link.subscribe(self.clocks.on_frame)
             if self.options.live is not None:
                 link.subscribe(_live_views(self.options.live, plan, self.scenario).on_frame)
             try:
@@ -262,6 +267,7 @@ class _Flight:
         missions = build_missions(self.plan, self.quirks)
         self.status.last_seq = {s: len(m) - 1 for s, m in missions.items()}
         await request_streams(link, self.sysids)
+        await self._check_starts()
         self.limits = await read_limits(link, self.sysids, self.quirks)
         check_limits(self.plan.vehicles, self.limits, 1.0)
         progress = self.progress
@@ -277,9 +283,30 @@ class _Flight:
         if failed:
             log.error("upload failed for sysid %s; not starting the fleet", failed)
             return
+        if not self.vehicles.simulated:
+            await self._check_clocks()
         for sysid, drift in self.options.drift_mps.items():
             self.vehicles.set_drift(sysid, *drift)
         await self._routes(link, logger, missions)
+
+    async def _check_starts(self) -> None:
+        """The pre-flight gate: every vehicle reports a position within its bound of its planned
+        start (starts.py), or nothing is armed; one line per vehicle that fails."""
+        samples = self.recorder.samples
+        deadline = time.monotonic() + START_FIX_WAIT_S
+        while not all(samples[s] for s in self.sysids) and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+        where = {s: rows[-1][1:3] for s, rows in samples.items() if rows}
+        name = self.scenario.path.name if self.scenario.path else "SCENARIO"
+        check_starts(starts(self.plan.vehicles, self.plan.origin), where,
+                     f"start each vehicle there: fly {name} --homes prints where")  # fmt: skip
+
+    async def _check_clocks(self) -> None:
+        """Refuse connected vehicles whose clocks run at another rate than this flight's."""
+        deadline = time.monotonic() + 3 * MIN_SPAN_S
+        while time.monotonic() < deadline and min(map(self.clocks.span_s, self.sysids)) < MIN_SPAN_S:
+            await asyncio.sleep(0.05)
+        self.clocks.check(self.vehicles.speedup)
 
     async def _routes(self, link: MavlinkLink, logger: FlightLogger, missions: dict) -> None:
         """Take off, start every route on time, keep the schedule until all are done."""
@@ -336,6 +363,8 @@ class _Flight:
             scenario.hemispheres,
             manned_traffic(scenario, self.route_t0_s),
             max_cross_track_m=options.max_cross_track_m,
+            route_t0_s=self.route_t0_s if self.route_t0_s else None,
+            max_schedule_error_s=options.max_schedule_error_s,
         )
         for r in reports:
             if not self.uploads[r.sysid].ok:

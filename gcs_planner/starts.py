@@ -16,9 +16,17 @@ from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.plan import VehiclePlan
 
-__all__ = ["CLIMB_RUN_PER_M", "MAX_START_OFFSET_M", "Start", "check_starts", "format_homes", "starts"]
+__all__ = [
+    "CLIMB_RUN_PER_M", "MULTIROTOR_START_M", "START_FIX_WAIT_S", "Start", "check_starts", "format_homes",
+    "starts",
+]  # fmt: skip
 
-MAX_START_OFFSET_M = 1000.0  # a connected vehicle further than this from its start is refused [m]
+# how far from its start a vehicle may stand and still fly its plan: a multirotor climbs straight
+# up, so a few metres (GPS error and the pad); a plane launches along its climb run, so that run
+# (and a margin: TAKEOFF mode's level-off is not exact)
+MULTIROTOR_START_M = 5.0
+PLANE_START_MARGIN_M = 50.0
+START_FIX_WAIT_S = 30.0  # how long a vehicle has to report a position before the check [s wall]
 # ground run per metre of climb: ArduPlane's TAKEOFF mode climbs at TECS_CLMB_MAX (5 m/s) at
 # about its cruise airspeed (22 m/s in SITL's plane model)
 CLIMB_RUN_PER_M = 22.0 / 5.0
@@ -30,6 +38,7 @@ class Start:
     vehicle_id: str
     home: Origin  # on the ground
     heading_deg: float  # launch heading, compass
+    bound_m: float  # the furthest from ``home`` it may stand and fly the plan
 
 
 def starts(plans: list[VehiclePlan], origin: Origin) -> list[Start]:
@@ -43,31 +52,47 @@ def starts(plans: list[VehiclePlan], origin: Origin) -> list[Start]:
         run = z0 * CLIMB_RUN_PER_M if vp.vehicle_type == "fixed_wing" else 0.0
         lat, lon, alt = enu_to_geodetic(x0 - run * ux, y0 - run * uy, 0.0, origin)
         heading = math.degrees(math.atan2(ux, uy)) % 360.0
-        out.append(Start(vp.sysid, vp.vehicle_id, Origin(float(lat), float(lon), float(alt)), heading))
+        bound = run + PLANE_START_MARGIN_M if vp.vehicle_type == "fixed_wing" else MULTIROTOR_START_M
+        out.append(Start(vp.sysid, vp.vehicle_id, Origin(float(lat), float(lon), float(alt)), heading, bound))
     return out
 
 
 def format_homes(found: list[Start], sysids: frozenset[int] | None) -> str:
-    """One line per start (of ``sysids``; None: all) with its SITL ``--home`` and system id parameter."""
-    return "\n".join(
-        f"sysid {s.sysid} ({s.vehicle_id}): --home {s.home.lat_deg:.7f},{s.home.lon_deg:.7f},"
-        f"{s.home.alt_m:.1f},{s.heading_deg:.0f}  (MAV_SYSID {s.sysid}; SYSID_THISMAV before ArduPilot 4.7)"
-        for s in found
-        if sysids is None or s.sysid in sysids
-    )
+    """One line per start (of ``sysids``; None: all): ArduPilot SITL's ``--home`` and system id
+    parameter, then PX4 SITL's home environment variables and its MAV_SYS_ID."""
+    rows = []
+    for s in found:
+        if sysids is not None and s.sysid not in sysids:
+            continue
+        lat, lon, alt = f"{s.home.lat_deg:.7f}", f"{s.home.lon_deg:.7f}", f"{s.home.alt_m:.1f}"
+        rows.append(
+            f"sysid {s.sysid} ({s.vehicle_id}): --home {lat},{lon},{alt},{s.heading_deg:.0f}  (MAV_SYSID"
+            f" {s.sysid}; SYSID_THISMAV before ArduPilot 4.7) | PX4: PX4_HOME_LAT={lat} PX4_HOME_LON={lon}"
+            f" PX4_HOME_ALT={alt}, param MAV_SYS_ID {s.sysid}"
+        )
+    return "\n".join(rows)
 
 
 def check_starts(found: list[Start], positions: dict[int, tuple[float, float]], hint: str) -> None:
-    """Refuse (UserError) when a vehicle's reported position (lat, lon [deg]) is more than
-    MAX_START_OFFSET_M from its start: its take-off would not end where its mission begins (a SITL
-    started without ``--home`` is at its default home, another continent). hint: how to start it."""
+    """Refuse (UserError, one line per vehicle) a vehicle whose reported position (lat, lon [deg]) is
+    further than its bound from its start, or that reported none: its take-off would not end where
+    its mission begins (a SITL started without ``--home`` is at its default home, another
+    continent; four mocks on one spot would collide). hint: how to start it."""
+    problems = []
     for s in found:
         if s.sysid not in positions:
+            problems.append(f"sysid {s.sysid} ({s.vehicle_id}) reports no position: its start is unknown")
             continue
         east, north, _ = geodetic_to_enu(*positions[s.sysid], s.home.alt_m, s.home)
         off = math.hypot(east, north)
-        if off > MAX_START_OFFSET_M:
-            raise UserError(
-                f"sysid {s.sysid} ({s.vehicle_id}) is {off / 1000:,.1f} km from its start "
-                f"{s.home.lat_deg:.7f},{s.home.lon_deg:.7f} ({hint})"
+        if not off <= s.bound_m:
+            problems.append(
+                f"sysid {s.sysid} ({s.vehicle_id}) is {_distance(off)} from its start "
+                f"{s.home.lat_deg:.7f},{s.home.lon_deg:.7f} (bound {s.bound_m:.0f} m)"
             )
+    if problems:
+        raise UserError("\n".join([*problems[:-1], f"{problems[-1]} ({hint})"]))
+
+
+def _distance(m: float) -> str:
+    return f"{m / 1000:,.1f} km" if m >= 1000 else f"{m:.1f} m"

@@ -71,3 +71,45 @@ def test_manned_traffic_crossing_a_track_is_reported():
     assert any("heli within" in f for f in r[0].failures)
     late = MovingObstacle("heli", (100.0, -300.0, 25.0), (0.0, 30.0, 0.0), 30.0, 10.0)
     assert conformance_report(plan, flown, {1: 5.0}, traffic=[late])[0].passed
+
+
+def _timed(vp, stretch=1.0, t0=100.0, hover_s=5.0):
+    """``vp`` flown from route time ``t0``, every planned time x ``stretch``, after hovering at the start."""
+    t_plan = np.linspace(0, vp.path_times_s[-1], 201)
+    pos = np.stack([np.interp(t_plan, vp.path_times_s, vp.path[:, k]) for k in range(3)], axis=1)
+    hover = np.linspace(t0 - hover_s, t0, 20, endpoint=False)
+    times = np.concatenate([hover, t0 + t_plan * stretch])
+    return Track(times, np.concatenate([np.repeat(pos[:1], len(hover), axis=0), pos]), True)
+
+
+@pytest.mark.parametrize(
+    ("stretch", "passed", "words"),
+    [(1.0, True, ""), (1.03, True, ""), (1.3, False, "s late"), (0.1, False, "s early")],
+)
+def test_the_schedule_is_bounded_in_time_as_well_as_space(stretch, passed, words):
+    """A deconflicted plan is separated in time: a route flown on the planned line but 30 % late (or
+    at a mock's 10x) fails; the error is reported signed, + late."""
+    plan = Plan(Origin(47.0, 8.0, 400.0), "test", [_vehicle(1, 0.0)])  # 20 s route
+    flown = {1: _timed(plan.vehicles[0], stretch)}
+    r = conformance_report(plan, flown, {1: 5.0}, route_t0_s=100.0)[0]
+    assert r.passed is passed, r.failures
+    assert all(words in f for f in r.failures if "schedule" in f)
+    assert r.schedule_error_s == pytest.approx(20.0 * (stretch - 1.0), abs=0.4)  # + acceptance radius
+    assert "late_s" in format_report([r])
+
+
+def test_a_completion_without_the_route_flown_never_passes():
+    """One report of completion and a track that jumps to the goal: the route was not flown."""
+    plan = Plan(Origin(47.0, 8.0, 400.0), "test", [_vehicle(1, 0.0)])
+    vp = plan.vehicles[0]
+    jump = Track(np.array([100.0, 100.05, 100.1]), np.array([vp.path[0], vp.path[0], vp.path[-1]]), True)
+    r = conformance_report(plan, {1: jump}, {1: 5.0}, route_t0_s=100.0)[0]
+    assert not r.passed and any("schedule" in f or "not flown in order" in f for f in r.failures), r.failures
+
+
+def test_nan_is_never_within_a_bound():
+    plan = Plan(Origin(47.0, 8.0, 400.0), "test", [_vehicle(1, 0.0)])
+    flown = _flown(plan.vehicles[0])
+    flown.positions[50:60, 0] = np.nan  # impossible positions (e.g. lat 91 deg) dropped to NaN
+    r = conformance_report(plan, {1: flown}, {1: 5.0})[0]
+    assert not r.passed and any("cross-track" in f for f in r.failures)

@@ -309,5 +309,6 @@ def test_fly_homes_puts_a_plane_one_climb_run_behind_its_first_waypoint_and_a_co
         x, y, _ = geodetic_to_enu(lat, lon, alt, plan.origin)
         (x0, y0, z0), (x1, y1, _) = vp.waypoints[0], vp.waypoints[1]
         assert abs(alt - plan.origin.alt_m) < 0.5 and f"MAV_SYSID {vp.sysid}" in line
+        assert f"PX4_HOME_LAT={lat:.7f} PX4_HOME_LON={lon:.7f}" in line and f"MAV_SYS_ID {vp.sysid}" in line
         assert math.hypot(x0 - x, y0 - y) == pytest.approx(z0 * run_per_m, abs=0.5)
         assert abs(math.remainder(heading - math.degrees(math.atan2(x1 - x0, y1 - y0)), 360.0)) < 1.0

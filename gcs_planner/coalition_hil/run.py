@@ -82,7 +82,7 @@ from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.planning.coalition import load_world, paths, simulate
 from gcs_planner.planning.coalition.track import Leg
 from gcs_planner.scenario import Scenario
-from gcs_planner.starts import check_starts, starts
+from gcs_planner.starts import START_FIX_WAIT_S, check_starts, starts
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.timekeeping import ScheduleKeeper
 from gcs_planner.vehicles import VehicleSource
@@ -104,7 +104,6 @@ UPLOAD_WORKERS = 4
 UPLOAD_TIMING = Timing(count_retry_s=0.25, count_retries=12, ack_timeout_max_s=0.5, item_timeout_max_s=0.5)
 NEXT_REPORT_POLL_S = 0.005  # upload end stamped at the next position report, polled this often [s wall]
 NEXT_REPORT_TIMEOUT_S = 2.0
-START_FIX_WAIT_S = 30.0  # a connected vehicle's start is checked once it reports a position [s wall]
 LOGGED_EVENTS = ("tender", "bid", "not_bidding", "late_bid_ignored", "formed", "formation_failed", "award")
 
 
@@ -449,7 +448,8 @@ class _HilRun:
         where = {s: r[-1][1:3] for s, r in rows.items() if r}
         name = self.scenario.path.name if self.scenario.path else "SCENARIO"
         hint = f"start it there: fly-coalition {name} --connect ... --homes prints each --home"
-        check_starts(starts(self.initial.vehicles, self.scenario.origin), where, hint)
+        fixed = [s for s in starts(self.initial.vehicles, self.scenario.origin) if s.sysid in where]
+        check_starts(fixed, where, hint)
 
     async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
         """Until the window ends: log the simulation's events as they come due, queue the awards

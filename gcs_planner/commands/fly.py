@@ -22,14 +22,22 @@ from tqdm import tqdm
 from gcs_planner.commands import fly_coalition
 from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
-from gcs_planner.conformance import format_report
+from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, format_report
 from gcs_planner.errors import UserError
 from gcs_planner.fly import FlyOptions, check_flight, check_networks, end_summary, fly, networks
 from gcs_planner.plan import Plan
 from gcs_planner.planning import load_scenario
 from gcs_planner.progress import plan_with_progress, progress_bar
 from gcs_planner.starts import format_homes, starts
-from gcs_planner.validation import MAX_RADIUS_M, MAX_SPEED_MPS, InputError, number, number_flag, output_dir
+from gcs_planner.validation import (
+    MAX_DURATION_S,
+    MAX_RADIUS_M,
+    MAX_SPEED_MPS,
+    InputError,
+    number,
+    number_flag,
+    output_dir,
+)
 from gcs_planner.vehicles import ConnectedVehicles, mock_vehicles
 
 WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid
@@ -75,6 +83,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default=15.0,
         metavar="M",
         help="cross-track bound for the conformance report [15 m]",
+    )
+    p.add_argument(
+        "--max-schedule-error",
+        type=number_flag(0, MAX_DURATION_S, lo_open=True),
+        default=MAX_SCHEDULE_ERROR_S,
+        metavar="S",
+        help=f"bound on each vehicle's along-track time error [{MAX_SCHEDULE_ERROR_S:g} s]",
     )
     p.add_argument(
         "--drift",
@@ -185,6 +200,7 @@ def run(args: argparse.Namespace) -> int:
         tlog=args.tlog,
         rrd=not args.no_rrd,
         max_cross_track_m=args.max_cross_track,
+        max_schedule_error_s=args.max_schedule_error,
         drift_mps=drift,
         live=live_recording(args.live, args.serve_web),
     )

@@ -1,0 +1,56 @@
+"""The pre-flight gate of `fly --connect`: vehicles that are not at their planned starts, or whose
+clocks run at another rate than the flight's, are refused before anything is armed."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from gcs_planner.cli import main
+from gcs_planner.planning import load_scenario, plan_scenario
+from gcs_planner.starts import starts
+
+sitl_mock = pytest.importorskip("sitl_mock")
+
+SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "straight_4uav.toml"
+FAST = {"arm_ready_s": 0, "position_fix_s": 0}
+
+
+def connect_args(fleet) -> list[str]:
+    return [arg for v in fleet.vehicles for arg in ("--connect", f"udpout:{v.address[0]}:{v.address[1]}")]
+
+
+def nothing_armed_or_uploaded(fleet) -> bool:
+    def look():
+        return all(not v.armed and len(v.mission_server.items()) <= 1 for v in fleet.vehicles)
+
+    return fleet.call(look)
+
+
+def test_vehicles_sharing_one_home_are_refused_one_line_each_before_anything_is_sent(tmp_path, capsys):
+    """The README's old recipe: four mocks on one spot. Vehicle 1 stands at its start; 2-4 are 30,
+    60 and 90 m from theirs (bound 5 m) and would have taken off into each other."""
+    plan = plan_scenario(load_scenario(SCENARIO))
+    with sitl_mock.MockFleet(count=4, home=starts(plan.vehicles, plan.origin)[0].home, speedup=10,
+                             flight=FAST) as fleet:  # fmt: skip
+        argv = ["fly", str(SCENARIO), *connect_args(fleet), "-o", str(tmp_path / "out")]
+        assert main(argv) == 2
+        assert nothing_armed_or_uploaded(fleet)
+    err = capsys.readouterr().err
+    for sysid, off in ((2, 30.0), (3, 60.0), (4, 90.0)):
+        assert f"sysid {sysid} (uav{sysid}) is {off:.1f} m from its start" in err
+    assert "sysid 1 " not in err and "--homes" in err and "Traceback" not in err
+
+
+def test_a_mock_at_another_speedup_is_refused_before_arming(tmp_path, capsys):
+    plan = plan_scenario(load_scenario(SCENARIO))
+    homes = [{"home": s.home} for s in starts(plan.vehicles, plan.origin)]
+    with sitl_mock.MockFleet(vehicles=homes, speedup=5, flight=FAST) as fleet:
+        assert main(["fly", str(SCENARIO), *connect_args(fleet), "-o", str(tmp_path / "out")]) == 2
+        assert fleet.call(lambda: not any(v.armed for v in fleet.vehicles))
+    err = capsys.readouterr().err
+    assert "do not run at the flight's 1x real time" in err and "restart it at 1x" in err, err
+    rates = [float(r) for r in re.findall(r"sysid \d runs at ([\d.]+)x", err)]
+    assert len(rates) == 4 and all(2.0 < r <= 5.5 for r in rates), err  # a busy mock may slip below 5
