@@ -62,6 +62,7 @@ from gcs_planner.mavlink.networks import open_networks
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan
+from gcs_planner.safe_signals import SafeEndSignals
 from gcs_planner.scenario import Scenario
 from gcs_planner.starts import START_FIX_WAIT_S, check_starts, starts
 from gcs_planner.telemetry import FlightLogger
@@ -75,6 +76,7 @@ log = logging.getLogger(__name__)
 
 HEARTBEAT_WAIT_S = 10.0  # simulated vehicles answer at once
 REAL_HEARTBEAT_WAIT_S = 30.0  # real vehicles / SITL started by hand
+END_WAIT_S = 300.0  # after a signal, how long the log waits for the vehicles to land [s flight time]
 
 
 @dataclass
@@ -103,10 +105,12 @@ class FlyResult:
     report_path: Path | None = None  # the flight report PNG (flight_report.py)
     log_error: str | None = None  # the flight log could not be written (full disk); the report stands
     frames_received: int = 0  # MAVLink frames the link delivered (every one is handed to the log)
+    interrupted: str | None = None  # the signal that ended the flight early (SIGINT, SIGTERM, SIGHUP)
 
     @property
     def passed(self) -> bool:
-        return all(r.passed for r in self.reports) and all(u.ok for u in self.uploads.values())
+        uploaded = all(u.ok for u in self.uploads.values())
+        return all(r.passed for r in self.reports) and uploaded and self.interrupted is None
 
 
 def manned_traffic(scenario: Scenario, route_t0_s: float) -> list[MovingObstacle]:
@@ -193,10 +197,15 @@ async def fly(
     if options.drift_mps and not vehicles.simulated:
         raise UserError("--drift injects a fault into mock vehicles; it cannot act on connected vehicles")
     options.out_dir.mkdir(parents=True, exist_ok=True)
-    flight = _Flight(scenario, plan, options, vehicles, progress)
-    with vehicles as urls:
-        check_networks(plan, len(urls))
-        await flight.run(urls)
+    with SafeEndSignals() as signals:
+        flight = _Flight(scenario, plan, options, vehicles, progress, signals)
+        with vehicles as urls:
+            check_networks(plan, len(urls))
+            await flight.run(urls)
+    if signals.received is not None and isinstance(flight.aborted, asyncio.CancelledError):
+        result = flight.result(time.monotonic() - t_wall)  # the vehicles were brought home: report it
+        result.interrupted = signals.received.name
+        return result
     if flight.aborted is not None:
         ended = end_summary(flight.end_states)
         if flight.end_states:
@@ -210,10 +219,13 @@ async def fly(
 class _Flight:
     """One flight's state, from the link's opening to the report (fly's steps as methods)."""
 
-    def __init__(self, scenario, plan, options: FlyOptions, vehicles: VehicleSource, progress) -> None:
+    def __init__(
+        self, scenario, plan, options: FlyOptions, vehicles: VehicleSource, progress, signals: SafeEndSignals
+    ) -> None:
         self.scenario, self.plan, self.options, self.vehicles, self.progress = (
             scenario, plan, options, vehicles, progress
         )  # fmt: skip
+        self.signals = signals
         self.sysids = [vp.sysid for vp in plan.vehicles]
         self.mcap_path = options.out_dir / "flight.mcap"
         tlog = options.out_dir / "flight.tlog"
@@ -331,16 +343,22 @@ class _Flight:
                 keeper.add(vp)
             for sysid, lim in self.limits.items():
                 keeper.limit(sysid, lim.min_mps, lim.max_mps)
-        await wait_until_done(
-            link, self.recorder, self.status, plan, speedup, options.timeout_factor, self.progress, keeper,
-            self.route_t0_s, self.quirks,
-        )  # fmt: skip
-        await routes
+        try:
+            await wait_until_done(
+                link, self.recorder, self.status, plan, speedup, options.timeout_factor, self.progress,
+                keeper, self.route_t0_s, self.quirks,
+            )  # fmt: skip
+            await routes
+        finally:  # a failure or a signal: no route may start after the safe end sent the vehicles home
+            routes.cancel()
+            await asyncio.gather(routes, return_exceptions=True)
 
     async def _end(self, link: MavlinkLink, logger: FlightLogger) -> None:
         """Send airborne vehicles home after a failure (nothing after a clean end), log it, close."""
         if self.quirks and (self.aborted is not None or not all(t.done for t in self.status.tracks.values())):
             self.end_states = await asyncio.shield(safe_end(link, self.status, self.quirks))
+            if self.signals.received is not None:
+                await self._until_landed(link, logger)
         elif self.quirks:  # every mission done: say where each vehicle ended, command nothing
             self.end_states = {s: _end_state(link, s) for s in self.sysids}
         if self.end_states:
@@ -349,6 +367,23 @@ class _Flight:
         self.status.close()
         await link.close()
         self.frames_received = link.frames_received
+
+    async def _until_landed(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        """After a signal's safe end: keep logging until every vehicle has landed (disarmed), for at
+        most END_WAIT_S of flight time or until a second signal; then say where each one is."""
+        task = asyncio.current_task()
+        if task is not None:
+            task.uncancel()  # the signal's cancel is handled: this wait may await again
+        log.warning("%s: vehicles sent home; logging until they land (send it again to stop waiting)",
+                    self.signals.received.name)  # fmt: skip
+        deadline = time.monotonic() + END_WAIT_S / self.vehicles.speedup
+        armed = [s for s in self.sysids if _armed(link, s)]
+        while armed and time.monotonic() < deadline and not self.signals.hurry.is_set():
+            await asyncio.sleep(0.1)
+            armed = [s for s in armed if _armed(link, s)]
+        ended = self.end_states
+        self.end_states = {s: what if s in armed else "landed (disarmed)" for s, what in ended.items()}
+        logger.log_event({"event": "end_wait", "still_armed": armed})
 
     def result(self, wall_s: float) -> FlyResult:
         """The conformance report, the flight report PNG and the .rrd of the flown log."""
@@ -367,8 +402,9 @@ class _Flight:
             max_schedule_error_s=options.max_schedule_error_s,
         )
         for r in reports:
-            if not self.uploads[r.sysid].ok:
-                r.failures.insert(0, f"upload failed: {self.uploads[r.sysid].error}")
+            upload = self.uploads.get(r.sysid)
+            if upload is not None and not upload.ok:
+                r.failures.insert(0, f"upload failed: {upload.error}")
         report_path = write_flight_report(
             options.out_dir / "report.png", plan, self.recorder.tracks(), reports, scenario,
             options.max_cross_track_m,
@@ -393,6 +429,11 @@ def _live_views(rec, plan: Plan, scenario: Scenario):
     live = LiveRerunLogger(rec, plan.origin, time.time())
     live.start(plan, scenario)
     return live
+
+
+def _armed(link: MavlinkLink, sysid: int) -> bool:
+    info = link.vehicles.get(sysid)
+    return info is not None and info.armed
 
 
 def _end_state(link: MavlinkLink, sysid: int) -> str:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import signal
 import sys
 import time
 from pathlib import Path
@@ -235,6 +236,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"report: {result.report_path}  (map, cross-track and separation over time, conformance)")
     for tlog in result.tlog_paths:
         print(f"tlog: {tlog}  (mavlogdump.py, MAVExplorer, QGroundControl)")
+    if result.interrupted:
+        print(f"interrupted by {result.interrupted}: the report covers the flight until then",
+              file=sys.stderr)  # fmt: skip
     verdict = "PASS" if result.passed else "FAIL"
     print(
         f"{verdict}: {sum(r.passed for r in result.reports)}/{len(result.reports)} vehicles conform"
@@ -242,4 +246,6 @@ def run(args: argparse.Namespace) -> int:
     )
     if result.log_error:  # the flight was flown and reported; its log is incomplete
         raise UserError(f"flight log {result.mcap_path}: {result.log_error}")
+    if result.interrupted:
+        return 128 + signal.Signals[result.interrupted].value
     return 0 if result.passed else 1
