@@ -107,7 +107,8 @@ def test_signing_setup_gives_a_vehicle_its_key_then_takes_it_away(capsys, missio
         host, port = fleet.addresses[0]
         base = ["signing-setup", "--connect", f"udpout:{host}:{port}", "--sysid", "1"]
         assert main([*base, "--new-passphrase", "correct horse battery staple"]) == 0
-        assert "signs with the new key" in capsys.readouterr().out
+        out = capsys.readouterr().out
+        assert "signs with the new key" in out and "unsigned messages on its first serial port" in out
         assert upload(fleet, KEY) and not upload(fleet, None)
         wrong = [*base, "--signing-passphrase", "wrong", "--heartbeat-timeout", "1", "--disable"]
         assert main(wrong) == 2 and "no HEARTBEAT" in capsys.readouterr().err

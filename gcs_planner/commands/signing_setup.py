@@ -14,6 +14,7 @@ import argparse
 import asyncio
 import os
 
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from pymavlink.dialects.v20.ardupilotmega import MAVLINK_IFLAG_SIGNED
 
 from gcs_planner.commands._mission_cli import add_connection_arguments, vehicle_link
@@ -24,6 +25,11 @@ from gcs_planner.mavlink.signing import NO_KEY, key_from_passphrase, setup_signi
 NEW_SIGNING_ENV = "GCS_PLANNER_NEW_SIGNING_PASSPHRASE"
 SETUP_ATTEMPTS = 3
 HEARTBEAT_WAIT_S = 2.5  # per attempt: autopilots send HEARTBEAT at 1 Hz
+# GCS_Signing.cpp accept_unsigned_callback: ArduPilot takes every unsigned frame on MAVLINK_COMM_0
+ARDUPILOT_SERIAL0 = (
+    "ArduPilot still accepts unsigned messages on its first serial port (SERIAL0, usually USB) by"
+    " design; signing protects its other links (telemetry radios, networks)"
+)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -48,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
 async def _setup(args: argparse.Namespace, new_key: bytes) -> int:
     current = key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None
     after = None if new_key == NO_KEY else new_key
-    async with vehicle_link(args) as (link, _):
+    async with vehicle_link(args) as (link, heartbeat):
         for attempt in range(1, SETUP_ATTEMPTS + 1):
             link.set_signing_key(current)  # the vehicle checks the request with the key it has
             link.send(setup_signing_message(new_key, args.sysid, args.compid))
@@ -56,6 +62,8 @@ async def _setup(args: argparse.Namespace, new_key: bytes) -> int:
             if await _heartbeat_with(link, args.sysid, signed=after is not None):
                 state = "signing off" if after is None else "signs with the new key"
                 print(f"vehicle {args.sysid}: {state} (HEARTBEAT checked; SETUP_SIGNING sent {attempt}x)")
+                if after is not None and heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
+                    print(f"note: {ARDUPILOT_SERIAL0}")
                 return 0
     raise UserError(
         f"vehicle {args.sysid} did not take the key: no HEARTBEAT {'signed with it' if after else 'unsigned'}"

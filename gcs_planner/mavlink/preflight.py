@@ -20,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import time
 from collections.abc import Callable, Mapping
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -35,6 +36,7 @@ __all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "read_param", "req
 
 log = logging.getLogger(__name__)
 
+STREAM_WAIT_S = 2.0  # how long a refused stream may take to show it flows anyway [s wall]
 ARM_RETRY_S = 2.0  # between arming attempts while the vehicle is not ready [s of vehicle time]
 _REFUSALS = (CommandResult.FAILED, CommandResult.TEMPORARILY_REJECTED, CommandResult.DENIED)
 PREARM_TEXTS = ("PreArm", "Arm", "Preflight")  # how ArduPilot and PX4 word a pre-arm failure
@@ -55,19 +57,35 @@ async def request_streams(
 ) -> dict[int, list[str]]:
     """Ask every vehicle for every message in ``rates``; returns sysid -> names it refused."""
 
+    heard: dict[int, set[int]] = {s: set() for s in sysids}
+
+    def on_frame(msg, raw: bytes, t_s: float) -> None:
+        kinds = heard.get(msg.get_srcSystem())
+        if kinds is not None:
+            kinds.add(msg.get_msgId())
+
     async def one(sysid: int) -> list[str]:
         command = CommandClient(link, sysid)
-        refused = []
+        refused = {}
         for message_id, hz in rates.items():
             try:
                 await command.set_message_interval(message_id, hz)
             except MavlinkError as exc:
-                name = mavlink.mavlink_map[message_id].msgname
-                log.warning("vehicle %d: no %s stream (%s)", sysid, name, exc)
-                refused.append(name)
-        return refused
+                refused[message_id] = exc
+        deadline = time.monotonic() + STREAM_WAIT_S  # streamed anyway (PX4 refuses some it always sends)?
+        while set(refused) - heard[sysid] and time.monotonic() < deadline:
+            await asyncio.sleep(0.05)
+        missing = [m for m in refused if m not in heard[sysid]]
+        for message_id in missing:
+            name = mavlink.mavlink_map[message_id].msgname
+            log.warning("vehicle %d: no %s stream (%s)", sysid, name, refused[message_id])
+        return [mavlink.mavlink_map[m].msgname for m in missing]
 
-    results = await asyncio.gather(*(one(s) for s in sysids))
+    unsubscribe = link.subscribe(on_frame)
+    try:
+        results = await asyncio.gather(*(one(s) for s in sysids))
+    finally:
+        unsubscribe()
     return dict(zip(sysids, results, strict=True))
 
 

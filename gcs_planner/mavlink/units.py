@@ -31,5 +31,7 @@ def no_fix(lat_deg, lon_deg):
 
 
 def reports_no_fix(msg) -> bool:
-    """A GLOBAL_POSITION_INT that carries no position yet (``no_fix`` of its degE7 lat, lon)."""
-    return no_fix(msg.lat * 1e-7, msg.lon * 1e-7)
+    """A GLOBAL_POSITION_INT that carries no position: none yet (``no_fix`` of its degE7 lat, lon)
+    or an impossible one (latitude past a pole, longitude past the antimeridian)."""
+    lat, lon = msg.lat * 1e-7, msg.lon * 1e-7
+    return bool(no_fix(lat, lon)) or not (abs(lat) <= 90.0 and abs(lon) <= 180.0)

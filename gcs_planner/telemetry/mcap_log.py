@@ -47,6 +47,7 @@ import numpy as np
 from gcs_planner import __version__
 from gcs_planner.fleet_ids import network_of
 from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.telemetry.colors import vehicle_color
 from gcs_planner.telemetry.encode import json_encoder
@@ -277,7 +278,7 @@ class FlightLogger:
             bucket = buckets.get(channel) or buckets.setdefault(channel, [])
             bucket.append(header(opcode, fixed + len(data), channel, 0, t_ns, t_ns))
             bucket.append(data)
-            if is_position:
+            if is_position and not reports_no_fix(msg):  # (0, 0) before a fix: no place on a map
                 channel = self._location_channels[sysid]
                 data = self._location_fix(sysid, msg, t_ns)
                 bucket = buckets.get(channel) or buckets.setdefault(channel, [])
