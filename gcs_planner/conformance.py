@@ -25,11 +25,12 @@ Choices:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from gcs_planner.plan import Plan
+from gcs_planner.plan import Plan, land_point
 from gcs_planner.scenario import Cylinder, Hemisphere
 
 __all__ = [
@@ -80,6 +81,7 @@ class VehicleReport:
     planned_time_s: float
     failures: list[str] = field(default_factory=list)
     schedule_error_s: float = np.nan  # the worst along-track time error, signed (+ = late) [s]
+    touchdown_m: float = np.nan  # where it landed after the route, from the planned land point [m]
 
     @property
     def passed(self) -> bool:
@@ -209,11 +211,11 @@ def conformance_report(
     acceptance_m: float | None = None,
     min_airborne_alt_m: float = 1.0,
     step_s: float = 0.1,
-    route_t0_s: float | None = None,
+    route_t0_s: Mapping[int, float] | None = None,
     max_schedule_error_s: float = MAX_SCHEDULE_ERROR_S,
 ) -> list[VehicleReport]:
     """Per-vehicle report; ``failures`` lists every bound broken (empty = passed). ``route_t0_s``:
-    when the routes' time 0 was, on the tracks' clock (None: the schedule is not checked)."""
+    sysid -> when its route's time 0 was, on the tracks' clock (None: no schedule is checked)."""
     airborne = {}
     for sysid, tr in tracks.items():
         up = tr.positions[:, 2] >= min_airborne_alt_m
@@ -240,7 +242,7 @@ def conformance_report(
         late_s = np.nan
         if route_t0_s is not None:
             route = Track(tr.times_s[window], tr.positions[window])
-            late_s, problem = _schedule_verdict(route, vp, route_t0_s, max_cross_track_m + accept,
+            late_s, problem = _schedule_verdict(route, vp, route_t0_s[vp.sysid], max_cross_track_m + accept,
                                                 max_schedule_error_s)  # fmt: skip
             failures += [problem] if problem else []
         clearance = _obstacle_clearance_m(tr.positions, cylinders, hemispheres)
@@ -264,9 +266,21 @@ def conformance_report(
                 planned_time_s=float(vp.times_s[-1] - vp.times_s[0]),
                 failures=failures,
                 schedule_error_s=late_s,
+                touchdown_m=_touchdown_m(tracks[vp.sysid], vp, tr.times_s[window][-1], min_airborne_alt_m),
             )
         )
     return reports
+
+
+def _touchdown_m(track: Track, vp, route_end_s: float, ground_m: float) -> float:
+    """Horizontal distance [m] from the plan's land point to the first report on the ground after
+    the route; NaN when the plan does not land there or the vehicle did not come down."""
+    if vp.final_action != "land":
+        return np.nan
+    down = np.flatnonzero((track.times_s > route_end_s) & (track.positions[:, 2] < ground_m))
+    if not len(down):
+        return np.nan
+    return float(np.hypot(*(track.positions[down[0], :2] - land_point(vp)[:2])))
 
 
 def _traffic_m(track: Track, traffic: list[MovingObstacle], failures: list[str]) -> float:
@@ -299,7 +313,7 @@ def format_report(reports: list[VehicleReport]) -> str:
     """The report as a fixed-width table, one row per vehicle."""
     head = (
         f"{'vehicle':<8} {'sysid':>5} {'done':>5} {'xt_max_m':>9} {'xt_mean_m':>9} {'min_sep_m':>9}"
-        f" {'clear_m':>8} {'traffic_m':>9} {'flown_s':>8} {'plan_s':>7} {'late_s':>6}  result"
+        f" {'clear_m':>8} {'traffic_m':>9} {'flown_s':>8} {'plan_s':>7} {'late_s':>6} {'land_m':>6}  result"
     )
     rows = [head]
     for r in reports:
@@ -308,6 +322,6 @@ def format_report(reports: list[VehicleReport]) -> str:
             f"{r.vehicle_id:<8} {r.sysid:>5} {'yes' if r.completed else 'no':>5} {r.cross_track_max_m:>9.2f}"
             f" {r.cross_track_mean_m:>9.2f} {r.min_separation_m:>9.1f} {r.min_obstacle_clearance_m:>8.1f}"
             f" {r.min_traffic_distance_m:>9.1f} {r.flight_time_s:>8.1f} {r.planned_time_s:>7.1f}"
-            f" {r.schedule_error_s:>6.1f}  {verdict}"
+            f" {r.schedule_error_s:>6.1f} {r.touchdown_m:>6.1f}  {verdict}"
         )
     return "\n".join(rows)

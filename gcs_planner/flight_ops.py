@@ -16,7 +16,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -157,10 +157,11 @@ async def take_off_all(
     timeout_factor: float = 2.0,
     progress=None,
     missions: dict | None = None,
+    on_route_start: Callable[[int], None] | None = None,
 ) -> None:
     """Arm every vehicle once it is ready and climb it to its first waypoint's altitude; return
     when all are there. With ``missions``, a fixed wing (which cannot wait in place) starts its
-    route as soon as it is up (``start_routes`` leaves it out)."""
+    route as soon as it is up (``start_routes`` leaves it out), then ``on_route_start(sysid)``."""
     gate = asyncio.Semaphore(workers)
     targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
 
@@ -172,6 +173,8 @@ async def take_off_all(
             await asyncio.sleep(0.02)
         items = missions[vp.sysid]
         await start_mission_at(link, vp.sysid, quirks[vp.sysid], route_seq(items), len(items) - 1)
+        if on_route_start is not None:
+            on_route_start(vp.sysid)
 
     def waiting(sysid: int, reason: str) -> None:
         log.info("sysid %d not ready to arm: %s", sysid, reason)
@@ -273,9 +276,11 @@ async def wait_until_done(
     timeout_factor: float,
     progress,
     keeper: ScheduleKeeper | None,
-    route_t0_s: float,
+    route_t0_s: Mapping[int, float],
     quirks: dict[int, AutopilotQuirks],
 ) -> None:
+    """Until every vehicle's mission is done (or the plan's time x timeout_factor), keeping the
+    schedule: ``route_t0_s[sysid]`` is when that vehicle's route time 0 was, on the recorder's clock."""
     descent_s = max(float(v.waypoints[-1, 2]) for v in plan.vehicles) / LAND_SPEED_MPS
     planned_s = max(float(v.path_times_s[-1]) + v.takeoff_delay_s for v in plan.vehicles) + descent_s
     budget_s = planned_s * timeout_factor / speedup + 10.0
@@ -302,7 +307,7 @@ def keep_schedule(
     recorder: TrackRecorder,
     status: VehicleStatus,
     keeper: ScheduleKeeper,
-    route_t0_s: float,
+    route_t0_s: Mapping[int, float],
     quirks: dict[int, AutopilotQuirks],
 ) -> None:
     for sysid, track in status.tracks.items():
@@ -312,6 +317,6 @@ def keep_schedule(
         if latest is None:
             continue
         t_s, position = latest
-        speed = keeper.speed_command(sysid, t_s - route_t0_s, position)
+        speed = keeper.speed_command(sysid, t_s - route_t0_s[sysid], position)
         if speed is not None:
             change_speed(link, sysid, quirks[sysid], speed)

@@ -239,7 +239,8 @@ class _Flight:
         self.end_states: dict[int, str] = {}
         self.log_errors: list[str] = []
         self.aborted: BaseException | None = None
-        self.route_t0_s = 0.0
+        self.route_t0_s = 0.0  # the fleet's route time 0 (track clock)
+        self.route_t0: dict[int, float] = {}  # sysid -> its route time 0: the fleet's, a plane's own
         self.status: VehicleStatus | None = None
         self.frames_received = 0
         self.clocks = ClockRate(self.sysids)
@@ -313,6 +314,10 @@ class _Flight:
         check_starts(starts(self.plan.vehicles, self.plan.origin), where,
                      f"start each vehicle there: fly {name} --homes prints where")  # fmt: skip
 
+    def _now(self) -> float:
+        """Now on the tracks' clock: the fleet's simulated time for mocks, receive time otherwise."""
+        return self.recorder.now_s() if self.vehicles.simulated else time.time()
+
     async def _check_clocks(self) -> None:
         """Refuse connected vehicles whose clocks run at another rate than this flight's."""
         deadline = time.monotonic() + 3 * MIN_SPAN_S
@@ -323,16 +328,22 @@ class _Flight:
     async def _routes(self, link: MavlinkLink, logger: FlightLogger, missions: dict) -> None:
         """Take off, start every route on time, keep the schedule until all are done."""
         plan, options, speedup = self.plan, self.options, self.vehicles.speedup
+        plane_t0: dict[int, float] = {}  # fixed wings start their routes once up: their own time 0
+
+        def plane_started(sysid: int) -> None:
+            vp = next(v for v in plan.vehicles if v.sysid == sysid)
+            plane_t0[sysid] = self._now() - max(vp.takeoff_delay_s, float(vp.times_s[0]))
+
         await take_off_all(
             link, plan, self.status, speedup, self.quirks, options.workers, options.timeout_factor,
-            self.progress, missions,
+            self.progress, missions, plane_started,
         )  # fmt: skip
         climbed = frozenset(v.sysid for v in plan.vehicles if v.vehicle_type == "fixed_wing")
         logger.log_event({"event": "airborne", "sysids": self.sysids})
         leads = {vp.sysid: accel_lead_s(vp, self.vehicles.accel_mps2(vp.sysid)) for vp in plan.vehicles}
         lead_s = max(leads.values())
-        now = self.recorder.now_s() if self.vehicles.simulated else time.time()
-        self.route_t0_s = now + lead_s
+        self.route_t0_s = self._now() + lead_s
+        self.route_t0 = {s: plane_t0.get(s, self.route_t0_s) for s in self.sysids}
         routes = asyncio.create_task(
             start_routes(link, plan, missions, speedup, logger, lead_s, leads, self.quirks, climbed)
         )
@@ -346,7 +357,7 @@ class _Flight:
         try:
             await wait_until_done(
                 link, self.recorder, self.status, plan, speedup, options.timeout_factor, self.progress,
-                keeper, self.route_t0_s, self.quirks,
+                keeper, self.route_t0, self.quirks,
             )  # fmt: skip
             await routes
         finally:  # a failure or a signal: no route may start after the safe end sent the vehicles home
@@ -398,7 +409,7 @@ class _Flight:
             scenario.hemispheres,
             manned_traffic(scenario, self.route_t0_s),
             max_cross_track_m=options.max_cross_track_m,
-            route_t0_s=self.route_t0_s if self.route_t0_s else None,
+            route_t0_s=self.route_t0 or None,
             max_schedule_error_s=options.max_schedule_error_s,
         )
         for r in reports:

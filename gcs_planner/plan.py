@@ -15,7 +15,9 @@ import numpy as np
 from gcs_planner.geo import Origin
 from gcs_planner.validation import InputError, load_json, read_text, unique, write_text_atomic
 
-__all__ = ["Plan", "VehiclePlan"]
+__all__ = ["LAND_GLIDE_DEG", "Plan", "VehiclePlan", "land_point"]
+
+LAND_GLIDE_DEG = 5.0  # a fixed wing's final approach: its glide slope [deg]
 
 
 @dataclass
@@ -158,3 +160,20 @@ class Plan:
             return cls.from_dict(data)
         except InputError as exc:
             raise InputError(f"{path}: {exc}") from None
+
+
+def land_point(vp: VehiclePlan) -> np.ndarray:
+    """Where a vehicle whose final action is "land" touches down (ENU [m], on the ground): under
+    its last waypoint for a multirotor; for a fixed wing, ahead of it along the last leg by the
+    run of a LAND_GLIDE_DEG glide from the waypoint's altitude, so that the approach is one a
+    plane can fly (ArduPlane descends on the line from the previous waypoint to the land point and
+    flares near the ground; a land point under the last waypoint made SITL planes flare at 60 m
+    and touch down 500-600 m further on)."""
+    last = vp.waypoints[-1]
+    if vp.vehicle_type != "fixed_wing" or len(vp.waypoints) < 2:
+        return np.array([last[0], last[1], 0.0])
+    leg = last[:2] - vp.waypoints[-2][:2]
+    length = float(np.hypot(*leg))
+    heading = leg / length if length > 1e-9 else np.array([1.0, 0.0])
+    run = max(float(last[2]), 0.0) / np.tan(np.radians(LAND_GLIDE_DEG))
+    return np.array([*(last[:2] + run * heading), 0.0])

@@ -91,7 +91,7 @@ def test_the_schedule_is_bounded_in_time_as_well_as_space(stretch, passed, words
     at a mock's 10x) fails; the error is reported signed, + late."""
     plan = Plan(Origin(47.0, 8.0, 400.0), "test", [_vehicle(1, 0.0)])  # 20 s route
     flown = {1: _timed(plan.vehicles[0], stretch)}
-    r = conformance_report(plan, flown, {1: 5.0}, route_t0_s=100.0)[0]
+    r = conformance_report(plan, flown, {1: 5.0}, route_t0_s={1: 100.0})[0]
     assert r.passed is passed, r.failures
     assert all(words in f for f in r.failures if "schedule" in f)
     assert r.schedule_error_s == pytest.approx(20.0 * (stretch - 1.0), abs=0.4)  # + acceptance radius
@@ -103,7 +103,7 @@ def test_a_completion_without_the_route_flown_never_passes():
     plan = Plan(Origin(47.0, 8.0, 400.0), "test", [_vehicle(1, 0.0)])
     vp = plan.vehicles[0]
     jump = Track(np.array([100.0, 100.05, 100.1]), np.array([vp.path[0], vp.path[0], vp.path[-1]]), True)
-    r = conformance_report(plan, {1: jump}, {1: 5.0}, route_t0_s=100.0)[0]
+    r = conformance_report(plan, {1: jump}, {1: 5.0}, route_t0_s={1: 100.0})[0]
     assert not r.passed and any("schedule" in f or "not flown in order" in f for f in r.failures), r.failures
 
 
@@ -113,3 +113,22 @@ def test_nan_is_never_within_a_bound():
     flown.positions[50:60, 0] = np.nan  # impossible positions (e.g. lat 91 deg) dropped to NaN
     r = conformance_report(plan, {1: flown}, {1: 5.0})[0]
     assert not r.passed and any("cross-track" in f for f in r.failures)
+
+
+def test_the_report_says_where_a_landing_touched_down_against_the_plan():
+    """A fixed wing's land point is one 5-degree glide ahead of its last waypoint (an approach it can
+    fly); the report measures the touchdown from it."""
+    from gcs_planner.plan import LAND_GLIDE_DEG, land_point
+
+    vp = _vehicle(1, 0.0)
+    vp.vehicle_type = "fixed_wing"
+    run = 20.0 / np.tan(np.radians(LAND_GLIDE_DEG))
+    np.testing.assert_allclose(land_point(vp), [200.0 + run, 0.0, 0.0])
+    flown = _flown(vp)
+    landing = np.array([[200.0 + run / 2, 0.0, 10.0], [200.0 + run + 40.0, 0.0, 0.0]])
+    times = np.r_[flown.times_s, flown.times_s[-1] + np.array([10.0, 20.0])]
+    track = Track(times, np.vstack([flown.positions, landing]), True)
+    plan = Plan(Origin(47.0, 8.0, 400.0), "test", [vp])
+    r = conformance_report(plan, {1: track}, {1: 5.0})[0]
+    assert r.touchdown_m == pytest.approx(40.0) and r.passed
+    assert np.isnan(conformance_report(plan, {1: flown}, {1: 5.0})[0].touchdown_m)  # never came down

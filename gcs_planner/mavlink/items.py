@@ -32,7 +32,10 @@ Choices where MAVLink or the autopilots leave room (all documented here, nowhere
 - Dwell: a zero-length leg in the plan (the same point twice, later in time) is a wait; it becomes
   the hold time (param1) of the previous waypoint, or NAV_LOITER_TIME for a fixed wing, which
   cannot hover.
-- Final action: "land" lands at the last waypoint (z = 0), "rtl" is NAV_RETURN_TO_LAUNCH,
+- Final action: "land" lands at ``plan.land_point`` (z = 0): under the last waypoint for a
+  multirotor; for a fixed wing DO_LAND_START at the last waypoint, then a land point one
+  glide-slope run ahead on the last leg (the approach is outside the planned path, checked only
+  by the fence); "rtl" is NAV_RETURN_TO_LAUNCH,
   "loiter" is NAV_LOITER_UNLIM over the last waypoint (radius = turn radius for fixed wings).
 - Fence (mission_type 1): the scenario's x/y bounds as an inclusion polygon, each cylinder
   (radius + buffer) and each radar dome (its footprint) as an exclusion circle, in
@@ -55,7 +58,7 @@ from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.units import SPEED_AIRSPEED, SPEED_GROUNDSPEED, e7, half_away
 from gcs_planner.mavlink.validate import MissionValidationError, validate_items
-from gcs_planner.plan import VehiclePlan
+from gcs_planner.plan import VehiclePlan, land_point
 from gcs_planner.scenario import Scenario
 
 __all__ = [
@@ -162,7 +165,10 @@ def plan_to_items(
     items.extend(_legs(vp, at, fixed_wing))
     last = len(wps) - 1
     if vp.final_action == "land":
-        items.append(at(last, mavlink.MAV_CMD_NAV_LAND, 0.0))
+        if fixed_wing:  # the approach starts at the last waypoint (QGC's landing pattern marks it so)
+            items += [at(last, mavlink.MAV_CMD_DO_LAND_START, wps[last, 2]), _fixed_wing_land(vp, origin)]
+        else:
+            items.append(at(last, mavlink.MAV_CMD_NAV_LAND, 0.0))
     elif vp.final_action == "rtl":
         items.append(MissionItem(0, NO_FRAME, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH))
     else:
@@ -171,6 +177,14 @@ def plan_to_items(
     items = [_renumbered(item, i, current=int(i == 0)) for i, item in enumerate(items)]
     validate_items(items)
     return items
+
+
+def _fixed_wing_land(vp: VehiclePlan, origin: Origin) -> MissionItem:
+    """NAV_LAND at the plan's land point: one glide-slope run ahead of the last waypoint."""
+    x, y, _ = land_point(vp)
+    lat, lon, _ = enu_to_geodetic(x, y, 0.0, origin)
+    lat_e7, lon_e7 = deg_to_e7([float(lat), float(lon)]).tolist()
+    return MissionItem(0, REL, mavlink.MAV_CMD_NAV_LAND, 0, 1, x=lat_e7, y=lon_e7, z=0.0)
 
 
 def _legs(vp: VehiclePlan, at, fixed_wing: bool) -> list[MissionItem]:
