@@ -30,7 +30,7 @@ from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
-from gcs_planner.plan import Plan
+from gcs_planner.plan import Plan, land_point
 from gcs_planner.timekeeping import ScheduleKeeper
 
 __all__ = [
@@ -48,6 +48,10 @@ TAKEOFF_ATTEMPTS = 3
 TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" once no lower than this below its take-off altitude
 NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
+# a completion counts where the track ends this near the mission's end [m]: a multirotor lands or
+# holds at it; a plane lands on a run past it or loiters round it
+END_RADIUS_M = 50.0
+PLANE_END_M = 500.0
 
 
 FrameClock = Callable[[object, float], float]  # (message, receive time [Unix s]) -> flight time [s]
@@ -286,9 +290,14 @@ async def wait_until_done(
     budget_s = planned_s * timeout_factor / speedup + 10.0
     deadline = time.monotonic() + budget_s
     total = len(plan.vehicles)
+    plans = {vp.sysid: vp for vp in plan.vehicles}
+    confirmed: set[int] = set()
 
     def done() -> set[int]:
-        return {s for s, t in status.tracks.items() if t.done}
+        for sysid, track in status.tracks.items():
+            if track.done and sysid not in confirmed and at_route_end(recorder, plans[sysid]):
+                confirmed.add(sysid)
+        return confirmed
 
     while time.monotonic() < deadline and len(done()) < total:
         if progress:
@@ -298,8 +307,21 @@ async def wait_until_done(
         await asyncio.sleep(KEEPER_PERIOD_S / speedup)
     if progress:
         progress("fly", len(done()), total)
+    recorder.completed.update({s: s in confirmed for s in plans})
     # a little more telemetry after the last item (landing) for the log
     await asyncio.sleep(min(1.0, 5.0 / speedup))
+
+
+def at_route_end(recorder: TrackRecorder, vp) -> bool:
+    """Whether the vehicle's newest report is where its mission ends (its last waypoint or its land
+    point): a completion the vehicle reports is believed only where its track shows it (a forged
+    MISSION_ITEM_REACHED from the vehicle's address must not end a flight)."""
+    latest = recorder.latest(vp.sysid)
+    if latest is None:
+        return False
+    radius = PLANE_END_M if vp.vehicle_type == "fixed_wing" else END_RADIUS_M
+    ends = (vp.waypoints[-1, :2], land_point(vp)[:2])
+    return min(float(np.hypot(*(latest[1][:2] - end))) for end in ends) <= radius
 
 
 def keep_schedule(

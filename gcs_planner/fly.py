@@ -366,7 +366,8 @@ class _Flight:
 
     async def _end(self, link: MavlinkLink, logger: FlightLogger) -> None:
         """Send airborne vehicles home after a failure (nothing after a clean end), log it, close."""
-        if self.quirks and (self.aborted is not None or not all(t.done for t in self.status.tracks.values())):
+        finished = all(self.recorder.completed.get(s, False) for s in self.sysids)
+        if self.quirks and (self.aborted is not None or not finished):
             self.end_states = await asyncio.shield(safe_end(link, self.status, self.quirks))
             if self.signals.received is not None:
                 await self._until_landed(link, logger)
@@ -399,8 +400,6 @@ class _Flight:
     def result(self, wall_s: float) -> FlyResult:
         """The conformance report, the flight report PNG and the .rrd of the flown log."""
         plan, scenario, options = self.plan, self.scenario, self.options
-        for sysid, track in self.status.tracks.items():
-            self.recorder.completed[sysid] = track.done
         reports = conformance_report(
             plan,
             self.recorder.tracks(),

@@ -44,3 +44,36 @@ def test_a_signal_mid_flight_brings_the_fleet_home_and_still_reports(sig, tmp_pa
     assert wait["still_armed"] == []
     assert any(e["event"] == "safe_end" for e in events)
     assert signal.getsignal(sig) in (signal.SIG_DFL, signal.default_int_handler)  # handlers removed
+
+
+def test_a_forged_completion_from_the_vehicles_address_does_not_end_the_flight(tmp_path):
+    """Reliability: MISSION_ITEM_REACHED(last) + MISSION_CURRENT(COMPLETE) sent from each vehicle's own
+    address as its routes start. Completion counts only where the track shows the vehicle at its
+    mission's end: the flight goes on and every route is flown in full, on time."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from gcs_planner.flight_ops import build_missions
+    from gcs_planner.mavlink.autopilots import quirks_named
+
+    scenario = load_scenario(SCENARIO)
+    plan = plan_scenario(scenario)
+    vehicles = MockVehicles(plan.vehicles, plan.origin, 20.0, "ardupilot")
+    missions = build_missions(plan, {v.sysid: quirks_named("ardupilot") for v in plan.vehicles})
+    last = {s: len(m) - 1 for s, m in missions.items()}
+    forged, calls = [], []
+
+    def progress(stage: str, done, total) -> None:
+        calls.append(stage)
+        if calls.count("fly") == 10 and not forged:  # 10 schedule-keeping periods (5 s) into the routes
+            (fleet,) = vehicles.fleets
+            for v in fleet.vehicles:
+                seq = last[v.sysid]
+                reached = mavlink.MAVLink_mission_item_reached_message(seq)
+                complete = mavlink.MAVLink_mission_current_message(seq, seq, 5, 1)  # MISSION_STATE_COMPLETE
+                fleet.call(lambda v=v, a=reached, b=complete: (v.link.send(a), v.link.send(b)))
+            forged.append(True)
+
+    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress))
+    assert forged and result.passed, [(r.sysid, r.failures) for r in result.reports]
+    for r in result.reports:
+        assert r.flight_time_s == pytest.approx(r.planned_time_s, rel=0.1), (r.sysid, r.flight_time_s)
