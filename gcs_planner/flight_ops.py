@@ -46,6 +46,7 @@ TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
 LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
 TAKEOFF_ATTEMPTS = 3
 TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" once no lower than this below its take-off altitude
+PLANE_CLIMB_PAST_M = 10.0  # a plane that climbs into its route is sent this much higher [m]
 NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
 # a completion counts where the track ends this near the mission's end [m]: a multirotor lands or
@@ -190,9 +191,11 @@ async def take_off_all(
             q = quirks[vp.sysid]
             for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
                 try:
+                    climbing_in = missions is not None and vp.vehicle_type == "fixed_wing"
                     await take_off(
-                        link, status, vp.sysid, q, float(vp.waypoints[0, 2]), ARM_TIMEOUT_S, speedup, waiting
-                    )
+                        link, status, vp.sysid, q, float(vp.waypoints[0, 2]), ARM_TIMEOUT_S, speedup, waiting,
+                        PLANE_CLIMB_PAST_M if climbing_in else 0.0,
+                    )  # fmt: skip
                     break
                 except MavlinkError as exc:
                     # a lost ACK makes the retried command fail (already armed / airborne)

@@ -57,6 +57,7 @@ DEFAULT_HOME = Origin(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zu
 COMPID = 1
 FORCE_MAGIC = 21196
 DEFAULT_TAKEOFF_ALT_M = 10.0
+TAKEOFF_MODE_EARLY_M = 2.0  # ArduPlane's TAKEOFF mode is done this far below TKOFF_ALT [m]
 _MAV_TYPE = {"multirotor": mavlink.MAV_TYPE_QUADROTOR, "fixed_wing": mavlink.MAV_TYPE_FIXED_WING}
 _CAPABILITIES = (
     mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
@@ -499,8 +500,11 @@ class MockVehicle:
         return ""
 
     def _takeoff_mode_alt_m(self) -> float:
+        """Where TAKEOFF mode levels off: ArduPlane's ModeTakeoff::update ends the climb within 2 m
+        of TKOFF_ALT and turns into its loiter (docs/real-autopilots.md, ArduPlane table)."""
         name = self.flight.takeoff_param
-        return self.params.get(name, DEFAULT_TAKEOFF_ALT_M) if name else DEFAULT_TAKEOFF_ALT_M
+        alt = self.params.get(name, DEFAULT_TAKEOFF_ALT_M) if name else DEFAULT_TAKEOFF_ALT_M
+        return alt - TAKEOFF_MODE_EARLY_M
 
     def _cmd_set_mode(self, p1: float, p2: float, p3: float, *_: float) -> CommandResult:
         custom = px4_custom_mode(int(p2), int(p3)) if self.profile.name == "px4" else int(p2)

@@ -37,11 +37,15 @@ async def take_off(
     arm_timeout_s: float,
     time_scale: float = 1.0,
     waiting=None,
+    climb_past_m: float = 0.0,
 ) -> None:
-    """Arm (once the vehicle is ready) and climb to ``alt_m`` above home, as the autopilot takes it."""
+    """Arm (once the vehicle is ready) and climb to ``alt_m`` above home, as the autopilot takes it.
+    ``climb_past_m``: a TAKEOFF-mode plane is given that much more, so that it is still climbing
+    straight when it passes ``alt_m`` (ArduPlane ends TAKEOFF 2 m below TKOFF_ALT and turns into a
+    loiter: a route started then begins off its line)."""
     command = CommandClient(link, sysid)
     if quirks.takeoff is Takeoff.TAKEOFF_MODE:
-        value = await set_param(link, sysid, TAKEOFF_ALT_PARAM, alt_m)
+        value = await set_param(link, sysid, TAKEOFF_ALT_PARAM, alt_m + climb_past_m)
         log.info("vehicle %d: %s set to %.1f m for the take-off", sysid, TAKEOFF_ALT_PARAM, value)
     if quirks.arm_mode is not None:
         await command.set_mode(quirks.arm_mode)
