@@ -23,8 +23,8 @@ import numpy as np
 from gcs_planner.conformance import Track
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin, geodetic_to_enu
-from gcs_planner.mavlink.actions import change_speed, start_mission_at, take_off
-from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_for
+from gcs_planner.mavlink.actions import TAKEOFF_MODE_LEVEL_OFF_M, change_speed, start_mission_at, take_off
+from gcs_planner.mavlink.autopilots import AutopilotQuirks, Takeoff, quirks_for
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
@@ -170,8 +170,13 @@ async def take_off_all(
     gate = asyncio.Semaphore(workers)
     targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
 
+    tolerance = {  # ArduPlane's TAKEOFF mode levels off TAKEOFF_MODE_LEVEL_OFF_M below its target
+        s: TAKEOFF_ALT_TOL_M + (TAKEOFF_MODE_LEVEL_OFF_M if q.takeoff is Takeoff.TAKEOFF_MODE else 0.0)
+        for s, q in quirks.items()
+    }
+
     def late() -> list[int]:
-        return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - TAKEOFF_ALT_TOL_M]
+        return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - tolerance[s]]
 
     async def climb_into_route(vp) -> None:
         while vp.sysid in late():

@@ -73,11 +73,14 @@ def format_homes(found: list[Start], sysids: frozenset[int] | None) -> str:
     return "\n".join(rows)
 
 
-def check_starts(found: list[Start], positions: dict[int, tuple[float, float]], hint: str) -> None:
+def check_starts(
+    found: list[Start], positions: dict[int, tuple[float, float]], hint: str, min_bound_m: float = 0.0
+) -> None:
     """Refuse (UserError, one line per vehicle) a vehicle whose reported position (lat, lon [deg]) is
     further than its bound from its start, or that reported none: its take-off would not end where
     its mission begins (a SITL started without ``--home`` is at its default home, another
-    continent; four mocks on one spot would collide). hint: how to start it."""
+    continent; four mocks on one spot would collide). hint: how to start it. ``min_bound_m``: a
+    looser bound for every vehicle."""
     problems = []
     for s in found:
         if s.sysid not in positions:
@@ -85,10 +88,11 @@ def check_starts(found: list[Start], positions: dict[int, tuple[float, float]], 
             continue
         east, north, _ = geodetic_to_enu(*positions[s.sysid], s.home.alt_m, s.home)
         off = math.hypot(east, north)
-        if not off <= s.bound_m:
+        bound = max(s.bound_m, min_bound_m)
+        if not off <= bound:
             problems.append(
                 f"sysid {s.sysid} ({s.vehicle_id}) is {_distance(off)} from its start "
-                f"{s.home.lat_deg:.7f},{s.home.lon_deg:.7f} (bound {s.bound_m:.0f} m)"
+                f"{s.home.lat_deg:.7f},{s.home.lon_deg:.7f} (bound {bound:.0f} m)"
             )
     if problems:
         raise UserError("\n".join([*problems[:-1], f"{problems[-1]} ({hint})"]))

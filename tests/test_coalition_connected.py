@@ -22,7 +22,7 @@ from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.plan import VehiclePlan
 from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.scenario import load_scenario
-from gcs_planner.starts import CLIMB_RUN_PER_M, MAX_START_OFFSET_M, check_starts, starts
+from gcs_planner.starts import CLIMB_RUN_PER_M, check_starts, starts
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
@@ -135,11 +135,14 @@ def test_a_connected_plane_that_cannot_fly_the_run_is_refused_before_anything_is
 
 def test_a_start_within_the_bound_passes_and_one_beyond_it_is_named():
     (start,) = starts([_plan()], Origin(31.5, 105.0, 500.0))
-    near = enu_to_geodetic(0.0, -0.9 * MAX_START_OFFSET_M, 0.0, start.home)[:2]
-    far = enu_to_geodetic(0.0, -1.1 * MAX_START_OFFSET_M, 0.0, start.home)[:2]
+    near = enu_to_geodetic(0.0, -0.9 * start.bound_m, 0.0, start.home)[:2]
+    far = enu_to_geodetic(0.0, -1.1 * start.bound_m, 0.0, start.home)[:2]
     check_starts([start], {1: near, 2: far}, "hint")  # sysid 2 has no start: not checked
-    with pytest.raises(UserError, match=r"sysid 1 \(V1\) is 1.1 km from its start .* \(hint\)"):
+    with pytest.raises(UserError, match=rf"sysid 1 \(V1\) is {1.1 * start.bound_m:.1f} m from its start .*"
+                       rf"\(bound {start.bound_m:.0f} m\) \(hint\)"):  # fmt: skip
         check_starts([start], {1: far}, "hint")
+    with pytest.raises(UserError, match=r"sysid 1 \(V1\) reports no position"):
+        check_starts([start], {}, "hint")
 
 
 def _plan() -> VehiclePlan:

@@ -93,6 +93,9 @@ __all__ = [
 ]  # fmt: skip
 
 NAV_WAYPOINT = 16
+# a connected plane joins the online run from where it is (its first leg is planned live from its
+# pose): its start is only checked for a SITL left at its default home, another continent [m]
+COALITION_START_M = 1000.0
 START_AHEAD_S = 1.0  # an uploaded mission starts at its first waypoint at least this far ahead [s]
 PASSED_WITHIN_M = 150.0  # a due waypoint behind the plane and this close was just flown past [m]
 PREFIX_DT_S = 2.0  # waypoint spacing on the predicted turn before a live leg [s]
@@ -449,7 +452,7 @@ class _HilRun:
         name = self.scenario.path.name if self.scenario.path else "SCENARIO"
         hint = f"start it there: fly-coalition {name} --connect ... --homes prints each --home"
         fixed = [s for s in starts(self.initial.vehicles, self.scenario.origin) if s.sysid in where]
-        check_starts(fixed, where, hint)
+        check_starts(fixed, where, hint, COALITION_START_M)
 
     async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
         """Until the window ends: log the simulation's events as they come due, queue the awards

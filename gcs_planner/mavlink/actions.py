@@ -20,12 +20,15 @@ from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.preflight import arm_when_ready, set_param
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
-__all__ = ["ON_GROUND_M", "change_speed", "safe_end", "start_mission_at", "take_off"]
+__all__ = [
+    "ON_GROUND_M", "TAKEOFF_MODE_LEVEL_OFF_M", "change_speed", "safe_end", "start_mission_at", "take_off",
+]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
 ON_GROUND_M = 1.0  # a vehicle this close to its home altitude counts as on the ground [m]
 TAKEOFF_ALT_PARAM = "TKOFF_ALT"  # ArduPlane: TAKEOFF mode's target altitude above home [m]
+TAKEOFF_MODE_LEVEL_OFF_M = 2.0  # ArduPlane's TAKEOFF mode is done this far below TKOFF_ALT [m]
 
 
 async def take_off(
