@@ -629,3 +629,43 @@ def test_partial_write_input_is_checked():
         UploadTransfer(1, [], partial=True)
     with pytest.raises(errors.MissionInputError, match="item 1: seq is 7, expected 4"):
         UploadTransfer(1, [mission(5)[3], mission(8)[7]], partial=True)
+
+
+def _from_vehicle(msg: mavlink.MAVLink_message) -> mavlink.MAVLink_message:
+    msg._header = mavlink.MAVLink_header(msg.id, srcSystem=1, srcComponent=1)
+    return msg
+
+
+def _request(seq: int) -> mavlink.MAVLink_message:
+    return _from_vehicle(mavlink.MAVLink_mission_request_int_message(255, 190, seq, 0))
+
+
+@pytest.mark.parametrize("window", [1, 2, 4])
+@pytest.mark.parametrize("asked", [[0, 1, 2, 28], [0, 1, 2, 27, 28], [0, 5, 28], [0, 28]])
+def test_accepted_after_skipped_items_is_a_protocol_error_naming_them(window, asked):
+    """A vehicle that jumps over items it was never sent cannot hold them: ACCEPTED is no success."""
+    up = UploadTransfer(1, mission(29), timing=Timing(window=window, push_ahead=False))
+    up.start(0.0)
+    t = 0.0
+    for seq in asked:
+        t += 0.5
+        up.on_message(_request(seq), t)
+    ack = _from_vehicle(mavlink.MAVLink_mission_ack_message(255, 190, MissionResult.ACCEPTED, 0))
+    up.on_message(ack, t + 0.5)
+    assert up.done and isinstance(up.outcome.error, errors.MissionProtocolError)
+    text = str(up.outcome.error)
+    assert "mix" in text and "\n" not in text
+    sent = {k for s in asked for k in range(s, min(s + window, 29))}
+    missing = sorted(set(range(29)) - sent)
+    assert f"without items {missing[0]}" in text and f"{missing[-1]} (never" in text
+
+
+def test_lost_request_for_an_item_in_flight_still_succeeds():
+    """With two items in flight a lost request skips an item that was sent: that upload is complete."""
+    up = UploadTransfer(1, mission(4), timing=Timing(window=2, push_ahead=False))
+    up.start(0.0)
+    for t, seq in [(0.1, 0), (0.2, 2), (0.3, 3)]:  # the request for 1 was lost, item 1 went with 0
+        up.on_message(_request(seq), t)
+    ack = _from_vehicle(mavlink.MAVLink_mission_ack_message(255, 190, MissionResult.ACCEPTED, 0))
+    up.on_message(ack, 0.4)
+    assert up.done and up.outcome.error is None

@@ -412,3 +412,45 @@ def test_udpin_link_serves_a_vehicle_that_connects_to_the_gcs():
         await link.close()
 
     run(main())
+
+
+def test_vehicle_that_skips_items_then_accepts_is_a_protocol_error_over_udp():
+    """Over a real socket: requests 0-2, then only the last item, then ACCEPTED is no success."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    async def main():
+        link = await MavlinkLink.open("udpin:127.0.0.1:0")
+        loop = asyncio.get_running_loop()
+        mav, parser = mavlink.MAVLink(None, srcSystem=7, srcComponent=1), mavlink.MAVLink(None)
+        seen: set[int] = set()
+
+        class Skipper(asyncio.DatagramProtocol):
+            def connection_made(self, transport):
+                self.transport = transport
+
+            def send(self, msg):
+                self.transport.sendto(msg.pack(mav))
+
+            def datagram_received(self, data, addr):
+                for msg in parser.parse_buffer(data) or []:
+                    kind = msg.get_type()
+                    if kind == "MISSION_COUNT" and not seen:
+                        self.send(mavlink.MAVLink_mission_request_int_message(255, 190, 0, 0))
+                    elif kind == "MISSION_ITEM_INT" and msg.seq not in seen:
+                        seen.add(msg.seq)
+                        if msg.seq < 2:
+                            self.send(mavlink.MAVLink_mission_request_int_message(255, 190, msg.seq + 1, 0))
+                        elif msg.seq == 2:
+                            self.send(mavlink.MAVLink_mission_request_int_message(255, 190, 28, 0))
+                        elif msg.seq == 28:
+                            self.send(mavlink.MAVLink_mission_ack_message(255, 190, 0, 0))
+
+        transport, _ = await loop.create_datagram_endpoint(Skipper, remote_addr=link.local_address)
+        transport.sendto(mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 4, 3).pack(mav))
+        await link.wait_for(lambda m: m.get_srcSystem() == 7, 2)
+        with pytest.raises(errors.MissionProtocolError, match=r"without items \d+-27 .*mix"):
+            await MissionClient(link, 7, timing=FAST).upload(mission(29))
+        transport.close()
+        await link.close()
+
+    run(main())

@@ -39,7 +39,9 @@ Choices (where the spec leaves room):
   ``Timing(push_ahead=False)`` turns it off.
 - MISSION_ACK(INVALID_SEQUENCE) mid-upload is ignored: ArduPilot sends it for an out-of-order item
   and then re-requests the expected one (QGC PR #6718). Success only on MISSION_ACK(ACCEPTED) after
-  the last item was sent; an ACCEPTED before that is stale and ignored.
+  the last item was sent; an ACCEPTED before that is stale and ignored. An ACCEPTED while some item
+  was never sent, or was jumped over before we sent it, is a MissionProtocolError naming those seqs
+  (the vehicle cannot hold them: it may hold a mix of old and new items).
 - After the final-item retries the outcome is a timeout with ``ack_lost=True``: the vehicle may hold
   the new mission (ArduPilot never repeats a final ACK). mission.py then verifies by download.
 - Overall deadline (issue 14): an upload ends after DEADLINE_BASE_S + DEADLINE_PER_ITEM_S x items
@@ -346,6 +348,7 @@ class UploadTransfer(Transfer):
         self._highest_sent = -1  # indexes into items from here on
         self._requested = -1  # the highest item the vehicle asked for
         self._pushes = 0  # push-ahead rounds since the last request
+        self._skipped: set[int] = set()  # items the vehicle went past before we ever sent them
 
     @property
     def never_requested(self) -> bool:
@@ -420,6 +423,10 @@ class UploadTransfer(Transfer):
         self._pushes = 0
         if i > self._requested and i > 0 and not math.isnan(self._sent_at[i - 1]):
             self._rtt_sample(now_s - self._sent_at[i - 1])  # the first ask for i answers item i - 1
+        # a request may skip items only where a lost request's item was already in flight: one never
+        # sent cannot be stored, so the vehicle jumped past it (unless it comes back for it)
+        self._skipped.update(k for k in range(self._requested + 1, i) if math.isnan(self._sent_at[k]))
+        self._skipped.discard(i)
         self._requested = max(self._requested, i)
         window = range(i, min(i + self.timing.window, len(self.items)))
         if now_s - self._sent_at[i] < max(self.timing.duplicate_window_s, 2 * self._srtt_s):
@@ -461,6 +468,18 @@ class UploadTransfer(Transfer):
         result = msg.type
         if result == MissionResult.ACCEPTED:
             if self.phase is Phase.FINAL_ACK or (not self.items and self.phase is Phase.COUNT):
+                missing = self._missing()
+                if missing:
+                    self._finish(
+                        MissionProtocolError(
+                            f"vehicle {self.sysid} ACKed the {mission_type_name(self.mission_type)} upload"
+                            f" ACCEPTED without items {_seq_ranges([k + self.first for k in missing])}"
+                            f" (never requested or never sent): it may hold a mix of old and new items",
+                            sysid=self.sysid,
+                            mission_type=self.mission_type,
+                        )
+                    )
+                    return []
                 self._finish(None, opaque_id=getattr(msg, "opaque_id", 0))
             return []  # stale ACCEPTED (e.g. a re-ack of an earlier upload)
         if result == MissionResult.INVALID_SEQUENCE:  # before our first item it is not about ours
@@ -481,6 +500,11 @@ class UploadTransfer(Transfer):
             # same ids with ERROR and keeps receiving): end it
             return [self._ack(MissionResult.OPERATION_CANCELLED)]
         return []
+
+    def _missing(self) -> list[int]:
+        """Items the vehicle cannot hold: skipped before we sent them, or never sent at all."""
+        never = (k for k, t in enumerate(self._sent_at) if math.isnan(t))
+        return sorted(self._skipped.union(never))
 
     def _timeout(self, now_s: float) -> list[mavlink.MAVLink_message]:
         if now_s >= self._give_up_s:
@@ -527,6 +551,18 @@ class UploadTransfer(Transfer):
 
     def _item(self, i: int) -> mavlink.MAVLink_message:
         return mavlink.MAVLink_mission_item_int_message(self.sysid, self.compid, *self.items[i].fields())
+
+
+def _seq_ranges(seqs: list[int], limit: int = 8) -> str:
+    """Sorted seqs as "3-28, 30" (at most ``limit`` runs, then a count), to keep an error one short line."""
+    runs: list[list[int]] = []
+    for s in seqs:
+        if runs and s == runs[-1][1] + 1:
+            runs[-1][1] = s
+        else:
+            runs.append([s, s])
+    text = ", ".join(f"{a}-{b}" if b > a else str(a) for a, b in runs[:limit])
+    return text + (f" and {len(runs) - limit} more runs" if len(runs) > limit else "")
 
 
 class DownloadTransfer(Transfer):
