@@ -27,9 +27,9 @@ if TYPE_CHECKING:  # gcs_planner.geo imports numpy and pyproj: only the readers 
 
 __all__ = [
     "FLOAT32_MAX", "MAX_ALT_M", "MAX_DURATION_S", "MAX_RADIUS_M", "MAX_RANGE_M", "MAX_SPEED_MPS",
-    "MAX_WAYPOINTS", "MIN_ALT_M", "InputError", "atomic_write", "integer", "items_of", "load_json",
-    "load_toml", "name", "number", "number_flag", "output_dir", "output_file", "read_text", "table", "unique",
-    "write_text_atomic",
+    "MAX_WAYPOINTS", "MIN_ALT_M", "InputError", "atomic_write", "file_stem", "integer", "items_of",
+    "load_json", "load_toml", "name", "not_an_input", "number", "number_flag", "output_dir", "output_file",
+    "read_text", "same_file", "table", "unique", "write_text_atomic",
 ]  # fmt: skip
 
 FLOAT32_MAX = 3.4028234663852886e38  # MAVLink float fields (z, param1..4)
@@ -185,9 +185,11 @@ def load_toml(text: str, what: str) -> dict[str, Any]:
         raise InputError(f"{what}: nested too deeply") from None
 
 
-def output_file(path: str | Path, flag: str) -> Path:
-    """An output file path whose folder exists and which is not itself a folder."""
+def output_file(path: str | Path, flag: str, inputs: Iterable[str | Path | None] = ()) -> Path:
+    """An output file path whose folder exists, which is not itself a folder and not one of
+    ``inputs`` (writing it would destroy what is being read)."""
     path = Path(path)
+    not_an_input(path, inputs, flag)
     if path.is_dir():
         raise InputError(f"{flag} {str(path)!r} is a folder; give a file name")
     parent = path.parent
@@ -195,6 +197,29 @@ def output_file(path: str | Path, flag: str) -> Path:
         state = "is a file" if parent.exists() else "does not exist"
         raise InputError(f"{flag} {str(path)!r}: folder {str(parent)!r} {state}")
     return path
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """True when ``a`` and ``b`` name one file (symlinks, hard links, ``./x`` and ``x`` alike)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one does not exist (yet): compare the resolved names
+        return Path(a).resolve() == Path(b).resolve()
+
+
+def not_an_input(path: str | Path, inputs: Iterable[str | Path | None], flag: str) -> None:
+    """InputError when the output ``path`` is one of the ``inputs`` (None entries are skipped)."""
+    for source in inputs:
+        if source is not None and same_file(path, source):
+            raise InputError(f"{flag} {_short(str(path))} is an input of this command; write elsewhere")
+
+
+def file_stem(value: str, field: str) -> str:
+    """``value`` as a file name inside an output folder: no folder parts, not hidden, not empty."""
+    bad = not value or value in (".", "..") or value.startswith(".") or any(c in value for c in "/\\\0:")
+    if bad or not value.isprintable():
+        raise InputError(f"{field} {_short(value)} cannot be a file name (no /, \\, :, leading dot)")
+    return value
 
 
 def output_dir(path: str | Path, flag: str) -> Path:
@@ -219,8 +244,13 @@ def atomic_write(path: str | Path) -> Iterator[Path]:
         fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
     except OSError as exc:
         raise UserError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
-    os.close(fd)
     tmp = Path(tmp_name)
+    try:
+        os.fchmod(fd, _new_file_mode(path))  # mkstemp makes 0600: give what open() would
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -228,6 +258,17 @@ def atomic_write(path: str | Path) -> Iterator[Path]:
         raise UserError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _new_file_mode(path: Path) -> int:
+    """The mode open() would leave: an existing file's own, else 0666 less the umask."""
+    try:
+        return path.stat().st_mode & 0o7777
+    except OSError:
+        pass
+    mask = os.umask(0o022)  # reading the umask means setting it: put it straight back
+    os.umask(mask)
+    return 0o666 & ~mask
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:

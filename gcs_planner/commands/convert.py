@@ -16,6 +16,7 @@ from gcs_planner.commands._mission_cli import MISSION_TYPES, print_losses
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.files import load_mission_file, save_mission_file
 from gcs_planner.mavlink.types import MissionType
+from gcs_planner.validation import output_file
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,6 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    output_file(args.output, "OUTPUT", [args.input])
     mf = load_mission_file(args.input)
     if args.list:
         if Path(args.output).suffix.lower() == ".plan":

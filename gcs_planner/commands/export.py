@@ -14,7 +14,7 @@ from gcs_planner.errors import UserError
 from gcs_planner.mavlink.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
 from gcs_planner.mavlink.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
 from gcs_planner.planning import load_scenario
-from gcs_planner.validation import atomic_write, output_dir, unique
+from gcs_planner.validation import atomic_write, file_stem, not_an_input, output_dir, unique
 
 SUFFIX = {"qgc": ".plan", "wpl": ".waypoints"}
 
@@ -44,8 +44,11 @@ def run(args: argparse.Namespace) -> int:
     for vp in vehicles:
         mf = plan_mission_file(vp, plan.origin, args.autopilot)
         mf.fence, mf.rally = fence, rally
-        files.append((vp, mf, out_dir / f"{vp.vehicle_id}{SUFFIX[args.format]}"))
+        stem = file_stem(vp.vehicle_id, "vehicle id")  # ../../x or /abs/x must not leave -o
+        files.append((vp, mf, out_dir / f"{stem}{SUFFIX[args.format]}"))
     unique([path.name for _, _, path in files], "output file")
+    for _, _, path in files:
+        not_an_input(path, [args.plan, args.scenario], "output file")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

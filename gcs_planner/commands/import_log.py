@@ -18,7 +18,7 @@ from gcs_planner.geo import Origin
 from gcs_planner.mavlink.files import load_plan_json
 from gcs_planner.planning import load_scenario
 from gcs_planner.telemetry.log_import import import_log
-from gcs_planner.validation import MAX_ALT_M, MIN_ALT_M, InputError, number, output_file, read_text
+from gcs_planner.validation import MAX_ALT_M, MIN_ALT_M, number, output_file, read_text
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -30,9 +30,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    output = output_file(args.output or Path(args.log).with_suffix(".mcap"), "-o")
-    if output.resolve() == Path(args.log).resolve():
-        raise InputError(f"-o {str(output)!r} is the log itself")
+    inputs = [args.log, args.plan, args.scenario]
+    output = output_file(args.output or Path(args.log).with_suffix(".mcap"), "-o", inputs)
     plan = load_plan_json(args.plan) if args.plan else None
     scenario_text = None
     if args.scenario:  # attached as it is, but it must be a scenario

@@ -27,9 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    output_file(args.output, "-o")
+    output_file(args.output, "-o", [args.scenario])
     if args.convergence:
-        output_file(args.convergence, "--convergence")
+        output_file(args.convergence, "--convergence", [args.scenario, args.output])
     scenario = load_scenario(args.scenario)
     plan = plan_with_progress(scenario, args.seed)
     plan.save(args.output)

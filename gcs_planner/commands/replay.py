@@ -44,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     if args.to:
         parse_udp_url(args.to)
     if args.rrd:
-        output_file(args.rrd, "--rrd")
+        output_file(args.rrd, "--rrd", [args.flight])
     _check_mcap(args.flight)
     flight = read_flight(args.flight)
     if not flight.frames:

@@ -10,7 +10,7 @@ from gcs_planner.errors import UserError
 from gcs_planner.progress import counting_bar
 from gcs_planner.sweep import load_study, run_study, summarise
 from gcs_planner.sweep_plots import write_plots
-from gcs_planner.validation import output_file
+from gcs_planner.validation import not_an_input, output_file
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--workers must be >= 1, got {args.workers}")
     study, base = load_study(args.study)
     if args.out:
-        out = output_file(args.out, "-o")
+        out = output_file(args.out, "-o", [args.study])
     else:
         out = Path("out") / f"{args.study.stem}.csv"
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -33,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
         ran = run_study(study, base, out, args.workers, args.scheduler, progress)
     summary = summarise(study, out)
     summary_path = out.with_name(out.stem + "_summary.csv")
+    for extra in (summary_path, out.with_name(out.stem + "_plots.png")):
+        not_an_input(extra, [args.study], "-o")
     with summary_path.open("w", newline="") as f:
         writer = csv.DictWriter(f, list(summary[0]) if summary else ["runs"])
         writer.writeheader()
