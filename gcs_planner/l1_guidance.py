@@ -16,9 +16,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from gcs_planner.plan import VehiclePlan
+
 __all__ = [
     "ARDUPLANE_SITL", "L1_DAMPING", "L1Response", "TurnGain", "l1_turn_rate", "predict_flight",
-    "shape_waypoints",
+    "shape_for_l1", "shape_waypoints",
 ]  # fmt: skip
 
 L1_DAMPING = 0.75  # NAVL1_DAMPING default (AP_L1_Control.cpp var_info)
@@ -34,6 +36,7 @@ GAIN_MIN_BANK_RAD = math.radians(5.0)  # turn samples below this bank say little
 GAIN_MEMORY = 0.995  # weight left on the older turn samples at each new one (~20 s at 10 Hz)
 GAIN_MIN_WEIGHT = 0.5  # sum of squared coordinated rates [(rad/s)^2] (~3 s turning at 10 deg/s) to tell
 GAIN_RANGE = (0.3, 1.5)  # a gain told is clipped to this
+SHAPE_AFTER_S = 8.0  # an L1 plane's waypoints this soon after its mission starts stay on the path [s]
 
 
 @dataclass(frozen=True)
@@ -279,3 +282,26 @@ def _score(err: np.ndarray, flown_s: np.ndarray, path_s: np.ndarray) -> float:
     if np.any(np.diff(flown_s[ok]) > LOOP_FACTOR * np.diff(path_s[ok]) + LOOP_SLACK_M):
         return math.inf
     return float(np.sqrt(np.mean(err[ok] ** 2)))
+
+
+def shape_for_l1(vp: VehiclePlan, response: L1Response, max_bank_rad: float, from_s: float) -> VehiclePlan:
+    """The mission with its waypoints after route time from_s (where the vehicle starts flying
+    it) moved so that a plane flying ArduPlane's L1 guidance as ``response`` says, on the path
+    at from_s, follows the path from there (``l1_guidance.shape_waypoints``): such a plane flies
+    a turn wide and is still converging on the line after it, where a leg's goal pose lies.
+    The waypoints before from_s + SHAPE_AFTER_S (and the first two after from_s) stay on the
+    path: the plane starts the mission towards one of them, later when the upload is slow, on a
+    line from its last mission's waypoint (``Plane::set_next_WP``), which the prediction does
+    not know; started towards a waypoint off its track it can circle it for good."""
+    path = vp.path[:, :2]
+    k = int(np.searchsorted(vp.path_times_s, from_s).clip(1, len(path) - 1))
+    pose = (*path[k - 1], math.atan2(*(path[k] - path[k - 1])[::-1]))
+    after = np.nonzero(vp.times_s > vp.path_times_s[k - 1])[0]
+    waypoints = vp.waypoints.copy()
+    if len(after):
+        keep = max(int(np.count_nonzero(vp.times_s[after] <= from_s + SHAPE_AFTER_S)), 2)
+        waypoints[after, :2] = shape_waypoints(
+            pose, vp.speeds_mps[after], vp.waypoints[after, :2], path[k - 1 :], response,
+            vp.acceptance_radius_m, max_bank_rad, keep,
+        )  # fmt: skip
+    return replace(vp, waypoints=waypoints)

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from gcs_planner.coalition_hil.live_legs import timed_leg
-from gcs_planner.coalition_hil.missions import SHAPE_AFTER_S, shape_for_l1
 from gcs_planner.l1_guidance import (
     ARDUPLANE_SITL,
     G_MPS2,
+    SHAPE_AFTER_S,
     L1Response,
     TurnGain,
     predict_flight,
+    shape_for_l1,
     shape_waypoints,
 )
 from gcs_planner.plan import VehiclePlan

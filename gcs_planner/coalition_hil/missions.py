@@ -20,14 +20,13 @@ shorter than a loiter lap.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
 from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, SPEED_TRIES
 from gcs_planner.coalition_hil.tracks import continue_turn, drop_spikes, slice_track
-from gcs_planner.l1_guidance import L1Response, shape_waypoints
 from gcs_planner.plan import VehiclePlan
 from gcs_planner.planning.coalition.track import Leg
 
@@ -42,7 +41,6 @@ __all__ = [
     "build_schedules",
     "first_mission",
     "idle_mission",
-    "shape_for_l1",
 ]
 
 AFTER_GOAL_S = 2.0  # simulated track flown after an award leg; the idle upload follows [s]
@@ -54,7 +52,6 @@ MIN_GAP_M = 7.5  # a turn or time waypoint this close to the one before is left 
 ACCEPTANCE_RADIUS_M = 15.0  # a fixed wing also counts a waypoint once past it
 APPROACH_DT_S, APPROACH_POINTS = 0.5, 4  # waypoints on the last 1.5 s before a goal pose (and 1 s after)
 KEEPER_SAMPLE_S = 0.25  # planned-path sampling given to the ScheduleKeeper [s]
-SHAPE_AFTER_S = 8.0  # an L1 plane's waypoints this soon after its mission starts stay on the path [s]
 
 
 @dataclass
@@ -249,25 +246,3 @@ def idle_mission(
     xys = np.vstack([*parts_xy, ext_xy])
     return _piece_plan(uav, ts, xys, t_route0, dt_s, list(prefix_wp_s) + [float(leg.t[0])])
 
-
-def shape_for_l1(vp: VehiclePlan, response: L1Response, max_bank_rad: float, from_s: float) -> VehiclePlan:
-    """The mission with its waypoints after route time from_s (where the vehicle starts flying
-    it) moved so that a plane flying ArduPlane's L1 guidance as ``response`` says, on the path
-    at from_s, follows the path from there (``l1_guidance.shape_waypoints``): such a plane flies
-    a turn wide and is still converging on the line after it, where a leg's goal pose lies.
-    The waypoints before from_s + SHAPE_AFTER_S (and the first two after from_s) stay on the
-    path: the plane starts the mission towards one of them, later when the upload is slow, on a
-    line from its last mission's waypoint (``Plane::set_next_WP``), which the prediction does
-    not know; started towards a waypoint off its track it can circle it for good."""
-    path = vp.path[:, :2]
-    k = int(np.searchsorted(vp.path_times_s, from_s).clip(1, len(path) - 1))
-    pose = (*path[k - 1], math.atan2(*(path[k] - path[k - 1])[::-1]))
-    after = np.nonzero(vp.times_s > vp.path_times_s[k - 1])[0]
-    waypoints = vp.waypoints.copy()
-    if len(after):
-        keep = max(int(np.count_nonzero(vp.times_s[after] <= from_s + SHAPE_AFTER_S)), 2)
-        waypoints[after, :2] = shape_waypoints(
-            pose, vp.speeds_mps[after], vp.waypoints[after, :2], path[k - 1 :], response,
-            vp.acceptance_radius_m, max_bank_rad, keep,
-        )  # fmt: skip
-    return replace(vp, waypoints=waypoints)

@@ -50,7 +50,6 @@ from gcs_planner.coalition_hil.missions import (
     award_mission,
     build_schedules,
     idle_mission,
-    shape_for_l1,
 )
 from gcs_planner.coalition_hil.report import TaskRow, add_prediction_errors, task_rows
 from gcs_planner.errors import UserError
@@ -68,7 +67,7 @@ from gcs_planner.flight_ops import (
 )
 from gcs_planner.fly import HEARTBEAT_WAIT_S, REAL_HEARTBEAT_WAIT_S
 from gcs_planner.geo import Origin
-from gcs_planner.l1_guidance import L1Response
+from gcs_planner.l1_guidance import L1Response, shape_for_l1
 from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet

@@ -53,7 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="URL",
-        help="real vehicles / SITL (udpout:HOST:PORT or udpin:HOST:PORT; repeatable; for a plan over"
+        help="real vehicles / SITL (udpout:HOST:PORT, udpin:HOST:PORT, tcp:HOST:PORT or serial:DEV:BAUD;"
+        " repeatable, any mix; for a plan over"
         " several networks, one per network in order)",
     )
     p.add_argument(
@@ -224,6 +225,11 @@ def run(args: argparse.Namespace) -> int:
     finally:
         for bar in bars.values():
             bar.close()
+    return _report(result)
+
+
+def _report(result) -> int:
+    """Print the flight's outcome; the exit code: 0 PASS, 1 FAIL, 128 + signal when one ended it."""
     print(format_report(result.reports))
     if result.end_states:
         print(f"end: {end_summary(result.end_states)}")
