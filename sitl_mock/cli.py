@@ -1,7 +1,11 @@
-"""`sitl-mock`: run a fleet of mock autopilots on UDP until Ctrl-C.
+"""`sitl-mock`: run a fleet of mock autopilots on UDP or TCP until Ctrl-C.
 
 Vehicle i (system id i) listens on 127.0.0.1:base_port+i-1 (``--host`` to change) and streams to
-whoever sends it a packet first, like ArduPilot SITL's udpin. One log line per vehicle at start.
+whoever sends it a packet first, like ArduPilot SITL's udpin. ``--tcp``: it listens on that TCP
+port instead and serves one GCS connection (ArduPilot SITL's ``tcp:5760``; ``--connect
+tcp:HOST:PORT``). ``--out HOST:PORT``: every vehicle sends from its own ephemeral UDP port to a GCS
+listening at HOST:PORT from the start (PX4 SITL, ArduPilot ``--serial0 udpclient:HOST:PORT``; the
+GCS uses ``--connect udpin:HOST:PORT``). One log line per vehicle at start.
 
 A fleet larger than ``--per-network`` (default 250; a MAVLink network has 254 system ids beside the
 GCS) runs as several networks, one process each on one shared simulated clock: network k holds
@@ -42,11 +46,28 @@ def _home(text: str) -> Origin:
         raise argparse.ArgumentTypeError(f"--home {text!r}: {exc}") from None
 
 
+def _host_port(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) <= 65535:
+        raise argparse.ArgumentTypeError(f"--out {text!r}: expected HOST:PORT")
+    return host, int(port)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sitl-mock", description=__doc__.splitlines()[0])
     p.add_argument("--vehicles", type=int, default=1, help="number of vehicles (system ids 1..N)")
     p.add_argument("--base-port", type=int, default=14550, help="UDP port of vehicle 1 (0: ephemeral ports)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (0.0.0.0 for other machines)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--tcp", action="store_true", help="listen on TCP ports instead of UDP (SITL's tcp:5760)"
+    )
+    where.add_argument(
+        "--out",
+        type=_host_port,
+        metavar="HOST:PORT",
+        help="send to a GCS listening at HOST:PORT from ephemeral UDP ports (PX4 SITL, ArduPilot udpclient)",
+    )
     p.add_argument("--profile", choices=sorted(PROFILES), default="ardupilot")
     p.add_argument("--type", dest="vehicle_type", choices=sorted(AIRFRAMES), default="multirotor")
     p.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second")
@@ -86,8 +107,11 @@ def main(argv: list[str] | None = None) -> int:
             speedup=args.speedup, home=args.home, profile=args.profile, vehicle_type=args.vehicle_type,
             host=args.host, faults=faults, rate_hz=args.rate,
             signing_key=key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None,
+            transport="tcp" if args.tcp else "udpclient" if args.out else "udpin", gcs=args.out,
         )  # fmt: skip
         if args.vehicles > args.per_network:
+            if args.tcp or args.out:
+                raise ValueError("a fleet over several networks runs on UDP ports: no --tcp or --out")
             return _serve_networks(args, options)
         fleet = MockFleet(count=args.vehicles, base_port=args.base_port, **options)
     except ValueError as exc:
@@ -137,9 +161,11 @@ async def _serve(fleet: MockFleet, args: argparse.Namespace) -> None:
     try:
         for v in fleet.vehicles:
             host, port = v.address
+            where = {"tcp": "tcp", "udpin": "udp"}.get(v.transport, "udp")
+            to = f" -> {v.gcs[0]}:{v.gcs[1]}" if v.transport == "udpclient" else ""
             log.info(
-                "sysid %d: udp %s:%d %s %s home %.7f,%.7f,%.1f",
-                v.sysid, host, port, args.profile, args.vehicle_type,
+                "sysid %d: %s %s:%d%s %s %s home %.7f,%.7f,%.1f",
+                v.sysid, where, host, port, to, args.profile, args.vehicle_type,
                 v.home.lat_deg, v.home.lon_deg, v.home.alt_m,
             )  # fmt: skip
         log.info("%d vehicles, speed-up %g; Ctrl-C to stop", len(fleet.vehicles), fleet.speedup)

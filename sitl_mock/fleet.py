@@ -62,7 +62,14 @@ class VehicleSnapshot:
 
 
 class MockFleet:
-    """Vehicles with system ids 1..count (or as given), each on its own UDP port."""
+    """Vehicles with system ids 1..count (or as given), each on its own UDP port.
+
+    Each vehicle's transport (sitl_mock/link.py) is ``transport`` / ``gcs`` for the whole fleet or
+    its spec's own keys: ``{"sysid": 3, "profile": "px4", "transport": "tcp", "port": 5760}`` listens
+    on TCP 5760 (ArduPilot SITL's default); ``{"transport": "udpclient", "gcs": ("127.0.0.1", 14550)}``
+    sends from an ephemeral port to a GCS listening there (PX4 SITL, ArduPilot ``udpclient``), so
+    several vehicles share one GCS port; the default ``"udpin"`` binds ``port`` and answers whoever
+    sent first. A spec's other keys are MockVehicle's arguments."""
 
     def __init__(
         self,
@@ -84,6 +91,8 @@ class MockFleet:
         signing_key: bytes | None = None,
         flight: dict | None = None,
         clock_zero_s: float | None = None,
+        transport: str = "udpin",
+        gcs: tuple[str, int] | None = None,
     ) -> None:
         """``flight``: FlightRules fields to override for every vehicle (e.g. ``{"arm_ready_s": 0}`` in
         a test about something else); the profile's real behaviour is the default. ``clock_zero_s``:
@@ -111,7 +120,7 @@ class MockFleet:
             port = base_port + k if base_port else 0
             kwargs = {"sysid": k + 1, "profile": profile, "vehicle_type": vehicle_type, "home": home,
                       "port": port, "faults": faults, "host": host, "signing_key": signing_key,
-                      "flight": flight, **spec}  # fmt: skip
+                      "flight": flight, "transport": transport, "gcs": gcs, **spec}  # fmt: skip
             self.vehicles.append(MockVehicle(**kwargs))
         sysids = [v.sysid for v in self.vehicles]
         if len(set(sysids)) != len(sysids):
@@ -146,7 +155,7 @@ class MockFleet:
                 await v.start()
         except OSError as exc:
             self._close_links()
-            raise OSError(f"MockFleet: cannot bind vehicle UDP port: {exc}") from exc
+            raise OSError(f"MockFleet: cannot bind vehicle port: {exc}") from exc
         self._task = asyncio.create_task(self._run(), name="sitl-mock-fleet")
 
     async def stop(self) -> None:

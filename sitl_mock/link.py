@@ -1,8 +1,18 @@
-"""One vehicle's UDP endpoint: pymavlink v2 codec, GCS peers learnt from traffic, link faults.
+"""One vehicle's MAVLink endpoint: pymavlink v2 codec, GCS peers, link faults.
 
-Behaves like ArduPilot's ``udpin``: the vehicle binds its own port and sends to every address it
-has heard from (up to ``MAX_PEERS``, oldest forgotten first), so a GCS must send first (its
-heartbeat). Frames are MAVLink 2 with srcSystem = the vehicle's system id, srcComponent = 1.
+Three transports (``TRANSPORTS``), each what a real autopilot offers:
+- ``udpin`` (default): like ArduPilot's ``udpin`` (SITL ``--serial0 udp:...``/MAVProxy's
+  ``udpout`` to it): the vehicle binds its own port and sends to every address it has heard from
+  (up to ``MAX_PEERS``, oldest forgotten first), so a GCS must send first (its heartbeat).
+- ``udpclient``: the vehicle binds an ephemeral port and sends to one GCS address from the start,
+  and hears only that address (a connected socket), as ArduPilot's ``--serial0
+  udpclient:127.0.0.1:14550`` and PX4 SITL (which streams to the GCS port 14550 unasked): several
+  vehicles can share one GCS ``udpin`` port. Its GCS stays a peer across reboots.
+- ``tcp``: the vehicle listens on a TCP port and serves one GCS connection at a time (ArduPilot
+  SITL's default ``tcp:5760`` on SERIAL0; a further connection is closed while one is served); a
+  byte stream, framed by gcs_planner/mavlink/framing.py's StreamFramer. Link faults act on whole
+  frames out and on the received chunks in (meant for UDP).
+Frames are MAVLink 2 with srcSystem = the vehicle's system id, srcComponent = 1.
 Outgoing and incoming datagrams each pass through their own `FaultyChannel`; a datagram lost
 on the way in teaches the vehicle nothing (not even the peer's address).
 
@@ -30,16 +40,17 @@ from collections.abc import Callable
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.mavlink.framing import frames  # noqa: E402
+from gcs_planner.mavlink.framing import StreamFramer, frames  # noqa: E402
 from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 from sitl_mock.faults import FaultyChannel, LinkFaults  # noqa: E402
 
-__all__ = ["MAX_PEERS", "VehicleLink"]
+__all__ = ["MAX_PEERS", "TRANSPORTS", "VehicleLink"]
 
 log = logging.getLogger(__name__)
 
 MAX_PEERS = 8
+TRANSPORTS = ("udpin", "udpclient", "tcp")
 OnMessage = Callable[[mavlink.MAVLink_message, tuple], None]
 
 
@@ -65,20 +76,48 @@ class VehicleLink(asyncio.DatagramProtocol):
         self.peers: list[tuple] = []
         self.out = FaultyChannel(self._sendto, faults, (sysid, 0))
         self.inbound = FaultyChannel(self._receive, faults, (sysid, 1))
-        self.transport: asyncio.DatagramTransport | None = None
+        self.transport: asyncio.DatagramTransport | None = None  # udpin / udpclient socket
         self.sent = 0
+        self.kind = "udpin"
+        self._fixed_peers: list[tuple] = []  # udpclient: the GCS, a peer from the start
+        self._server: asyncio.AbstractServer | None = None  # tcp: the listening socket
+        self._conn: _TcpConnection | None = None  # tcp: the GCS connection served
 
-    async def open(self, host: str, port: int) -> None:
+    async def open(
+        self, host: str, port: int, kind: str = "udpin", gcs: tuple[str, int] | None = None
+    ) -> None:
+        """Bind ``host:port`` (udpin, tcp) or an ephemeral port of ``host`` sending to ``gcs`` (udpclient)."""
+        if kind not in TRANSPORTS:
+            raise ValueError(f"vehicle transport must be one of {TRANSPORTS}, got {kind!r}")
         loop = asyncio.get_running_loop()
-        await loop.create_datagram_endpoint(lambda: self, local_addr=(host, port))
+        self.kind = kind
+        if kind == "tcp":
+            self._server = await loop.create_server(lambda: _TcpConnection(self), host, port)
+        elif kind == "udpclient":
+            if gcs is None:
+                raise ValueError("a udpclient vehicle needs the GCS address it sends to (gcs=(host, port))")
+            await loop.create_datagram_endpoint(lambda: self, local_addr=(host, 0), remote_addr=tuple(gcs))
+            self._fixed_peers = [self.transport.get_extra_info("peername")[:2]]
+            self.peers[:] = self._fixed_peers
+        else:
+            await loop.create_datagram_endpoint(lambda: self, local_addr=(host, port))
 
     def close(self) -> None:
         if self.transport is not None:
             self.transport.close()
             self.transport = None
+        if self._conn is not None:
+            self._conn.transport.close()
+            self._conn = None
+        if self._server is not None:
+            self._server.close()
+            self._server = None
 
     @property
     def address(self) -> tuple[str, int]:
+        """The vehicle's own address: its UDP port (udpclient: the ephemeral one), or its TCP port."""
+        if self._server is not None:
+            return self._server.sockets[0].getsockname()[:2]
         if self.transport is None:
             raise RuntimeError(f"vehicle {self.sysid}: link not open")
         return self.transport.get_extra_info("sockname")[:2]
@@ -99,8 +138,12 @@ class VehicleLink(asyncio.DatagramProtocol):
 
     def forget_peers(self) -> None:
         """Reboot: peers forgotten. The replay table is kept: ArduPilot loses it with RAM but restarts
-        its clock 60 s past the stored timestamp (``load_signing_key``), closing the same window."""
-        self.peers.clear()
+        its clock 60 s past the stored timestamp (``load_signing_key``), closing the same window.
+        A udpclient keeps sending to its GCS; a TCP connection is dropped (the GCS reconnects)."""
+        self.peers[:] = self._fixed_peers
+        if self._conn is not None:
+            self._conn.transport.close()
+            self._conn = None
 
     # --- asyncio protocol ----------------------------------------------------------------------
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
@@ -123,12 +166,20 @@ class VehicleLink(asyncio.DatagramProtocol):
             self.out.send(data, peer)
 
     def _sendto(self, data: bytes, addr: tuple) -> None:
-        if self.transport is not None:
+        if self._conn is not None:
+            if addr == self._conn.peer:
+                self.sent += 1
+                self._conn.transport.write(data)
+        elif self.transport is not None:
             self.sent += 1
-            self.transport.sendto(data, addr)
+            self.transport.sendto(data, None if self._fixed_peers else addr)  # udpclient: connected
 
     def _receive(self, data: bytes, addr: tuple) -> None:
-        found, junk = frames(data)
+        conn = self._conn
+        if conn is not None and addr == conn.peer:
+            found, junk = conn.framer.feed(data)
+        else:
+            found, junk = frames(data)
         self.rejected += junk
         for frame in found:
             msg = self._decode(frame)
@@ -152,8 +203,49 @@ class VehicleLink(asyncio.DatagramProtocol):
             log.debug("vehicle %d: undecodable frame: %s", self.sysid, exc)
             return None
 
+    # --- tcp -------------------------------------------------------------------------------------
+    def _tcp_connected(self, conn: _TcpConnection) -> bool:
+        """Serve ``conn`` unless one is served already (then False: it is closed)."""
+        if self._conn is not None or self._server is None:
+            return False
+        self._conn = conn
+        log.info("vehicle %d: GCS connected over TCP from %s:%d", self.sysid, *conn.peer[:2])
+        self.peers[:] = [conn.peer]  # a TCP server talks to its client at once (ArduPilot SITL)
+        if self._on_new_peer is not None:
+            self._on_new_peer(conn.peer)
+        return True
+
+    def _tcp_lost(self, conn: _TcpConnection) -> None:
+        if self._conn is conn:
+            self._conn = None
+            if conn.peer in self.peers:
+                self.peers.remove(conn.peer)
+
     def _add_peer(self, addr: tuple) -> None:
         if len(self.peers) >= MAX_PEERS:
             self.peers.pop(0)
         self.peers.append(addr)
         log.info("vehicle %d: GCS peer %s:%d", self.sysid, *addr[:2])
+
+
+class _TcpConnection(asyncio.Protocol):
+    """One GCS connection to a tcp vehicle: its bytes go through the vehicle's inbound channel."""
+
+    def __init__(self, link: VehicleLink) -> None:
+        self.link = link
+        self.framer = StreamFramer()
+        self.transport: asyncio.Transport | None = None
+        self.peer: tuple = ()
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        self.transport = transport  # type: ignore[assignment]
+        self.peer = tuple(transport.get_extra_info("peername")[:2])
+        if not self.link._tcp_connected(self):
+            transport.close()
+
+    def data_received(self, data: bytes) -> None:
+        if self.link._conn is self:
+            self.link.inbound.send(data, self.peer)
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self.link._tcp_lost(self)

@@ -171,6 +171,11 @@ class AutopilotProfile:
         collected and written on completion (MissionItemProtocol_Fence::complete). PX4 writes every
         list into the inactive dataman slot and switches on the last item (handle_mission_item_both:
         ``_transfer_dataman_id``, update_active_mission), so a failed upload changes nothing.
+    current_mode_message: streams CURRENT_MODE (id 436, MAVLink development.xml) with its status
+        messages, as PX4 main does (src/modules/mavlink/streams/CURRENT_MODE.hpp, in the default
+        stream set of mavlink_main.cpp): a standard message the pinned pymavlink 2.4.50 ardupilotmega
+        dialect does not know, so a GCS meets a frame it cannot decode (sitl_mock/vehicle.py packs it
+        with the CRC extra 193 of pymavlink's development dialect).
     ArduPilot ignores a GCS's MISSION_ACK during an upload (MissionItemProtocol has no handler for it:
     a session ends by completion, an item error or its 8 s timeout in ``update()``); PX4 ends it on
     MISSION_ACK(OPERATION_CANCELLED) from the partner (handle_mission_ack).
@@ -201,6 +206,7 @@ class AutopilotProfile:
     same_partner_restarts: bool = True
     foreign_item_denied: bool = True
     stores_as_received: frozenset[int] = frozenset()
+    current_mode_message: bool = False
 
     def custom_mode(self, mode: str, vehicle_type: str = "multirotor") -> int:
         """HEARTBEAT custom_mode of a mode name; ValueError naming the mode if it does not exist."""
@@ -261,6 +267,7 @@ PX4 = AutopilotProfile(
     second_uploader_result=MissionResult.ERROR,
     same_partner_restarts=False,
     foreign_item_denied=False,
+    current_mode_message=True,
 )
 
 PROFILES: dict[str, AutopilotProfile] = {p.name: p for p in (ARDUPILOT, PX4)}

@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import struct
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -43,7 +44,7 @@ from gcs_planner.mavlink.wire import MissionCurrentMessage
 from sitl_mock import telemetry
 from sitl_mock.faults import LinkFaults
 from sitl_mock.flight import AIRFRAMES, Airframe
-from sitl_mock.link import VehicleLink, mavlink
+from sitl_mock.link import TRANSPORTS, VehicleLink, mavlink
 from sitl_mock.mission_exec import Navigator
 from sitl_mock.mission_server import MissionServer
 from sitl_mock.profiles import PROFILES
@@ -70,6 +71,32 @@ _CAPABILITIES = (
 )
 
 
+# MAV_STANDARD_MODE (development.xml) of the mock's mode names; the rest are NON_STANDARD (0)
+_STANDARD_MODES = {"POSCTL": 1, "LOITER": 1, "RTL": 5, "AUTO": 6, "LAND": 7, "TAKEOFF": 8}
+
+
+class CurrentModeMessage(mavlink.MAVLink_message):
+    """CURRENT_MODE (id 436, MAVLink development.xml; not in pymavlink 2.4.50's ardupilotmega), as PX4
+    streams it: a message the GCS's dialect does not know. Packed with the CRC extra pymavlink's own
+    development dialect gives it (193: pymavlink.dialects.v20.development.MAVLink_current_mode_message)."""
+
+    id = 436
+    msgname = "CURRENT_MODE"
+    crc_extra = 193
+    fieldnames = ["standard_mode", "custom_mode", "intended_custom_mode"]
+    _PAYLOAD = struct.Struct("<IIB")  # wire order: the uint32 fields first
+
+    def __init__(self, standard_mode: int, custom_mode: int, intended_custom_mode: int) -> None:
+        mavlink.MAVLink_message.__init__(self, self.id, self.msgname)
+        self._fieldnames = self.fieldnames
+        self.standard_mode, self.custom_mode = standard_mode, custom_mode
+        self.intended_custom_mode = intended_custom_mode
+
+    def pack(self, mav: mavlink.MAVLink, force_mavlink1: bool = False) -> bytes:
+        payload = self._PAYLOAD.pack(self.custom_mode, self.intended_custom_mode, self.standard_mode)
+        return self._pack(mav, self.crc_extra, payload, force_mavlink1=force_mavlink1)
+
+
 @dataclass(frozen=True)
 class VehicleState:
     """Snapshot of one vehicle (thread-safe to pass around)."""
@@ -87,7 +114,9 @@ class VehicleState:
     sim_time_s: float
 
 
-def _check_identity(sysid: int, profile: str, vehicle_type: str, port: int) -> None:
+def _check_identity(
+    sysid: int, profile: str, vehicle_type: str, port: int, transport: str = "udpin", gcs: object = None
+) -> None:
     if not (isinstance(sysid, int) and 1 <= sysid <= 254):
         raise ValueError(f"vehicle sysid must be an integer in 1..254, got {sysid!r}")
     if profile not in PROFILES:
@@ -96,10 +125,19 @@ def _check_identity(sysid: int, profile: str, vehicle_type: str, port: int) -> N
         raise ValueError(f"vehicle_type must be one of {sorted(AIRFRAMES)}, got {vehicle_type!r}")
     if not (isinstance(port, int) and 0 <= port <= 65535):
         raise ValueError(f"vehicle port must be in 0..65535, got {port!r}")
+    if transport not in TRANSPORTS:
+        raise ValueError(f"vehicle transport must be one of {list(TRANSPORTS)}, got {transport!r}")
+    if transport == "udpclient":
+        ok = isinstance(gcs, tuple | list) and len(gcs) == 2 and isinstance(gcs[1], int)
+        if not (ok and 0 < gcs[1] <= 65535):
+            raise ValueError(f"a udpclient vehicle needs gcs=(HOST, PORT), where it sends; got {gcs!r}")
 
 
 class MockVehicle:
-    """A mock autopilot with system id ``sysid`` on UDP ``host:port`` (0 = ephemeral port)."""
+    """A mock autopilot with system id ``sysid`` on UDP ``host:port`` (0 = ephemeral port).
+    ``transport`` (sitl_mock/link.py): "udpin" (that port, answers whoever sent first), "udpclient"
+    (an ephemeral port of ``host`` sending to ``gcs`` = (HOST, PORT) from the start) or "tcp"
+    (listens on TCP ``host:port``, serves one GCS connection)."""
 
     def __init__(
         self,
@@ -117,8 +155,11 @@ class MockVehicle:
         airframe: Airframe | None = None,
         signing_key: bytes | None = None,
         flight: dict | None = None,
+        transport: str = "udpin",
+        gcs: tuple[str, int] | None = None,
     ) -> None:
-        _check_identity(sysid, profile, vehicle_type, port)
+        _check_identity(sysid, profile, vehicle_type, port, transport, gcs)
+        self.transport, self.gcs = transport, (None if gcs is None else (gcs[0], gcs[1]))
         self.sysid = sysid
         self.profile = PROFILES[profile]
         self.vehicle_type = vehicle_type
@@ -207,7 +248,7 @@ class MockVehicle:
         self.boot_sim_s = world.sim_time_s
 
     async def start(self) -> None:
-        await self.link.open(self.host, self.port)
+        await self.link.open(self.host, self.port, self.transport, self.gcs)
 
     def close(self) -> None:
         self.link.close()
@@ -331,6 +372,9 @@ class MockVehicle:
             ))  # fmt: skip
         if self.wants(mavlink.MAVLINK_MSG_ID_MISSION_CURRENT):
             self.send(self._mission_current())
+        if self.profile.current_mode_message:
+            mode = self._modes[self.mode]
+            self.send(CurrentModeMessage(_STANDARD_MODES.get(self.mode, 0), mode, mode))
 
     def send_home(self) -> None:
         """HOME_POSITION, once the vehicle has a position (ArduPilot GCS_Common.cpp

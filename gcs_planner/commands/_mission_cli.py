@@ -47,8 +47,9 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
         required=True,
         action="append",
         metavar="URL",
-        help="MAVLink endpoint, e.g. udpout:127.0.0.1:14550 (to a vehicle), udpin:0.0.0.0:14550 (listen)"
-        " or serial:/dev/ttyUSB0:57600 (radio / USB); repeat for vehicles on several UDP ports",
+        help="MAVLink endpoint, e.g. udpout:127.0.0.1:14550 (to a vehicle), udpin:0.0.0.0:14550 (listen),"
+        " tcp:127.0.0.1:5760 (SITL's TCP port) or serial:/dev/ttyUSB0:57600 (radio / USB); repeat for"
+        " vehicles on several ports (any mix)",
     )
     if fleet:
         p.add_argument(

@@ -53,7 +53,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="URL",
-        help="real vehicles / SITL (udpin:HOST:PORT or udpout:HOST:PORT; repeatable)",
+        help="real vehicles / SITL (udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEV:BAUD;"
+        " repeatable, any mix)",
     )
     p.add_argument(
         "--connected",

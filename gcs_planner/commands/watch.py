@@ -17,13 +17,12 @@ import contextlib
 import time
 from pathlib import Path
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
-
 from gcs_planner.commands._mission_cli import open_link
 from gcs_planner.commands.fly import live_recording
 from gcs_planner.commands.import_log import parse_origin
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
+from gcs_planner.mavlink.link import is_autopilot_heartbeat
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.units import reports_no_fix
 
@@ -36,7 +35,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         required=True,
         action="append",
         metavar="URL",
-        help="MAVLink endpoint: udpin:HOST:PORT, udpout:HOST:PORT or serial:DEV:BAUD (repeatable)",
+        help="MAVLink endpoint: udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT or serial:DEV:BAUD"
+        " (repeatable, any mix)",
     )
     p.add_argument("-o", "--out", default="out/watch", help="output folder [out/watch]")
     p.add_argument("--origin", help="LAT,LON,ALT_AMSL of the local frame [the first vehicle's home]")
@@ -70,17 +70,13 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _autopilot_heartbeat(msg) -> bool:
-    return msg.get_type() == "HEARTBEAT" and msg.autopilot != mavlink.MAV_AUTOPILOT_INVALID
-
-
 async def _watch(args: argparse.Namespace, mcap_path: Path, origin: Origin | None, rec) -> int:
     from gcs_planner.telemetry import FlightLogger
     from gcs_planner.telemetry.rerun_views import LiveRerunLogger
 
     link = await open_link(args)
     try:
-        heartbeat = await link.wait_for(_autopilot_heartbeat, FIRST_POSITION_TIMEOUT_S)
+        heartbeat = await link.wait_for(is_autopilot_heartbeat, FIRST_POSITION_TIMEOUT_S)
         await request_streams(link, [heartbeat.get_srcSystem()])  # ArduPilot streams what it is asked for
         first = await link.wait_for(
             lambda m: m.get_type() == "GLOBAL_POSITION_INT" and not reports_no_fix(m),

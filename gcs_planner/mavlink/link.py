@@ -1,11 +1,14 @@
-"""An asyncio MAVLink 2 link over UDP: one socket, many vehicles, routed by system id.
+"""An asyncio MAVLink 2 link over several endpoints at once: many vehicles, routed by system id.
 
 ``await MavlinkLink.open("udpout:127.0.0.1:14550")`` talks to a vehicle that listens (ArduPilot SITL
 ``udpin``, our sitl-mock); several ``udpout`` URLs share one socket, so one link reaches a whole mock
 fleet (one port per vehicle); ``udpout:HOST:FIRST-LAST`` names one remote per port of a range.
-``udpin:0.0.0.0:14550`` listens and answers every peer heard from.
+``udpin:0.0.0.0:14550`` listens and answers every peer heard from (several SITLs may all send to
+it); each further ``udpin`` URL binds one more socket. ``tcp:HOST:PORT`` (alias ``tcpout:``)
+connects to a vehicle that listens on TCP (ArduPilot SITL's default ``tcp:5760``).
 ``serial:/dev/ttyUSB0:57600`` (baud optional, default 57600) opens a telemetry radio or an
-autopilot's USB port instead (serial_port.py); everything above the transport is the same.
+autopilot's USB port (serial_port.py). Any mix of these makes one link (transports.py); everything
+above the transport is the same.
 
 Choices:
 - Each UDP datagram is framed on its own (framing.py): no bytes are carried from one datagram to
@@ -15,10 +18,20 @@ Choices:
   pymavlink decoder. Frames carry a sequence number that advances per frame sent.
 - Frames are dispatched synchronously in ``datagram_received``: a transfer's reply goes out in the
   same callback that received the request (no task hop, no sleep) - the hot path of an upload.
-- Routing: a message with ``target_system`` goes to the address that system was last heard from;
-  broadcasts (target 0, HEARTBEAT) go to every peer. A system id heard from two addresses within
-  DUPLICATE_WINDOW_S is ambiguous: ``vehicles`` reports it and sending to it raises
-  DuplicateSysidError (QGC merges such vehicles silently, #14812; we refuse).
+- Routing: every peer address belongs to the endpoint it was heard on (addresses are
+  endpoint-qualified, transports.py, so two endpoints never collide). A message with
+  ``target_system`` goes out of the endpoint and address that system was last heard from;
+  broadcasts (target 0, HEARTBEAT) go to every peer of every endpoint. A system id heard from two
+  addresses within DUPLICATE_WINDOW_S is ambiguous: ``vehicles`` reports it and sending to it
+  raises DuplicateSysidError (QGC merges such vehicles silently, #14812; we refuse).
+- Vehicles: a system id becomes a ``VehicleInfo`` only once its autopilot's HEARTBEAT was heard
+  (``is_autopilot_heartbeat``: autopilot not INVALID and a vehicle MAV_TYPE); its other frames then
+  keep its addresses fresh. The info latches the autopilot's component (MAV_COMP_ID_AUTOPILOT1
+  preferred): mode, armed state and type come only from that component's HEARTBEATs, so a camera
+  or gimbal of the same system (its own HEARTBEAT, often with the autopilot field set) changes none.
+- Frames of message ids the pinned dialect does not know (PX4 streams development / newer common
+  messages) are delivered as pymavlink's ``MAVLink_unknown`` with the frame header's system and
+  component ids (pymavlink leaves them 0), so they count for their own vehicle, never for system 0.
 - ``subscribe(callback, sysid=N)`` delivers only that vehicle's frames: a fleet upload's transfers
   each see their own vehicle, so dispatch stays O(frames), not O(frames x transfers).
 - Subscribers get ``(msg, raw, t_s)``: the exact received frame and the receive time as Unix
@@ -50,14 +63,14 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
-from gcs_planner.mavlink.framing import StreamFramer, frames  # noqa: E402
-from gcs_planner.mavlink.serial_port import DEFAULT_BAUD, SerialPort  # noqa: E402
+from gcs_planner.mavlink.serial_port import DEFAULT_BAUD  # noqa: E402
 from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
+from gcs_planner.mavlink.transports import UdpProtocol, open_serial, open_tcp  # noqa: E402
 from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = [
-    "DUPLICATE_WINDOW_S", "FLEET_RCVBUF_BYTES", "GCS_COMPID", "GCS_SYSID", "MavlinkLink", "VehicleInfo",
-    "expand_ranges", "first_message", "parse_url",
+    "DUPLICATE_WINDOW_S", "FLEET_RCVBUF_BYTES", "GCS_COMPID", "GCS_SYSID", "VEHICLE_TYPES", "MavlinkLink",
+    "VehicleInfo", "expand_ranges", "first_message", "is_autopilot_heartbeat", "parse_url",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -68,6 +81,23 @@ DUPLICATE_WINDOW_S = 5.0  # two addresses heard within this time with one sysid 
 FLEET_RCVBUF_BYTES = 4 << 20  # a fleet link's socket receive buffer (Linux caps it at net.core.rmem_max)
 HEARTBEAT_PERIOD_S = 1.0
 _NOT_AUTOPILOT = mavlink.MAV_AUTOPILOT_INVALID  # HEARTBEAT of a camera, gimbal, companion or GCS
+_AUTOPILOT1 = mavlink.MAV_COMP_ID_AUTOPILOT1
+# MAV_TYPEs of vehicles (an autopilot's HEARTBEAT); not: GCS, antenna tracker, onboard controller,
+# gimbal, ADSB, camera, charging station, FLARM, servo, ODID, battery, parachute, log, OSD, IMU,
+# GPS, winch, illuminator, gripper - components, peripherals or ground equipment
+VEHICLE_TYPES = frozenset({
+    mavlink.MAV_TYPE_GENERIC, mavlink.MAV_TYPE_FIXED_WING, mavlink.MAV_TYPE_QUADROTOR,
+    mavlink.MAV_TYPE_COAXIAL, mavlink.MAV_TYPE_HELICOPTER, mavlink.MAV_TYPE_AIRSHIP,
+    mavlink.MAV_TYPE_FREE_BALLOON, mavlink.MAV_TYPE_ROCKET, mavlink.MAV_TYPE_GROUND_ROVER,
+    mavlink.MAV_TYPE_SURFACE_BOAT, mavlink.MAV_TYPE_SUBMARINE, mavlink.MAV_TYPE_HEXAROTOR,
+    mavlink.MAV_TYPE_OCTOROTOR, mavlink.MAV_TYPE_TRICOPTER, mavlink.MAV_TYPE_FLAPPING_WING,
+    mavlink.MAV_TYPE_KITE, mavlink.MAV_TYPE_VTOL_DUOROTOR, mavlink.MAV_TYPE_VTOL_QUADROTOR,
+    mavlink.MAV_TYPE_VTOL_TILTROTOR, mavlink.MAV_TYPE_VTOL_RESERVED2, mavlink.MAV_TYPE_VTOL_RESERVED3,
+    mavlink.MAV_TYPE_VTOL_RESERVED4, mavlink.MAV_TYPE_VTOL_RESERVED5, mavlink.MAV_TYPE_PARAFOIL,
+    mavlink.MAV_TYPE_DODECAROTOR, mavlink.MAV_TYPE_DECAROTOR, mavlink.MAV_TYPE_GENERIC_MULTIROTOR,
+    mavlink.MAV_TYPE_SPACECRAFT_ORBITER, mavlink.MAV_TYPE_GROUND_QUADRUPED, mavlink.MAV_TYPE_VTOL_GYRODYNE,
+})  # fmt: skip
+_UNKNOWN = mavlink.MAVLink_unknown
 
 Address = tuple[str, int]
 Callback = Callable[[mavlink.MAVLink_message, bytes, float], None]
@@ -75,12 +105,14 @@ Callback = Callable[[mavlink.MAVLink_message, bytes, float], None]
 
 @dataclass
 class VehicleInfo:
-    """What the link knows about one system id (from any of its messages; the type fields from the
-    autopilot's HEARTBEAT: ``autopilot`` is None until the flight controller itself was heard)."""
+    """What the link knows about one vehicle: created by its autopilot's first HEARTBEAT; addresses
+    from any of its messages; the type, mode and armed fields only from HEARTBEATs of the latched
+    autopilot component ``compid`` (module docstring)."""
 
     sysid: int
     address: Address
     addresses: dict[Address, float] = field(default_factory=dict)  # address -> last heard [monotonic s]
+    compid: int | None = None  # the autopilot's component id (latched)
     autopilot: int | None = None  # HEARTBEAT.autopilot (MAV_AUTOPILOT)
     mav_type: int | None = None  # HEARTBEAT.type (MAV_TYPE)
     custom_mode: int | None = None
@@ -99,9 +131,15 @@ class VehicleInfo:
         return len(self.live_addresses(time.monotonic())) > 1
 
 
+def is_autopilot_heartbeat(msg: mavlink.MAVLink_message) -> bool:
+    """A HEARTBEAT of a flight controller: autopilot not MAV_AUTOPILOT_INVALID and a vehicle
+    MAV_TYPE (VEHICLE_TYPES): not a GCS, camera, gimbal, companion computer, ADSB receiver, ..."""
+    return msg.get_type() == "HEARTBEAT" and msg.autopilot != _NOT_AUTOPILOT and msg.type in VEHICLE_TYPES
+
+
 def parse_url(url: str) -> tuple[str, Address]:
-    """'udpout:host:port' / 'udpin:host:port' (also 'udp:' = udpin) -> (kind, (host, port));
-    'serial:PATH[:BAUD]' -> ('serial', (PATH, BAUD))."""
+    """'udpout:host:port' / 'udpin:host:port' (also 'udp:' = udpin) / 'tcp:host:port' (also
+    'tcpout:') -> (kind, (host, port)); 'serial:PATH[:BAUD]' -> ('serial', (PATH, BAUD))."""
     if url.startswith("serial:"):
         rest = url.removeprefix("serial:")
         head, sep, tail = rest.rpartition(":")  # by-path device names contain colons
@@ -113,10 +151,15 @@ def parse_url(url: str) -> tuple[str, Address]:
         kind, host, port_text = url.split(":")
         port = int(port_text)
     except ValueError:
-        raise ValueError(f"connection URL {url!r}: expected udpin:HOST:PORT or udpout:HOST:PORT") from None
-    kind = {"udp": "udpin"}.get(kind, kind)
-    if kind not in ("udpin", "udpout"):
-        raise ValueError(f"connection URL {url!r}: scheme {kind!r} not supported (udpin, udpout, serial)")
+        raise ValueError(
+            f"connection URL {url!r}: expected udpin:HOST:PORT, udpout:HOST:PORT, tcp:HOST:PORT"
+            " or serial:PATH"
+        ) from None
+    kind = {"udp": "udpin", "tcpout": "tcp"}.get(kind, kind)
+    if kind not in ("udpin", "udpout", "tcp"):
+        raise ValueError(
+            f"connection URL {url!r}: scheme {kind!r} not supported (udpin, udpout, tcp, serial)"
+        )
     if not 0 <= port <= 65535:
         raise ValueError(f"connection URL {url!r}: port {port} out of range")
     return kind, (host, port)
@@ -143,17 +186,6 @@ def expand_ranges(urls) -> list[str]:
     return out
 
 
-class _Protocol(asyncio.DatagramProtocol):
-    def __init__(self, link: MavlinkLink) -> None:
-        self.link = link
-
-    def datagram_received(self, data: bytes, addr: Address) -> None:
-        self.link._on_datagram(data, addr[:2])
-
-    def error_received(self, exc: Exception) -> None:
-        log.debug("UDP error: %s", exc)  # ICMP port unreachable while a vehicle is down
-
-
 class MavlinkLink:
     """See module docstring. Create with :meth:`open`; close with :meth:`close`."""
 
@@ -165,12 +197,16 @@ class MavlinkLink:
         self._mav = mavlink.MAVLink(None, srcSystem=sysid, srcComponent=compid)
         self.signing = LinkSigning(self._mav, signing_key)
         self._decoder = mavlink.MAVLink(None)  # keyless: signatures are checked by self.signing
-        self._stream: StreamFramer | None = None  # serial: bytes of a frame split across reads
-        self._peers: dict[Address, None] = {}  # ordered set of addresses we send broadcasts to
+        # every peer, in the order first heard or named: its endpoint-qualified address ->
+        # (the endpoint's transport, the address as that transport sends to it)
+        self._peers: dict[Address, tuple[object, Address]] = {}
         self._subscribers: list[Callback] = []  # every frame
         self._by_sysid: dict[int, list[Callback]] = {}  # one vehicle's frames
         self.vehicles: dict[int, VehicleInfo] = {}
-        self._transport: asyncio.DatagramTransport | SerialPort | None = None
+        self._transport = None  # the first endpoint: the UDP socket udpout remotes share, else the first
+        self._endpoints: list = []  # every transport (UDP sockets, TCP connections, serial ports)
+        self._udp = None  # the first UDP socket: it carries the udpout remotes
+        self._closed = False
         self._heartbeat_task: asyncio.Task | None = None
         self.frames_received = 0
         self.frames_sent = 0
@@ -187,34 +223,54 @@ class MavlinkLink:
         signing_key: bytes | None = None,
         receive_buffer_bytes: int | None = None,
     ) -> MavlinkLink:
-        """Bind one UDP socket: at most one udpin URL (the bind address), any number of udpout remotes;
-        or open one serial port (a serial URL stands alone). ``signing_key``: sign and verify.
-        ``receive_buffer_bytes``: the UDP socket's SO_RCVBUF, for bursts from large fleets (the
-        kernel may cap it at net.core.rmem_max)."""
-        parsed = [parse_url(u) for u in expand_ranges((url, *more_urls))]
+        """Open every endpoint of the URLs: one UDP socket per udpin URL (the first one also carries
+        the udpout remotes; with none, an ephemeral socket does), one TCP connection per tcp URL,
+        one serial port per serial URL. ``signing_key``: sign and verify. ``receive_buffer_bytes``:
+        the UDP sockets' SO_RCVBUF, for bursts from large fleets (the kernel may cap it at
+        net.core.rmem_max). Whatever fails (a bind, a refused TCP connection: ConnectionError naming
+        the URL) closes what was opened."""
+        urls = expand_ranges((url, *more_urls))
+        parsed = [parse_url(u) for u in urls]
         link = cls(sysid, compid, signing_key)
-        if any(kind == "serial" for kind, _ in parsed):
-            if len(parsed) > 1:
-                raise ValueError("a serial URL cannot share a link with other URLs")
-            link._stream = StreamFramer()
-            link._transport = SerialPort.open(*parsed[0][1], link._on_datagram)
-            link._peers[parsed[0][1]] = None
-            link._start_heartbeat(heartbeat_period_s)
-            return link
-        binds = [addr for kind, addr in parsed if kind == "udpin"]
-        if len(binds) > 1:
-            raise ValueError(f"only one udpin URL per link, got {len(binds)}")
-        remotes = [addr for kind, addr in parsed if kind == "udpout"]
-        local = binds[0] if binds else ("0.0.0.0", 0)
-        loop = asyncio.get_running_loop()
-        link._transport, _ = await loop.create_datagram_endpoint(lambda: _Protocol(link), local_addr=local)
-        if receive_buffer_bytes is not None:
-            sock = link._transport.get_extra_info("socket")
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_bytes)
-        for remote in remotes:
-            link._peers[(_resolve(remote[0]), remote[1])] = None
+        try:
+            await link._open_endpoints(urls, parsed, receive_buffer_bytes)
+        except BaseException:
+            link._close_endpoints()
+            raise
         link._start_heartbeat(heartbeat_period_s)
         return link
+
+    async def _open_endpoints(
+        self, urls: list[str], parsed: list[tuple[str, Address]], rcvbuf: int | None
+    ) -> None:
+        loop = asyncio.get_running_loop()
+        binds = [addr for kind, addr in parsed if kind == "udpin"]
+        remotes = [addr for kind, addr in parsed if kind == "udpout"]
+        udp = [*binds] or ([("0.0.0.0", 0)] if remotes else [])
+        for k, local in enumerate(udp):
+            transport, _ = await loop.create_datagram_endpoint(  # the first socket keeps plain addresses
+                lambda k=k: UdpProtocol(self._on_frames, qualified=k > 0), local_addr=local
+            )
+            self._add_endpoint(transport)
+            self._udp = self._udp or transport
+            if rcvbuf is not None:
+                transport.get_extra_info("socket").setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+        for remote in remotes:
+            self.add_peer(remote)
+        for url, (kind, addr) in zip(urls, parsed, strict=True):
+            if kind == "tcp":
+                client = await open_tcp(url, addr[0], addr[1], self._on_frames)
+                self._add_endpoint(client)
+                self._peers[client.key] = (client, client.key)
+            elif kind == "serial":
+                port = open_serial(*addr, self._on_frames)
+                self._add_endpoint(port)
+                self._peers[addr] = (port, addr)
+
+    def _add_endpoint(self, transport) -> None:
+        self._endpoints.append(transport)
+        if self._transport is None:
+            self._transport = transport
 
     def _start_heartbeat(self, period_s: float) -> None:
         if period_s > 0:
@@ -222,37 +278,47 @@ class MavlinkLink:
 
     @property
     def local_address(self) -> Address:
+        """The first endpoint's own address: the (first) udpin bind or the udpout socket."""
         assert self._transport is not None
         return self._transport.get_extra_info("sockname")[:2]
 
+    @property
+    def local_addresses(self) -> list[Address]:
+        """Every endpoint's own address, in the order opened."""
+        return [t.get_extra_info("sockname")[:2] for t in self._endpoints]
+
     def add_peer(self, url_or_address: str | Address) -> None:
-        """Start talking to one more udpout remote (heartbeats included)."""
+        """Start talking to one more udpout remote (heartbeats included), from the first UDP socket."""
         if isinstance(url_or_address, str):
             kind, addr = parse_url(url_or_address)
             if kind != "udpout":
                 raise ValueError(f"add_peer needs a udpout URL, got {url_or_address!r}")
         else:
             addr = url_or_address
-        self._peers[(_resolve(addr[0]), addr[1])] = None
+        if self._udp is None:
+            raise ValueError("add_peer needs a link with a UDP socket (a udpin or udpout URL)")
+        key = (_resolve(addr[0]), addr[1])
+        self._peers[key] = (self._udp, key)
 
     # ----------------------------------------------------------------- sending
     def send(self, msg: mavlink.MAVLink_message) -> None:
         """Pack and send now; to the target system's address, or to every peer for broadcasts."""
-        if self._transport is None or self._transport.is_closing():
+        if self._closed or all(t.is_closing() for t in self._endpoints):
             raise ConnectionError("MAVLink link is closed")
         target = getattr(msg, "target_system", 0)
         raw = codec.encode(msg, self._mav) or self.signing.pack(msg)
         self._mav.seq = (self._mav.seq + 1) % 256
         info = self.vehicles.get(target) if target else None
         if info is None:
-            for addr in self._peers:
-                self._transport.sendto(raw, addr)
+            for transport, addr in self._peers.values():
+                transport.sendto(raw, addr)
         else:
             if len(info.addresses) > 1:  # fast path: one address can never be ambiguous
                 live = info.live_addresses(time.monotonic())
                 if len(live) > 1:
                     raise DuplicateSysidError(target, live)
-            self._transport.sendto(raw, info.address)
+            transport, addr = self._peers[info.address]
+            transport.sendto(raw, addr)
         self.frames_sent += 1
 
     def check_target(self, sysid: int) -> None:
@@ -299,10 +365,11 @@ class MavlinkLink:
         """The first message for which ``predicate`` is true; TimeoutError after ``timeout_s``."""
         return await first_message(self.subscribe, predicate, timeout_s)
 
-    def _on_datagram(self, data: bytes, addr: Address) -> None:
-        """One datagram (or serial read): its frames, each decoded, verified, then delivered."""
-        found, junk = frames(data) if self._stream is None else self._stream.feed(data)
-        self.frames_dropped += junk
+    def _on_frames(self, found: list[bytes], junk: int, addr: Address, transport, raw_addr: Address) -> None:
+        """The frames of one datagram (or stream read) from ``addr`` (endpoint-qualified; answered
+        by ``transport.sendto(data, raw_addr)``): each decoded, verified, then delivered."""
+        if junk:
+            self.frames_dropped += junk
         t_s = time.time()
         now = time.monotonic()
         for frame in found:
@@ -312,8 +379,8 @@ class MavlinkLink:
                 continue
             raw = frame
             msg._signed = self.signing.key is not None  # verified above
-            if addr not in self._peers:
-                self._peers[addr] = None  # udpin: answer whoever talks to us (once a frame verified)
+            if addr not in self._peers:  # udpin: answer whoever talks to us (once a frame verified)
+                self._peers[addr] = (transport, raw_addr)
             self._note_source(msg, addr, now)
             attach_extensions(msg, raw)
             self.frames_received += 1
@@ -329,15 +396,20 @@ class MavlinkLink:
         if frame[0] == 0xFD and frame[2] & ~mavlink.MAVLINK_IFLAG_SIGNED:
             return None  # an incompatibility flag we do not know: the spec says drop
         try:
-            return codec.decode(frame) or self._decoder.decode(bytearray(frame))
+            msg = codec.decode(frame) or self._decoder.decode(bytearray(frame))
         except mavlink.MAVError as exc:
             log.debug("bad frame from %s: %s", addr, exc)
             return None
+        if msg.__class__ is _UNKNOWN:  # pymavlink leaves its header empty (system 0)
+            msg._header = _frame_header(frame)
+        return msg
 
     def _note_source(self, msg: mavlink.MAVLink_message, addr: Address, now: float) -> None:
         sysid = msg.get_srcSystem()
         info = self.vehicles.get(sysid)
         if info is None:
+            if not is_autopilot_heartbeat(msg):
+                return  # a vehicle exists once its autopilot was heard
             info = self.vehicles[sysid] = VehicleInfo(sysid, addr)
         elif addr != info.address or len(info.addresses) > 1:
             live = info.live_addresses(now)
@@ -346,7 +418,12 @@ class MavlinkLink:
             elif addr not in live and addr not in info.addresses:
                 log.warning("system id %d heard from %s and %s: ambiguous", sysid, info.address, addr)
         info.addresses[addr] = now
-        if msg.get_type() == "HEARTBEAT" and addr == info.address and msg.autopilot != _NOT_AUTOPILOT:
+        if addr == info.address and is_autopilot_heartbeat(msg):
+            compid = msg.get_srcComponent()
+            if compid != info.compid:
+                if info.compid is not None and (info.compid == _AUTOPILOT1 or compid != _AUTOPILOT1):
+                    return  # another component's HEARTBEAT (a camera, a second autopilot-like one)
+                info.compid = compid  # the first autopilot heard, or MAV_COMP_ID_AUTOPILOT1 over it
             info.autopilot, info.mav_type = msg.autopilot, msg.type
             info.custom_mode, info.base_mode = msg.custom_mode, msg.base_mode
 
@@ -367,8 +444,12 @@ class MavlinkLink:
             with contextlib.suppress(asyncio.CancelledError):
                 await self._heartbeat_task
             self._heartbeat_task = None
-        if self._transport is not None:
-            self._transport.close()
+        self._closed = True
+        self._close_endpoints()
+
+    def _close_endpoints(self) -> None:
+        for transport in self._endpoints:
+            transport.close()
 
     async def __aenter__(self) -> MavlinkLink:
         return self
@@ -395,6 +476,14 @@ async def first_message(
         return await asyncio.wait_for(future, timeout_s)
     finally:
         unsubscribe()
+
+
+def _frame_header(frame: bytes) -> mavlink.MAVLink_header:
+    """The header of a whole MAVLink 2 (0xFD) or 1 (0xFE) frame: ids, sequence, length, flags."""
+    if frame[0] == 0xFD:  # magic, len, incompat, compat, seq, sysid, compid, msgid (3 bytes)
+        msgid = frame[7] | frame[8] << 8 | frame[9] << 16
+        return mavlink.MAVLink_header(msgid, frame[2], frame[3], frame[1], frame[4], frame[5], frame[6])
+    return mavlink.MAVLink_header(frame[5], 0, 0, frame[1], frame[2], frame[3], frame[4])  # v1
 
 
 def _resolve(host: str) -> str:

@@ -22,7 +22,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.enums import MissionState
-from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.link import MavlinkLink, is_autopilot_heartbeat
 from gcs_planner.mavlink.statustext import TextAssembler
 from gcs_planner.mavlink.units import reports_no_fix
 
@@ -87,7 +87,7 @@ class VehicleStatus:
             self._on_current(msg.get_srcSystem(), track, msg)
         elif kind == "MISSION_ITEM_REACHED" and msg.seq == self.last_seq.get(msg.get_srcSystem()):
             track.done = track.started or track.done
-        elif kind == "HEARTBEAT":
+        elif kind == "HEARTBEAT" and is_autopilot_heartbeat(msg):  # not a camera's, a gimbal's, ...
             self._on_heartbeat(msg.get_srcSystem(), track)
 
     def _on_current(self, sysid: int, track: VehicleTrack, msg) -> None:
