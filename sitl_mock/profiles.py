@@ -171,11 +171,11 @@ class AutopilotProfile:
         collected and written on completion (MissionItemProtocol_Fence::complete). PX4 writes every
         list into the inactive dataman slot and switches on the last item (handle_mission_item_both:
         ``_transfer_dataman_id``, update_active_mission), so a failed upload changes nothing.
-    current_mode_message: streams CURRENT_MODE (id 436, MAVLink development.xml) with its status
-        messages, as PX4 main does (src/modules/mavlink/streams/CURRENT_MODE.hpp, in the default
-        stream set of mavlink_main.cpp): a standard message the pinned pymavlink 2.4.50 ardupilotmega
-        dialect does not know, so a GCS meets a frame it cannot decode (sitl_mock/vehicle.py packs it
-        with the CRC extra 193 of pymavlink's development dialect).
+    current_mode_message: streams CURRENT_MODE (id 436, MAVLink development.xml) with its 1 Hz status
+        group, as PX4 main does (mavlink_main.cpp ``configure_stream_local("CURRENT_MODE", 0.5f)``,
+        streams/CURRENT_MODE.hpp): a message the pinned pymavlink 2.4.50 ardupilotmega dialect does
+        not know, so a GCS meets a frame it cannot decode (sitl_mock/vehicle.py packs it with the CRC
+        extra 193 of pymavlink's development dialect).
     ArduPilot ignores a GCS's MISSION_ACK during an upload (MissionItemProtocol has no handler for it:
     a session ends by completion, an item error or its 8 s timeout in ``update()``); PX4 ends it on
     MISSION_ACK(OPERATION_CANCELLED) from the partner (handle_mission_ack).
