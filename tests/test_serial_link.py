@@ -77,7 +77,7 @@ def test_serial_urls_parse_and_bad_ports_name_the_path():
             await MavlinkLink.open("serial:/dev/null:12345")
         with pytest.raises(OSError, match="/dev/null: not a terminal"):
             await MavlinkLink.open("serial:/dev/null")
-        with pytest.raises(OSError, match="/dev/no-such-radio"):  # serial mixes with UDP; the socket is closed
+        with pytest.raises(OSError, match="/dev/no-such-radio"):  # serial mixes with UDP; all closed
             await MavlinkLink.open("udpout:127.0.0.1:14550", "serial:/dev/no-such-radio")
 
     asyncio.run(main())
