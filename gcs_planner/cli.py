@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from importlib import import_module
 
@@ -74,10 +75,11 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser(_command_in(argv)).parse_args(argv)
     except SystemExit as exc:  # --help, --version (0) or a usage error already printed (2)
         return exc.code if isinstance(exc.code, int) else 2
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-    )
+    handler = logging.StreamHandler()
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    if not args.verbose:
+        handler.addFilter(one_line_logs)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, handlers=[handler])
     try:
         return int(args.run(args) or 0)
     except UserError as exc:
@@ -86,6 +88,34 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"gcs-planner {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `... | head`: the reader is gone; stop quietly as other CLI tools do
+        _silence_stdout()
+        return 141  # 128 + SIGPIPE, what a shell reports for a tool that died of it
+
+
+def one_line_logs(record: logging.LogRecord) -> bool:
+    """Log filter without --verbose: no tracebacks. A UserError logged on its way (a link subscriber
+    that hit a duplicate sysid) is dropped, since the command reports it as its one error line;
+    any other exception shrinks to one line (-v shows the traceback)."""
+    if not record.exc_info or record.exc_info[1] is None:
+        return True
+    exc = record.exc_info[1]
+    if isinstance(exc, UserError):
+        return False
+    text = str(exc).splitlines()[0][:200] if str(exc) else ""
+    record.msg, record.args = f"{record.getMessage()}: {type(exc).__name__}: {text} (-v: traceback)", ()
+    record.exc_info, record.exc_text, record.stack_info = None, None, None
+    return True
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so the flush at exit does not raise BrokenPipeError again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):  # no real file descriptor (captured in tests)
+        pass
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from gcs_planner.errors import UserError
 from gcs_planner.mavlink.files import MissionFile, in_file_frames, save_mission_file
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.types import MissionType
+from gcs_planner.validation import output_file
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -47,26 +48,32 @@ def run(args: argparse.Namespace) -> int:
 
 async def _download(args: argparse.Namespace) -> int:
     types = list(MISSION_TYPES.values()) if args.type == "all" else [MISSION_TYPES[args.type]]
+    if args.file:
+        output_file(args.file, "FILE")  # before the vehicle is asked: a bad path costs no download
     async with vehicle_link(args) as (link, heartbeat):
         autopilot = autopilot_of(heartbeat, args.autopilot)
         client = MissionClient(link, args.sysid, args.compid)
         lists = {}
         for mission_type in types:
             lists[mission_type] = await client.download(mission_type=mission_type)
-            print_items(lists[mission_type], f"{mission_type.name.lower()}: {len(lists[mission_type])} items")
         home = None
         if args.file and autopilot != "ardupilot":
             home = await home_position(link, args.sysid, args.compid)  # ArduPilot's is item 0
-    if args.file:
-        lists = {t: in_file_frames(items) for t, items in lists.items()}
+    losses = []
+    if args.file:  # written before anything is printed: a closed stdout (| head) must not lose it
+        in_file = {t: in_file_frames(items) for t, items in lists.items()}
         mf = MissionFile.from_items(
-            lists.get(MissionType.MISSION, []),
+            in_file.get(MissionType.MISSION, []),
             autopilot,
             home=home,
-            fence=lists.get(MissionType.FENCE),
-            rally=lists.get(MissionType.RALLY),
-            lists=frozenset(lists),
+            fence=in_file.get(MissionType.FENCE),
+            rally=in_file.get(MissionType.RALLY),
+            lists=frozenset(in_file),
         )
-        print_losses(save_mission_file(args.file, mf))
+        losses = save_mission_file(args.file, mf)
+    for mission_type, items in lists.items():
+        print_items(items, f"{mission_type.name.lower()}: {len(items)} items")
+    if args.file:
+        print_losses(losses)
         print(f"wrote {args.file}")
     return 0

@@ -15,6 +15,7 @@ what a reader had to interpret is in ``MissionFile.notes``. Details: docs/missio
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -255,12 +256,26 @@ def save_mission_file(path: str | Path, mission_file: MissionFile) -> list[Loss]
     from gcs_planner.mavlink import planfile, wpl
 
     path = Path(path)
+    _check_storable(mission_file, path)
     if path.suffix.lower() == ".plan":
         text, losses = planfile.dumps_plan(mission_file), planfile.plan_losses(mission_file)
     else:
         text, losses = wpl.dumps_mission_file(mission_file), wpl.wpl_losses(mission_file)
     write_text_atomic(path, text)  # a failed write leaves no half file
     return losses
+
+
+def _check_storable(mf: MissionFile, path: Path) -> None:
+    """MissionFileError for an infinite value (a vehicle may hold one): JSON cannot hold it and a
+    WPL with "inf" is refused when read back, so no file is written."""
+    for name in ("mission", "fence", "rally"):
+        for i, it in enumerate(getattr(mf, name)):
+            for key in ("param1", "param2", "param3", "param4", "z"):
+                if math.isinf(getattr(it, key)):
+                    raise MissionFileError(
+                        f"{path}: {name} item {i}: {key} = {getattr(it, key)} cannot be stored in a"
+                        " mission file (the vehicle holds an infinite value); nothing written"
+                    )
 
 
 def plan_mission_file(vehicle_plan: VehiclePlan, origin, autopilot: str = "ardupilot") -> MissionFile:

@@ -272,10 +272,17 @@ def loads_plan(text: str, where: str = ".plan file") -> MissionFile:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
         raise MissionFileError(f"{where}: not valid JSON: {exc}") from None
+    except RecursionError:
+        raise MissionFileError(f"{where}: nested too deeply") from None
+    except ValueError as exc:  # an integer of more than 4300 digits
+        raise MissionFileError(f"{where}: not valid JSON: {str(exc)[:80]}") from None
     if isinstance(doc, dict) and "fileType" not in doc and isinstance(doc.get("items"), list):
         mission, fence, rally = doc, {}, {}  # a .mission file: the mission object alone
         lists = frozenset({MissionType.MISSION})
     elif isinstance(doc, dict) and doc.get("fileType") == "Plan":
+        if not isinstance(doc.get("mission"), dict) or not isinstance(doc["mission"].get("items"), list):
+            # QGroundControl and MAVSDK refuse such a file; reading it as empty would clear the vehicle
+            raise MissionFileError(f"{where}: a .plan needs a \"mission\" object with an \"items\" list")
         mission, fence, rally = (
             doc.get("mission", {}),
             doc.get("geoFence") or {},

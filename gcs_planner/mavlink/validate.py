@@ -5,6 +5,8 @@ Rules (each failure names the item's seq and the field):
 - ``seq`` equals the item's index (0..n-1) and every item has the list's ``mission_type``;
 - exactly one item has ``current = 1`` in a MISSION list (MAVSDK enforces this as well); fence and
   rally lists may have none, never two;
+- a MISSION list holds no fence vertex / circle or rally point (5000-5004, 5100): a vehicle would
+  store one as a mission item;
 - ``frame`` is a known MAV_FRAME; ``command`` is any uint16: a command the pinned dialect lacks
   may be one the vehicle has (ArduPilot's 116, 219), so files pass it through with a note
   (files.unknown_command_notes); ``current`` and ``autocontinue`` are 0 or 1;
@@ -15,9 +17,13 @@ Rules (each failure names the item's seq and the field):
   [0, MAX_SPEED_MPS] or -1 / -2 (no change / default), a waypoint's acceptance radius (param2) in
   [0, MAX_RADIUS_M], a fence circle's radius (param1) in (0, MAX_RADIUS_M], a loiter radius
   (signed: the sign is the direction) within MAX_RADIUS_M;
-- ``z`` is finite; ``param1..4`` are finite or NaN. NaN is allowed in params because MAVLink defines
-  it as "use the default / leave unchanged" (QGroundControl sends NaN yaw and stores it as null in
-  .plan files); infinity is never meaningful;
+- ``z`` is finite; ``param1..4`` are finite, or NaN where the command gives NaN a meaning: the
+  dialect's description of that param says NaN (QGroundControl's NaN yaw, stored as null in .plan
+  files) or the param is Empty / Reserved. A NaN speed, radius, time or count has no meaning (a
+  vehicle stores it half: DO_CHANGE_SPEED NaN) and is refused; unknown commands pass; infinity is
+  never meaningful;
+- ``z`` of a positioned item is within +-MAX_REL_ALT_M (10 km) in a relative or terrain frame: a
+  take-off to 99,999 m above home is a typo, not a mission;
 - in global frames, ``x``/``y`` are integers with latitude in [-90, 90] deg and longitude in
   [-180, 180] deg (degE7), except for commands that carry no position (dialect.has_position), whose
   x/y must still fit int32.
@@ -30,15 +36,19 @@ from collections.abc import Sequence
 from numbers import Integral, Real
 
 from gcs_planner.errors import UserError
-from gcs_planner.mavlink.dialect import KNOWN_FRAMES, has_position
+from gcs_planner.mavlink.dialect import KNOWN_FRAMES, has_position, nan_has_meaning
 from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
 from gcs_planner.validation import FLOAT32_MAX, MAX_ALT_M, MAX_RADIUS_M, MAX_SPEED_MPS, MIN_ALT_M
 
-__all__ = ["MAX_MISSION_COUNT", "MissionValidationError", "validate_items"]
+__all__ = ["MAX_MISSION_COUNT", "MAX_REL_ALT_M", "MissionValidationError", "validate_items"]
 
 MAX_MISSION_COUNT = 65535  # MISSION_COUNT.count and seq are uint16
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 DO_CHANGE_SPEED, NAV_WAYPOINT = 178, 16
+MAX_REL_ALT_M = 10_000.0  # |z| in relative / terrain frames: higher than any UAV flies above home
+# MAV_FRAME_GLOBAL_RELATIVE_ALT (3), _TERRAIN_ALT (10) and their _INT forms (6, 11)
+RELATIVE_FRAMES = frozenset({3, 6, 10, 11})
+FENCE_AND_RALLY = frozenset({5000, 5001, 5002, 5003, 5004, 5100})  # NAV_FENCE_* and NAV_RALLY_POINT
 FENCE_CIRCLES = (5003, 5004)  # MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION / _EXCLUSION: param1 = radius
 LOITER_RADIUS = {17: "param3", 18: "param3", 19: "param3", 31: "param2"}  # UNLIM, TURNS, TIME, TO_ALT
 
@@ -101,6 +111,8 @@ def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
         raise fail("seq", f"but the item is at index {index}; seq must run 0..n-1")
     if item.mission_type != mission_type:
         raise fail("mission_type", f"differs from the list's mission_type {int(mission_type)}")
+    if mission_type == MissionType.MISSION and item.command in FENCE_AND_RALLY:
+        raise fail("command", "is a fence / rally point, not a mission item: put it in its own list")
     if item.frame not in KNOWN_FRAMES:
         raise fail("frame", "is not a known MAV_FRAME")
     if not _is_integer(item.command) or not 0 <= item.command <= 65535:
@@ -112,6 +124,8 @@ def _check_item(item: MissionItem, index: int, mission_type: int) -> None:
         value = getattr(item, field)
         if not _is_real(value) or math.isinf(value) or abs(value) > FLOAT32_MAX:
             raise fail(field, "must be a finite float32 number (or NaN for 'default')")
+        if math.isnan(value) and not nan_has_meaning(item.command, int(field[-1])):
+            raise fail(field, f"is NaN, which command {item.command} gives no meaning in this param")
     if not _is_real(item.z) or not math.isfinite(item.z) or abs(item.z) > FLOAT32_MAX:
         raise fail("z", "must be a finite float32 altitude [m]")
     _check_physical(item, fail)
@@ -130,6 +144,8 @@ def _check_physical(item: MissionItem, fail) -> None:
     """Altitude, speed and radius limits of the commands that carry them (module docstring)."""
     if item.frame in GLOBAL_FRAMES and has_position(item.command) and not MIN_ALT_M <= item.z <= MAX_ALT_M:
         raise fail("z", f"is outside the altitude limits [{MIN_ALT_M:g}, {MAX_ALT_M:g}] m")
+    if item.frame in RELATIVE_FRAMES and has_position(item.command) and abs(item.z) > MAX_REL_ALT_M:
+        raise fail("z", f"is more than {MAX_REL_ALT_M:g} m above or below home / terrain")
     if item.command == DO_CHANGE_SPEED:
         speed = item.param2
         if not (math.isnan(speed) or speed in (-1.0, -2.0) or 0.0 <= speed <= MAX_SPEED_MPS):

@@ -31,7 +31,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs_planner.mavlink.dialect import has_position
 from gcs_planner.mavlink.files import (
     DO_JUMP,
+    FENCE_COMMANDS,
     LIST_NAMES,
+    RALLY_COMMANDS,
     Loss,
     MissionFile,
     MissionFileError,
@@ -234,6 +236,7 @@ def loads_wpl(text: str, autopilot: str = "ardupilot", where: str = "WPL file") 
         _item(seq, ln, f, MissionType.MISSION if seq == 0 and home_row else kind, where)
         for seq, (ln, f) in enumerate(rows)
     ]
+    _check_kind(rows, kind, home_row, where)
     home_item, body = (items[0], items[1:]) if home_row and items else (None, items)
     if version == "120":
         body = [replace(it, param1=it.param1 + 1) if it.command == DO_JUMP else it for it in body]
@@ -246,6 +249,19 @@ def loads_wpl(text: str, autopilot: str = "ardupilot", where: str = "WPL file") 
         mf.home = (home_item.x / 1e7, home_item.y / 1e7, float(home_item.z))
     mf.notes = unknown_command_notes(body, name)
     return mf
+
+
+def _check_kind(rows: list[tuple[int, list[str]]], kind: MissionType, home_row: bool, where: str) -> None:
+    """A mission WPL holds no fence / rally row: uploaded as mission items they would be flown."""
+    if kind != MissionType.MISSION:
+        return
+    for lineno, f in rows:
+        command = _int(f[3], "command", lineno, where)
+        if command in FENCE_COMMANDS or command in RALLY_COMMANDS:
+            raise MissionFileError(
+                f"{where}: line {lineno}: command {command} is a fence / rally row in a mission file;"
+                " put fence and rally points in their own file"
+            )
 
 
 def _int(text: str, name: str, lineno: int, where: str) -> int:
