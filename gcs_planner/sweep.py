@@ -13,7 +13,10 @@ keep (keys of ``Plan.metrics``, dotted for nested ones, plus ``feasible_fraction
 
 ``task = "package.module:function"`` runs another function per run instead of the planner (e.g.
 ``gcs_planner.planning.coalition.montecarlo:run``): ``function(scenario_path, params, seed)``
-returns the metrics. A grid key ``scenario`` (a list of scenario files, relative to the study file)
+returns the metrics. Only the project's own tasks (STUDY_TASKS) run: a study file is data, and
+importing and calling whatever it names runs anyone's code (``logging.config:fileConfig`` on a
+crafted file ran a shell command). Your own task needs ``sweep --allow-user-task`` or
+ALLOW_USER_TASK_ENV=1. A grid key ``scenario`` (a list of scenario files, relative to the study file)
 sweeps over scenarios as well, e.g. the fleet sizes of a table; the top-level ``scenario`` may then
 be left out.
 
@@ -27,9 +30,13 @@ from __future__ import annotations
 import csv
 import hashlib
 import importlib
+import io
 import itertools
 import json
 import math
+import os
+import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -42,9 +49,16 @@ from gcs_planner.config import Config, parse
 from gcs_planner.errors import UserError
 from gcs_planner.validation import InputError, load_toml, read_text
 
-__all__ = ["Study", "load_study", "marginals", "run_study", "summarise"]
+__all__ = ["ALLOW_USER_TASK_ENV", "STUDY_TASKS", "Study", "load_study", "marginals", "run_study", "summarise"]
 
 FIXED_COLUMNS = ["run_id", "seed", "error", "cpu_s"]
+STUDY_TASKS = frozenset({
+    "gcs_planner.sweep:plan",
+    "gcs_planner.planning.acmpso_study:table3_run",
+    "gcs_planner.planning.baselines:compare_run",
+    "gcs_planner.planning.coalition.montecarlo:run",
+})  # fmt: skip
+ALLOW_USER_TASK_ENV = "GCS_PLANNER_ALLOW_USER_TASK"
 
 
 class Study(Config):
@@ -58,9 +72,9 @@ class Study(Config):
     task: str = "gcs_planner.sweep:plan"
 
 
-def load_study(path: str | Path) -> tuple[Study, Path]:
+def load_study(path: str | Path, allow_user_task: bool = False) -> tuple[Study, Path]:
     """The study and the folder its scenario paths are relative to (the study file's), every
-    scenario checked to be a file."""
+    scenario checked to be a file and the task one of STUDY_TASKS unless ``allow_user_task``."""
     path = Path(path)
     try:
         study = parse(Study, load_toml(read_text(path, "study"), str(path)), "study")
@@ -75,7 +89,10 @@ def load_study(path: str | Path) -> tuple[Study, Path]:
     for name in named:
         if not isinstance(name, str) or not (base / name).is_file():
             raise UserError(f"{path}: scenario {name!r} is not a file ({base / str(name)})")
-    task_named(study.task)
+    try:
+        task_named(study.task, allow_user_task)
+    except UserError as exc:
+        raise UserError(f"{path}: {exc}") from None
     return study, base
 
 
@@ -103,8 +120,22 @@ def plan(scenario: Path, params: dict[str, Any], seed: int) -> dict[str, Any]:
     }
 
 
-def task_named(name: str) -> Callable[[Path, dict[str, Any], int], dict[str, Any]]:
-    """The function a study's ``task = "package.module:function"`` names (UserError if none)."""
+def user_tasks_allowed(flag: bool = False) -> bool:
+    """The opt-in to run a study's own task: the flag, or ALLOW_USER_TASK_ENV=1."""
+    return flag or os.environ.get(ALLOW_USER_TASK_ENV) == "1"
+
+
+def task_named(
+    name: str, allow_user_task: bool = False
+) -> Callable[[Path, dict[str, Any], int], dict[str, Any]]:
+    """The function a study's ``task = "package.module:function"`` names (UserError if none); a
+    name outside STUDY_TASKS is refused before anything is imported unless user tasks are allowed."""
+    if name not in STUDY_TASKS and not user_tasks_allowed(allow_user_task):
+        shown = name if len(name) <= 80 else name[:77] + "..."
+        raise UserError(
+            f"task {shown!r} is not one of gcs-planner's study tasks ({', '.join(sorted(STUDY_TASKS))});"
+            f" to run your own code pass --allow-user-task (or {ALLOW_USER_TASK_ENV}=1)"
+        )
     module, _, attr = name.partition(":")
     try:
         fn = getattr(importlib.import_module(module), attr)
@@ -116,14 +147,20 @@ def task_named(name: str) -> Callable[[Path, dict[str, Any], int], dict[str, Any
 
 
 def run_task(
-    task: str, base: str, params: dict[str, Any], seed: int, metrics: list[str], default: str
+    task: str,
+    base: str,
+    params: dict[str, Any],
+    seed: int,
+    metrics: list[str],
+    default: str,
+    allow_user_task: bool = False,
 ) -> dict[str, Any]:
     """One run (in a worker): the study's task on its scenario (``params["scenario"]`` or
     ``default``, relative to ``base``) with the other ``params``; the named metrics and CPU time."""
     cpu = time.process_time()
     params = dict(params)
     scenario = Path(base) / params.pop("scenario", default)
-    values = task_named(task)(scenario, params, seed)
+    values = task_named(task, allow_user_task)(scenario, params, seed)
     values["cpu_s"] = time.process_time() - cpu
     return {m: metric(values, m) for m in [*metrics, "cpu_s"]}
 
@@ -137,19 +174,51 @@ def metric(values: dict[str, Any], name: str) -> Any:
     return values
 
 
-def _done(out: Path, columns: list[str]) -> set[str]:
-    """The runs already in ``out``; UserError if its columns are not ``columns`` (another study's
-    file: its rows would be misread, and new rows written under the wrong heads)."""
+def _done(out: Path, columns: list[str]) -> tuple[set[str], int | None]:
+    """(the runs complete in ``out``, the size to cut it to first or None). UserError if it is not
+    UTF-8 CSV text or its columns are not ``columns`` (another study's file: its rows would be
+    misread, and new rows written under the wrong heads). A last row without its newline (a sweep
+    killed mid-write) is incomplete: it is cut off and run again, so the next row starts on a line
+    of its own. A row with the wrong number of fields does not count as done."""
     if not out.exists() or out.stat().st_size == 0:
-        return set()
-    with out.open(newline="") as f:
-        reader = csv.DictReader(f)
-        if reader.fieldnames != columns:
+        return set(), None
+    data = _csv_text(out)
+    cut = None
+    if not data.endswith("\n"):
+        keep = data.rfind("\n") + 1
+        cut, data = len(data[:keep].encode()), data[:keep]
+    try:
+        reader = csv.DictReader(io.StringIO(data, newline=""))
+        if data and reader.fieldnames != columns:
             raise UserError(
-                f"{out}: its columns are not this study's (grid and metrics {columns[len(FIXED_COLUMNS):]});"
-                " give another output file"
+                f"{out}: its columns are not this study's (grid and metrics"
+                f" {_short(columns[len(FIXED_COLUMNS):])}); give another output file"
             )
-        return {row["run_id"] for row in reader}
+        done = {row["run_id"] for row in reader if None not in row and None not in row.values()}
+    except csv.Error as exc:
+        raise UserError(f"{out}: not a results CSV ({exc})") from None
+    if not data:  # only a cut header: write it again
+        cut = 0
+    return done, cut
+
+
+def _csv_text(out: Path) -> str:
+    """``out`` as text: UserError (one line) if it cannot be read or is not UTF-8 (UTF-16, binary)."""
+    try:
+        raw = out.read_bytes()
+    except OSError as exc:
+        raise UserError(f"{out}: cannot read: {exc.strerror or exc}") from None
+    if b"\0" in raw:
+        raise UserError(f"{out}: not a UTF-8 results CSV (it holds NUL bytes: UTF-16 or binary?)")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise UserError(f"{out}: not a UTF-8 results CSV (byte {exc.start})") from None
+
+
+def _short(value: Any) -> str:
+    text = str(value)
+    return text if len(text) <= 120 else text[:117] + "..."
 
 
 def run_study(
@@ -160,18 +229,22 @@ def run_study(
     scheduler: str | None = None,
     progress: Callable[[int, int], None] | None = None,
     max_runs: int | None = None,
+    allow_user_task: bool = False,
 ) -> int:
     """Run every run not yet in ``out`` (local processes, or the Dask scheduler at ``scheduler``:
     an address, or "local" for a LocalCluster of ``workers``); the number of runs done now."""
     columns = FIXED_COLUMNS + sorted(study.grid) + [m for m in study.metrics if m != "cpu_s"]
-    done = _done(out, columns)
+    done, cut = _done(out, columns)
     todo = [r for r in runs(study) if r[0] not in done][:max_runs]
+    if cut is not None:
+        with out.open("r+b") as f:
+            f.truncate(cut)
     new_file = not out.exists() or out.stat().st_size == 0
     with out.open("a", newline="") as f, _executor(scheduler, workers) as submit:
         writer = csv.DictWriter(f, columns, extrasaction="ignore")
         if new_file:
             writer.writeheader()
-        args = (study.metrics, study.scenario)
+        args = (study.metrics, study.scenario, user_tasks_allowed(allow_user_task))
         futures = {submit(run_task, study.task, str(base), params, seed, *args): (ident, params, seed)
                    for ident, params, seed in todo}  # fmt: skip
         for n, (future, (ident, params, seed)) in enumerate(_completed(futures), 1):
@@ -195,7 +268,7 @@ class _executor:
 
     def __enter__(self):
         if self.scheduler is None:
-            self.pool = ProcessPoolExecutor(self.workers)
+            self.pool = ProcessPoolExecutor(self.workers, initializer=_die_with, initargs=(os.getpid(),))
             return self.pool.submit
         try:
             import dask
@@ -226,6 +299,44 @@ class _executor:
             self.cluster.close()
 
 
+def _die_with(parent_pid: int) -> None:
+    """Pool worker initializer: end this worker when the sweep that started it ends, even by
+    SIGKILL (its atexit never runs, and an orphaned worker would plan on for ever). Linux:
+    PR_SET_PDEATHSIG; everywhere: a thread that checks the sweep's pid every second."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL, 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+    def watch() -> None:
+        while True:
+            try:
+                os.kill(parent_pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:
+                pass
+            time.sleep(1.0)
+
+    if not _alive(parent_pid):  # died before the prctl above took hold
+        os._exit(1)
+    threading.Thread(target=watch, name="sweep-parent-watch", daemon=True).start()
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def _completed(futures: dict) -> Iterator[tuple[Any, Any]]:
     """(future, its key) as each finishes, for process-pool and Dask futures alike."""
     if futures and type(next(iter(futures))).__module__.startswith("distributed"):
@@ -239,8 +350,12 @@ def _completed(futures: dict) -> Iterator[tuple[Any, Any]]:
 
 
 def _read(out: Path) -> list[dict[str, str]]:
-    with out.open(newline="") as f:
-        return list(csv.DictReader(f))
+    """The complete rows of a results CSV (one-line UserError if it is not one)."""
+    try:
+        reader = csv.DictReader(io.StringIO(_csv_text(out), newline=""))
+        return [row for row in reader if None not in row and None not in row.values()]
+    except csv.Error as exc:
+        raise UserError(f"{out}: not a results CSV ({exc})") from None
 
 
 def _mean_std(values: list[float]) -> tuple[float, float]:

@@ -18,19 +18,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--out", default=None, help="results CSV, appended and resumed [out/<study>.csv]")
     p.add_argument("--workers", type=int, default=2, help="local worker processes [2]")
     p.add_argument("--scheduler", default=None, help="Dask scheduler tcp://HOST:PORT or 'local'")
+    p.add_argument(
+        "--allow-user-task",
+        action="store_true",
+        help="let the study's task name your own package.module:function (it runs your code) [off]",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
     if args.workers < 1:
         raise UserError(f"--workers must be >= 1, got {args.workers}")
-    study, base = load_study(args.study)
+    study, base = load_study(args.study, args.allow_user_task)
     if args.out:
         out = output_file(args.out, "-o", [args.study])
     else:
         out = Path("out") / f"{args.study.stem}.csv"
         out.parent.mkdir(parents=True, exist_ok=True)
     with counting_bar("sweeping", "run") as progress:
-        ran = run_study(study, base, out, args.workers, args.scheduler, progress)
+        ran = run_study(
+            study, base, out, args.workers, args.scheduler, progress, allow_user_task=args.allow_user_task
+        )
     summary = summarise(study, out)
     summary_path = out.with_name(out.stem + "_summary.csv")
     for extra in (summary_path, out.with_name(out.stem + "_plots.png")):
