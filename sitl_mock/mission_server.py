@@ -18,8 +18,10 @@ Choices where the autopilots differ or the spec is open:
   count over capacity -> NO_SPACE + STATUSTEXT, CLEAR_ALL while receiving or (mission) in AUTO ->
   ERROR, CLEAR_ALL of mission_type ALL -> UNSUPPORTED, an item while no upload runs (a repeated
   final item after completion) -> MISSION_ACK(ERROR) (GCS_MAVLINK::handle_mission_item).
-- Items are stored as the autopilot stores them (the profile's ``storage``, readback.py: AP_Mission
-  for ArduCopter / ArduPlane, PX4's mission_item_s), so a download returns what the real one would.
+- Items are stored as the autopilot stores them (the profile's ``storage``, sitl_mock/storage.py:
+  AP_Mission for ArduCopter / ArduPlane, PX4's mission_item_s, in float32 / C integers), so a
+  download returns what the real one would; an altitude it refuses (ArduPilot: |z| >= 83000 m or
+  NaN in a Location) is answered with MISSION_ACK(INVALID_PARAM7).
 - PX4-like: MISSION_REQUEST_INT, 250 ms re-request, 5 s timeout, wrong seq ignored (the timer
   re-requests), a repeated final item is acknowledged again, MISSION_ACK(OPERATION_CANCELLED) from
   the uploader cancels, a positionless command outside MAV_FRAME_MISSION (or a positional one in
@@ -48,6 +50,7 @@ from gcs_planner.mavlink.enums import MissionResult, MissionState
 from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
 from gcs_planner.mavlink.wire import MissionAckMessage, MissionCountMessage, MissionCurrentMessage
 from sitl_mock.profiles import AutopilotProfile
+from sitl_mock.storage import Refused
 
 __all__ = ["Failure", "MissionServer"]
 
@@ -415,8 +418,6 @@ class MissionServer:
                 return item, MissionResult.INVALID_PARAM5_X
             if abs(item.y) > 180 * 10**7:
                 return item, MissionResult.INVALID_PARAM6_Y
-        if not math.isfinite(msg.z):
-            return item, MissionResult.INVALID_PARAM7
         if self.profile.nan_params_rejected:
             bad = _bad_param(msg)
             if bad:
@@ -427,7 +428,10 @@ class MissionServer:
             and has_position(item.command) == (item.frame == mavlink.MAV_FRAME_MISSION)
         ):
             return item, MissionResult.UNSUPPORTED  # PX4: positionless items only in MAV_FRAME_MISSION
-        return self.storage(item), MissionResult.ACCEPTED
+        try:  # the altitude check is the storage's (ArduPilot: only items kept in a Location)
+            return self.storage(item), MissionResult.ACCEPTED
+        except Refused as refused:
+            return item, refused.result
 
     # ----------------------------------------------------------------- download
     def _on_request_list(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:

@@ -10,9 +10,9 @@ storage on a 16 kB FRAM, PX4's dataman), both overridable per vehicle.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from gcs_planner.mavlink import readback
 from gcs_planner.mavlink.enums import (
     ARDUCOPTER_MODES,
     ARDUPLANE_MODES,
@@ -21,7 +21,8 @@ from gcs_planner.mavlink.enums import (
     CommandResult,
     MissionResult,
 )
-from gcs_planner.mavlink.types import MissionType
+from gcs_planner.mavlink.types import MissionItem, MissionType
+from sitl_mock import storage as stored
 
 __all__ = [
     "ARDUCOPTER_FLIGHT",
@@ -145,8 +146,9 @@ class AutopilotProfile:
     timeout_s: time without any item before the vehicle cancels an upload [s].
     capacity: items per mission type (MISSION, FENCE, RALLY); more -> MISSION_ACK(NO_SPACE).
     modes: vehicle type ("multirotor" / "fixed_wing") -> mode name -> HEARTBEAT custom_mode.
-    storage: what the autopilot stores of an item, per vehicle type (readback.py, from AP_Mission
-        and PX4's mavlink_mission.cpp), so a read-back shows what the real one returns.
+    storage: what the autopilot stores of an item, per vehicle type (sitl_mock/storage.py, from
+        AP_Mission and PX4's mavlink_mission.cpp, in their float32 / integer arithmetic), so a
+        read-back shows what the real one returns; it raises storage.Refused for an item refused.
     reacks_final_item: a repeated last item after completion is answered with the ACK again
         (PX4 does; ArduPilot drops it, so a lost final ACK is never repeated).
     clear_denied_while_running: MISSION_CLEAR_ALL of the mission in AUTO -> ERROR (ArduPilot).
@@ -189,7 +191,7 @@ class AutopilotProfile:
     home_at_seq0: bool
     capacity: dict[int, int]
     modes: dict[str, dict[str, int]]
-    storage: dict[str, readback.Model]  # vehicle type -> what the autopilot keeps of an item
+    storage: dict[str, Callable[[MissionItem], MissionItem]]  # vehicle type -> what the autopilot keeps
     reacks_final_item: bool
     clear_denied_while_running: bool
     flight: dict[str, FlightRules] = field(default_factory=dict)  # vehicle type -> rules
@@ -235,7 +237,7 @@ ARDUPILOT = AutopilotProfile(
     home_at_seq0=True,
     capacity={MissionType.MISSION: 724, MissionType.FENCE: 84, MissionType.RALLY: 10},
     modes={"multirotor": ARDUCOPTER_MODES, "fixed_wing": ARDUPLANE_MODES},
-    storage={"multirotor": readback.ARDUCOPTER, "fixed_wing": readback.ARDUPLANE},
+    storage={"multirotor": stored.ARDUCOPTER, "fixed_wing": stored.ARDUPLANE},
     reacks_final_item=False,
     clear_denied_while_running=True,
     flight={"multirotor": ARDUCOPTER_FLIGHT, "fixed_wing": ARDUPLANE_FLIGHT},
@@ -258,7 +260,7 @@ PX4 = AutopilotProfile(
     home_at_seq0=False,
     capacity={MissionType.MISSION: 2000, MissionType.FENCE: 64, MissionType.RALLY: 32},
     modes={"multirotor": PX4_MODES, "fixed_wing": PX4_MODES},
-    storage={"multirotor": readback.PX4, "fixed_wing": readback.PX4},
+    storage={"multirotor": stored.PX4, "fixed_wing": stored.PX4},
     reacks_final_item=True,
     clear_denied_while_running=False,
     flight={"multirotor": PX4_FLIGHT, "fixed_wing": PX4_FLIGHT},

@@ -403,25 +403,37 @@ def compare_items(
     skip_home: bool = False,
 ) -> str | None:
     """None if ``got`` is what an autopilot storing items as ``model`` returns for ``sent``, else
-    the first difference in words. Both sides go through ``model``; then every field must be equal
-    (params and altitude to float32 precision: they cross the wire as float32)."""
+    the first difference in words. The model maps each item sent to the item the autopilot returns
+    for it (in its own float32 / integer arithmetic); every field of the item downloaded must then
+    equal it exactly, both rounded to what the wire carries (params and z float32). A NaN sent or
+    expected ("use the default") accepts any value."""
     home_only = skip_home and not sent and len(got) == 1  # ArduPilot keeps home after an empty upload
     if len(sent) != len(got) and not home_only:
         return f"{len(got)} items, expected {len(sent)}"
     for a, b in zip(sent, got, strict=False):
         if skip_home and a.seq == 0:
             continue
-        a, b = model(a), model(b)
+        want, b = model(a), readback.wire(b)
         for name in ("seq", "command", "frame", "x", "y", "autocontinue"):
-            if getattr(a, name) != getattr(b, name):
-                return f"item {a.seq}: {name} is {getattr(b, name)}, sent {getattr(a, name)}"
+            if getattr(want, name) != getattr(b, name):
+                got_v, want_v, sent_v = getattr(b, name), getattr(want, name), getattr(a, name)
+                return f"item {a.seq}: {name} is {got_v}, expected {want_v} (sent {sent_v})"
         for name in ("param1", "param2", "param3", "param4", "z"):
-            if not _close(getattr(a, name), getattr(b, name)):
-                return f"item {a.seq}: {name} is {getattr(b, name):g}, sent {getattr(a, name):g}"
+            sent_v, want_v, got_v = getattr(a, name), getattr(want, name), getattr(b, name)
+            if not _close(sent_v, want_v, got_v):
+                return f"item {a.seq}: {name} is {_full(got_v)}, expected {_full(want_v)} (sent {sent_v!r})"
     return None
 
 
-def _close(a: float, b: float) -> bool:
-    if math.isnan(a):
+def _close(sent: float, want: float, got: float) -> bool:
+    """``got`` (float32) is ``want`` (float32) exactly; NaN sent or expected: any value."""
+    if math.isnan(sent) or math.isnan(want):
         return True  # NaN means "use the default": the autopilot may store any value
-    return abs(a - b) <= 1e-6 + 1.2e-7 * max(abs(a), abs(b))  # float32 has a 6e-8 relative step
+    return got == want
+
+
+def _full(v: float) -> str:
+    """A float32 value at full precision: 65.36999511718750."""
+    if v == 0 or not math.isfinite(v) or 1e-3 <= abs(v) < 1e9:
+        return f"{v:.14f}" if math.isfinite(v) else repr(v)
+    return f"{v:.17g}"
