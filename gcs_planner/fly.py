@@ -236,7 +236,7 @@ class _Flight:
         tlog = options.out_dir / "flight.tlog"
         self.tlog_path = tlog if options.tlog else None
         self.tlog_paths = [tlog_network_path(tlog, n) for n in range(networks(plan))] if options.tlog else []
-        clock = boot_clock if vehicles.simulated else receive_clock()
+        clock = boot_clock if vehicles.simulated else receive_clock(vehicles.speedup)
         self.recorder = TrackRecorder(plan.origin, clock, self.sysids)
         self.quirks: dict[int, AutopilotQuirks] = {}
         self.limits: dict = {}  # sysid: flight_limits.FlightLimits
@@ -341,8 +341,9 @@ class _Flight:
         return replace(self.plan, vehicles=vehicles)
 
     def _now(self) -> float:
-        """Now on the tracks' clock: the fleet's simulated time for mocks, receive time otherwise."""
-        return self.recorder.now_s() if self.vehicles.simulated else time.time()
+        """Now on the tracks' clock: the fleet's simulated time for mocks, else the receive time
+        scaled to the vehicles' rate."""
+        return self.recorder.now_s() if self.vehicles.simulated else self.recorder.clock(None, time.time())
 
     async def _check_clocks(self) -> None:
         """Refuse connected vehicles whose clocks run at another rate than this flight's."""

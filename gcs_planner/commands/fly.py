@@ -61,7 +61,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--speedup",
         type=SPEEDUP,
         default=None,
-        help="mock simulation speed-up [10; 5 for coalition scenarios]",
+        help="mock simulation speed-up [10; 5 for coalition scenarios]; with --connect, the rate the"
+        " connected vehicles' clocks run at [1: real vehicles; a SITL's or sitl-mock's --speedup]",
     )
     p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
     p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
@@ -174,6 +175,7 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     if scenario.planner.get("name") == "coalition":
         return _fly_coalition(args)
+    connected_rate = 1.0 if args.speedup is None else args.speedup  # real vehicles: 1; SITL: its --speedup
     args.speedup = 10.0 if args.speedup is None else args.speedup
     plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
     if args.homes:
@@ -192,7 +194,7 @@ def run(args: argparse.Namespace) -> int:
         bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]
         print(f"warning: the planner reports infeasible paths for {bad}; flying anyway")
     if args.connect:
-        vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1)
+        vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1, speedup=connected_rate)
     else:
         vehicles = mock_vehicles("mock", plan.vehicles, origin=plan.origin, speedup=args.speedup,
                                  autopilot=args.autopilot)  # fmt: skip
