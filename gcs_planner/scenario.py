@@ -33,6 +33,7 @@ from gcs_planner.fleet_ids import MAX_NETWORK, fleet_id
 from gcs_planner.geo import Origin
 from gcs_planner.validation import (
     MAX_ALT_M,
+    MAX_DURATION_S,
     MAX_RADIUS_M,
     MAX_RANGE_M,
     MAX_SPEED_MPS,
@@ -151,6 +152,9 @@ WORLD_TABLES: dict[str, tuple[tuple[str, ...], dict[str, tuple[str, ...]]]] = {
     ),
     "terrain": (("type", "peaks", "file"), {"peaks": ("h_m", "x_m", "y_m", "sx_m", "sy_m")}),
 }
+MAX_MANNED = 10_000  # manned tracks in a scenario, and tracks in one mode's history
+MAX_MANNED_SAMPLES = 100_000  # samples of one manned track (observed_s / dt_s, track rows)
+MAX_START_BELOW_M = 100.0  # a start this far below the origin's ground is underground (a sign error)
 MANNED_KEYS = ("id", "dt_s", "track", "position_m", "velocity_mps", "observed_s", "modes")
 MANNED_MODE_KEYS = ("name", "history", "velocity_mps", "sigma_mps", "strength", "weight")
 # [[vehicles]] keys: the common ones, the 4-D planner's timing and dynamics (deconflict4d), the
@@ -240,10 +244,88 @@ def _check_world_tables(data: dict[str, Any]) -> None:
         for key, row_keys in rows.items():
             for i, row in enumerate(items_of(data[section].get(key, []), f"{section}.{key}")):
                 known_keys(row, row_keys, f"{section}.{key}[{i}]")
-    for i, m in enumerate(items_of(data.get("manned", []), "manned")):
+    terrain = data.get("terrain", {})
+    for i, peak in enumerate(terrain.get("peaks", []) if isinstance(terrain.get("peaks"), list) else []):
+        _peak(peak, f"terrain.peaks[{i}]")
+    manned = items_of(data.get("manned", []), "manned")
+    if len(manned) > MAX_MANNED:
+        raise InputError(f"manned: {len(manned)} tracks, at most {MAX_MANNED}")
+    for i, m in enumerate(manned):
         known_keys(m, MANNED_KEYS, f"manned[{i}]")
+        _manned(m, f"manned[{i}]")
         for k, mode in enumerate(items_of(m.get("modes", []), f"manned[{i}].modes")):
             known_keys(mode, MANNED_MODE_KEYS, f"manned[{i}].modes[{k}]")
+            _mode(mode, f"manned[{i}].modes[{k}]")
+
+
+def _peak(p: dict[str, Any], where: str) -> None:
+    """A terrain peak: a finite height within the altitude limits, a place and widths in range."""
+    for key in ("h_m", "x_m", "y_m", "sx_m", "sy_m"):
+        if key not in p:
+            continue
+        if key == "h_m":
+            number(p[key], f"{where}.h_m", MIN_ALT_M, MAX_ALT_M)
+        elif key in ("x_m", "y_m"):
+            number(p[key], f"{where}.{key}", -MAX_RANGE_M, MAX_RANGE_M)
+        else:
+            number(p[key], f"{where}.{key}", 0, MAX_RANGE_M, lo_open=True)
+
+
+def _vector(value: Any, field: str, limit: float, lo: float | None = None) -> None:
+    """[x, y, z]: three finite numbers within +-limit (or [lo, limit])."""
+    if not (isinstance(value, list) and len(value) == 3):
+        raise InputError(f"{field} must be [x, y, z], got {_short(value)}")
+    for k, v in enumerate(value):
+        number(v, f"{field}[{k}]", -limit if lo is None else lo, limit)
+
+
+def _manned(m: dict[str, Any], where: str) -> None:
+    """A manned track's numbers: the sample time, the observed state or track, finite and in range."""
+    dt = number(m.get("dt_s", 1.0), f"{where}.dt_s", 0, 3600.0, lo_open=True)
+    if "position_m" in m:
+        _point(m["position_m"], f"{where}.position_m")
+    if "velocity_mps" in m:
+        _vector(m["velocity_mps"], f"{where}.velocity_mps", MAX_SPEED_MPS)
+    observed = number(m.get("observed_s", 10.0), f"{where}.observed_s", 0, MAX_DURATION_S)
+    if observed / dt > MAX_MANNED_SAMPLES:
+        raise InputError(f"{where}: observed_s / dt_s is {observed / dt:.3g} samples, > {MAX_MANNED_SAMPLES}")
+    if "track" in m:
+        rows = items_of(m["track"], f"{where}.track", list)
+        if not rows or len(rows) > MAX_MANNED_SAMPLES:
+            raise InputError(f"{where}.track must hold 1..{MAX_MANNED_SAMPLES} rows, got {len(rows)}")
+        for r, row in enumerate(rows):
+            if len(row) != 4:
+                raise InputError(f"{where}.track[{r}] must be [t_s, x, y, z], got {_short(row)}")
+            number(row[0], f"{where}.track[{r}] t_s", -MAX_DURATION_S, MAX_DURATION_S)
+            _point(row[1:], f"{where}.track[{r}]")
+
+
+def _mode(mode: dict[str, Any], where: str) -> None:
+    """A manned motion prior: velocity, sigma (> 0), strength (> 0) and weight (>= 0), finite."""
+    if "velocity_mps" in mode:
+        _vector(mode["velocity_mps"], f"{where}.velocity_mps", MAX_SPEED_MPS)
+    if "sigma_mps" in mode:
+        _vector(mode["sigma_mps"], f"{where}.sigma_mps", MAX_SPEED_MPS, lo=0.0)
+        if any(v == 0 for v in mode["sigma_mps"]):
+            raise InputError(f"{where}.sigma_mps must be > 0 in each axis, got {_short(mode['sigma_mps'])}")
+    if "strength" in mode:
+        number(mode["strength"], f"{where}.strength", 0, 1e6, lo_open=True)
+    if "weight" in mode:
+        number(mode["weight"], f"{where}.weight", 0, 1e6)
+    if "history" in mode:
+        tracks = items_of(mode["history"], f"{where}.history", list)
+        if not tracks or len(tracks) > MAX_MANNED:
+            raise InputError(f"{where}.history must hold 1..{MAX_MANNED} tracks, got {len(tracks)}")
+        for t, track in enumerate(tracks):
+            if not track or len(track) > MAX_MANNED_SAMPLES:
+                raise InputError(f"{where}.history[{t}] must hold 1..{MAX_MANNED_SAMPLES} points")
+            for k, point in enumerate(track):
+                _point(point, f"{where}.history[{t}][{k}]")
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
@@ -270,7 +352,7 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
         id=vid,
         sysid=fleet_id(network, sysid),
         type=vtype,
-        start=_point(d.get("start"), f"{where}.start"),
+        start=_start(d.get("start"), f"{where}.start"),
         goal=_point(d.get("goal"), f"{where}.goal"),
         speed_mps=number(d.get("speed_mps", 10.0), f"{where}.speed_mps", 0, MAX_SPEED_MPS, lo_open=True),
         turn_radius_m=number(d.get("turn_radius_m", 20.0), f"{where}.turn_radius_m", 0, MAX_RADIUS_M),
@@ -313,10 +395,18 @@ def _hemisphere(h: dict[str, Any], where: str) -> Hemisphere:
     )
 
 
+def _start(value: Any, field: str) -> tuple[float, float, float]:
+    """A start point: as _point, and not more than MAX_START_BELOW_M below the origin's ground."""
+    x, y, z = _point(value, field)
+    if z < -MAX_START_BELOW_M:
+        raise InputError(f"{field} z = {z:g} m is over {MAX_START_BELOW_M:g} m below the origin: underground")
+    return x, y, z
+
+
 def _point(value: Any, field: str) -> tuple[float, float, float]:
     """[x, y, z] in local ENU metres within MAX_RANGE_M of the origin and the altitude limits."""
     if not (isinstance(value, list) and len(value) == 3):
-        raise InputError(f"{field} must be [x, y, z] in metres, got {value!r}")
+        raise InputError(f"{field} must be [x, y, z] in metres, got {_short(value)}")
     x = number(value[0], f"{field} x", -MAX_RANGE_M, MAX_RANGE_M)
     y = number(value[1], f"{field} y", -MAX_RANGE_M, MAX_RANGE_M)
     return x, y, number(value[2], f"{field} z", MIN_ALT_M, MAX_ALT_M)

@@ -173,6 +173,8 @@ def load_json(text: str, what: str) -> Any:
         raise InputError(f"{what}: not valid JSON: {exc}") from None
     except RecursionError:
         raise InputError(f"{what}: nested too deeply") from None
+    except ValueError as exc:  # an integer of more than 4300 digits (int_max_str_digits)
+        raise InputError(f"{what}: not valid JSON: {_short(str(exc))}") from None
 
 
 def load_toml(text: str, what: str) -> dict[str, Any]:
@@ -183,6 +185,8 @@ def load_toml(text: str, what: str) -> dict[str, Any]:
         raise InputError(f"{what}: not valid TOML: {exc}") from None
     except RecursionError:
         raise InputError(f"{what}: nested too deeply") from None
+    except ValueError as exc:  # a huge integer
+        raise InputError(f"{what}: not valid TOML: {_short(str(exc))}") from None
 
 
 def output_file(path: str | Path, flag: str, inputs: Iterable[str | Path | None] = ()) -> Path:
