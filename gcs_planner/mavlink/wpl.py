@@ -22,6 +22,7 @@ Choices (sources in docs/mission-files.md):
 
 from __future__ import annotations
 
+import io
 import math
 import re
 from dataclasses import replace
@@ -42,6 +43,8 @@ from gcs_planner.mavlink.files import (
 )
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.units import e7, half_away
+
+MAX_ROWS = 65536  # 65535 items (MISSION_COUNT is uint16) and a home row
 
 __all__ = ["HEADER", "dumps_mission_file", "dumps_wpl", "loads_wpl", "loads_wpl_items", "wpl_losses"]
 
@@ -165,13 +168,17 @@ def loads_wpl_items(text: str, where: str = "WPL file") -> list[MissionItem]:
 
 def _read(text: str, where: str) -> tuple[list[tuple[int, list[str]]], list[tuple[int, str]], str]:
     """(rows as (line number, 12 fields), comments as (rows before it, line), format version)."""
-    lines = text.splitlines()
-    header = lines[0].split() if lines else []
+    lines = iter(text.splitlines() if len(text) < 1_000_000 else io.StringIO(text))  # lazily if big
+    first = next(lines, "")
+    header = first.split()
     if header not in (["QGC", "WPL", v] for v in VERSIONS):
-        first = lines[0].strip() if lines else ""
-        raise MissionFileError(f"{where}: line 1 must be {HEADER!r}, got {first[:40]!r}")
+        raise MissionFileError(f"{where}: line 1 must be {HEADER!r}, got {first.strip()[:40]!r}")
     rows, comments = [], []
-    for lineno, line in enumerate(lines[1:], start=2):
+    for lineno, line in enumerate(lines, start=2):
+        if len(rows) > MAX_ROWS:  # checked while reading: a huge file stops here, not after parsing
+            raise MissionFileError(
+                f"{where}: line {lineno}: more than {MAX_ROWS} rows; a mission holds at most 65535 items"
+            )
         if line.lstrip().startswith("#"):
             comments.append((len(rows), line.rstrip("\r\n")))
             continue
