@@ -27,7 +27,7 @@ from gcs_planner.mavlink.actions import TAKEOFF_MODE_LEVEL_OFF_M, change_speed, 
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, Takeoff, quirks_for
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.items import plan_to_items
-from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.link import MavlinkLink, check_signing
 from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan, land_point
@@ -131,6 +131,7 @@ async def wait_for_vehicles(link: MavlinkLink, sysids: list[int], timeout_s: flo
             break
         await asyncio.sleep(0.05)
     missing = [s for s in sysids if not heard(link, s)]
+    check_signing(link, sysids)
     if missing:
         raise UserError(f"no autopilot HEARTBEAT from sysid {missing} within {timeout_s:.0f} s")
     duplicates = link.duplicates()

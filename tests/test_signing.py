@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import socket
 
 import pytest
 
+from gcs_planner.cli import main
 from gcs_planner.mavlink import errors
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
@@ -116,3 +118,22 @@ def test_signing_setup_gives_a_vehicle_its_key_then_takes_it_away(capsys, missio
         assert "signing off" in capsys.readouterr().out
         assert upload(fleet, None)
         assert main(base) == 2 and "--new-passphrase" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("passphrase", "words"), [(None, "give --signing-passphrase"), ("wrong", "not its key")]
+)
+def test_a_signing_vehicle_heard_without_its_key_is_named_as_signing(passphrase, words, capsys):
+    """A vehicle that sends to the GCS (as SITL with --serial0 udpclient does) signs every frame: a
+    GCS without its key hears only frames it cannot verify, and says so instead of "no HEARTBEAT"."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        gcs = s.getsockname()
+    vehicle = {"transport": "udpclient", "gcs": gcs}
+    with MockFleet(vehicles=[vehicle], signing_key=KEY):
+        argv = ["clear", "--connect", f"udpin:{gcs[0]}:{gcs[1]}", "--sysid", "1", "--heartbeat-timeout", "3"]
+        if passphrase:
+            argv += ["--signing-passphrase", passphrase]
+        assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "sysid 1 signs its frames" in err and words in err and err.count("\n") == 1, err

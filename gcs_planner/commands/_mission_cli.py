@@ -24,7 +24,7 @@ from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import MAX_NETWORK, network_of, wire_sysid
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.command import CommandClient
-from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink
+from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink, check_signing
 from gcs_planner.mavlink.networks import NetworkLinks, open_networks
 from gcs_planner.mavlink.signing import key_from_passphrase
 from gcs_planner.mavlink.types import MissionItem, MissionType
@@ -172,6 +172,7 @@ async def fleet_link(
         while missing and loop.time() < deadline:
             await asyncio.sleep(0.05)
             missing = [s for s in sysids if getattr(link.vehicles.get(s), "autopilot", None) is None]
+        check_signing(link, sysids)
         if missing:
             raise UserError(
                 f"no HEARTBEAT from system(s) {missing} on {' '.join(args.connect)}"
@@ -205,6 +206,7 @@ async def vehicle_link(args: argparse.Namespace) -> AsyncIterator[tuple[MavlinkL
             )
         except TimeoutError:
             heartbeat = None
+        check_signing(link, [args.sysid])
         if heartbeat is None:
             raise UserError(
                 f"no HEARTBEAT from system {args.sysid} component {args.compid} on {' '.join(args.connect)}"

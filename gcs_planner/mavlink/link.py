@@ -61,6 +61,7 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
+from gcs_planner.errors import UserError  # noqa: E402
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD  # noqa: E402
@@ -70,7 +71,8 @@ from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
 
 __all__ = [
     "DUPLICATE_WINDOW_S", "FLEET_RCVBUF_BYTES", "GCS_COMPID", "GCS_SYSID", "VEHICLE_TYPES", "MavlinkLink",
-    "VehicleInfo", "expand_ranges", "first_message", "is_autopilot_heartbeat", "parse_url",
+    "VehicleInfo", "check_signing", "expand_ranges", "first_message", "is_autopilot_heartbeat", "parse_url",
+    "signing_problem",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -211,6 +213,7 @@ class MavlinkLink:
         self.frames_received = 0
         self.frames_sent = 0
         self.frames_dropped = 0  # undecodable, bad CRC, or (signing) unsigned / badly signed
+        self.unverified: dict[int, int] = {}  # header sysid -> signed frames dropped (not our key)
 
     @classmethod
     async def open(
@@ -374,7 +377,11 @@ class MavlinkLink:
         now = time.monotonic()
         for frame in found:
             msg = self._decode(frame, addr)
-            if msg is None or not self.signing.accept(frame):
+            accepted = msg is not None and self.signing.accept(frame)
+            signed = msg is not None and frame[0] == 0xFD and frame[2] & mavlink.MAVLINK_IFLAG_SIGNED
+            if signed and (not accepted or self.signing.key is None):  # signed with a key we lack
+                self.unverified[frame[5]] = self.unverified.get(frame[5], 0) + 1
+            if not accepted:
                 self.frames_dropped += 1
                 continue
             raw = frame
@@ -388,6 +395,8 @@ class MavlinkLink:
             for callback in (*self._by_sysid.get(msg.get_srcSystem(), ()), *self._subscribers):
                 try:
                     callback(msg, raw, t_s)
+                except UserError as exc:  # said once more, in one line, by the operation it ends
+                    log.debug("MAVLink subscriber %r: %s", callback, exc)
                 except Exception:
                     log.exception("MAVLink subscriber %r failed", callback)
 
@@ -456,6 +465,24 @@ class MavlinkLink:
 
     async def __aexit__(self, *exc: object) -> None:
         await self.close()
+
+
+def signing_problem(link: MavlinkLink, sysid: int) -> str:
+    """'' unless the vehicle signs its frames with a key this link does not have: then why, in
+    words (it drops every unsigned or wrongly signed frame this link sends)."""
+    if sysid not in link.unverified:
+        return ""
+    which = "give --signing-passphrase"
+    if link.signing.key:
+        which = "the --signing-passphrase given is not its key"
+    return f"sysid {sysid} signs its frames (MAVLink 2 signing) with a key this link lacks: {which}"
+
+
+def check_signing(link: MavlinkLink, sysids) -> None:
+    """UserError naming each vehicle of ``sysids`` that signs with a key this link lacks."""
+    problems = [p for p in (signing_problem(link, s) for s in sysids) if p]
+    if problems:
+        raise UserError("; ".join(problems))
 
 
 async def first_message(
