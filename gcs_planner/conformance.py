@@ -138,13 +138,15 @@ MAX_SCHEDULE_ERROR_S = 3.0  # default bound on the along-track time error [s] (d
 
 
 def schedule_errors_s(track: Track, vp, route_t0_s: float, near_m: float) -> np.ndarray:
-    """Flown minus planned time at path points ``SCHEDULE_STEP_S`` apart (+ = late) [s].
+    """Flown minus planned time at path points ``SCHEDULE_STEP_S`` apart from the first waypoint's
+    time to the last one's (+ = late) [s]; a plan's climb and descent, flown at the vehicle's own
+    pace before and after its route, are not timed.
 
     Each point's flown time is that of the track's closest sample within ``near_m`` of it, in the
     first stretch of samples that comes that near after the previous point's match (so a route
     that passes a place twice is matched in order); a point never come near is NaN.
     """
-    times = np.arange(vp.path_times_s[0], vp.path_times_s[-1] + 1e-9, SCHEDULE_STEP_S)
+    times = np.arange(vp.times_s[0], vp.times_s[-1] + 1e-9, SCHEDULE_STEP_S)
     points = np.stack([np.interp(times, vp.path_times_s, vp.path[:, k]) for k in range(3)], axis=1)
     errors = np.full(len(times), np.nan)
     i = 0
