@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from gcs_planner.mavlink import readback
 from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot
 from gcs_planner.mavlink.units import SPEED_AIRSPEED, SPEED_GROUNDSPEED
 
@@ -57,7 +56,7 @@ class AutopilotQuirks:
     streams_by_request: bool  # streams telemetry only when asked (stock ArduPilot SRn_* = 0)
     return_mode: str | None  # the mode that brings a vehicle home (safe end)
     land_mode: str | None  # the mode that lands it where it is (None: no such mode)
-    readback: readback.Model
+    readback: str  # the name of its read-back model in readback.py (loaded when a verify needs it: numpy)
     # parameters of the airspeed range and bank limit, [min m/s, max m/s, roll deg] (None: none):
     # ArduPlane refuses a DO_CHANGE_SPEED airspeed outside [AIRSPEED_MIN, AIRSPEED_MAX]
     # (commands_logic.cpp Plane::do_change_speed) and banks at most ROLL_LIMIT_DEG
@@ -74,6 +73,12 @@ class AutopilotQuirks:
     # after the transfer and says "Mission rejected: ..." (e.g. "takeoff not first waypoint item")
     verdict_after_ack_s: float = 0.0
     rejection_texts: tuple[str, ...] = ()
+
+    def readback_model(self):
+        """What the autopilot returns of an item sent (readback.Model)."""
+        from gcs_planner.mavlink import readback
+
+        return getattr(readback, self.readback)
 
     @property
     def home_at_seq0(self) -> bool:
@@ -94,7 +99,7 @@ ARDUCOPTER = AutopilotQuirks(
     streams_by_request=True,
     return_mode="RTL",
     land_mode="LAND",
-    readback=readback.ARDUCOPTER,
+    readback="ARDUCOPTER",
     stores_as_received=frozenset({0, 2}),
 )
 ARDUPLANE = AutopilotQuirks(
@@ -111,7 +116,7 @@ ARDUPLANE = AutopilotQuirks(
     streams_by_request=True,
     return_mode="RTL",
     land_mode=None,
-    readback=readback.ARDUPLANE,
+    readback="ARDUPLANE",
     stores_as_received=frozenset({0, 2}),
     flight_limits=("AIRSPEED_MIN", "AIRSPEED_MAX", "ROLL_LIMIT_DEG"),
     l1_params=("NAVL1_PERIOD", "RLL2SRV_TCONST"),
@@ -130,7 +135,7 @@ PX4 = AutopilotQuirks(
     streams_by_request=False,
     return_mode="RTL",
     land_mode="LAND",
-    readback=readback.PX4,
+    readback="PX4",
     stores_as_received=frozenset(),
     verdict_after_ack_s=1.0,
     rejection_texts=("mission rejected", "mission invalid"),
@@ -149,7 +154,7 @@ GENERIC = AutopilotQuirks(
     streams_by_request=True,
     return_mode=None,
     land_mode=None,
-    readback=readback.GENERIC,  # stores_as_received: unknown, so every list is read back
+    readback="GENERIC",  # stores_as_received: unknown, so every list is read back
 )
 
 

@@ -41,7 +41,6 @@ import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
-from gcs_planner.mavlink import readback
 from gcs_planner.mavlink.autopilots import GENERIC, AutopilotQuirks, quirks_for
 from gcs_planner.mavlink.enums import CommandResult, MissionResult
 from gcs_planner.mavlink.errors import (
@@ -363,7 +362,7 @@ class MissionClient:
 
     def _difference(self, sent: Sequence[MissionItem], got: Sequence[MissionItem]) -> str | None:
         q = self.quirks
-        return compare_items(sent, got, q.readback, skip_home=q.home_at_seq0)
+        return compare_items(sent, got, q.readback_model(), skip_home=q.home_at_seq0)
 
 
 def written_slice(transfer: UploadTransfer, items: Sequence[MissionItem], partial: bool) -> slice:
@@ -377,14 +376,14 @@ def _describe(
     """What the vehicle holds, in words, from a read-back ``got`` of the upload ``sent``."""
     if got is None:
         return f"what the vehicle holds is unknown: the read-back failed ({problem})"
-    if compare_items(sent, got, q.readback, skip_home=q.home_at_seq0) is None:
+    if compare_items(sent, got, q.readback_model(), skip_home=q.home_at_seq0) is None:
         return f"the vehicle holds this upload's {len(sent)} items (it stores items as they arrive)"
     real = [it for it in got if not (q.home_at_seq0 and it.seq == 0)]
     if not real:
         return "the vehicle now holds no items" + (" (only its home at seq 0)" if got else "")
     same = 0
     for a, b in zip(sent, got, strict=False):
-        if compare_items([a], [b], q.readback, skip_home=q.home_at_seq0) is not None:
+        if compare_items([a], [b], q.readback_model(), skip_home=q.home_at_seq0) is not None:
             break
         same += 1
     home = 1 if q.home_at_seq0 and sent and sent[0].seq == 0 else 0
@@ -399,14 +398,17 @@ def _describe(
 def compare_items(
     sent: Sequence[MissionItem],
     got: Sequence[MissionItem],
-    model: readback.Model = readback.GENERIC,
+    model=None,
     skip_home: bool = False,
 ) -> str | None:
     """None if ``got`` is what an autopilot storing items as ``model`` returns for ``sent``, else
     the first difference in words. The model maps each item sent to the item the autopilot returns
     for it (in its own float32 / integer arithmetic); every field of the item downloaded must then
     equal it exactly, both rounded to what the wire carries (params and z float32). A NaN sent or
-    expected ("use the default") accepts any value."""
+    expected ("use the default") accepts any value. ``model``: a readback.Model (default GENERIC)."""
+    from gcs_planner.mavlink import readback  # numpy: loaded only when a list is compared
+
+    model = readback.GENERIC if model is None else model
     home_only = skip_home and not sent and len(got) == 1  # ArduPilot keeps home after an empty upload
     if len(sent) != len(got) and not home_only:
         return f"{len(got)} items, expected {len(sent)}"
