@@ -56,6 +56,12 @@ def _host_port(text: str) -> tuple[str, int]:
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sitl-mock", description=__doc__.splitlines()[0])
     p.add_argument("--vehicles", type=int, default=1, help="number of vehicles (system ids 1..N)")
+    p.add_argument(
+        "--plan",
+        metavar="PLAN",
+        help="one vehicle per vehicle of this plan.json, with its sysid and airframe type, standing at"
+        " its start (where `gcs-planner fly --homes` says a SITL should stand); replaces --vehicles",
+    )
     p.add_argument("--base-port", type=int, default=14550, help="UDP port of vehicle 1 (0: ephemeral ports)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (0.0.0.0 for other machines)")
     where = p.add_mutually_exclusive_group()
@@ -101,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     )
     if not 1 <= args.per_network <= 254:
         parser.error(f"--per-network must be in 1..254, got {args.per_network}")
+    if 0 < args.base_port < 1024:
+        parser.error(f"--base-port {args.base_port} is a privileged port: use 0 (ephemeral) or 1024..65535")
     try:
         faults = LinkFaults(args.loss, args.delay, args.jitter, args.duplicate, args.reorder, args.seed)
         options = dict(
@@ -113,7 +121,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.tcp or args.out:
                 raise ValueError("a fleet over several networks runs on UDP ports: no --tcp or --out")
             return _serve_networks(args, options)
-        fleet = MockFleet(count=args.vehicles, base_port=args.base_port, **options)
+        if args.plan:
+            fleet = MockFleet(vehicles=_plan_vehicles(args.plan), base_port=args.base_port, **options)
+        else:
+            fleet = MockFleet(count=args.vehicles, base_port=args.base_port, **options)
     except ValueError as exc:
         parser.error(str(exc))
     try:
@@ -122,6 +133,18 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sitl-mock: error: {exc}", file=sys.stderr)
         return 2
     return 0
+
+
+def _plan_vehicles(path: str) -> list[dict]:
+    """A vehicle spec per vehicle of a plan.json, each standing at its planned start."""
+    from gcs_planner.plan import Plan
+    from gcs_planner.starts import starts
+
+    plan = Plan.load(path)  # a bad file: an InputError (a ValueError) naming the field
+    at = {s.sysid: s.home for s in starts(plan.vehicles, plan.origin)}
+    return [
+        {"sysid": vp.sysid, "home": at[vp.sysid], "vehicle_type": vp.vehicle_type} for vp in plan.vehicles
+    ]
 
 
 def _serve_networks(args: argparse.Namespace, options: dict) -> int:

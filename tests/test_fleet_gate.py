@@ -4,6 +4,9 @@ clocks run at another rate than the flight's, are refused before anything is arm
 from __future__ import annotations
 
 import re
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -54,3 +57,26 @@ def test_a_mock_at_another_speedup_is_refused_before_arming(tmp_path, capsys):
     assert "do not run at the flight's 1x real time" in err and "restart it at 1x" in err, err
     rates = [float(r) for r in re.findall(r"sysid \d runs at ([\d.]+)x", err)]
     assert len(rates) == 4 and all(2.0 < r <= 5.5 for r in rates), err  # a busy mock may slip below 5
+
+
+def test_the_readme_recipe_sitl_mock_at_the_plans_starts_then_fly_connect_passes(tmp_path, capsys):
+    """`sitl-mock --plan` stands each vehicle at its start, so `fly --connect` to it passes the gate
+    (the old recipe put four vehicles on one spot); a privileged --base-port is refused."""
+    from child_process import child
+    from test_fly_networks import _free_port_run
+
+    plan_path = tmp_path / "plan.json"
+    assert main(["plan", str(SCENARIO), "-o", str(plan_path)]) == 0
+    base = _free_port_run(4)
+    cli = [sys.executable, "-m", "sitl_mock.cli", "--plan", str(plan_path), "--base-port", str(base),
+           "--profile", "px4", "--speedup", "10"]  # fmt: skip
+    with child(cli, stderr=subprocess.DEVNULL) as mock:
+        argv = ["fly", str(SCENARIO), "--plan", str(plan_path), "--speedup", "10",
+                "-o", str(tmp_path / "out"), "--connect", f"udpout:127.0.0.1:{base}-{base + 3}"]  # fmt: skip
+        rc = main(argv)
+        mock.send_signal(signal.SIGINT)
+        mock.wait(timeout=30)
+    out = capsys.readouterr().out
+    assert rc == 0 and "PASS: 4/4 vehicles conform" in out, out
+    refused = subprocess.run([*cli[:3], "--base-port", "80"], capture_output=True, text=True)
+    assert refused.returncode == 2 and "privileged" in refused.stderr
