@@ -11,9 +11,10 @@ Choices:
 - Schemas and channels are written in the data section *before* the chunk that first uses them,
   never inside chunks, and repeated in the summary. A sequential reader of a truncated file
   therefore knows every channel of every complete chunk.
-- No message index records: they cost 16 uncompressed bytes per message (more than a
-  compressed MAVLink frame). Chunk indexes are written, and MCAP readers (mcap Python, Foxglove)
-  read the messages of a chunk without message indexes.
+- Message index records after every chunk (one per channel: each message's log time and offset
+  in the chunk), found by walking the chunk's records once at flush, not per message on the hot
+  path: Foxglove's reader (@mcap/core, McapIndexedReader) refuses a chunk index without them
+  ("Encountered a chunk index without message indexes"), so every finished log carries them.
 - ``flush()`` closes the open chunk, compresses it (zstd) and writes it together with every
   record added since the last flush, followed by a *provisional end*: Data End, a Footer without
   summary (``summary_start`` 0) and the closing magic. Between flushes nothing is written, so the
@@ -48,6 +49,7 @@ from mcap.records import (
     DataEnd,
     Footer,
     Header,
+    MessageIndex,
     Metadata,
     MetadataIndex,
     Schema,
@@ -191,14 +193,19 @@ class ChunkedMcapWriter:
             )
             start = self._offset
             length = self._write_record(chunk)
+            index_start = self._offset
+            offsets = {}
+            for channel_id, records in _message_index(data).items():
+                offsets[channel_id] = self._offset
+                self._write_record(MessageIndex(channel_id=channel_id, records=records))
             self._chunk_indexes.append(
                 ChunkIndex(
                     message_start_time=self._chunk_start_ns,
                     message_end_time=self._chunk_end_ns,
                     chunk_start_offset=start,
                     chunk_length=length,
-                    message_index_offsets={},
-                    message_index_length=0,
+                    message_index_offsets=offsets,
+                    message_index_length=self._offset - index_start,
                     compression="zstd",
                     compressed_size=len(compressed),
                     uncompressed_size=len(data),
@@ -340,6 +347,21 @@ class ChunkedMcapWriter:
     def _write(self, data: bytes) -> None:
         self._pending += data
         self._offset += len(data)
+
+
+_RECORD_START = struct.Struct("<BQH4xQ")  # opcode, length, channel, (sequence), log time
+
+
+def _message_index(chunk: bytes) -> dict[int, list[tuple[int, int]]]:
+    """Per channel, (log time, offset) of each Message record in an uncompressed chunk."""
+    index: dict[int, list[tuple[int, int]]] = defaultdict(list)
+    unpack, offset, end = _RECORD_START.unpack_from, 0, len(chunk)
+    while offset < end:
+        opcode, length, channel_id, log_time = unpack(chunk, offset)
+        if opcode == MESSAGE_OPCODE:
+            index[channel_id].append((log_time, offset))
+        offset += 9 + length
+    return index
 
 
 def _provisional_end() -> bytes:
