@@ -74,7 +74,8 @@ def main() -> None:
     ours_s = best_cpu_s(ours, rows, args.channels, args.repeat)
     stock_s = best_cpu_s(stock, rows, args.channels, args.repeat)
     machine = platform.processor() or platform.machine()
-    print(f"machine: {machine}, {os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}, {time.strftime('%Y-%m-%d')}")
+    load = os.getloadavg()[0]
+    print(f"machine: {machine}, {os.cpu_count()} cores, load {load:.1f}, {time.strftime('%Y-%m-%d')}")
     print(f"ChunkedMcapWriter (message indexes): {args.messages / ours_s:,.0f} msg/s")
     print(f"mcap.writer.Writer (stock):          {args.messages / stock_s:,.0f} msg/s")
     print(f"ratio ours / stock: {stock_s / ours_s:.2f}x")
