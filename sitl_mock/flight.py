@@ -21,9 +21,9 @@ Models (choices where the brief leaves them open):
   max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Between
   waypoints it turns towards the target (pursuit, the planner's own model), or, with an ``l1``
   response, tracks the line from the previous waypoint as ArduPlane's L1 controller does
-  (gcs_planner.l1_guidance: ``AP_L1_Control::update_waypoint``, the previous waypoint as the
-  line's start, ``Plane::set_next_WP``), its bank lagging the demand and its turn at the
-  airframe's gain (``l1_guidance.ARDUPLANE_SITL``: fitted to ArduPlane SITL's plane). The L1
+  (sitl_mock.l1, the mock's own copy of ``AP_L1_Control::update_waypoint``, the previous waypoint
+  as the line's start, ``Plane::set_next_WP``), its bank lagging the demand and its turn at the
+  airframe's gain (``l1.SITL_PLANE``: ArduPlane SITL's plane, measured). The L1
   plane flies arcs wide and overshoots a turn onto a new line, as ArduPlane SITL does
   (docs/coalition.md). Loiter is a
   clockwise circle (ArduPilot's default direction): turn-rate feed-forward ``v / R`` plus a
@@ -43,7 +43,7 @@ from enum import IntEnum
 import numpy as np
 
 from gcs_planner.geo import wrap_pi
-from gcs_planner.l1_guidance import L1Response, l1_turn_rate
+from sitl_mock.l1 import L1Plane, l1_lateral_accel
 
 __all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
 
@@ -72,7 +72,7 @@ class Airframe:
     land_speed_mps: float
     accept_radius_m: float
     loiter_radius_m: float
-    l1: L1Response | None = None  # fixed wing: None = pursuit; else ArduPlane's L1 guidance, flown so
+    l1: L1Plane | None = None  # fixed wing: None = pursuit; else ArduPlane's L1 guidance, flown so
 
     @property
     def min_turn_radius_m(self) -> float:
@@ -357,8 +357,10 @@ class Kinematics:
         bank within the limit, lagging by the airframe's time constant, turning at its gain."""
         ground = np.column_stack([v * np.cos(psi), v * np.sin(psi)]) + self.wind[m][:, :2]
         tan_max = self.tan_bank[m]
-        demand = np.clip(l1_turn_rate(pos, self.leg_from[m], tgt, ground, self.l1_period[m]) * v / G_MPS2,
-                         -tan_max, tan_max)  # fmt: skip
+        north_east = np.array([1, 0])  # ENU (x east, y north) -> the controller's NE
+        lateral = l1_lateral_accel(pos[:, north_east], self.leg_from[m][:, north_east], tgt[:, north_east],
+                                   ground[:, north_east], self.l1_period[m])  # fmt: skip
+        demand = np.clip(-lateral / G_MPS2, -tan_max, tan_max)  # tan(bank); + right is - counter-clockwise
         tau = self.roll_tau[m]
         lag = np.where(tau > 0, np.minimum(1.0, dt_s / np.maximum(tau, 1e-9)), 1.0)
         bank = self.l1_bank[m]

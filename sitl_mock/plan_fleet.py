@@ -25,11 +25,11 @@ import numpy as np
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of, wire_sysid
 from gcs_planner.geo import Origin, enu_to_geodetic
-from gcs_planner.l1_guidance import L1Response
 from gcs_planner.plan import VehiclePlan
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.flight import AIRFRAMES, G_MPS2, Airframe, climb_run_m
+from sitl_mock.l1 import L1Plane
 from sitl_mock.process import MockFleetProcess
 
 __all__ = ["CATCH_UP_FACTOR", "MockVehicles", "MockVehiclesProcess", "airframe_for"]
@@ -155,12 +155,12 @@ class MockVehiclesProcess(_PlanFleet):
     """The coalition HIL run's fleet: mock fixed wings in their own process (module docstring),
     each with the bank for its minimum turn radius at the keeper's top speed (CATCH_UP_FACTOR x
     cruise), so catching up does not widen turns. With an ``l1`` response they fly ArduPlane's
-    L1 guidance (sitl_mock.flight; ``l1_guidance.ARDUPLANE_SITL`` is the SITL plane's): a stand-in
+    L1 guidance (sitl_mock.flight; ``sitl_mock.l1.SITL_PLANE`` is the SITL plane's): a stand-in
     for ArduPlane SITL's wide turns."""
 
     def __init__(
         self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float = 10.0,
-        l1: L1Response | None = None,
+        l1: L1Plane | None = None,
     ) -> None:
         airframes, specs = {}, []
         for vp in plans:

@@ -16,14 +16,12 @@ MAX_FUNCTION_LINES = 80
 # the MAVLink core: message types, enums, wire structs, framing, signing, what autopilots store;
 # the GCS and the mock autopilot both build on it, and it builds on nothing else of the project
 MAVLINK_CORE = {f"gcs_planner.mavlink.{m}" for m in ("types", "enums", "wire", "dialect", "framing")} | {
-    f"gcs_planner.mavlink.{m}" for m in ("signing", "signing_streams", "readback")
+    f"gcs_planner.mavlink.{m}" for m in ("signing", "signing_streams")
 }
-# what the mock autopilot may use of gcs_planner: the MAVLink core, geodesy, fleet ids, plan types
-# (its plan-tuned fleets) and what those import
-# l1_guidance: the mock's L1 planes fly the same ArduPlane guidance law the planner predicts with
-MOCK_MAY_USE = MAVLINK_CORE | {
-    f"gcs_planner.{m}" for m in ("geo", "plan", "errors", "fleet_ids", "l1_guidance")
-}
+# what the mock autopilot may use of gcs_planner: the MAVLink wire core, geodesy, fleet ids, plan
+# types and starts (its plan-tuned fleets, `sitl-mock --plan`) and what those import. Never the
+# client's models of an autopilot (readback, l1_guidance): the mock keeps its own (storage.py, l1.py)
+MOCK_MAY_USE = MAVLINK_CORE | {f"gcs_planner.{m}" for m in ("geo", "plan", "errors", "fleet_ids", "starts")}
 
 
 def _modules() -> dict[str, Path]:
@@ -100,7 +98,7 @@ def test_gcs_planner_never_imports_the_mock():
     assert offenders == [], "the flight code gets its vehicles from a VehicleSource (gcs_planner/vehicles.py)"
 
 
-def test_the_mock_uses_only_the_mavlink_core_geodesy_plans_and_the_l1_law():
+def test_the_mock_uses_only_the_mavlink_core_geodesy_and_plans_never_the_clients_models():
     used = {d for m in MODULES_OF["sitl_mock"] for d in GRAPH[m]} - set(MODULES_OF["sitl_mock"])
     assert used <= MOCK_MAY_USE, sorted(used - MOCK_MAY_USE)
 

@@ -21,6 +21,7 @@ from gcs_planner.l1_guidance import (
 )
 from gcs_planner.plan import VehiclePlan
 from sitl_mock.flight import AIRFRAMES, Arrival, Guidance, Kinematics
+from sitl_mock.l1 import L1Plane
 
 DT = 0.05
 SPEED = 20.0
@@ -47,7 +48,8 @@ def _goal_leg(run_in_m: float):
 def _mock_flight(waypoints: np.ndarray, response: L1Response, each_step=lambda kin: None) -> np.ndarray:
     """The mock's L1 plane (sitl_mock.flight.Kinematics) flying the waypoints from the origin,
     heading east, each accepted within 15 m or once passed: its positions every DT."""
-    kin = Kinematics([replace(AIRFRAMES["fixed_wing"], l1=response, max_bank_rad=BANK)], np.zeros((1, 3)))
+    plane = L1Plane(response.period_s, response.turn_gain, response.roll_tau_s)  # the mock's own law
+    kin = Kinematics([replace(AIRFRAMES["fixed_wing"], l1=plane, max_bank_rad=BANK)], np.zeros((1, 3)))
     kin.pos[0], kin.psi[0], kin.speed_cmd[0] = [0.0, 0.0, 50.0], 0.0, SPEED
     track = [kin.pos[0, :2].copy()]
     for wp in waypoints:

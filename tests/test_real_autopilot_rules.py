@@ -19,7 +19,6 @@ from gcs_planner.flight_limits import FlightLimits, check_limits, read_l1_params
 from gcs_planner.flight_ops import vehicle_quirks
 from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.geo import Origin
-from gcs_planner.l1_guidance import ARDUPLANE_SITL
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandError
 from gcs_planner.mavlink.link import MavlinkLink
@@ -31,6 +30,7 @@ from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
 from gcs_planner.starts import CLIMB_RUN_PER_M
 from sitl_mock.flight import AIRFRAMES
+from sitl_mock.l1 import SITL_PLANE
 from sitl_mock.mission_server import Failure
 from sitl_mock.plan_fleet import MockVehicles
 
@@ -189,7 +189,7 @@ def test_a_plane_on_l1_guidance_gives_its_period_and_roll_lag_and_a_pursuit_plan
     planes = [
         dict(sysid=s, home=ORIGIN, vehicle_type="fixed_wing", profile="ardupilot",
              airframe=replace(AIRFRAMES["fixed_wing"], l1=l1))
-        for s, l1 in ((1, ARDUPLANE_SITL), (2, None))
+        for s, l1 in ((1, SITL_PLANE), (2, None))
     ]  # fmt: skip
 
     async def run():

@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from gcs_planner.l1_guidance import L1Response
 from sitl_mock.flight import AIRFRAMES, G_MPS2, Arrival, Guidance, Kinematics
+from sitl_mock.l1 import L1Plane
 
 DT = 0.05
 
@@ -140,7 +140,7 @@ def test_landing_reaches_the_ground_and_idle_does_not_move(kind):
     np.testing.assert_array_equal(kin.pos, before)
 
 
-def _turn_onto_a_line(l1: L1Response | None) -> np.ndarray:
+def _turn_onto_a_line(l1: L1Plane | None) -> np.ndarray:
     """A plane (20 m/s) flies a 100 m half circle sampled every 40 m, then a straight line, each
     waypoint accepted within 5 m or once passed; its positions from the arc's end on."""
     af = replace(AIRFRAMES["fixed_wing"], l1=l1)
@@ -164,7 +164,7 @@ def test_an_l1_plane_overshoots_a_turn_onto_a_line_as_arduplane_does_and_then_ho
     """ArduPlane SITL overshot its turns onto run-in lines by 25-37 m (docs/coalition.md); the L1
     guidance (AP_L1_Control::update_waypoint) overshoots too, where pursuit hardly does, and both
     then hold the line."""
-    pursuit, l1 = (_turn_onto_a_line(response) for response in (None, L1Response(15.0)))
+    pursuit, l1 = (_turn_onto_a_line(response) for response in (None, L1Plane(15.0)))
     for track, most in ((pursuit, 5.0), (l1, 30.0)):
         off = np.abs(track[:, 1] - 200.0)  # distance from the line y = 200
         assert off.max() <= most and off[-40:].max() < 2.0, off.max()
@@ -173,7 +173,7 @@ def test_an_l1_plane_overshoots_a_turn_onto_a_line_as_arduplane_does_and_then_ho
 
 
 def test_an_l1_plane_captures_a_line_at_most_45_degrees_and_converges():
-    af = replace(AIRFRAMES["fixed_wing"], l1=L1Response(15.0))
+    af = replace(AIRFRAMES["fixed_wing"], l1=L1Plane(15.0))
     kin = Kinematics([af], np.zeros((1, 3)))
     kin.pos[0] = [0.0, -300.0, 50.0]  # 300 m right of the line x axis, heading along it
     kin.psi[0] = 0.0
