@@ -77,3 +77,29 @@ def test_three_px4_and_three_arducopters_on_ports_a_shared_port_and_tcp_pass_in_
     assert len(rows) == 6 and all(abs(t) <= 3.0 for t in late_s), rows  # the schedule bound
     flight = read_flight(tmp_path / "out" / "flight.mcap")
     assert sorted(flight.positions) == [1, 2, 3, 4, 5, 6]  # PX4's unknown messages made no vehicle 0
+
+
+def test_a_fleet_flying_30_percent_late_fails_its_schedule_bound(tmp_path, capsys):
+    """Vehicles that cannot fly the planned speed (airframes capped at 0.77 of it) fly every route
+    on the planned line but 30 % late: for a deconflicted plan time is separation, so they FAIL."""
+    from dataclasses import replace
+
+    scenario_path = MISSIONS / "straight_4uav.toml"
+    plan = plan_scenario(load_scenario(scenario_path))
+    plan.save(tmp_path / "plan.json")
+    homes = {s.sysid: s.home for s in starts(plan.vehicles, plan.origin)}
+    specs = []
+    for vp in plan.vehicles:
+        frame = airframe_for(vp)
+        slow = 0.77 * float(max(vp.speeds_mps))
+        specs.append({"sysid": vp.sysid, "home": homes[vp.sysid],
+                      "airframe": replace(frame, cruise_speed_mps=slow, max_speed_mps=slow)})  # fmt: skip
+    with sitl_mock.MockFleet(vehicles=specs, home=plan.origin, speedup=SPEEDUP) as fleet:
+        connect = [a for h, p in fleet.addresses for a in ("--connect", f"udpout:{h}:{p}")]
+        argv = ["fly", str(scenario_path), "--plan", str(tmp_path / "plan.json"), "--speedup", str(SPEEDUP),
+                "-o", str(tmp_path / "out"), *connect]  # fmt: skip
+        rc = main(argv)
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.startswith("uav")]
+    assert rc == 1 and len(rows) == 4 and all("s late > 3.0 s" in row for row in rows), out
+    assert not any("cross-track" in row for row in rows)  # on the line, only late
