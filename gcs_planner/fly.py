@@ -30,19 +30,16 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
 
 from gcs_planner.clock_check import MIN_SPAN_S, ClockRate
 from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of, wire_sysid
-from gcs_planner.flight_limits import check_limits, read_l1_params, read_limits
+from gcs_planner.flight_limits import check_limits, read_limits
 from gcs_planner.flight_ops import (
     TrackRecorder,
     accel_lead_s,
@@ -56,7 +53,6 @@ from gcs_planner.flight_ops import (
     wait_until_done,
 )
 from gcs_planner.flight_report import write_flight_report
-from gcs_planner.l1_guidance import L1Response, shape_for_l1
 from gcs_planner.mavlink.actions import safe_end
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_named
 from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
@@ -80,7 +76,6 @@ log = logging.getLogger(__name__)
 
 HEARTBEAT_WAIT_S = 10.0  # simulated vehicles answer at once
 REAL_HEARTBEAT_WAIT_S = 30.0  # real vehicles / SITL started by hand
-DEFAULT_BANK_DEG = 45.0  # an L1 plane's bank limit where it does not say (ArduPlane's ROLL_LIMIT_DEG default)
 END_WAIT_S = 300.0  # after a signal, how long the log waits for the vehicles to land [s flight time]
 
 
@@ -286,8 +281,7 @@ class _Flight:
         await self._check_starts()
         self.limits = await read_limits(link, self.sysids, self.quirks)
         check_limits(self.plan.vehicles, self.limits, 1.0)
-        flown = await self._shaped_for_guidance(link, logger)
-        missions = build_missions(flown, self.quirks)
+        missions = build_missions(self.plan, self.quirks)
         self.status.last_seq = {s: len(m) - 1 for s, m in missions.items()}
         progress = self.progress
         self.uploads = await upload_fleet(
@@ -319,26 +313,6 @@ class _Flight:
         name = self.scenario.path.name if self.scenario.path else "SCENARIO"
         check_starts(starts(self.plan.vehicles, self.plan.origin), where,
                      f"start each vehicle there: fly {name} --homes prints where")  # fmt: skip
-
-    async def _shaped_for_guidance(self, link: MavlinkLink, logger: FlightLogger) -> Plan:
-        """The plan with each L1-guided plane's waypoints shaped so that its predicted flight follows
-        the planned path (l1_guidance.shape_for_l1, as fly-coalition's award legs); the conformance
-        is still judged against the planned path. The turn gain is 1 (a coordinated airframe: it is
-        learnt only in flight), the bank limit the plane's own."""
-        l1 = await read_l1_params(link, self.sysids, self.quirks)
-        vehicles = []
-        for vp in self.plan.vehicles:
-            if vp.sysid not in l1:
-                vehicles.append(vp)
-                continue
-            period_s, tau_s = l1[vp.sysid]
-            limits = self.limits.get(vp.sysid)
-            bank_rad = math.radians(limits.roll_deg if limits else DEFAULT_BANK_DEG)
-            shaped = shape_for_l1(vp, L1Response(period_s, 1.0, tau_s), bank_rad, float(vp.times_s[0]))
-            shift = float(np.hypot(*(shaped.waypoints - vp.waypoints)[:, :2].T).max())
-            logger.log_event({"event": "l1_shaped", "sysid": vp.sysid, "l1_shift_m": round(shift, 1)})
-            vehicles.append(shaped)
-        return replace(self.plan, vehicles=vehicles)
 
     def _now(self) -> float:
         """Now on the tracks' clock: the fleet's simulated time for mocks, else the receive time
