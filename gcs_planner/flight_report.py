@@ -23,6 +23,7 @@ from gcs_planner.conformance import (
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario
 from gcs_planner.telemetry.colors import vehicle_color
+from gcs_planner.validation import atomic_write
 
 __all__ = ["write_flight_report"]
 
@@ -37,7 +38,8 @@ def write_flight_report(
     scenario: Scenario | None = None,
     max_cross_track_m: float | None = None,
 ) -> Path:
-    """Draw the report to ``path`` (PNG) and return it."""
+    """Draw the report to ``path`` (PNG) and return it; written whole or not at all (an OSError is
+    a UserError naming the path, which the CLI prints as its one line)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -57,8 +59,11 @@ def write_flight_report(
     passed = sum(r.passed for r in reports)
     fig.suptitle(f"{plan.planner} plan flown: {passed}/{len(reports)} vehicles conform", fontsize=14)
     path = Path(path)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    try:
+        with atomic_write(path) as tmp:  # a full disk: one line (UserError), no partial report.png
+            fig.savefig(tmp, dpi=90)
+    finally:
+        plt.close(fig)
     return path
 
 

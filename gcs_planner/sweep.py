@@ -236,14 +236,18 @@ def run_study(
     columns = FIXED_COLUMNS + sorted(study.grid) + [m for m in study.metrics if m != "cpu_s"]
     done, cut = _done(out, columns)
     todo = [r for r in runs(study) if r[0] not in done][:max_runs]
-    if cut is not None:
-        with out.open("r+b") as f:
-            f.truncate(cut)
-    new_file = not out.exists() or out.stat().st_size == 0
-    with out.open("a", newline="") as f, _executor(scheduler, workers) as submit:
+    try:
+        if cut is not None:
+            with out.open("r+b") as f:
+                f.truncate(cut)
+        new_file = not out.exists() or out.stat().st_size == 0
+        f = out.open("a", newline="")  # closed by the with below
+    except OSError as exc:
+        raise _cannot_write(out, exc) from None
+    with f, _executor(scheduler, workers) as submit:
         writer = csv.DictWriter(f, columns, extrasaction="ignore")
         if new_file:
-            writer.writeheader()
+            _append(f, writer.writeheader, out)
         args = (study.metrics, study.scenario, user_tasks_allowed(allow_user_task))
         futures = {submit(run_task, study.task, str(base), params, seed, *args): (ident, params, seed)
                    for ident, params, seed in todo}  # fmt: skip
@@ -253,11 +257,25 @@ def run_study(
                 row.update(future.result())
             except Exception as exc:  # noqa: BLE001 - a failed run is recorded, the sweep goes on
                 row["error"] = f"{type(exc).__name__}: {exc}".replace("\n", " ")
-            writer.writerow(row)
-            f.flush()
+            _append(f, lambda row=row: writer.writerow(row), out)
             if progress:
                 progress(n, len(todo))
     return len(todo)
+
+
+def _append(f, write: Callable[[], object], out: Path) -> None:
+    """Write one CSV line and flush it; a full disk is one line (a rerun redoes a cut last row)."""
+    try:
+        write()
+        f.flush()
+    except OSError as exc:
+        raise _cannot_write(out, exc) from None
+
+
+def _cannot_write(out: Path, exc: OSError) -> UserError:
+    """The one-line error for a results CSV that cannot be written: the path and the OS reason."""
+    reason = exc.strerror or exc
+    return UserError(f"cannot write {str(out)!r}: {reason}; a rerun resumes from the rows written")
 
 
 class _executor:

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from gcs_planner.sweep import Study, marginals
+from gcs_planner.validation import atomic_write
 
 
 def write_plots(study: Study, results: Path, path: Path) -> Path | None:
@@ -39,6 +40,9 @@ def write_plots(study: Study, results: Path, path: Path) -> Path | None:
                 ax.set_ylabel(m)
     fig.suptitle(f"{study.name}: mean +- std over runs")
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    try:
+        with atomic_write(path) as tmp:  # a full disk: one line (UserError), no partial PNG
+            fig.savefig(tmp, dpi=90)
+    finally:
+        plt.close(fig)
     return path

@@ -85,15 +85,17 @@ def _check_mcap(path: str) -> None:
 def _to_rerun(flight, rrd_path: str | None, viewer: bool, speed: float) -> None:
     import rerun as rr
 
-    from gcs_planner.telemetry.rerun_views import APPLICATION_ID, flight_blueprint, log_flight_to_rerun
+    from gcs_planner.telemetry.rerun_views import (
+        APPLICATION_ID,
+        flight_blueprint,
+        log_flight_to_rerun,
+        rrd_recording,
+    )
 
     start = time.monotonic()
-    if rrd_path:
-        rec = rr.RecordingStream(APPLICATION_ID, recording_id=str(flight.path))
-        rec.save(rrd_path, default_blueprint=flight_blueprint())
-        log_flight_to_rerun(flight, rec=rec)
-        rec.flush()
-        rec.disconnect()
+    if rrd_path:  # written whole or not at all: a full disk is one line, no partial .rrd
+        with rrd_recording(rrd_path, str(flight.path)) as rec:
+            log_flight_to_rerun(flight, rec=rec)
         print(f"wrote {rrd_path} in {time.monotonic() - start:.1f} s; open it with: rerun {rrd_path}")
     if viewer:
         rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{flight.path} replay")

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 from pathlib import Path
 
 from gcs_planner.errors import UserError
 from gcs_planner.progress import counting_bar
 from gcs_planner.sweep import load_study, run_study, summarise
 from gcs_planner.sweep_plots import write_plots
-from gcs_planner.validation import not_an_input, output_file
+from gcs_planner.validation import not_an_input, output_file, write_text_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,7 +34,10 @@ def run(args: argparse.Namespace) -> int:
         out = output_file(args.out, "-o", [args.study])
     else:
         out = Path("out") / f"{args.study.stem}.csv"
-        out.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UserError(f"cannot make the folder {str(out.parent)!r}: {exc.strerror or exc}") from None
     with counting_bar("sweeping", "run") as progress:
         ran = run_study(
             study, base, out, args.workers, args.scheduler, progress, allow_user_task=args.allow_user_task
@@ -42,10 +46,11 @@ def run(args: argparse.Namespace) -> int:
     summary_path = out.with_name(out.stem + "_summary.csv")
     for extra in (summary_path, out.with_name(out.stem + "_plots.png")):
         not_an_input(extra, [args.study], "-o")
-    with summary_path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, list(summary[0]) if summary else ["runs"])
-        writer.writeheader()
-        writer.writerows(summary)
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, list(summary[0]) if summary else ["runs"])
+    writer.writeheader()
+    writer.writerows(summary)
+    write_text_atomic(summary_path, text.getvalue())  # a full disk: one line, no partial summary
     plots = write_plots(study, out, out.with_name(out.stem + "_plots.png"))
     print(f"{ran} runs now, results {out}, summary {summary_path}" + (f", plots {plots}" if plots else ""))
     for entry in summary:

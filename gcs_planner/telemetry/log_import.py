@@ -40,6 +40,7 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 DF_HEAD = b"\xa3\x95\x80"  # HEAD1, HEAD2, then the first record: FMT (type 128)
 UNIX_2000_US, UNIX_2100_US = 946_684_800_000_000, 4_102_444_800_000_000
 VEHICLE_SYSID = 1  # DataFlash and ULog are one vehicle's own log
+IMPORT_FLUSH_INTERVAL_S = 3600.0  # imports flush every max_pending frames in their thread: errors raise there
 POSITION_TOPICS = ("vehicle_global_position", "vehicle_gps_position", "sensor_gps")  # ULog, best first
 
 
@@ -161,6 +162,10 @@ def import_log(
         if result.frames == 0 and not result.records:
             raise UserError(f"{path}: a {fmt} log with nothing in it")
         tmp.replace(mcap_path)
+    except OSError as exc:  # a full disk, a read-only folder: one line, nothing at mcap_path
+        if exc.filename is not None and str(exc.filename) == str(path):
+            raise UserError(f"log {str(path)!r}: cannot read: {exc.strerror or exc}") from None
+        raise UserError(f"cannot write {str(mcap_path)!r}: {exc.strerror or exc}") from None
     finally:
         tmp.unlink(missing_ok=True)
     return result
@@ -170,7 +175,8 @@ def _logger(mcap_path: Path, origin: Origin | None, plan: Plan | None, scenario_
     from gcs_planner.telemetry.mcap_log import FlightLogger
 
     origin = origin or (plan.origin if plan is not None else Origin(0.0, 0.0, 0.0))
-    return FlightLogger(mcap_path, origin, plan=plan, scenario_text=scenario_text, max_pending=50_000)
+    return FlightLogger(mcap_path, origin, plan=plan, scenario_text=scenario_text, max_pending=50_000,
+                        flush_interval_s=IMPORT_FLUSH_INTERVAL_S)  # fmt: skip
 
 
 def _import_tlog(path, mcap_path, origin, plan, scenario_text) -> ImportResult:

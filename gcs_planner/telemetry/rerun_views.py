@@ -22,8 +22,10 @@ lays out map, 3-D view and the time series.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import tomllib
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -36,8 +38,9 @@ from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario, ScenarioError, parse_scenario
 from gcs_planner.telemetry.colors import vehicle_color
 from gcs_planner.telemetry.reader import Flight
+from gcs_planner.validation import atomic_write
 
-__all__ = ["FlightViews", "LiveRerunLogger", "flight_blueprint", "log_flight_to_rerun"]
+__all__ = ["FlightViews", "LiveRerunLogger", "flight_blueprint", "log_flight_to_rerun", "rrd_recording"]
 
 log = logging.getLogger(__name__)
 
@@ -247,12 +250,38 @@ def log_flight_to_rerun(
     With ``rrd_path`` the file is complete when this returns (the recording is flushed and
     disconnected); with ``rec`` the caller owns the recording.
     """
-    own = rec is None
     if rec is None:
-        rec = rr.RecordingStream(APPLICATION_ID, recording_id=str(flight.path))
         if rrd_path is None:
             raise ValueError("log_flight_to_rerun needs rrd_path or rec")
-        rec.save(str(rrd_path), default_blueprint=flight_blueprint())
+        with rrd_recording(rrd_path, str(flight.path)) as rec:
+            _log_flight(flight, rec, terrain)
+        return rec
+    _log_flight(flight, rec, terrain)
+    return rec
+
+
+@contextlib.contextmanager
+def rrd_recording(rrd_path: str | Path, recording_id: str) -> Iterator[rr.RecordingStream]:
+    """A recording (with the flight blueprint as default) saved to ``rrd_path`` when the block ends.
+
+    Encoded in memory and written here through atomic_write, not by Rerun's file sink, which on a
+    full disk logs multi-line errors and can hang its flush: a failed write is one line (UserError
+    naming the path and the OS reason) and leaves no partial .rrd at ``rrd_path``.
+    """
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id)
+    stream = rec.binary_stream()
+    rec.send_blueprint(flight_blueprint(), make_active=False, make_default=True)
+    try:
+        yield rec
+        rec.flush()
+        data = stream.read(flush=True) or b""
+    finally:
+        rec.disconnect()
+    with atomic_write(rrd_path) as tmp, open(tmp, "wb") as f:
+        f.write(data)
+
+
+def _log_flight(flight: Flight, rec: rr.RecordingStream, terrain) -> None:
     origin = flight.origin or _origin_from_flight(flight)
     views = FlightViews(rec, origin, flight.start_time_s)
     views.log_scene(flight.plan, scenario_from_text(flight.scenario_text), terrain)
@@ -276,9 +305,6 @@ def log_flight_to_rerun(
     for t_s, event in flight.events:
         views.log_event(t_s, event)
     rec.flush()
-    if own:
-        rec.disconnect()
-    return rec
 
 
 class LiveRerunLogger:
