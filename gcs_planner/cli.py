@@ -2,7 +2,7 @@
 
 Each subcommand lives in gcs_planner/commands/<name>.py with ``add_arguments(parser)`` and
 ``run(args) -> int``; a module docstring's first line is its help text. User mistakes
-(UserError) print one line and exit 2; no traceback.
+(UserError) print one line of bounded length and exit 2; no traceback.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import sys
 from importlib import import_module
 
 from gcs_planner import __version__
-from gcs_planner.errors import UserError
+from gcs_planner.errors import UserError, one_line
 
 # command -> its one-line help (the first line of its module's docstring, tested): `--help` lists
 # them without importing every command
@@ -42,7 +42,7 @@ class OneLineParser(argparse.ArgumentParser):
     """argparse with its usage errors on one line (``gcs-planner fly: error: ...``), exit 2."""
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}\n")
+        self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
 
 
 def build_parser(only: str | None = None) -> argparse.ArgumentParser:
@@ -83,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.run(args) or 0)
     except UserError as exc:
-        print(f"gcs-planner {args.command}: error: {exc}", file=sys.stderr)
+        print(f"gcs-planner {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"gcs-planner {args.command}: interrupted", file=sys.stderr)

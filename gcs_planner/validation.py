@@ -20,16 +20,16 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gcs_planner.errors import UserError
+from gcs_planner.errors import UserError, shorten
 
 if TYPE_CHECKING:  # gcs_planner.geo imports numpy and pyproj: only the readers of origins need it
     from gcs_planner.geo import Origin
 
 __all__ = [
-    "FLOAT32_MAX", "MAX_ALT_M", "MAX_DURATION_S", "MAX_RADIUS_M", "MAX_RANGE_M", "MAX_SPEED_MPS",
-    "MAX_WAYPOINTS", "MIN_ALT_M", "InputError", "atomic_write", "file_stem", "integer", "items_of",
-    "load_json", "load_toml", "name", "not_an_input", "number", "number_flag", "output_dir", "output_file",
-    "read_text", "same_file", "table", "unique", "write_text_atomic",
+    "FLOAT32_MAX", "MAX_ALT_M", "MAX_DURATION_S", "MAX_INPUT_BYTES", "MAX_RADIUS_M", "MAX_RANGE_M",
+    "MAX_SPEED_MPS", "MAX_WAYPOINTS", "MIN_ALT_M", "InputError", "atomic_write", "file_stem", "integer",
+    "items_of", "load_json", "load_toml", "name", "not_an_input", "number", "number_flag", "output_dir",
+    "output_file", "read_text", "same_file", "table", "too_big", "unique", "write_text_atomic",
 ]  # fmt: skip
 
 FLOAT32_MAX = 3.4028234663852886e38  # MAVLink float fields (z, param1..4)
@@ -40,6 +40,7 @@ MAX_RANGE_M = 1_000_000.0  # east / north from the scenario origin (local ENU st
 MAX_RADIUS_M = 100_000.0  # turn, acceptance, loiter, separation, obstacle and fence radii
 MAX_DURATION_S = 7 * 86_400.0  # times, delays, timeouts: one week
 MAX_WAYPOINTS = 10_000  # per vehicle (a mission holds at most 65535 items)
+MAX_INPUT_BYTES = 256 * 2**20  # scenario, plan.json, .plan, WPL, study (100k vehicles' plan.json: 60 MB)
 
 
 class InputError(UserError, ValueError):
@@ -144,24 +145,33 @@ def unique(values: Iterable, field: str) -> None:
     seen = set()
     for v in values:
         if v in seen:
-            raise InputError(f"{field} {v!r} appears twice; each must be unique")
+            raise InputError(f"{field} {shorten(v)} appears twice; each must be unique")
         seen.add(v)
 
 
 def read_text(path: str | Path, what: str) -> str:
     """A UTF-8 text file (a leading byte-order mark is dropped), with one-line errors."""
     try:
-        data = Path(path).read_bytes()
+        with open(path, "rb") as f:  # at most one byte over the limit: /dev/zero is refused too
+            data = f.read(MAX_INPUT_BYTES + 1)
     except FileNotFoundError:
         raise InputError(f"{what} {str(path)!r}: no such file") from None
     except IsADirectoryError:
         raise InputError(f"{what} {str(path)!r} is a folder, not a file") from None
     except OSError as exc:
         raise InputError(f"{what} {str(path)!r}: cannot read: {exc.strerror or exc}") from None
+    too_big(len(data), path, what)
     try:
         return data.decode("utf-8").removeprefix("\ufeff")
     except UnicodeDecodeError as exc:
         raise InputError(f"{what} {str(path)!r}: not UTF-8 text (byte {exc.start})") from None
+
+
+def too_big(size: int, path: str | Path, what: str) -> None:
+    """InputError when a text input of ``size`` bytes is over MAX_INPUT_BYTES (read no further)."""
+    if size > MAX_INPUT_BYTES:
+        raise InputError(f"{what} {str(path)!r} is over {MAX_INPUT_BYTES // 2**20} MiB, the limit for"
+                         " a text input")  # fmt: skip
 
 
 def load_json(text: str, what: str) -> Any:

@@ -26,7 +26,7 @@ from gcs_planner.errors import UserError
 from gcs_planner.mavlink.dialect import KNOWN_COMMANDS, has_position
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.units import e7
-from gcs_planner.validation import write_text_atomic
+from gcs_planner.validation import MAX_INPUT_BYTES, write_text_atomic
 
 if TYPE_CHECKING:  # numpy-backed; imported only by the readers of plan.json
     from gcs_planner.plan import Plan, VehiclePlan
@@ -232,7 +232,11 @@ def load_mission_file(path: str | Path, autopilot: str = "ardupilot") -> Mission
 
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")  # a byte-order mark (Windows editors) is no content
+        with open(path, "rb") as f:  # at most one byte over the limit, whatever the file is
+            data = f.read(MAX_INPUT_BYTES + 1)
+        if len(data) > MAX_INPUT_BYTES:
+            raise MissionFileError(f"{path} is over {MAX_INPUT_BYTES // 2**20} MiB, a mission file's limit")
+        text = data.decode("utf-8-sig")  # a byte-order mark (Windows editors) is no content
     except FileNotFoundError:
         raise MissionFileError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as exc:

@@ -46,6 +46,7 @@ from gcs_planner.mavlink.files import (
 )
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.units import e7, half_away
+from gcs_planner.mavlink.validate import MAX_MISSION_COUNT
 
 __all__ = ["dumps_plan", "loads_plan", "plan_losses"]
 
@@ -300,7 +301,9 @@ def loads_plan(text: str, where: str = ".plan file") -> MissionFile:
         )
     notes = _Notes()
     items, jump_ids = [], []
-    for i, raw in enumerate(_list(mission.get("items", []), where, "mission.items")):
+    raws = _list(mission.get("items", []), where, "mission.items")
+    _count(len(raws), where, "mission.items")
+    for i, raw in enumerate(raws):
         path = f"mission.items[{i}]"
         kind = _get(raw, "type")
         if kind in ("SimpleItem", "missionItem"):
@@ -316,6 +319,7 @@ def loads_plan(text: str, where: str = ".plan file") -> MissionFile:
             subs = [(sub, f"{path}.TransectStyleComplexItem.Items[{j}]") for j, sub in enumerate(inner)]
         else:
             raise MissionFileError(f"{where}: {path}: type must be SimpleItem or ComplexItem, got {kind!r}")
+        _count(len(items) + len(subs), where, "mission.items (with their survey items)")
         for sub, sub_path in subs:
             items.append(_parse_simple(sub, where, sub_path, notes, len(items)))
             jump_ids.append(_get(sub, "doJumpId"))
@@ -340,6 +344,14 @@ def loads_plan(text: str, where: str = ".plan file") -> MissionFile:
         notes=notes.lines() + unknown_command_notes(items, "mission"),
         **kwargs,
     )
+
+
+def _count(n: int, where: str, path: str) -> None:
+    """MissionFileError when a list holds more items than MISSION_COUNT can (65,535), checked
+    before the items are built (a huge file is one line, not minutes of parsing)."""
+    if n > MAX_MISSION_COUNT:
+        raise MissionFileError(f"{where}: {path} holds {n:,} items; a mission list holds at most "
+                               f"{MAX_MISSION_COUNT:,} (MISSION_COUNT is 16-bit)")  # fmt: skip
 
 
 def _home(value: Any, where: str) -> tuple[float, float, float] | None:
@@ -504,11 +516,13 @@ def _parse_fence(fence: Any, where: str) -> list[MissionItem]:
     polygons = list(_list(fence.get("polygons", []), where, "geoFence.polygons"))
     if fence.get("polygon"):
         polygons.insert(0, {"polygon": fence["polygon"], "inclusion": True})
+    _count(len(polygons), where, "geoFence.polygons")
     for i, poly in enumerate(polygons):
         path = f"geoFence.polygons[{i}]"
         vertices = _get(poly, "polygon")
         if not isinstance(vertices, list) or len(vertices) < 3:
             raise MissionFileError(f"{where}: {path}.polygon must list at least 3 [lat, lon] vertices")
+        _count(len(items) + len(vertices), where, "geoFence (polygon vertices)")
         cmd = POLYGON[bool(poly.get("inclusion", True))]
         for j, v in enumerate(vertices):
             lat, lon = _numbers(v, 2, where, f"{path}.polygon[{j}]")
@@ -516,6 +530,7 @@ def _parse_fence(fence: Any, where: str) -> list[MissionItem]:
             items.append(_fence_item(cmd, lat, lon, float(len(vertices))))
     for i, circ in enumerate(_list(fence.get("circles", []), where, "geoFence.circles")):
         path = f"geoFence.circles[{i}]"
+        _count(len(items) + 1, where, "geoFence (vertices and circles)")
         lat, lon = _numbers(_get(_get(circ, "circle"), "center"), 2, where, f"{path}.circle.center")
         _check_lat_lon(lat, lon, where, f"{path}.circle.center")
         (radius,) = _numbers([_get(_get(circ, "circle"), "radius")], 1, where, f"{path}.circle.radius")
@@ -529,6 +544,7 @@ def _parse_fence(fence: Any, where: str) -> list[MissionItem]:
 
 def _parse_rally(rally: Any, where: str) -> list[MissionItem]:
     points = _list(_get(rally, "points") or [], where, "rallyPoints.points")
+    _count(len(points), where, "rallyPoints.points")
     items = []
     for i, pt in enumerate(points):
         lat, lon, alt = _numbers(pt, 3, where, f"rallyPoints.points[{i}]")
