@@ -27,7 +27,8 @@ def scenario(path: Path, n: int) -> Path:
     lines = ['name = "big"', "origin = {lat_deg = 47.4, lon_deg = 8.5, alt_m = 400.0}",
              '[planner]', 'name = "straight"']  # fmt: skip
     for i in range(n):  # no sysids: every vehicle is sysid 0, which cannot fly
-        lines += ["[[vehicles]]", f'id = "v{i}"', f"start = [{i}.0, 0.0, 20.0]", f"goal = [300.0, {i}.0, 20.0]"]
+        lines += ["[[vehicles]]", f'id = "v{i}"', f"start = [{i}.0, 0.0, 20.0]"]
+        lines += [f"goal = [300.0, {i}.0, 20.0]"]
     path.write_text("\n".join(lines) + "\n")
     return path
 
