@@ -2,10 +2,11 @@
 
     PYTHONPATH=tests python benchmarks/input_fuzz.py --n 4000 --seed 1
 
-Each input comes from tests/input_mutations.py (mutated scenario TOML, plan.json, .tlog, MCAP and
-CLI flag values) and runs through ``gcs_planner.cli.main`` in-process, with the flight itself
-stubbed out (the checks `fly` makes before it sends still run). Prints one row per reader and
-the first few distinct problems; exits 1 when any input broke a rule.
+Each input comes from tests/input_mutations.py (mutated scenario TOML and its world tables,
+plan.json, .tlog, MCAP, CLI flag values, study TOML and cut or garbled sweep CSVs to resume) and
+runs through ``gcs_planner.cli.main`` in-process, with the flight itself stubbed out (the checks
+`fly` makes before it sends still run). Prints one row per reader and the first few distinct
+problems; exits 1 when any input broke a rule.
 """
 
 from __future__ import annotations

@@ -1,9 +1,10 @@
 """Mutated inputs for every CLI reader, shared by tests/test_input_fuzz.py and benchmarks/input_fuzz.py.
 
-Each case builds one mutated input (scenario TOML, plan.json, .tlog bytes, MCAP bytes or CLI flag
-values) in a fresh folder from a ``random.Random``, and returns the ``gcs-planner`` argv that reads
-it. :func:`run_case` runs it through ``gcs_planner.cli.main`` and records what came out: the exit
-code, stderr, any uncaught exception and the files left in the folder.
+Each case builds one mutated input (scenario TOML and its world tables, plan.json, .tlog bytes,
+MCAP bytes, CLI flag values, a study TOML or a sweep's results CSV) in a fresh folder from a
+``random.Random``, and returns the ``gcs-planner`` argv that reads it. :func:`run_case` runs it
+through ``gcs_planner.cli.main`` and records what came out: the exit code, stderr, any uncaught
+exception and the files left in the folder.
 """
 
 from __future__ import annotations
@@ -50,6 +51,27 @@ SCENARIO: dict = {
             "separation_m": 5.0,
         },
     ],
+}
+
+# the world tables: manned traffic (a mode mixture and a recorded track) and terrain peaks
+WORLD: dict = {
+    "manned": [
+        {"id": "ga1", "dt_s": 1.0, "position_m": [-60.0, 6.0, 12.0], "velocity_mps": [10.0, 0.0, 0.0],
+         "observed_s": 10.0,
+         "modes": [{"name": "cruise", "velocity_mps": [10.0, 0.0, 0.0], "sigma_mps": [0.3, 0.3, 0.1],
+                    "strength": 20.0, "weight": 0.9},
+                   {"name": "descent", "velocity_mps": [9.0, 0.0, -2.0], "sigma_mps": [0.3, 0.3, 0.2],
+                    "strength": 20.0, "weight": 0.1}]},
+    ],
+    "terrain": {"type": "peaks",
+                "peaks": [{"h_m": 15.0, "x_m": 150.0, "y_m": -60.0, "sx_m": 30.0, "sy_m": 20.0}]},
+}  # fmt: skip
+STUDY: dict = {
+    "name": "fuzz",
+    "scenario": "s.toml",
+    "seeds": [0, 1],
+    "metrics": ["feasible_fraction"],
+    "grid": {"waypoint_spacing_m": [80.0, 120.0]},
 }
 
 
@@ -196,6 +218,42 @@ def _plan_text(rng: random.Random) -> bytes:
     return deep_nesting("json")
 
 
+def _world_text(rng: random.Random) -> bytes:
+    """SCENARIO with manned traffic and terrain peaks, one of the two mutated."""
+    tree = {**copy.deepcopy(SCENARIO), **copy.deepcopy(WORLD)}
+    key = rng.choice(["manned", "terrain"])
+    tree[key] = mutate_tree(tree[key], rng)
+    if rng.random() < 0.1:
+        tree = mutate_tree(tree, rng)
+    return toml_dumps(tree).encode()
+
+
+def base_sweep_csv(tmp: Path) -> bytes:
+    """The results CSV of a complete sweep of STUDY (4 runs)."""
+    if "csv" not in _cache:
+        from gcs_planner.cli import main
+
+        (tmp / "s.toml").write_text(toml_dumps(SCENARIO))
+        (tmp / "study.toml").write_text(toml_dumps(STUDY))
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            argv = ["sweep", str(tmp / "study.toml"), "-o", str(tmp / "base.csv"), "--workers", "1"]
+            assert main(argv) == 0
+        _cache["csv"] = (tmp / "base.csv").read_bytes()
+        for name in ("s.toml", "study.toml", "base.csv", "base_summary.csv", "base_plots.png"):
+            (tmp / name).unlink(missing_ok=True)
+    return _cache["csv"]
+
+
+def _study_files(rng: random.Random | None, d: Path) -> str:
+    """STUDY (mutated when ``rng`` is given) and its scenario in ``d``; the study's path."""
+    (d / "s.toml").write_text(toml_dumps(SCENARIO))
+    study = STUDY if rng is None else mutate_tree(STUDY, rng)
+    text = toml_dumps(study).encode() if rng is None or rng.random() < 0.8 else None
+    if text is None:
+        text = mutate_bytes(toml_dumps(STUDY).encode(), rng)
+    return _write(d, "study.toml", text)
+
+
 def _write(folder: Path, name: str, data: bytes) -> str:
     (folder / "out").mkdir(exist_ok=True)
     (folder / name).write_bytes(data)
@@ -269,6 +327,29 @@ def case_flags(rng: random.Random, d: Path) -> list[str]:
     return rng.choice(choices)
 
 
+def case_world(rng: random.Random, d: Path) -> list[str]:
+    return ["plan", _write(d, "s.toml", _world_text(rng)), "-o", str(d / "out" / "plan.json")]
+
+
+def case_study(rng: random.Random, d: Path) -> list[str]:
+    return ["sweep", _study_files(rng, d), "-o", str(d / "out" / "r.csv"), "--workers", "1"]
+
+
+def case_sweep_csv(rng: random.Random, d: Path) -> list[str]:
+    """Resume a cut, garbled or foreign results CSV (it is in out/ before the run)."""
+    study = _study_files(None, d)
+    data = base_sweep_csv(d)
+    r = rng.random()
+    if r < 0.4:
+        data = data[: rng.randrange(len(data) + 1)]  # a sweep killed mid-row
+    elif r < 0.9:
+        data = mutate_bytes(data, rng)
+    else:
+        data = rng.choice([b"\xff\xfe" + data.decode().encode("utf-16-le"), b"\x00" * 64, b"a,b\n1,2\n"])
+    _write(d, "out/r.csv", data)
+    return ["sweep", study, "-o", str(d / "out" / "r.csv"), "--workers", "1"]
+
+
 CASES: dict[str, Callable[[random.Random, Path], list[str]]] = {
     "plan (scenario)": case_plan,
     "fly (scenario)": case_fly_scenario,
@@ -278,6 +359,9 @@ CASES: dict[str, Callable[[random.Random, Path], list[str]]] = {
     "import-tlog (.tlog)": case_import_tlog,
     "replay (MCAP)": case_replay,
     "CLI flags": case_flags,
+    "plan (world tables)": case_world,
+    "sweep (study)": case_study,
+    "sweep (resume CSV)": case_sweep_csv,
 }
 
 
