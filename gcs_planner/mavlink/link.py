@@ -470,7 +470,7 @@ class MavlinkLink:
 def signing_problem(link: MavlinkLink, sysid: int) -> str:
     """'' unless the vehicle signs its frames with a key this link does not have: then why, in
     words (it drops every unsigned or wrongly signed frame this link sends)."""
-    if sysid not in link.unverified:
+    if sysid not in getattr(link, "unverified", {}):  # (a link per network keeps no such count)
         return ""
     which = "give --signing-passphrase"
     if link.signing.key:
