@@ -21,7 +21,7 @@ from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.preflight import read_param
 from gcs_planner.plan import VehiclePlan
 
-__all__ = ["FlightLimits", "check_limits", "read_l1_params", "read_limits"]
+__all__ = ["FlightLimits", "check_limits", "read_l1_params", "read_limits", "read_ramps"]
 
 log = logging.getLogger(__name__)
 
@@ -72,6 +72,25 @@ async def read_l1_params(
         s: (float(period), float(tau or 0.0))
         for s, (period, tau) in zip(asked, found, strict=True)
         if period is not None and period > 0.0
+    }
+
+
+async def read_ramps(
+    link: MavlinkLink, sysids: Sequence[int], quirks: dict[int, AutopilotQuirks]
+) -> dict[int, tuple[float, float]]:
+    """Each vehicle's waypoint acceleration [m/s^2] and jerk [m/s^3] limits
+    (``AutopilotQuirks.ramp_params``), for those whose autopilot has them and answers both."""
+
+    async def one(sysid: int) -> tuple[float | None, ...]:
+        accel, jerk, _ = quirks[sysid].ramp_params
+        return tuple(await asyncio.gather(read_param(link, sysid, accel), read_param(link, sysid, jerk)))
+
+    asked = [s for s in sysids if quirks[s].ramp_params is not None]
+    found = await asyncio.gather(*(one(s) for s in asked))
+    return {
+        s: (accel * quirks[s].ramp_params[2], jerk * quirks[s].ramp_params[2])
+        for s, (accel, jerk) in zip(asked, found, strict=True)
+        if accel and jerk and accel > 0 and jerk > 0
     }
 
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import time
 from collections.abc import Callable, Mapping
 
@@ -232,10 +233,13 @@ async def take_off_all(
     await asyncio.gather(*climbs)
 
 
-def accel_lead_s(vp, accel_mps2: float) -> float:
-    """How much earlier than planned a route starts, so that accelerating from the hover at
-    ``accel_mps2`` puts the vehicle where a plan assuming instant cruise speed has it."""
-    return float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0]) / (2.0 * accel_mps2)
+def accel_lead_s(vp, accel_mps2: float, jerk_mps3: float = math.inf, latency_s: float = 0.0) -> float:
+    """How much earlier than planned a route starts, so that accelerating from the hover puts the
+    vehicle where a plan assuming instant cruise speed has it: half the ramp to cruise speed v
+    (an S-curve with acceleration a and jerk j takes v / a + a / j, half of which is lost), plus
+    the autopilot's latency from MISSION_START to moving."""
+    v = float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0])
+    return v / (2.0 * accel_mps2) + accel_mps2 / (2.0 * jerk_mps3) + latency_s
 
 
 async def start_routes(
@@ -248,11 +252,13 @@ async def start_routes(
     leads: dict[int, float],
     quirks: dict[int, AutopilotQuirks],
     started: frozenset[int] = frozenset(),
+    on_start: Callable[[int, float], None] | None = None,
 ) -> None:
     """Start each route (the item after NAV_TAKEOFF) at its planned start time, but those in
     ``started`` (fixed wings that climbed into theirs).
 
     Route time 0 is ``lead_s`` after now; each route starts its own acceleration lead earlier.
+    ``on_start(sysid, route_s)`` is called as each start is sent, with the route time it was due at.
     """
     t0 = time.monotonic()
 
@@ -264,6 +270,8 @@ async def start_routes(
         offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
         start_s = lead_s + offset_s - leads[vp.sysid]
         await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
+        if on_start is not None:
+            on_start(vp.sysid, offset_s - leads[vp.sysid])
         try:
             await start_mission_at(link, vp.sysid, quirks[vp.sysid], first, len(items) - 1)
         except MavlinkError as exc:

@@ -39,7 +39,7 @@ from gcs_planner.clock_check import MIN_SPAN_S, ClockRate
 from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of, wire_sysid
-from gcs_planner.flight_limits import check_limits, read_limits
+from gcs_planner.flight_limits import check_limits, read_limits, read_ramps
 from gcs_planner.flight_ops import (
     TrackRecorder,
     accel_lead_s,
@@ -235,6 +235,7 @@ class _Flight:
         self.recorder = TrackRecorder(plan.origin, clock, self.sysids)
         self.quirks: dict[int, AutopilotQuirks] = {}
         self.limits: dict = {}  # sysid: flight_limits.FlightLimits
+        self.ramps: dict[int, tuple[float, float]] = {}  # sysid: waypoint acceleration, jerk
         self.uploads: dict[int, VehicleResult] = {}
         self.end_states: dict[int, str] = {}
         self.log_errors: list[str] = []
@@ -280,6 +281,7 @@ class _Flight:
         await request_streams(link, self.sysids)
         await self._check_starts()
         self.limits = await read_limits(link, self.sysids, self.quirks)
+        self.ramps = {} if self.vehicles.simulated else await read_ramps(link, self.sysids, self.quirks)
         check_limits(self.plan.vehicles, self.limits, 1.0)
         missions = build_missions(self.plan, self.quirks)
         self.status.last_seq = {s: len(m) - 1 for s, m in missions.items()}
@@ -314,6 +316,20 @@ class _Flight:
         check_starts(starts(self.plan.vehicles, self.plan.origin), where,
                      f"start each vehicle there: fly {name} --homes prints where")  # fmt: skip
 
+    def _started(self, sysid: int, route_s: float) -> None:
+        """A route's start is being sent, due at route time ``route_s``: its route time 0 is taken
+        from now, so a start this process sent late (a busy machine; a mock does not wait for it)
+        is not charged to the vehicle's schedule, while everything the vehicle does after is."""
+        self.route_t0[sysid] = self._now() - route_s
+
+    def _lead_s(self, vp) -> float:
+        """How early a route starts (flight_ops.accel_lead_s): a mock at its airframe's
+        acceleration; a connected vehicle on the S-curve its own parameters give, after its
+        autopilot's start latency (docs/real-autopilots.md)."""
+        if self.vehicles.simulated or vp.sysid not in self.ramps:
+            return accel_lead_s(vp, self.vehicles.accel_mps2(vp.sysid))
+        return accel_lead_s(vp, *self.ramps[vp.sysid], self.quirks[vp.sysid].start_latency_s)
+
     def _now(self) -> float:
         """Now on the tracks' clock: the fleet's simulated time for mocks, else the receive time
         scaled to the vehicles' rate."""
@@ -341,13 +357,13 @@ class _Flight:
         )  # fmt: skip
         climbed = frozenset(v.sysid for v in plan.vehicles if v.vehicle_type == "fixed_wing")
         logger.log_event({"event": "airborne", "sysids": self.sysids})
-        leads = {vp.sysid: accel_lead_s(vp, self.vehicles.accel_mps2(vp.sysid)) for vp in plan.vehicles}
+        leads = {vp.sysid: self._lead_s(vp) for vp in plan.vehicles}
         lead_s = max(leads.values())
         self.route_t0_s = self._now() + lead_s
         self.route_t0 = {s: plane_t0.get(s, self.route_t0_s) for s in self.sysids}
-        routes = asyncio.create_task(
-            start_routes(link, plan, missions, speedup, logger, lead_s, leads, self.quirks, climbed)
-        )
+        routes = asyncio.create_task(start_routes(
+            link, plan, missions, speedup, logger, lead_s, leads, self.quirks, climbed, self._started
+        ))  # fmt: skip
         keeper = None
         if options.keep_schedule:
             keeper = ScheduleKeeper()

@@ -77,6 +77,10 @@ class FlightRules:
         bank (plane.parm: 15 s, 0.25 s), both 0 where the mock plane flies its pursuit guidance
         instead (ArduPlane has no such values: the mock says so).
     params: the parameters the mock serves over PARAM_SET / PARAM_REQUEST_READ.
+    ramp_params: the names of the waypoint acceleration [m/s^2] and jerk [m/s^3] limits
+        (ArduCopter AC_WPNav WP_ACC / WP_JERK, PX4 MPC_ACC_HOR / MPC_JERK_AUTO); the mock serves
+        its airframe's acceleration and a jerk it never limits (it ramps linearly), which is
+        what it flies.
     """
 
     name: str
@@ -96,6 +100,7 @@ class FlightRules:
     takeoff_param: str | None = None
     params: dict[str, float] = field(default_factory=dict)
     position_fix_s: float = 0.0
+    ramp_params: tuple[str, str] | None = None
 
 
 ARDUCOPTER_FLIGHT = FlightRules(
@@ -108,6 +113,7 @@ ARDUCOPTER_FLIGHT = FlightRules(
     takeoff_command="above_home",
     start_range=False,
     final_land_disarms=True,
+    ramp_params=("WP_ACC", "WP_JERK"),
 )
 ARDUPLANE_FLIGHT = FlightRules(
     name="ArduPlane",
@@ -135,6 +141,7 @@ PX4_FLIGHT = FlightRules(
     streams_by_request=False,
     rejects_position_before_takeoff=True,
     signing_refused_armed=True,
+    ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO"),
 )
 
 

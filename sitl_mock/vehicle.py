@@ -58,6 +58,7 @@ DEFAULT_HOME = Origin(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zu
 COMPID = 1
 FORCE_MAGIC = 21196
 DEFAULT_TAKEOFF_ALT_M = 10.0
+UNLIMITED_JERK_MPS3 = 1000.0  # the mock's acceleration is not jerk-limited: it ramps linearly
 TAKEOFF_MODE_EARLY_M = 2.0  # ArduPlane's TAKEOFF mode is done this far below TKOFF_ALT [m]
 _MAV_TYPE = {"multirotor": mavlink.MAV_TYPE_QUADROTOR, "fixed_wing": mavlink.MAV_TYPE_FIXED_WING}
 _CAPABILITIES = (
@@ -183,6 +184,9 @@ class MockVehicle:
                                ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad),
                                NAVL1_PERIOD=af.l1.period_s if af.l1 else 0.0,
                                RLL2SRV_TCONST=af.l1.roll_tau_s if af.l1 else 0.0)  # fmt: skip
+        if self.flight.ramp_params and self.airframe.kind == "multirotor":  # the ramp it flies
+            accel, jerk = self.flight.ramp_params
+            self.params.update({accel: self.airframe.accel_mps2, jerk: UNLIMITED_JERK_MPS3})
         if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
             for name, value in (("MAV_OPTIONS", 0.0), ("MAV_GCS_SYSID", 255.0), ("MAV_GCS_SYSID_HI", 0.0)):
                 self.params.setdefault(name, value)

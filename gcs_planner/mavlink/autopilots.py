@@ -73,6 +73,10 @@ class AutopilotQuirks:
     # after the transfer and says "Mission rejected: ..." (e.g. "takeoff not first waypoint item")
     verdict_after_ack_s: float = 0.0
     rejection_texts: tuple[str, ...] = ()
+    # parameters of its waypoint navigation's acceleration and jerk limits, with their unit scale
+    # to m/s^2 and m/s^3 (None: not known): a route starts from the hover on this S-curve ramp
+    ramp_params: tuple[str, str, float] | None = None
+    start_latency_s: float = 0.0  # from MISSION_START to moving along the route [s] (measured)
 
     def readback_model(self):
         """What the autopilot returns of an item sent (readback.Model)."""
@@ -101,6 +105,8 @@ ARDUCOPTER = AutopilotQuirks(
     land_mode="LAND",
     readback="ARDUCOPTER",
     stores_as_received=frozenset({0, 2}),
+    ramp_params=("WP_ACC", "WP_JERK", 1.0),  # AC_WPNav (4.7+; WPNAV_ACCEL [cm/s^2] before)
+    start_latency_s=1.0,  # SITL 4.8.0-dev: with it four copters kept a 10 m/s plan within 2.1 s
 )
 ARDUPLANE = AutopilotQuirks(
     name="ArduPlane",
@@ -139,6 +145,7 @@ PX4 = AutopilotQuirks(
     stores_as_received=frozenset(),
     verdict_after_ack_s=1.0,
     rejection_texts=("mission rejected", "mission invalid"),
+    ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO", 1.0),  # mc_pos_control / FlightTaskAuto
 )
 GENERIC = AutopilotQuirks(
     name="MAVLink",
