@@ -76,7 +76,7 @@ def format_homes(found: list[Start], sysids: frozenset[int] | None) -> str:
 def check_starts(
     found: list[Start], positions: dict[int, tuple[float, float]], hint: str, min_bound_m: float = 0.0
 ) -> None:
-    """Refuse (UserError, one line per vehicle) a vehicle whose reported position (lat, lon [deg]) is
+    """Refuse (UserError naming each vehicle) a vehicle whose reported position (lat, lon [deg]) is
     further than its bound from its start, or that reported none: its take-off would not end where
     its mission begins (a SITL started without ``--home`` is at its default home, another
     continent; four mocks on one spot would collide). hint: how to start it. ``min_bound_m``: a
@@ -95,7 +95,7 @@ def check_starts(
                 f"{s.home.lat_deg:.7f},{s.home.lon_deg:.7f} (bound {bound:.0f} m)"
             )
     if problems:
-        raise UserError("\n".join([*problems[:-1], f"{problems[-1]} ({hint})"]))
+        raise UserError("; ".join([*problems[:-1], f"{problems[-1]} ({hint})"]))
 
 
 def _distance(m: float) -> str:
