@@ -29,7 +29,7 @@ from gcs_planner.mavlink.autopilots import AutopilotQuirks, Takeoff, quirks_for
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink, check_signing
-from gcs_planner.mavlink.units import reports_no_fix
+from gcs_planner.mavlink.units import impossible_position, reports_no_fix
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan, land_point
 from gcs_planner.timekeeping import ScheduleKeeper
@@ -78,12 +78,15 @@ class TrackRecorder:
         self.clock = clock
         self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in sysids}
         self.completed: dict[int, bool] = {}
+        self.impossible: dict[int, int] = {}  # sysid -> reports of a position that cannot be
 
     def on_frame(self, msg, raw: bytes, t_s: float) -> None:
         sysid = msg.get_srcSystem()
         if sysid not in self.samples or msg.get_type() != "GLOBAL_POSITION_INT":
             return
         if reports_no_fix(msg):
+            if impossible_position(msg):
+                self.impossible[sysid] = self.impossible.get(sysid, 0) + 1
             return
         self.samples[sysid].append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
 

@@ -432,6 +432,9 @@ class _Flight:
             upload = self.uploads.get(r.sysid)
             if upload is not None and not upload.ok:
                 r.failures.insert(0, f"upload failed: {upload.error}")
+            impossible = self.recorder.impossible.get(r.sysid, 0)
+            if impossible:
+                r.failures.append(f"{impossible} impossible positions reported (ignored)")
         report_path = write_flight_report(
             options.out_dir / "report.png", plan, self.recorder.tracks(), reports, scenario,
             options.max_cross_track_m,

@@ -77,3 +77,28 @@ def test_a_forged_completion_from_the_vehicles_address_does_not_end_the_flight(t
     assert forged and result.passed, [(r.sysid, r.failures) for r in result.reports]
     for r in result.reports:
         assert r.flight_time_s == pytest.approx(r.planned_time_s, rel=0.1), (r.sysid, r.flight_time_s)
+
+
+def test_impossible_positions_are_flagged_and_never_pass(tmp_path):
+    """Reliability: a vehicle that reports latitude 91 deg (a valid int32) mid-flight: the reports
+    are left out of its track and its row fails naming them, never a NaN that passes."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    scenario = load_scenario(SCENARIO)
+    plan = plan_scenario(scenario)
+    vehicles = MockVehicles(plan.vehicles, plan.origin, 20.0, "ardupilot")
+    calls = []
+
+    def progress(stage: str, done, total) -> None:
+        calls.append(stage)
+        if calls.count("fly") == 6:
+            (fleet,) = vehicles.fleets
+            v = fleet.vehicle(2)
+            for lat in (910_000_000, -(2**31)):
+                bad = mavlink.MAVLink_global_position_int_message(0, lat, 85_455_940, 500_000, 20_000, *[0] * 4)
+                fleet.call(lambda b=bad: v.link.send(b))
+
+    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress))
+    by_sysid = {r.sysid: r for r in result.reports}
+    assert "2 impossible positions reported (ignored)" in by_sysid[2].failures, by_sysid[2].failures
+    assert all(by_sysid[s].passed for s in (1, 3, 4)) and not result.passed

@@ -7,7 +7,10 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["NO_FIX_DEG", "SPEED_AIRSPEED", "SPEED_GROUNDSPEED", "e7", "half_away", "no_fix", "reports_no_fix"]
+__all__ = [
+    "NO_FIX_DEG", "SPEED_AIRSPEED", "SPEED_GROUNDSPEED", "e7", "half_away", "impossible_position", "no_fix",
+    "reports_no_fix",
+]  # fmt: skip
 
 SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0  # MAV_CMD_DO_CHANGE_SPEED param1
 NO_FIX_DEG = 0.01  # a reported position this near (0, 0) is no position (no_fix)
@@ -32,6 +35,10 @@ def no_fix(lat_deg, lon_deg):
 
 def reports_no_fix(msg) -> bool:
     """A GLOBAL_POSITION_INT that carries no position: none yet (``no_fix`` of its degE7 lat, lon)
-    or an impossible one (latitude past a pole, longitude past the antimeridian)."""
-    lat, lon = msg.lat * 1e-7, msg.lon * 1e-7
-    return bool(no_fix(lat, lon)) or not (abs(lat) <= 90.0 and abs(lon) <= 180.0)
+    or an impossible one (``impossible_position``)."""
+    return bool(no_fix(msg.lat * 1e-7, msg.lon * 1e-7)) or impossible_position(msg)
+
+
+def impossible_position(msg) -> bool:
+    """A GLOBAL_POSITION_INT past a pole or the antimeridian (a valid int32 all the same)."""
+    return not (abs(msg.lat) <= 900_000_000 and abs(msg.lon) <= 1_800_000_000)
