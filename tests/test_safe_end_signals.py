@@ -95,7 +95,7 @@ def test_impossible_positions_are_flagged_and_never_pass(tmp_path):
             (fleet,) = vehicles.fleets
             v = fleet.vehicle(2)
             for lat in (910_000_000, -(2**31)):
-                bad = mavlink.MAVLink_global_position_int_message(0, lat, 85_455_940, 500_000, 20_000, *[0] * 4)
+                bad = mavlink.MAVLink_global_position_int_message(0, lat, 85_455_940, 500_000, 0, 0, 0, 0, 0)
                 fleet.call(lambda b=bad: v.link.send(b))
 
     result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress))
