@@ -32,6 +32,7 @@ from gcs_planner.mavlink.link import MavlinkLink, check_signing
 from gcs_planner.mavlink.units import impossible_position, reports_no_fix
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan, land_point
+from gcs_planner.starts import CLIMB_RUN_PER_M
 from gcs_planner.timekeeping import ScheduleKeeper
 
 __all__ = [
@@ -47,7 +48,8 @@ TAKEOFF_CLIMB_MPS = 2.0  # conservative climb rate for the flight-time budget
 LAND_SPEED_MPS = 1.0  # conservative landing descent rate for the flight-time budget
 TAKEOFF_ATTEMPTS = 3
 TAKEOFF_ALT_TOL_M = 1.0  # a vehicle is "up" once no lower than this below its take-off altitude
-PLANE_CLIMB_PAST_M = 10.0  # a plane that climbs into its route is sent this much higher [m]
+PLANE_CLIMB_PAST_M = 2.0  # a plane that climbs into its route is sent this much higher [m]
+PLANE_RUN_FACTOR = 3.0  # ... and its take-off may run this many times its planned climb run
 NAV_TAKEOFF = 22  # MAV_CMD_NAV_TAKEOFF
 KEEPER_PERIOD_S = 0.5  # schedule-keeping period [s of flight time]
 # a completion counts where the track ends this near the mission's end [m]: a multirotor lands or
@@ -202,9 +204,10 @@ async def take_off_all(
             for attempt in range(1, TAKEOFF_ATTEMPTS + 1):
                 try:
                     climbing_in = missions is not None and vp.vehicle_type == "fixed_wing"
+                    z0 = float(vp.waypoints[0, 2])
                     await take_off(
-                        link, status, vp.sysid, q, float(vp.waypoints[0, 2]), ARM_TIMEOUT_S, speedup, waiting,
-                        PLANE_CLIMB_PAST_M if climbing_in else 0.0,
+                        link, status, vp.sysid, q, z0, ARM_TIMEOUT_S, speedup, waiting,
+                        PLANE_CLIMB_PAST_M if climbing_in else 0.0, PLANE_RUN_FACTOR * z0 * CLIMB_RUN_PER_M,
                     )  # fmt: skip
                     break
                 except MavlinkError as exc:

@@ -35,6 +35,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from gcs_planner.clock_check import MIN_SPAN_S, ClockRate
 from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
@@ -316,6 +318,17 @@ class _Flight:
         check_starts(starts(self.plan.vehicles, self.plan.origin), where,
                      f"start each vehicle there: fly {name} --homes prints where")  # fmt: skip
 
+    def _run_to_start_s(self, vp) -> float:
+        """How long a plane that starts its route now takes to reach its first waypoint, flying
+        along its first leg at the leg's speed (it climbs out faster than its climb run assumes:
+        a SITL plane was up 80 m before it, 4.4 s early)."""
+        latest = self.recorder.latest(vp.sysid)
+        if latest is None or len(vp.waypoints) < 2:
+            return 0.0
+        leg = vp.waypoints[1, :2] - vp.waypoints[0, :2]
+        ahead_m = float(np.dot(vp.waypoints[0, :2] - latest[1][:2], leg / max(float(np.hypot(*leg)), 1e-9)))
+        return max(ahead_m, 0.0) / max(float(vp.speeds_mps[1]), 1e-3)
+
     def _started(self, sysid: int, route_s: float) -> None:
         """A route's start is being sent, due at route time ``route_s``: its route time 0 is taken
         from now, so a start this process sent late (a busy machine; a mock does not wait for it)
@@ -349,7 +362,8 @@ class _Flight:
 
         def plane_started(sysid: int) -> None:
             vp = next(v for v in plan.vehicles if v.sysid == sysid)
-            plane_t0[sysid] = self._now() - max(vp.takeoff_delay_s, float(vp.times_s[0]))
+            due_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at its first waypoint
+            plane_t0[sysid] = self._now() + self._run_to_start_s(vp) - due_s
 
         await take_off_all(
             link, plan, self.status, speedup, self.quirks, options.workers, options.timeout_factor,

@@ -128,7 +128,7 @@ ARDUPLANE_FLIGHT = FlightRules(
     groundspeed_is_minimum=True,
     airspeed_range=True,
     takeoff_param="TKOFF_ALT",
-    params={"TKOFF_ALT": 50.0},
+    params={"TKOFF_ALT": 50.0, "TKOFF_DIST": 200.0},  # ArduPlane ModeTakeoff defaults
 )
 PX4_FLIGHT = FlightRules(
     name="PX4",

@@ -28,6 +28,7 @@ log = logging.getLogger(__name__)
 
 ON_GROUND_M = 1.0  # a vehicle this close to its home altitude counts as on the ground [m]
 TAKEOFF_ALT_PARAM = "TKOFF_ALT"  # ArduPlane: TAKEOFF mode's target altitude above home [m]
+TAKEOFF_DIST_PARAM = "TKOFF_DIST"  # ArduPlane: TAKEOFF mode ends this far from its start [m]
 TAKEOFF_MODE_LEVEL_OFF_M = 2.0  # ArduPlane's TAKEOFF mode is done this far below TKOFF_ALT [m]
 
 
@@ -41,15 +42,20 @@ async def take_off(
     time_scale: float = 1.0,
     waiting=None,
     climb_past_m: float = 0.0,
+    takeoff_dist_m: float = 0.0,
 ) -> None:
     """Arm (once the vehicle is ready) and climb to ``alt_m`` above home, as the autopilot takes it.
-    ``climb_past_m``: a TAKEOFF-mode plane is given that much more, so that it is still climbing
-    straight when it passes ``alt_m`` (ArduPlane ends TAKEOFF 2 m below TKOFF_ALT and turns into a
-    loiter: a route started then begins off its line)."""
+    ``climb_past_m``: a TAKEOFF-mode plane is given that much more, and TKOFF_DIST ``takeoff_dist_m``,
+    so that it is still climbing straight along its launch heading when it passes ``alt_m``
+    (ArduPlane's ModeTakeoff::update ends the take-off 2 m below TKOFF_ALT or TKOFF_DIST from its
+    start, default 200 m, and turns into a loiter: SITL planes began their routes 44-80 m off the
+    line)."""
     command = CommandClient(link, sysid)
     if quirks.takeoff is Takeoff.TAKEOFF_MODE:
         value = await set_param(link, sysid, TAKEOFF_ALT_PARAM, alt_m + climb_past_m)
         log.info("vehicle %d: %s set to %.1f m for the take-off", sysid, TAKEOFF_ALT_PARAM, value)
+        if climb_past_m > 0:  # nor may the take-off end by distance before the plane is up
+            await set_param(link, sysid, TAKEOFF_DIST_PARAM, takeoff_dist_m)
     if quirks.arm_mode is not None:
         await command.set_mode(quirks.arm_mode)
     await arm_when_ready(link, status, sysid, arm_timeout_s, time_scale, waiting)

@@ -33,9 +33,9 @@ Choices where MAVLink or the autopilots leave room (all documented here, nowhere
   the hold time (param1) of the previous waypoint, or NAV_LOITER_TIME for a fixed wing, which
   cannot hover.
 - Final action: "land" lands at ``plan.land_point`` (z = 0): under the last waypoint for a
-  multirotor; for a fixed wing DO_LAND_START at the last waypoint, then a land point one
-  glide-slope run ahead on the last leg (the approach is outside the planned path, checked only
-  by the fence); "rtl" is NAV_RETURN_TO_LAUNCH,
+  multirotor; for a fixed wing a land point one glide-slope run ahead on the last leg (the
+  approach is outside the planned path, checked only by the fence; no DO_LAND_START: ArduPlane
+  SITL 4.8 refuses to arm with one while RTL_AUTOLAND is 0); "rtl" is NAV_RETURN_TO_LAUNCH,
   "loiter" is NAV_LOITER_UNLIM over the last waypoint (radius = turn radius for fixed wings).
 - Fence (mission_type 1): the scenario's x/y bounds as an inclusion polygon, each cylinder
   (radius + buffer) and each radar dome (its footprint) as an exclusion circle, in
@@ -165,8 +165,8 @@ def plan_to_items(
     items.extend(_legs(vp, at, fixed_wing))
     last = len(wps) - 1
     if vp.final_action == "land":
-        if fixed_wing:  # the approach starts at the last waypoint (QGC's landing pattern marks it so)
-            items += [at(last, mavlink.MAV_CMD_DO_LAND_START, wps[last, 2]), _fixed_wing_land(vp, origin)]
+        if fixed_wing:  # no DO_LAND_START: ArduPlane refuses to arm with one unless RTL_AUTOLAND is set
+            items.append(_fixed_wing_land(vp, origin))
         else:
             items.append(at(last, mavlink.MAV_CMD_NAV_LAND, 0.0))
     elif vp.final_action == "rtl":
