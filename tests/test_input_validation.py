@@ -9,6 +9,7 @@ import json
 import math
 
 import pytest
+from cli_checks import refused as _fails
 from input_mutations import SCENARIO, base_mcap, base_plan, base_tlog, toml_dumps
 
 from gcs_planner import fly as fly_module
@@ -37,14 +38,6 @@ def _plan(tmp_path, edit=None, name="p.json"):
     return str(path)
 
 
-def _fails(argv, capsys, *words):
-    """main(argv) exits 2 with one stderr line that contains every one of ``words``."""
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    for word in words:
-        assert word in err[0], err[0]
-    return err[0]
 
 
 def _veh(i, key, value):

@@ -7,19 +7,11 @@ import os
 import stat
 
 import pytest
+from cli_checks import refused as _fails
 from input_mutations import SCENARIO, base_mcap, base_plan, base_tlog, toml_dumps
 
 from gcs_planner.cli import main
 from gcs_planner.validation import write_text_atomic
-
-
-def _fails(argv, capsys, *words):
-    """main(argv) exits 2 with one stderr line holding every word."""
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    for word in words:
-        assert word in err[0], err[0]
 
 
 @pytest.mark.parametrize("vid", ["../../x", "/abs/x", "..", ".hidden", "a\\b", "c:x"])

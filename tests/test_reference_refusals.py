@@ -10,8 +10,8 @@ import subprocess
 import sys
 
 import pytest
+from cli_checks import refused as _fails
 
-from gcs_planner.cli import main
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.files import MissionFile, MissionFileError, load_mission_file, save_mission_file
 from gcs_planner.mavlink.types import MissionItem
@@ -21,12 +21,6 @@ ORIGIN = Origin(47.397742, 8.545594, 488.0)
 HOME = "0\t1\t0\t16\t0\t0\t0\t0\t47.3977420\t8.5455940\t488.0\t1\n"
 
 
-def _fails(argv, capsys, *words):
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    for word in words:
-        assert word in err[0], err[0]
 
 
 def _plan_doc(**edit):

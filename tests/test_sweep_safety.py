@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_checks import refused as _fails
 
 from gcs_planner.cli import main
 from gcs_planner.sweep import ALLOW_USER_TASK_ENV, load_study, run_study
@@ -28,12 +29,6 @@ def _study(tmp_path: Path, extra: str = "", grid: str = "waypoint_spacing_m = [5
     return path
 
 
-def _fails(argv, capsys, *words):
-    assert main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1, err
-    for word in words:
-        assert word in err[0], err[0]
 
 
 @pytest.fixture
