@@ -32,6 +32,7 @@ from gcs_planner.mavlink.files import (
 )
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient, compare_items
+from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.mavlink.types import MissionType
 from gcs_planner.mavlink.validate import validate_items
 
@@ -152,7 +153,8 @@ async def _upload_download_all(fleet, sysid: int, autopilot: str) -> dict[str, s
         await link.wait_for(
             lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == sysid, timeout_s=10
         )
-        client = MissionClient(link, sysid)
+        # storage fidelity, not verdicts (tests/test_mission_verdict.py): no post-ACK wait per file
+        client = MissionClient(link, sysid, timing=Timing(verdict_s=0.0))
         for name in FILES:
             mf = load_mission_file(CORPUS / name)
             for mission_type in sorted(mf.lists):

@@ -124,7 +124,7 @@ class MissionClient:
         t0 = time.monotonic()
         transfer = self._transfer(UploadTransfer, items=items, mission_type=mission_type, partial=partial)
         judged = self.quirks if mission_type == MissionType.MISSION else GENERIC
-        watch = VerdictWatch(self.link, self.sysid, judged)
+        watch = VerdictWatch(self.link, self.sysid, judged, self.timing.verdict_s)
         try:
             outcome = await self._run(transfer)
             written = written_slice(transfer, items, partial)

@@ -148,6 +148,9 @@ class Timing:
     deadline_base_s: float = DEADLINE_BASE_S
     deadline_per_item_s: float = DEADLINE_PER_ITEM_S
     restart_window_s: float = RESTART_WINDOW_S
+    # after an upload's ACK, how long to listen for the autopilot's own refusal (verdict.py);
+    # None: as long as its autopilot may take (AutopilotQuirks.verdict_after_ack_s)
+    verdict_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.window < 1:

@@ -21,11 +21,15 @@ __all__ = ["VerdictWatch"]
 class VerdictWatch:
     """Collects one vehicle's refusal texts from now on; ``rejection()`` is the autopilot's words or None."""
 
-    def __init__(self, link: MavlinkLink, sysid: int, quirks: AutopilotQuirks) -> None:
+    def __init__(
+        self, link: MavlinkLink, sysid: int, quirks: AutopilotQuirks, wait_s: float | None = None
+    ) -> None:
         self.quirks = quirks
+        self.wait_s = quirks.verdict_after_ack_s if wait_s is None else wait_s
         self._texts = TextAssembler()
         self._refused: asyncio.Future[str] = asyncio.get_running_loop().create_future()
-        self._unsubscribe = link.subscribe(self._on_frame, sysid) if quirks.verdict_after_ack_s > 0 else None
+        listen = self.wait_s > 0 and quirks.rejection_texts
+        self._unsubscribe = link.subscribe(self._on_frame, sysid) if listen else None
 
     def _on_frame(self, msg, raw: bytes, t_s: float) -> None:
         if msg.get_type() != "STATUSTEXT" or self._refused.done():
@@ -35,11 +39,12 @@ class VerdictWatch:
             self._refused.set_result(text)
 
     async def rejection(self) -> str | None:
-        """Wait up to the autopilot's verdict time after the ACK; its refusal text, or None."""
+        """Wait up to ``wait_s`` (default: the autopilot's verdict time) after the ACK; its refusal
+        text, or None."""
         if self._unsubscribe is None:
             return None
         with contextlib.suppress(TimeoutError):
-            return await asyncio.wait_for(asyncio.shield(self._refused), self.quirks.verdict_after_ack_s)
+            return await asyncio.wait_for(asyncio.shield(self._refused), self.wait_s)
         return None
 
     def close(self) -> None:
