@@ -72,6 +72,17 @@ class Study(Config):
     task: str = "gcs_planner.sweep:plan"
 
 
+def _check_csv_text(path: Path, study: Study) -> None:
+    """Every name and text value that goes into the results CSV is free of control characters
+    (a NUL in a metric name made the sweep refuse its own CSV as binary)."""
+    texts = [("name", study.name), *(("metrics", m) for m in study.metrics)]
+    texts += [("grid", k) for k in study.grid]
+    texts += [(f"grid.{k}", v) for k, values in study.grid.items() for v in values if isinstance(v, str)]
+    for field, text in texts:
+        if any(ord(c) < 32 or ord(c) == 127 for c in text):
+            raise UserError(f"{path}: {field} {text!r} holds control characters (it goes into the CSV)")
+
+
 def load_study(path: str | Path, allow_user_task: bool = False) -> tuple[Study, Path]:
     """The study and the folder its scenario paths are relative to (the study file's), every
     scenario checked to be a file and the task one of STUDY_TASKS unless ``allow_user_task``."""
@@ -82,6 +93,7 @@ def load_study(path: str | Path, allow_user_task: bool = False) -> tuple[Study, 
         raise UserError(f"{path}: {exc}") from None
     if not study.seeds:
         raise UserError(f"{path}: seeds must name at least one seed")
+    _check_csv_text(path, study)
     base = path.parent.resolve()
     named = study.grid.get("scenario") or ([study.scenario] if study.scenario else [])
     if not named:

@@ -131,3 +131,13 @@ def _running(pid: int) -> bool:
     except OSError:
         return False
     return state != "Z"
+
+
+def test_a_control_character_in_a_metric_name_is_refused_before_any_csv(tmp_path, capsys):
+    """A NUL in a metric name went into the results CSV, which the sweep then refused as binary,
+    leaving it behind (found by the fuzz harness)."""
+    study = tmp_path / "study.toml"
+    study.write_text(_study(tmp_path).read_text().replace('"feasible_fraction"', '"feasible\\u0000fraction"'))
+    out = tmp_path / "r.csv"
+    _fails(["sweep", str(study), "-o", str(out)], capsys, "metrics", "control characters")
+    assert not out.exists()
