@@ -77,6 +77,9 @@ class FlightRules:
         bank (plane.parm: 15 s, 0.25 s), both 0 where the mock plane flies its pursuit guidance
         instead (ArduPlane has no such values: the mock says so).
     params: the parameters the mock serves over PARAM_SET / PARAM_REQUEST_READ.
+    land_start_needs_autoland: a mission holding DO_LAND_START while parameter RTL_AUTOLAND is 0
+        is refused at arming, "PreArm: DO_LAND_START set and RTL_AUTOLAND disable" (measured on
+        ArduPlane SITL 4.8.0-dev, 2026-12-04).
     ramp_params: the names of the waypoint acceleration [m/s^2] and jerk [m/s^3] limits
         (ArduCopter AC_WPNav WP_ACC / WP_JERK, PX4 MPC_ACC_HOR / MPC_JERK_AUTO); the mock serves
         its airframe's acceleration and a jerk it never limits (it ramps linearly), which is
@@ -95,6 +98,7 @@ class FlightRules:
     groundspeed_is_minimum: bool = False
     streams_by_request: bool = True
     rejects_position_before_takeoff: bool = False
+    land_start_needs_autoland: bool = False
     signing_refused_armed: bool = False
     airspeed_range: bool = False
     takeoff_param: str | None = None
@@ -128,7 +132,8 @@ ARDUPLANE_FLIGHT = FlightRules(
     groundspeed_is_minimum=True,
     airspeed_range=True,
     takeoff_param="TKOFF_ALT",
-    params={"TKOFF_ALT": 50.0, "TKOFF_DIST": 200.0},  # ArduPlane ModeTakeoff defaults
+    params={"TKOFF_ALT": 50.0, "TKOFF_DIST": 200.0, "RTL_AUTOLAND": 0.0},  # ArduPlane defaults
+    land_start_needs_autoland=True,
 )
 PX4_FLIGHT = FlightRules(
     name="PX4",

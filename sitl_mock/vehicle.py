@@ -545,6 +545,9 @@ class MockVehicle:
             return self.flight.not_ready_text
         if self.mission_rejected and self.mode == "AUTO":
             return "Arming denied: Resolve system health failures first"
+        land_start = any(it.command == mavlink.MAV_CMD_DO_LAND_START for it in self._nav.items)
+        if self.flight.land_start_needs_autoland and land_start and not self.params.get("RTL_AUTOLAND"):
+            return "PreArm: DO_LAND_START set and RTL_AUTOLAND disable"
         return ""
 
     def _takeoff_mode_alt_m(self) -> float:

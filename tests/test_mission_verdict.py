@@ -88,3 +88,23 @@ def test_split_statustexts_are_whole_or_not_at_all():
     assert texts.feed(_Chunk(chunks[1], 7, 1)) == long
     assert texts.feed(_Chunk("t", 9, 1)) is None  # the tail of a text whose head was lost
     assert texts.feed(_Chunk("Armed", 0, 0)) == "Armed"
+
+
+def test_arduplane_refuses_to_arm_with_do_land_start_unless_rtl_autoland(tmp_path, capsys):
+    """Measured on ArduPlane SITL 4.8.0-dev: a mission with DO_LAND_START is refused at arming while
+    RTL_AUTOLAND is 0, so the tool's fixed-wing routes carry none (they end with NAV_LAND)."""
+    ready = {"arm_ready_s": 0, "position_fix_s": 0}
+    with sitl_mock.MockFleet(count=1, profile="ardupilot", vehicle_type="fixed_wing", home=ORIGIN,
+                             speedup=20.0, flight=ready) as plane:  # fmt: skip
+        host, port = plane.vehicle(1).address
+        argv = ["--connect", f"udpout:{host}:{port}", "--sysid", "1"]
+        mission = tmp_path / "land_start.waypoints"
+        mission.write_text(
+            "QGC WPL 110\n0\t1\t0\t16\t0\t0\t0\t0\t47.397742\t8.545594\t488.0\t1\n"
+            "1\t0\t3\t22\t15\t0\t0\t0\t47.397742\t8.545594\t50.0\t1\n"
+            "2\t0\t3\t189\t0\t0\t0\t0\t47.398742\t8.545594\t50.0\t1\n"
+            "3\t0\t3\t21\t0\t0\t0\t0\t47.400742\t8.545594\t0.0\t1\n"
+        )
+        assert main(["start", *argv, str(mission), "--arm-timeout", "1"]) == 2
+        assert "DO_LAND_START set and RTL_AUTOLAND disable" in capsys.readouterr().err
+        assert not plane.call(lambda: plane.vehicle(1).state.armed)
