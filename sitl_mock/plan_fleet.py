@@ -98,6 +98,10 @@ class _PlanFleet:
     def accel_mps2(self, sysid: int) -> float:
         return self.airframes[sysid].accel_mps2
 
+    def sim_time_s(self) -> float | None:
+        """The fleet's simulated clock now (its vehicles' time_boot_ms), where this process runs it."""
+        return getattr(self.fleets[0], "sim_time_s", None)
+
     def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
         self.fleets[network_of(sysid)].set_drift(wire_sysid(sysid), east_mps, north_mps)
 

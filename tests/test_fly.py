@@ -64,7 +64,7 @@ def test_fly_fails_when_a_vehicle_drifts(scenario_and_plan, tmp_path):
     assert not result.passed
     by_sysid = {r.sysid: r for r in result.reports}
     assert any("cross-track" in f for f in by_sysid[2].failures), [r.failures for r in result.reports]
-    assert all(by_sysid[s].passed for s in (1, 3, 4))
+    assert all(by_sysid[s].passed for s in (1, 3, 4)), [r.failures for r in result.reports]
 
 
 @pytest.mark.slow
