@@ -16,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import time
 from collections.abc import Callable, Mapping
 
 import numpy as np
@@ -24,6 +23,7 @@ import numpy as np
 from gcs_planner.conformance import Track
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin, geodetic_to_enu
+from gcs_planner.lockstep import now_s
 from gcs_planner.mavlink.actions import TAKEOFF_MODE_LEVEL_OFF_M, change_speed, start_mission_at, take_off
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, Takeoff, quirks_for
 from gcs_planner.mavlink.errors import MavlinkError
@@ -131,8 +131,8 @@ class TrackRecorder:
 async def wait_for_vehicles(link: MavlinkLink, sysids: list[int], timeout_s: float) -> None:
     """Until every vehicle's autopilot sent a HEARTBEAT (any other frame, or a camera's HEARTBEAT,
     says nothing of what the vehicle is); duplicate system ids are refused."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
+    deadline = now_s() + timeout_s
+    while now_s() < deadline:
         if all(heard(link, s) for s in sysids):
             break
         await asyncio.sleep(0.05)
@@ -228,8 +228,8 @@ async def take_off_all(
     climbs: list[asyncio.Task] = []
     await asyncio.gather(*(one(vp) for vp in plan.vehicles))
     climb_s = max(float(vp.waypoints[0, 2]) for vp in plan.vehicles) / TAKEOFF_CLIMB_MPS
-    deadline = time.monotonic() + climb_s * timeout_factor / speedup + 10.0
-    while time.monotonic() < deadline and late():
+    deadline = now_s() + climb_s * timeout_factor / speedup + 10.0
+    while now_s() < deadline and late():
         await asyncio.sleep(0.05)
     if late():
         for task in climbs:
@@ -266,7 +266,7 @@ async def start_routes(
     Route time 0 is ``lead_s`` after now; each route starts its own acceleration lead earlier.
     ``on_start(sysid, route_s)`` is called as each start is sent, with the route time it was due at.
     """
-    t0 = time.monotonic()
+    t0 = now_s()
 
     async def one(vp) -> None:
         items = missions[vp.sysid]
@@ -275,7 +275,7 @@ async def start_routes(
         first = route_seq(items)
         offset_s = max(vp.takeoff_delay_s, float(vp.times_s[0]))  # planned time at the first waypoint
         start_s = lead_s + offset_s - leads[vp.sysid]
-        await asyncio.sleep(max(0.0, t0 + start_s / speedup - time.monotonic()))
+        await asyncio.sleep(max(0.0, t0 + start_s / speedup - now_s()))
         if on_start is not None:
             on_start(vp.sysid, offset_s - leads[vp.sysid])
         try:
@@ -311,18 +311,22 @@ async def wait_until_done(
     descent_s = max(float(v.waypoints[-1, 2]) for v in plan.vehicles) / LAND_SPEED_MPS
     planned_s = max(float(v.path_times_s[-1]) + v.takeoff_delay_s for v in plan.vehicles) + descent_s
     budget_s = planned_s * timeout_factor / speedup + 10.0
-    deadline = time.monotonic() + budget_s
+    deadline = now_s() + budget_s
     total = len(plan.vehicles)
     plans = {vp.sysid: vp for vp in plan.vehicles}
     confirmed: set[int] = set()
 
     def done() -> set[int]:
         for sysid, track in status.tracks.items():
-            if track.done and sysid not in confirmed and at_route_end(recorder, plans[sysid]):
+            if not track.done or sysid in confirmed:
+                continue
+            if at_route_end(recorder, plans[sysid]):
                 confirmed.add(sysid)
+            else:  # a claim made away from the end is dropped, not kept until the vehicle comes near
+                track.done = False
         return confirmed
 
-    while time.monotonic() < deadline and len(done()) < total:
+    while now_s() < deadline and len(done()) < total:
         if progress:
             progress("fly", len(done()), total)
         if keeper is not None:

@@ -55,6 +55,7 @@ from gcs_planner.flight_ops import (
     wait_until_done,
 )
 from gcs_planner.flight_report import write_flight_report
+from gcs_planner.lockstep import check_loop, now_s, unix_s
 from gcs_planner.mavlink.actions import safe_end
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, quirks_named
 from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
@@ -191,6 +192,7 @@ async def fly(
     ``progress("wait", sysid, 0)`` with a reason while a vehicle is not ready to arm.
     """
     t_wall = time.monotonic()
+    check_loop(vehicles.lockstep)
     check_flight(plan)  # before anything is sent
     sysids = [vp.sysid for vp in plan.vehicles]
     unknown = sorted(set(options.drift_mps) - set(sysids))
@@ -201,7 +203,7 @@ async def fly(
     options.out_dir.mkdir(parents=True, exist_ok=True)
     with SafeEndSignals() as signals:
         flight = _Flight(scenario, plan, options, vehicles, progress, signals)
-        with vehicles as urls:
+        async with vehicles as urls:
             check_networks(plan, len(urls))
             await flight.run(urls)
     if signals.received is not None and isinstance(flight.aborted, asyncio.CancelledError):
@@ -310,8 +312,8 @@ class _Flight:
         """The pre-flight gate: every vehicle reports a position within its bound of its planned
         start (starts.py), or nothing is armed; one line per vehicle that fails."""
         samples = self.recorder.samples
-        deadline = time.monotonic() + START_FIX_WAIT_S
-        while not all(samples[s] for s in self.sysids) and time.monotonic() < deadline:
+        deadline = now_s() + START_FIX_WAIT_S
+        while not all(samples[s] for s in self.sysids) and now_s() < deadline:
             await asyncio.sleep(0.05)
         where = {s: rows[-1][1:3] for s, rows in samples.items() if rows}
         name = self.scenario.path.name if self.scenario.path else "SCENARIO"
@@ -348,14 +350,13 @@ class _Flight:
         scaled to the vehicles' rate."""
         if not self.vehicles.simulated:
             return self.recorder.clock(None, time.time())
-        clock = getattr(self.vehicles, "sim_time_s", None)  # read directly: reports lag on a busy machine
-        now = clock() if clock is not None else None
+        now = self.vehicles.sim_time_s()  # read directly: reports lag on a busy machine
         return self.recorder.now_s() if now is None else now
 
     async def _check_clocks(self) -> None:
         """Refuse connected vehicles whose clocks run at another rate than this flight's."""
-        deadline = time.monotonic() + 3 * MIN_SPAN_S
-        while time.monotonic() < deadline and min(map(self.clocks.span_s, self.sysids)) < MIN_SPAN_S:
+        deadline = now_s() + 3 * MIN_SPAN_S
+        while now_s() < deadline and min(map(self.clocks.span_s, self.sysids)) < MIN_SPAN_S:
             await asyncio.sleep(0.05)
         self.clocks.check(self.vehicles.speedup)
 
@@ -423,9 +424,9 @@ class _Flight:
             task.uncancel()  # the signal's cancel is handled: this wait may await again
         log.warning("%s: vehicles sent home; logging until they land (send it again to stop waiting)",
                     self.signals.received.name)  # fmt: skip
-        deadline = time.monotonic() + END_WAIT_S / self.vehicles.speedup
+        deadline = now_s() + END_WAIT_S / self.vehicles.speedup
         armed = [s for s in self.sysids if _armed(link, s)]
-        while armed and time.monotonic() < deadline and not self.signals.hurry.is_set():
+        while armed and now_s() < deadline and not self.signals.hurry.is_set():
             await asyncio.sleep(0.1)
             armed = [s for s in armed if _armed(link, s)]
         ended = self.end_states
@@ -474,7 +475,7 @@ def _live_views(rec, plan: Plan, scenario: Scenario):
     """The views of a log (telemetry.rerun_views), fed frame by frame while flying."""
     from gcs_planner.telemetry.rerun_views import LiveRerunLogger
 
-    live = LiveRerunLogger(rec, plan.origin, time.time())
+    live = LiveRerunLogger(rec, plan.origin, unix_s())
     live.start(plan, scenario)
     return live
 

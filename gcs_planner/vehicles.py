@@ -24,17 +24,23 @@ ENTRY_POINT_GROUP = "gcs_planner.vehicle_sources"
 
 class VehicleSource(Protocol):
     """Vehicles for one flight. ``simulated``: they share one simulated clock (time_boot_ms) that
-    runs ``speedup`` times faster than the wall clock; real vehicles run at 1 on their own clocks."""
+    runs ``speedup`` times faster than the flight's loop clock; real vehicles run at 1 on their
+    own clocks. ``lockstep``: they run in the flight's own event loop, which must then be a
+    gcs_planner.lockstep.LockstepLoop (``lockstep.run``), so that one clock serves both sides."""
 
     simulated: bool
+    lockstep: bool
     speedup: float
 
-    def __enter__(self) -> list[list[str]]:
+    async def __aenter__(self) -> list[list[str]]:
         """Start the vehicles (if this source runs them); the link URLs that reach each network
         (one list for a fleet of at most 254; fleet ids, mavlink/networks.py)."""
 
-    def __exit__(self, *exc: object) -> None:
-        """Stop what ``__enter__`` started."""
+    async def __aexit__(self, *exc: object) -> None:
+        """Stop what ``__aenter__`` started."""
+
+    def sim_time_s(self) -> float | None:
+        """The vehicles' simulated clock now, where this process runs it (None: it does not)."""
 
     def accel_mps2(self, sysid: int) -> float:
         """The vehicle's acceleration from the hover [m/s^2] (route starts lead by v / 2a)."""
@@ -53,17 +59,21 @@ class ConnectedVehicles:
     rate their clocks run at (1 for real vehicles; SITL's --speedup)."""
 
     simulated = False
+    lockstep = False
     lag_events = 0
 
     def __init__(self, urls: Sequence[str], per_network: bool = False, speedup: float = 1.0) -> None:
         self.networks = [[u] for u in urls] if per_network else [list(urls)]
         self.speedup = float(speedup)
 
-    def __enter__(self) -> list[list[str]]:
+    async def __aenter__(self) -> list[list[str]]:
         return self.networks
 
-    def __exit__(self, *exc: object) -> None:
+    async def __aexit__(self, *exc: object) -> None:
         pass
+
+    def sim_time_s(self) -> float | None:
+        return None
 
     def accel_mps2(self, sysid: int) -> float:
         return ROUTE_ACCEL_MPS2
@@ -75,20 +85,25 @@ class ConnectedVehicles:
 class MixedVehicles:
     """Some vehicles connected (``connected``: real or SITL), the rest mock vehicles (``mock``),
     on one network and one link. Their clocks differ, so the flight times frames on receipt
-    (``simulated`` is False); the mock runs at the connected vehicles' rate."""
+    (``simulated`` is False); the mock runs at the connected vehicles' rate, paced by the wall
+    clock (``mock`` is not lockstep)."""
 
     simulated = False
+    lockstep = False
 
     def __init__(self, mock: VehicleSource, connected: ConnectedVehicles, mock_sysids: set[int]) -> None:
         self.mock, self.connected, self.mock_sysids = mock, connected, mock_sysids
         self.speedup = connected.speedup
 
-    def __enter__(self) -> list[list[str]]:
-        (mock_urls,) = self.mock.__enter__()
+    async def __aenter__(self) -> list[list[str]]:
+        (mock_urls,) = await self.mock.__aenter__()
         return [mock_urls + self.connected.networks[0]]
 
-    def __exit__(self, *exc: object) -> None:
-        self.mock.__exit__(*exc)
+    async def __aexit__(self, *exc: object) -> None:
+        await self.mock.__aexit__(*exc)
+
+    def sim_time_s(self) -> float | None:
+        return None
 
     def _source(self, sysid: int) -> VehicleSource:
         return self.mock if sysid in self.mock_sysids else self.connected

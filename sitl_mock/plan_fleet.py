@@ -1,9 +1,12 @@
 """Mock fleets for a plan: one mock autopilot per VehiclePlan, homed and tuned for it.
 
 These are gcs_planner's vehicle sources (gcs_planner.vehicles.VehicleSource), registered as the
-``gcs_planner.vehicle_sources`` entry points "mock" (MockVehicles: the fleet in a thread of this
-process, for ``fly``) and "mock-process" (MockVehiclesProcess: its own process, for the coalition
-HIL run, whose in-flight uploads would otherwise share a core with 32 simulated vehicles).
+``gcs_planner.vehicle_sources`` entry points "mock" (MockVehicles, for ``fly``) and "mock-process"
+(MockVehiclesProcess, the coalition HIL run's planes). Without a ``speedup`` a fleet runs in the
+flight's own event loop in lockstep with it (gcs_planner.lockstep: one virtual clock, as fast as
+the CPU allows, the same flight however busy the machine); with one it is paced by the wall clock
+at that rate, in a thread (``fly``) or its own process (the coalition run, whose in-flight
+planning would otherwise share a core with 32 simulated vehicles), for a GCS on its own clock.
 
 Each airframe is tuned to its planned vehicle as one would set SITL parameters (``airframe_for``):
 the plan's speed and turn radius need a lateral acceleration of v^2 / R and its steepest legs a
@@ -35,6 +38,7 @@ from sitl_mock.process import MockFleetProcess
 __all__ = ["CATCH_UP_FACTOR", "MockVehicles", "MockVehiclesProcess", "airframe_for"]
 
 CATCH_UP_FACTOR = 1.3  # mock top speed / planned speed (headroom for schedule keeping)
+PHYSICS_DT_S = 0.05  # the mock's physics step [s of flight time]
 MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
 MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
 FLY_TAKEOFF_CLIMB_MPS = 2.0  # a fixed wing's take-off climb in `fly`: the rate its flight-time budget assumes
@@ -71,9 +75,12 @@ def _home(vp: VehiclePlan, origin: Origin, climb_run: float) -> Origin:
     return Origin(float(lat), float(lon), float(alt))
 
 
-def _rate_hz(speedup: float) -> float:
-    """Position reports at MOCK_TELEMETRY_HZ of flight time, within what one Python process streams."""
-    return min(MOCK_TELEMETRY_HZ * speedup, MAX_WALL_TELEMETRY_HZ)
+def _fleet_options(speedup: float | None) -> dict:
+    """MockFleet's clock options. Lockstep (None): one physics step a tick, reports at
+    MOCK_TELEMETRY_HZ of flight time; paced: reports within what one Python process streams."""
+    if speedup is None:
+        return dict(speedup=1.0, tick_s=PHYSICS_DT_S, physics_dt_s=PHYSICS_DT_S, rate_hz=MOCK_TELEMETRY_HZ)
+    return dict(speedup=speedup, rate_hz=min(MOCK_TELEMETRY_HZ * speedup, MAX_WALL_TELEMETRY_HZ))
 
 
 class _PlanFleet:
@@ -82,18 +89,23 @@ class _PlanFleet:
 
     simulated = True
 
-    def __init__(self, fleets: list, airframes: dict[int, Airframe], speedup: float):
-        self.fleets, self.airframes, self.speedup = fleets, airframes, float(speedup)
+    def __init__(self, fleets: list, airframes: dict[int, Airframe], speedup: float | None):
+        self.fleets, self.airframes = fleets, airframes
+        self.lockstep = speedup is None
+        self.speedup = 1.0 if speedup is None else float(speedup)
 
-    def __enter__(self) -> list[list[str]]:
-        with contextlib.ExitStack() as stack:  # a fleet that fails to start stops those started
+    async def __aenter__(self) -> list[list[str]]:
+        async with contextlib.AsyncExitStack() as stack:  # a fleet that fails to start stops those started
             for fleet in self.fleets:
-                stack.enter_context(fleet)
+                if self.lockstep:
+                    await stack.enter_async_context(fleet)
+                else:
+                    stack.enter_context(fleet)
             self._running = stack.pop_all()
         return [[f"udpout:{h}:{p}" for h, p in fleet.addresses] for fleet in self.fleets]
 
-    def __exit__(self, *exc: object) -> None:
-        self._running.__exit__(*exc)
+    async def __aexit__(self, *exc: object) -> None:
+        await self._running.__aexit__(*exc)
 
     def accel_mps2(self, sysid: int) -> float:
         return self.airframes[sysid].accel_mps2
@@ -124,14 +136,15 @@ def _networks(specs: list[dict]) -> list[list[dict]]:
 
 
 class MockVehicles(_PlanFleet):
-    """``fly``'s mock fleet on one simulated clock: in a thread of this process, or, for a plan
-    over several networks (fleets past 254), one process per network sharing the clock."""
+    """``fly``'s mock fleet on one simulated clock: in lockstep in the flight's loop (one fleet per
+    network), or paced at ``speedup`` in a thread of this process, or, for a plan over several
+    networks (fleets past 254), one process per network sharing the clock."""
 
     def __init__(
         self,
         plans: Sequence[VehiclePlan],
         origin: Origin,
-        speedup: float = 10.0,
+        speedup: float | None = None,
         autopilot: str = "ardupilot",
     ) -> None:
         airframes, specs = {}, []
@@ -146,8 +159,10 @@ class MockVehicles(_PlanFleet):
                      profile=autopilot, airframe=frame)
             )  # fmt: skip
         networks = _networks(specs)
-        options = dict(speedup=speedup, home=origin, rate_hz=_rate_hz(speedup))
-        if len(networks) == 1:
+        options = dict(home=origin, **_fleet_options(speedup))
+        if speedup is None:
+            fleets = [MockFleet(vehicles=n, **options) for n in networks]
+        elif len(networks) == 1:
             fleets = [MockFleet(vehicles=specs, **options)]
         else:
             zero = time.monotonic()
@@ -163,7 +178,7 @@ class MockVehiclesProcess(_PlanFleet):
     for ArduPlane SITL's wide turns."""
 
     def __init__(
-        self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float = 10.0,
+        self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float | None = None,
         l1: L1Plane | None = None,
     ) -> None:
         airframes, specs = {}, []
@@ -184,5 +199,6 @@ class MockVehiclesProcess(_PlanFleet):
             )  # fmt: skip
         if len(_networks(specs)) > 1:
             raise UserError("the coalition run flies one network: its vehicles need sysids 1..254")
-        fleet = MockFleetProcess(vehicles=specs, speedup=speedup, home=origin, rate_hz=_rate_hz(speedup))
+        options = dict(vehicles=specs, home=origin, **_fleet_options(speedup))
+        fleet = MockFleet(**options) if speedup is None else MockFleetProcess(**options)
         super().__init__([fleet], airframes, speedup)

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gcs_planner import lockstep
 from gcs_planner.coalition_hil import HilOptions, live_state, measure_task, plan_live_leg, run_coalition_hil
 from gcs_planner.geo import enu_to_geodetic
 from gcs_planner.planning.coalition import load_world, paths
@@ -122,14 +123,10 @@ def test_a_mission_starts_at_the_first_waypoint_that_is_ahead_in_time_and_in_fro
 
 
 def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_path):
-    """At the HIL run's default speed-up (5x). At 10x one strike in 10-20 runs came 2-3 s late when
-    the machine was busy: an upload's wall time is then ten times as much flight."""
+    """In lockstep (gcs_planner.lockstep): the same flight however busy the machine."""
     scenario = load_scenario(SCENARIO)
-    result = asyncio.run(
-        run_coalition_hil(
-            scenario, HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",)), MockVehiclesProcess
-        )
-    )
+    options = HilOptions(out_dir=tmp_path, targets=("T1",))
+    result = lockstep.run(run_coalition_hil(scenario, options, MockVehiclesProcess), True)
     assert not result.failures, result.failures
     # the 8 strikes of T1's simultaneous attack, each within 1 s and 10 deg of its award
     assert len(result.strikes) == 8 and len({r.awarded_s for r in result.strikes}) == 1
@@ -166,9 +163,9 @@ def test_a_vehicle_away_from_its_simulated_state_still_strikes_because_its_leg_i
     scenario = load_scenario(SCENARIO)
     runs = {}
     for replay in (False, True):
-        options = HilOptions(out_dir=tmp_path / str(replay), speedup=20.0, targets=("T1",), uavs=("U13",),
+        options = HilOptions(out_dir=tmp_path / str(replay), targets=("T1",), uavs=("U13",),
                              offset_m={"U13": (300.0, -300.0)}, replay_legs=replay)  # fmt: skip
-        runs[replay] = asyncio.run(run_coalition_hil(scenario, options, MockVehiclesProcess))
+        runs[replay] = lockstep.run(run_coalition_hil(scenario, options, MockVehiclesProcess), True)
     live, replayed = runs[False], runs[True]
     assert not live.failures and not replayed.failures, (live.failures, replayed.failures)
     (row,) = live.strikes

@@ -3,13 +3,13 @@
 Engine tests feed OnlineContractNet a fleet whose "telemetry" is the engine's own planned track
 (a perfect fleet), displaced or cut where the test says; the flight tests fly it on the mock."""
 
-import asyncio
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from gcs_planner import lockstep
 from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, LiveState, goal_pose
 from gcs_planner.coalition_hil.online import OnlineContractNet, arc_covered
@@ -177,8 +177,8 @@ HANDED_ON = ("award", "award_released", "award_lost", "task_retendered", "vehicl
 def test_paper_scenario_flown_online_every_task_on_time_and_angle(tmp_path):
     """All 32 UAVs fly; every award comes from the contract net in flight. Coalitions form in the
     simulation's order with the same leaders."""
-    options = HilOptions(out_dir=tmp_path, speedup=5.0, online=True)
-    result = asyncio.run(run_online(load_scenario(SCENARIO), options, MockVehiclesProcess))
+    options = HilOptions(out_dir=tmp_path, online=True)
+    result = lockstep.run(run_online(load_scenario(SCENARIO), options, MockVehiclesProcess), True)
     assert not result.failures, result.failures
     handed_on = [e for e in result.events if e["event"] in HANDED_ON]
     assert len(result.strikes) == 20 and len(result.rows) == 31, (result.released_awards, handed_on[-12:])
@@ -201,10 +201,10 @@ def test_online_flight_with_a_displaced_vehicle_a_lost_one_and_a_pop_up_threat(t
     award an 80 m pop-up threat is put across the fifth member's leg: that member's leg is
     re-planned in flight, its flown track stays out of the threat and every strike is on time."""
     options = HilOptions(
-        out_dir=tmp_path, speedup=5.0, online=True, targets=("T1",), offset_m={"U8": (400.0, 16.0)},
+        out_dir=tmp_path, online=True, targets=("T1",), offset_m={"U8": (400.0, 16.0)},
         faults=(Fault("cut", "T1", 2, 8.0), Fault("threat", "T1", 4, 2.0, 80.0)),
     )  # fmt: skip
-    result = asyncio.run(run_online(load_scenario(SCENARIO), options, MockVehiclesProcess))
+    result = lockstep.run(run_online(load_scenario(SCENARIO), options, MockVehiclesProcess), True)
     assert not result.failures, result.failures
     assert result.passed, [r for r in result.rows if not r.passed]
     (lost,) = result.lost_awards

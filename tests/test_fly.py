@@ -1,10 +1,10 @@
 """The whole chain: plan -> upload over UDP -> mock fleet flies -> MCAP/.rrd -> conformance."""
 
-import asyncio
 from pathlib import Path
 
 import pytest
 
+from gcs_planner import lockstep
 from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
@@ -20,9 +20,10 @@ def scenario_and_plan():
     return scenario, plan_scenario(scenario)
 
 
-def _fly(scenario, plan, out, speedup=20.0, progress=None, **kw):
+def _fly(scenario, plan, out, speedup=None, progress=None, **kw):
+    """Fly against mock vehicles, in lockstep unless paced at ``speedup``."""
     vehicles = MockVehicles(plan.vehicles, plan.origin, speedup)
-    return asyncio.run(fly(scenario, plan, FlyOptions(out_dir=out, **kw), vehicles, progress))
+    return lockstep.run(fly(scenario, plan, FlyOptions(out_dir=out, **kw), vehicles, progress), vehicles.lockstep)
 
 
 def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_plan, tmp_path):
@@ -84,15 +85,15 @@ def test_deconflicted_10_uav_plan_flies_clear_of_each_other_and_the_manned_aircr
 def test_40_uav_priority_swarm_plan_flies_with_no_separation_breach(tmp_path):
     scenario = load_scenario(SCENARIO.parent / "swarm40_cylinders.toml")
     plan = plan_scenario(scenario)
-    result = _fly(scenario, plan, tmp_path, rrd=False, speedup=10.0)
+    result = _fly(scenario, plan, tmp_path, rrd=False)
     assert result.passed, [(r.sysid, r.failures) for r in result.reports if r.failures]
     assert all(r.completed for r in result.reports) and len(result.reports) == 40
     assert min(r.min_separation_m for r in result.reports) >= 8.0
 
 
 def test_fly_flies_a_coalition_scenario_award_by_award(tmp_path, monkeypatch, capsys):
-    """`gcs-planner fly` on the coalition scenario runs the coalition HIL (5x by default), and says
-    which of fly's options do not apply to it."""
+    """`gcs-planner fly` on the coalition scenario runs the coalition HIL (in lockstep by default),
+    and says which of fly's options do not apply to it."""
     from gcs_planner import cli
     from gcs_planner.commands import fly_coalition
 
@@ -100,7 +101,7 @@ def test_fly_flies_a_coalition_scenario_award_by_award(tmp_path, monkeypatch, ca
     monkeypatch.setattr(fly_coalition, "run", lambda args: seen.append(args) or 0)
     scenario = str(SCENARIO.parent / "coalition_paper.toml")
     assert cli.main(["fly", scenario, "-o", str(tmp_path), "--seed", "7"]) == 0
-    assert (seen[0].scenario, seen[0].out, seen[0].speedup, seen[0].seed) == (scenario, str(tmp_path), 5.0, 7)
+    assert (seen[0].scenario, seen[0].out, seen[0].speedup, seen[0].seed) == (scenario, str(tmp_path), None, 7)
     assert cli.main(["fly", scenario, "--speedup", "10"]) == 0 and seen[1].speedup == 10.0
     assert cli.main(["fly", scenario, "--plan", "p.json", "--tlog"]) == 2 and len(seen) == 2
     assert "--plan, --tlog not supported" in capsys.readouterr().err

@@ -17,6 +17,7 @@ from child_process import child, group_alive
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner import lockstep
 from gcs_planner.errors import UserError
 from gcs_planner.fly import FlyOptions, check_flight, end_summary, fly
 from gcs_planner.mavlink.networks import open_networks
@@ -121,8 +122,8 @@ def test_a_fleet_over_two_networks_flies_each_vehicle_its_own_mission(tmp_path):
     or swapped mission would break the cross-track bound) and the log keeps the four apart."""
     scenario = load_scenario(_two_networks(tmp_path))
     plan = plan_scenario(scenario)
-    vehicles = MockVehicles(plan.vehicles, plan.origin, speedup=10.0)
-    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False, tlog=True), vehicles))
+    vehicles = MockVehicles(plan.vehicles, plan.origin)
+    result = lockstep.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False, tlog=True), vehicles), True)
     assert result.passed, [r.failures for r in result.reports]
     assert sorted(r.sysid for r in result.reports if r.completed and r.cross_track_max_m < 5.0) == [
         1,

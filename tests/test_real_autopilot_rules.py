@@ -13,6 +13,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from test_cli_mission import SCENARIO
 
 import sitl_mock
+from gcs_planner import lockstep
 from gcs_planner.cli import main
 from gcs_planner.errors import UserError
 from gcs_planner.flight_limits import FlightLimits, check_limits, read_l1_params, read_limits
@@ -59,8 +60,8 @@ def _fly(scenario_name: str, autopilot: str, out: Path, **kw):
     scenario = load_scenario(MISSIONS / scenario_name)
     plan = plan_scenario(scenario)
     options = FlyOptions(out_dir=out, rrd=False, **kw)
-    vehicles = MockVehicles(plan.vehicles, plan.origin, 20.0, autopilot)
-    return asyncio.run(fly(scenario, plan, options, vehicles))
+    vehicles = MockVehicles(plan.vehicles, plan.origin, autopilot=autopilot)
+    return lockstep.run(fly(scenario, plan, options, vehicles), lockstep=True)
 
 
 @pytest.mark.parametrize(

@@ -3,13 +3,13 @@ sent home, the log runs on until they have landed, and the report is still writt
 
 from __future__ import annotations
 
-import asyncio
 import os
 import signal
 from pathlib import Path
 
 import pytest
 
+from gcs_planner import lockstep
 from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
@@ -33,8 +33,8 @@ def test_a_signal_mid_flight_brings_the_fleet_home_and_still_reports(sig, tmp_pa
             os.kill(os.getpid(), sig)
 
     options = FlyOptions(out_dir=tmp_path, rrd=False)
-    vehicles = MockVehicles(plan.vehicles, plan.origin, 20.0, "ardupilot")
-    result = asyncio.run(fly(scenario, plan, options, vehicles, progress))
+    vehicles = MockVehicles(plan.vehicles, plan.origin)
+    result = lockstep.run(fly(scenario, plan, options, vehicles, progress), lockstep=True)
     assert sent and result.interrupted == sig.name and not result.passed
     assert set(result.end_states.values()) == {"landed (disarmed)"}, result.end_states
     assert result.report_path is not None and result.report_path.stat().st_size > 0
@@ -57,7 +57,7 @@ def test_a_forged_completion_from_the_vehicles_address_does_not_end_the_flight(t
 
     scenario = load_scenario(SCENARIO)
     plan = plan_scenario(scenario)
-    vehicles = MockVehicles(plan.vehicles, plan.origin, 20.0, "ardupilot")
+    vehicles = MockVehicles(plan.vehicles, plan.origin)
     missions = build_missions(plan, {v.sysid: quirks_named("ardupilot") for v in plan.vehicles})
     last = {s: len(m) - 1 for s, m in missions.items()}
     forged, calls = [], []
@@ -73,7 +73,7 @@ def test_a_forged_completion_from_the_vehicles_address_does_not_end_the_flight(t
                 fleet.call(lambda v=v, a=reached, b=complete: (v.link.send(a), v.link.send(b)))
             forged.append(True)
 
-    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress))
+    result = lockstep.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress), True)
     assert forged and result.passed, [(r.sysid, r.failures) for r in result.reports]
     for r in result.reports:
         assert r.flight_time_s == pytest.approx(r.planned_time_s, rel=0.1), (r.sysid, r.flight_time_s)
@@ -86,7 +86,7 @@ def test_impossible_positions_are_flagged_and_never_pass(tmp_path):
 
     scenario = load_scenario(SCENARIO)
     plan = plan_scenario(scenario)
-    vehicles = MockVehicles(plan.vehicles, plan.origin, 20.0, "ardupilot")
+    vehicles = MockVehicles(plan.vehicles, plan.origin)
     calls = []
 
     def progress(stage: str, done, total) -> None:
@@ -98,7 +98,7 @@ def test_impossible_positions_are_flagged_and_never_pass(tmp_path):
                 bad = mavlink.MAVLink_global_position_int_message(0, lat, 85_455_940, 500_000, 0, 0, 0, 0, 0)
                 fleet.call(lambda b=bad: v.link.send(b))
 
-    result = asyncio.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress))
+    result = lockstep.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress), True)
     by_sysid = {r.sysid: r for r in result.reports}
     assert "2 impossible positions reported (ignored)" in by_sysid[2].failures, by_sysid[2].failures
     assert all(by_sysid[s].passed for s in (1, 3, 4)) and not result.passed

@@ -26,7 +26,6 @@ wall time of each formation made in flight.
 from __future__ import annotations
 
 import asyncio
-import time
 from dataclasses import dataclass
 from typing import Literal
 
@@ -51,6 +50,7 @@ from gcs_planner.coalition_hil.run import (
 from gcs_planner.coalition_hil.tracks import drop_spikes
 from gcs_planner.errors import UserError
 from gcs_planner.flight_ops import KEEPER_PERIOD_S
+from gcs_planner.lockstep import now_s
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.scenario import Scenario
@@ -274,8 +274,8 @@ class OnlineRun(_HilRun):
             raise UserError("a link-cut fault needs the mock fleet (this vehicle source cannot cut a link)")
         workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
         self.due.sort()
-        deadline = time.monotonic() + (self._end_s() - self.t_route0 + 10.0) * 2.0 / options.speedup + 10.0
-        while self._open(self.scenario_now()) and time.monotonic() < deadline:
+        deadline = now_s() + (self._end_s() - self.t_route0 + 10.0) * 2.0 / self.vehicles.speedup + 10.0
+        while self._open(self.scenario_now()) and now_s() < deadline:
             now = self.scenario_now()
             if now >= self.t_start:
                 self._check_losses()
@@ -287,7 +287,7 @@ class OnlineRun(_HilRun):
                 self.queue.put_nowait((job.rank, next(self.order), job))
             if options.keep_schedule:
                 _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
-            await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
+            await asyncio.sleep(KEEPER_PERIOD_S / self.vehicles.speedup)
         self.t_end = self.scenario_now()
         await self._drain(workers, deadline)
 

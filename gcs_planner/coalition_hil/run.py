@@ -68,6 +68,7 @@ from gcs_planner.flight_ops import (
 from gcs_planner.fly import HEARTBEAT_WAIT_S, REAL_HEARTBEAT_WAIT_S
 from gcs_planner.geo import Origin
 from gcs_planner.l1_guidance import L1Response, shape_for_l1
+from gcs_planner.lockstep import check_loop, now_s
 from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
@@ -114,7 +115,7 @@ class HilOptions:
     """What to fly (targets, UAVs, window), how fast, and the pass bounds of a coalition HIL run."""
 
     out_dir: Path = Path("out")
-    speedup: float = 10.0
+    speedup: float | None = None  # mock planes: None runs them in lockstep (gcs_planner.lockstep)
     seed: int | None = None  # default: the scenario's [planner] seed
     targets: tuple[str, ...] | None = None  # awards of these targets only (None: all)
     uavs: tuple[str, ...] | None = None  # fly only these awarded UAVs (None: all)
@@ -221,14 +222,14 @@ def _predicted_prefix(state: LiveState, t0_s: float) -> tuple[np.ndarray, np.nda
 class UploadTiming:
     """The upload estimate's inputs, EMAs over the uploads so far (seeded by the fleet upload)."""
 
-    item_wall_s: float  # wall time per mission item at this concurrency
-    plan_wall_s: float = 0.0  # wall time to plan a live leg
+    item_s: float  # loop time per mission item at this concurrency (gcs_planner.lockstep)
+    plan_s: float = 0.0  # loop time to plan a live leg (none under lockstep: the clock waits)
     items: int = 20  # items of the last award mission
     idle_items: int = 30  # and of the last idle mission
 
     def estimate_s(self, items: int, speedup: float, safety: float) -> float:
         """Flight time [s] an upload of ``items`` is expected to take, with the safety factor."""
-        return speedup * (self.plan_wall_s + self.item_wall_s * items) * safety
+        return speedup * (self.plan_s + self.item_s * items) * safety
 
 
 @dataclass(order=True)
@@ -263,12 +264,13 @@ async def run_coalition_hil(
     if say is not None:
         run.say = say
     vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
+    check_loop(vehicles.lockstep)
     run.vehicles = vehicles
     if not vehicles.simulated:
         run.connect(vehicles.speedup)
     options.out_dir.mkdir(parents=True, exist_ok=True)
     scenario_text = scenario.path.read_text() if scenario.path else None
-    with vehicles as networks:
+    async with vehicles as networks:
         # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
         # message lost when it overflows costs a re-send timer
         link = await MavlinkLink.open(*networks[0], receive_buffer_bytes=FLEET_RCVBUF_BYTES)
@@ -344,7 +346,7 @@ class _HilRun:
         return self.recorder.now_s() - self.route_t0 + self.t_route0
 
     def upload_estimate_s(self, items: int) -> float:
-        return self.timing.estimate_s(items, self.options.speedup, self.options.upload_safety)
+        return self.timing.estimate_s(items, self.vehicles.speedup, self.options.upload_safety)
 
     def vehicle_state(self, uav) -> LiveState:
         rows = list(self.telemetry.rows[uav.sysid])  # a copy: planning runs in a thread
@@ -410,16 +412,16 @@ class _HilRun:
             await self._check_starts()
         n_items = sum(len(m) for m in self.missions.values())
         self.say(f"{len(self.flying)} vehicles heard, within their limits; uploading {n_items} mission items")
-        t_up = time.monotonic()
+        t_up = now_s()
         first = await upload_fleet(link, self.missions, workers=8)
         bad = {s: r.error for s, r in first.items() if not r.ok}
         if bad:
             first_error = next(iter(bad.values()))
             booting = "" if self.vehicles.simulated else "; a SITL answers uploads only once booted (~30 s)"
             raise UserError(f"initial mission upload failed for sysid {sorted(bad)}: {first_error}{booting}")
-        self.timing = UploadTiming((time.monotonic() - t_up) * min(8, len(self.missions)) / n_items)
+        self.timing = UploadTiming((now_s() - t_up) * min(8, len(self.missions)) / n_items)
         self.say("first missions uploaded; arming and taking off")
-        speedup = self.options.speedup
+        speedup = self.vehicles.speedup
         said: dict[int, str] = {}
 
         def waiting(stage: str, sysid: int, reason: str) -> None:
@@ -441,8 +443,8 @@ class _HilRun:
         """Refuse, before anything is sent, a vehicle that is not where --homes starts it; wait up
         to START_FIX_WAIT_S for the positions (ArduPilot reports none for ~10 s after boot)."""
         rows = self.telemetry.rows
-        deadline = time.monotonic() + START_FIX_WAIT_S
-        while not all(rows[s] for s in self.flying) and time.monotonic() < deadline:
+        deadline = now_s() + START_FIX_WAIT_S
+        while not all(rows[s] for s in self.flying) and now_s() < deadline:
             await asyncio.sleep(0.2)
         unfixed = [s for s in self.flying if not rows[s]]
         if unfixed:
@@ -471,8 +473,8 @@ class _HilRun:
             key=lambda e: e["t_s"],
         )  # fmt: skip
         route_end = self.t_stop - self.t_route0
-        deadline = time.monotonic() + (route_end + 10.0) * 2.0 / options.speedup + 10.0
-        while self.scenario_now() - self.t_route0 < route_end and time.monotonic() < deadline:
+        deadline = now_s() + (route_end + 10.0) * 2.0 / self.vehicles.speedup + 10.0
+        while self.scenario_now() - self.t_route0 < route_end and now_s() < deadline:
             now = self.scenario_now()
             while events and events[0]["t_s"] <= now:
                 logger.log_event({**events.pop(0), "source": "coalition_simulation"})
@@ -483,7 +485,7 @@ class _HilRun:
                 self.queue.put_nowait((job.rank, next(self.order), job))
             if options.keep_schedule:
                 _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
-            await asyncio.sleep(KEEPER_PERIOD_S / options.speedup)
+            await asyncio.sleep(KEEPER_PERIOD_S / self.vehicles.speedup)
         await self._drain(workers, deadline)
 
     async def _drain(self, workers: list[asyncio.Task], deadline: float) -> None:
@@ -495,7 +497,7 @@ class _HilRun:
             for w in workers:
                 w.cancel()
             await asyncio.gather(*workers, return_exceptions=True)
-        if time.monotonic() >= deadline:
+        if now_s() >= deadline:
             self.failures.append("the run did not reach the window end in time")
 
     async def _worker(self, link: MavlinkLink, logger: FlightLogger) -> None:
@@ -518,10 +520,10 @@ class _HilRun:
             vp, leg = await self._mission(job, entry)
             items = plan_to_items(vp, self.scenario.origin, self.options.autopilot)
             entry["upload_start_s"] = self.scenario_now()
-            t_up = time.monotonic()
+            t_up = now_s()
             await MissionClient(link, sysid, timing=UPLOAD_TIMING).upload(items)
-            per_item = (time.monotonic() - t_up) / len(items)
-            self.timing.item_wall_s = 0.5 * self.timing.item_wall_s + 0.5 * per_item
+            per_item = (now_s() - t_up) / len(items)
+            self.timing.item_s = 0.5 * self.timing.item_s + 0.5 * per_item
             if kind == "award":
                 self.timing.items = len(items)
             else:
@@ -567,7 +569,9 @@ class _HilRun:
             vp, info = await asyncio.to_thread(self._live_idle, sched, payload, state, now)
             entry.update(info)
             return vp, None
+        t_plan = now_s()
         leg, vp, info = await asyncio.to_thread(self._live_leg, sched, payload, state, now)
+        self.timing.plan_s = 0.5 * self.timing.plan_s + 0.5 * (now_s() - t_plan)
         entry.update(info)
         return vp, leg
 
@@ -576,7 +580,7 @@ class _HilRun:
         so that the event loop keeps draining the sockets: a loop blocked for ~0.1 s overflows them
         and a lost mission message costs a 1 s (wall) re-request."""
         e = award.event
-        t_plan = time.monotonic()
+        t_plan = time.perf_counter()
         items = self.timing.items
         known = self.known_threats(e["t_s"])
         for _ in range(2):  # once more when the mission has more items than guessed
@@ -594,10 +598,8 @@ class _HilRun:
                 break
             items = n
         vp, shaped = self._for_guidance(vp, t0)
-        plan_wall_s = time.monotonic() - t_plan
-        self.timing.plan_wall_s = 0.5 * self.timing.plan_wall_s + 0.5 * plan_wall_s
         info = {
-            "plan_wall_ms": round(1000.0 * plan_wall_s, 1),
+            "plan_wall_ms": round(1000.0 * (time.perf_counter() - t_plan), 1),
             "t0_s": round(t0, 3),
             "estimate_s": round(self.upload_estimate_s(items), 3),
             "live_pose": [round(float(v), 2) for v in q0],
@@ -632,7 +634,7 @@ class _HilRun:
     def _live_idle(self, sched: VehicleSchedule, idle: Idle, state: LiveState, now: float):
         """Plan the idle mission from the vehicle's newest reports: back onto the simulated track
         (``rejoin_leg``), then along it. Runs in a thread."""
-        t_plan = time.monotonic()
+        t_plan = time.perf_counter()
         t0 = now + self.upload_estimate_s(self.timing.idle_items) + START_AHEAD_S
         q0 = state.predict([t0])[0]
         leg = rejoin_leg(self.world, sched.uav, q0, t0, sched.track, idle.end_s, self.known_threats(now))
@@ -640,7 +642,7 @@ class _HilRun:
         vp = idle_mission(sched, idle, leg, prefix, self.t_route0, self.options.waypoint_dt_s,
                           np.arange(now, t0, PREFIX_DT_S))  # fmt: skip
         info = {
-            "plan_wall_ms": round(1000.0 * (time.monotonic() - t_plan), 1),
+            "plan_wall_ms": round(1000.0 * (time.perf_counter() - t_plan), 1),
             "t0_s": round(t0, 3),
             "live_pose": [round(float(v), 2) for v in q0],
             "rejoin_s": round(float(leg.t[-1]), 3),
@@ -668,9 +670,9 @@ async def next_report_after(clock, t_s: float, timeout_s: float = NEXT_REPORT_TI
     """The first value of ``clock`` (a telemetry clock: it moves only when a report arrives) above
     ``t_s``, polled every ``NEXT_REPORT_POLL_S`` [s wall]; after ``timeout_s`` of wall time without a
     report, the clock's value then (the fleet has stopped reporting: the run fails anyway)."""
-    deadline = time.monotonic() + timeout_s
+    deadline = now_s() + timeout_s
     now = clock()
-    while now <= t_s and time.monotonic() < deadline:
+    while now <= t_s and now_s() < deadline:
         await asyncio.sleep(NEXT_REPORT_POLL_S)
         now = clock()
     return now

@@ -1,8 +1,8 @@
 """Run the bundled demo: plan missions/swarm_small.toml and fly it against mock vehicles.
 
 Five multirotors cross a field with three towers: priority-swarm planning, concurrent upload
-over MAVLink/UDP to five mock autopilots running 10x faster than real time, MCAP + Rerun logs,
-and the conformance report. Takes well under a minute on 2 cores.
+over MAVLink/UDP to five mock autopilots in lockstep with the tool (gcs_planner.lockstep: as fast
+as the CPU allows, the same flight every time), MCAP + Rerun logs, and the conformance report.
 """
 
 from __future__ import annotations
@@ -19,7 +19,10 @@ DEMO_SCENARIO = Path(__file__).resolve().parents[2] / "missions" / "swarm_small.
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--out", default="out/demo", help="output folder [out/demo]")
-    p.add_argument("--speedup", type=SPEEDUP, default=10.0, help="mock simulation speed-up [10]")
+    p.add_argument(
+        "--speedup", type=SPEEDUP, default=None,
+        help="pace the mock vehicles at this rate of the wall clock [none: lockstep, as fast as it goes]",
+    )
 
 
 def run(args: argparse.Namespace) -> int:

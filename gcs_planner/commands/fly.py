@@ -11,7 +11,6 @@ mission or breaks a separation, obstacle or cross-track bound. A coalition scena
 from __future__ import annotations
 
 import argparse
-import asyncio
 import signal
 import sys
 import time
@@ -20,6 +19,7 @@ from urllib.parse import quote
 
 from tqdm import tqdm
 
+from gcs_planner import lockstep
 from gcs_planner.commands import fly_coalition
 from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
@@ -61,8 +61,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--speedup",
         type=SPEEDUP,
         default=None,
-        help="mock simulation speed-up [10; 5 for coalition scenarios]; with --connect, the rate the"
-        " connected vehicles' clocks run at [1: real vehicles; a SITL's or sitl-mock's --speedup]",
+        help="mock vehicles paced at this rate of the wall clock [none: in lockstep with this tool, as"
+        " fast as the CPU allows]; with --connect, the rate the connected vehicles' clocks run at"
+        " [1: real vehicles; a SITL's or sitl-mock's --speedup]",
     )
     p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
     p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
@@ -103,11 +104,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
 
 
-def build_parser_defaults(scenario: Path, out: str, speedup: float) -> argparse.Namespace:
+def build_parser_defaults(scenario: Path, out: str, speedup: float | None) -> argparse.Namespace:
     """The fly arguments with every default, for commands that fly a fixed scenario (demo)."""
     parser = argparse.ArgumentParser()
     add_arguments(parser)
-    return parser.parse_args([str(scenario), "--out", out, "--speedup", str(speedup)])
+    pace = ["--speedup", str(speedup)] if speedup is not None else []
+    return parser.parse_args([str(scenario), "--out", out, *pace])
 
 
 def _fly_coalition(args: argparse.Namespace) -> int:
@@ -121,7 +123,8 @@ def _fly_coalition(args: argparse.Namespace) -> int:
         )
     parser = argparse.ArgumentParser()
     fly_coalition.add_arguments(parser)
-    argv = [args.scenario, "--out", args.out, "--speedup", str(args.speedup or 5.0)]
+    argv = [args.scenario, "--out", args.out]
+    argv += ["--speedup", str(args.speedup)] if args.speedup is not None else []
     argv += ["--seed", str(args.seed)] if args.seed is not None else []
     argv += ["--homes"] if args.homes else []
     print("coalition scenario: each award is uploaded to its vehicles in flight (gcs-planner fly-coalition)")
@@ -175,8 +178,6 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     if scenario.planner.get("name") == "coalition":
         return _fly_coalition(args)
-    connected_rate = 1.0 if args.speedup is None else args.speedup  # real vehicles: 1; SITL: its --speedup
-    args.speedup = 10.0 if args.speedup is None else args.speedup
     plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
     if args.homes:
         print(format_homes(starts(plan.vehicles, plan.origin), None))
@@ -194,7 +195,8 @@ def run(args: argparse.Namespace) -> int:
         bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]
         print(f"warning: the planner reports infeasible paths for {bad}; flying anyway")
     if args.connect:
-        vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1, speedup=connected_rate)
+        rate = 1.0 if args.speedup is None else args.speedup  # real vehicles: 1; SITL: its --speedup
+        vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1, speedup=rate)
     else:
         vehicles = mock_vehicles("mock", plan.vehicles, origin=plan.origin, speedup=args.speedup,
                                  autopilot=args.autopilot)  # fmt: skip
@@ -223,7 +225,7 @@ def run(args: argparse.Namespace) -> int:
         bars[stage].refresh()
 
     try:
-        result = asyncio.run(fly(scenario, plan, options, vehicles, progress))
+        result = lockstep.run(fly(scenario, plan, options, vehicles, progress), vehicles.lockstep)
     finally:
         for bar in bars.values():
             bar.close()

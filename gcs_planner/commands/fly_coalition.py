@@ -18,10 +18,10 @@ against its award. Exits 1 when one is more than --max-time-error late or early 
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from pathlib import Path
 
+from gcs_planner import lockstep
 from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
 from gcs_planner.coalition_hil.online_run import OnlineRun
 from gcs_planner.coalition_hil.report import format_formations
@@ -45,8 +45,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--speedup",
         type=SPEEDUP,
         default=None,
-        help="mock simulation speed-up; with --connect, the rate the connected vehicles run at (SITL"
-        " --speedup) [5; 1 with --connect]",
+        help="mock planes paced at this rate of the wall clock [none: in lockstep with this tool, as"
+        " fast as the CPU allows]; with --connect, the rate the connected vehicles run at (SITL"
+        " --speedup) [1]",
     )
     p.add_argument(
         "--connect",
@@ -96,7 +97,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def mock_fleet_process(plans, origin, speedup):
-    """The coalition run's vehicles: mock fixed wings in their own process (sitl_mock.plan_fleet)."""
+    """The coalition run's vehicles: mock fixed wings (sitl_mock.plan_fleet), in lockstep without
+    a ``speedup``, else in their own process paced at it."""
     return mock_vehicles("mock-process", plans, origin=origin, speedup=speedup)
 
 
@@ -123,9 +125,9 @@ def _check_connected(args: argparse.Namespace, sysids: set[int]) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.speedup is None:
-        args.speedup = 1.0 if args.connect else 5.0
-    if args.speedup <= 0:
+    if args.speedup is None and args.connect:
+        args.speedup = 1.0
+    if args.speedup is not None and args.speedup <= 0:
         raise UserError(f"--speedup must be > 0, got {args.speedup}")
     if args.upload_safety <= 0:
         raise UserError(f"--upload-safety must be > 0, got {args.upload_safety}")
@@ -157,7 +159,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     vehicles_for = connected_fleet(args.connect, args.connected) if args.connect else mock_fleet_process
     try:
-        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, runner, say=_say))
+        result = lockstep.run(
+            run_coalition_hil(scenario, options, vehicles_for, runner, say=_say), args.speedup is None
+        )
     except TimeoutError as exc:  # the mock fleet's process did not start
         raise UserError(str(exc)) from None
     print(format_strike_report(result.rows))

@@ -14,11 +14,11 @@ Choices:
 from __future__ import annotations
 
 import asyncio
-import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from gcs_planner.errors import UserError
+from gcs_planner.lockstep import now_s
 from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import (
@@ -103,7 +103,7 @@ async def upload_fleet(
         while True:
             sysid, attempt = await queue.get()
             try:
-                t0 = started.setdefault(sysid, time.monotonic())
+                t0 = started.setdefault(sysid, now_s())
                 client = MissionClient(link, sysid, compid, timing=timing)
                 try:
                     up = await client.upload(missions[sysid], mission_type=mission_type, verify=verify)
@@ -111,9 +111,9 @@ async def upload_fleet(
                     if isinstance(exc, RETRYABLE) and attempt <= retries:
                         queue.put_nowait((sysid, attempt + 1))
                     else:
-                        finish(VehicleResult(sysid, False, attempt, time.monotonic() - t0, error=exc))
+                        finish(VehicleResult(sysid, False, attempt, now_s() - t0, error=exc))
                 else:
-                    finish(VehicleResult(sysid, True, attempt, time.monotonic() - t0, up.opaque_id))
+                    finish(VehicleResult(sysid, True, attempt, now_s() - t0, up.opaque_id))
             finally:
                 queue.task_done()
 
@@ -146,7 +146,7 @@ async def start_fleet(
 
     async def one(sysid: int) -> VehicleResult:
         async with gate:
-            t0 = time.monotonic()
+            t0 = now_s()
             command = CommandClient(link, sysid, compid)
             try:
                 link.check_target(sysid)
@@ -158,11 +158,11 @@ async def start_fleet(
                     await arm_when_ready(link, status, sysid, arm_timeout_s)
                 await command.mission_start()
             except MavlinkError as exc:
-                return VehicleResult(sysid, False, 1, time.monotonic() - t0, error=exc)
+                return VehicleResult(sysid, False, 1, now_s() - t0, error=exc)
             except UserError as exc:  # not ready to arm in time
                 error = MavlinkError(str(exc))
-                return VehicleResult(sysid, False, 1, time.monotonic() - t0, error=error)
-            return VehicleResult(sysid, True, 1, time.monotonic() - t0)
+                return VehicleResult(sysid, False, 1, now_s() - t0, error=error)
+            return VehicleResult(sysid, True, 1, now_s() - t0)
 
     try:
         done = await asyncio.gather(*(one(s) for s in sysids))

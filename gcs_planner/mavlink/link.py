@@ -53,7 +53,6 @@ import contextlib
 import logging
 import os
 import socket
-import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -62,6 +61,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.errors import UserError  # noqa: E402
+from gcs_planner.lockstep import now_s, unix_s
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD  # noqa: E402
@@ -130,7 +130,7 @@ class VehicleInfo:
     @property
     def duplicate(self) -> bool:
         """True when the system id answers from more than one address (ambiguous target)."""
-        return len(self.live_addresses(time.monotonic())) > 1
+        return len(self.live_addresses(now_s())) > 1
 
 
 def is_autopilot_heartbeat(msg: mavlink.MAVLink_message) -> bool:
@@ -317,7 +317,7 @@ class MavlinkLink:
                 transport.sendto(raw, addr)
         else:
             if len(info.addresses) > 1:  # fast path: one address can never be ambiguous
-                live = info.live_addresses(time.monotonic())
+                live = info.live_addresses(now_s())
                 if len(live) > 1:
                     raise DuplicateSysidError(target, live)
             transport, addr = self._peers[info.address]
@@ -328,13 +328,13 @@ class MavlinkLink:
         """Raise DuplicateSysidError if ``sysid`` answers from more than one address."""
         info = self.vehicles.get(sysid)
         if info is not None:
-            live = info.live_addresses(time.monotonic())
+            live = info.live_addresses(now_s())
             if len(live) > 1:
                 raise DuplicateSysidError(sysid, live)
 
     def duplicates(self) -> dict[int, list[Address]]:
         """System ids currently heard from more than one address."""
-        now = time.monotonic()
+        now = now_s()
         return {s: v.live_addresses(now) for s, v in self.vehicles.items() if len(v.live_addresses(now)) > 1}
 
     def set_signing_key(self, key: bytes | None) -> None:
@@ -373,8 +373,8 @@ class MavlinkLink:
         by ``transport.sendto(data, raw_addr)``): each decoded, verified, then delivered."""
         if junk:
             self.frames_dropped += junk
-        t_s = time.time()
-        now = time.monotonic()
+        t_s = unix_s()
+        now = now_s()
         for frame in found:
             msg = self._decode(frame, addr)
             accepted = msg is not None and self.signing.accept(frame)

@@ -36,11 +36,11 @@ from __future__ import annotations
 
 import asyncio
 import math
-import time
 import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
+from gcs_planner.lockstep import now_s
 from gcs_planner.mavlink.autopilots import GENERIC, AutopilotQuirks, quirks_for
 from gcs_planner.mavlink.enums import CommandResult, MissionResult
 from gcs_planner.mavlink.errors import (
@@ -121,7 +121,7 @@ class MissionClient:
         differs) or DuplicateSysidError.
         """
         items = list(items)
-        t0 = time.monotonic()
+        t0 = now_s()
         transfer = self._transfer(UploadTransfer, items=items, mission_type=mission_type, partial=partial)
         judged = self.quirks if mission_type == MissionType.MISSION else GENERIC
         watch = VerdictWatch(self.link, self.sysid, judged, self.timing.verdict_s)
@@ -170,7 +170,7 @@ class MissionClient:
             opaque_id,
             len(items),
             int(mission_type),
-            time.monotonic() - t0,
+            now_s() - t0,
             verified,
             ack_lost,
             transfer.stats,

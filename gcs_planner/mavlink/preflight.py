@@ -20,12 +20,12 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-import time
 from collections.abc import Callable, Mapping
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.errors import UserError
+from gcs_planner.lockstep import now_s
 from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S, CommandClient
 from gcs_planner.mavlink.enums import CommandResult
 from gcs_planner.mavlink.errors import CommandError, MavlinkError
@@ -72,8 +72,8 @@ async def request_streams(
                 await command.set_message_interval(message_id, hz)
             except MavlinkError as exc:
                 refused[message_id] = exc
-        deadline = time.monotonic() + STREAM_WAIT_S  # streamed anyway (PX4 refuses some it always sends)?
-        while set(refused) - heard[sysid] and time.monotonic() < deadline:
+        deadline = now_s() + STREAM_WAIT_S  # streamed anyway (PX4 refuses some it always sends)?
+        while set(refused) - heard[sysid] and now_s() < deadline:
             await asyncio.sleep(0.05)
         missing = [m for m in refused if m not in heard[sysid]]
         for message_id in missing:

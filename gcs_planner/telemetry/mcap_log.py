@@ -47,6 +47,7 @@ import numpy as np
 from gcs_planner import __version__
 from gcs_planner.fleet_ids import network_of
 from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.lockstep import unix_s
 from gcs_planner.mavlink.units import reports_no_fix
 from gcs_planner.plan import Plan
 from gcs_planner.telemetry.colors import vehicle_color
@@ -154,7 +155,7 @@ class FlightLogger:
         if self._closed:
             raise RuntimeError("FlightLogger.log_event after close()")
         data = json.dumps(event, separators=(",", ":"), default=str).encode()
-        t_ns = self._to_ns(time.time() if t_s is None else t_s)
+        t_ns = self._to_ns(unix_s() if t_s is None else t_s)
         with self._write_lock:
             self._writer.add_message(self._event_channel, t_ns, data)
 
@@ -227,7 +228,7 @@ class FlightLogger:
     def _to_ns(self, t_s: float) -> int:
         if t_s < _UNIX_TIME_MIN_S:
             if self._clock_offset_s is None:
-                self._clock_offset_s = time.time() - t_s
+                self._clock_offset_s = unix_s() - t_s
             t_s += self._clock_offset_s
         return round(t_s * 1e6) * 1000
 
