@@ -122,7 +122,12 @@ def l1_turn_rate(pos: np.ndarray, a: np.ndarray, b: np.ndarray, ground: np.ndarr
 
 
 def predict_flight(
-    pose, speed_mps, waypoints: np.ndarray, response: L1Response, accept_m: float, max_bank_rad: float,
+    pose,
+    speed_mps,
+    waypoints: np.ndarray,
+    response: L1Response,
+    accept_m: float,
+    max_bank_rad: float,
     dt_s: float = PREDICT_DT_S,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The track of a plane at pose (x, y, heading [rad]) flying ``waypoints`` (N, 2) [m] in order
@@ -164,8 +169,14 @@ def predict_flight(
 
 
 def shape_waypoints(
-    pose, speed_mps, waypoints: np.ndarray, path_xy: np.ndarray, response: L1Response, accept_m: float,
-    max_bank_rad: float, keep_first: int = 0,
+    pose,
+    speed_mps,
+    waypoints: np.ndarray,
+    path_xy: np.ndarray,
+    response: L1Response,
+    accept_m: float,
+    max_bank_rad: float,
+    keep_first: int = 0,
 ) -> np.ndarray:
     """Waypoints moved across the planned path ``path_xy`` (dense, in flight order) so that the
     L1 flight ``predict_flight`` gives passes each original waypoint's place on the path: each

@@ -94,8 +94,10 @@ def check_loop(lockstep: bool) -> None:
     would run ahead of vehicles outside this process)."""
     on_lockstep = isinstance(asyncio.get_running_loop(), LockstepLoop)
     if lockstep != on_lockstep:
-        need = "on a LockstepLoop: gcs_planner.lockstep.run(..., lockstep=True)" if lockstep else (
-            "on the wall clock: gcs_planner.lockstep.run(..., lockstep=False)"
+        need = (
+            "on a LockstepLoop: gcs_planner.lockstep.run(..., lockstep=True)"
+            if lockstep
+            else ("on the wall clock: gcs_planner.lockstep.run(..., lockstep=False)")
         )
         raise RuntimeError(f"these vehicles fly {need}")
 

@@ -185,7 +185,7 @@ def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
 
 def _parse(data: dict[str, Any], where: str) -> Scenario:
     if "acmpso" in data:
-        raise InputError("the [acmpso] table's keys now belong in [planner] (name = \"acmpso\")")
+        raise InputError('the [acmpso] table\'s keys now belong in [planner] (name = "acmpso")')
     known_keys(data, SECTIONS, "top level")
     origin = checked_origin(data.get("origin"), "[origin]")
     planner = dict(table(data.get("planner"), "[planner]"))

@@ -204,7 +204,7 @@ def _done(out: Path, columns: list[str]) -> tuple[set[str], int | None]:
         if data and reader.fieldnames != columns:
             raise UserError(
                 f"{out}: its columns are not this study's (grid and metrics"
-                f" {_short(columns[len(FIXED_COLUMNS):])}); give another output file"
+                f" {_short(columns[len(FIXED_COLUMNS) :])}); give another output file"
             )
         done = {row["run_id"] for row in reader if None not in row and None not in row.values()}
     except csv.Error as exc:

@@ -178,7 +178,10 @@ class MockVehiclesProcess(_PlanFleet):
     for ArduPlane SITL's wide turns."""
 
     def __init__(
-        self, plans: Sequence[VehiclePlan], origin: Origin, speedup: float | None = None,
+        self,
+        plans: Sequence[VehiclePlan],
+        origin: Origin,
+        speedup: float | None = None,
         l1: L1Plane | None = None,
     ) -> None:
         airframes, specs = {}, []
@@ -189,9 +192,7 @@ class MockVehiclesProcess(_PlanFleet):
             gain = l1.turn_gain if l1 else 1.0  # an airframe turning at less than its bank's rate banks more
             bank = float(np.arctan((CATCH_UP_FACTOR * cruise) ** 2 / vp.turn_radius_m / G_MPS2 / gain))
             bank = max(frame.max_bank_rad, bank)
-            frame = replace(
-                frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS, l1=l1
-            )
+            frame = replace(frame, max_bank_rad=bank, climb_rate_mps=HIL_TAKEOFF_CLIMB_MPS, l1=l1)
             airframes[vp.sysid] = frame
             specs.append(
                 dict(sysid=vp.sysid, home=_home(vp, origin, run_m), vehicle_type="fixed_wing",

@@ -108,8 +108,14 @@ CMAC = Origin(-35.363261, 149.165230, 584.0)  # ArduPilot SITL's default home (T
     [
         # a stock plane (AIRSPEED_MAX 30 m/s) cannot fly the paper's 50 m/s UAVs; the line says
         # what to fly on a stock SITL plane instead
-        (SCENARIO, None, ["(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s",
-                          "missions/coalition_sitl.toml"]),
+        (
+            SCENARIO,
+            None,
+            [
+                "(sysid 1): AIRSPEED_MAX is 30 m/s, but the flight needs up to 60 m/s",
+                "missions/coalition_sitl.toml",
+            ],
+        ),
         # a SITL started without --home is at CMAC, not one climb run behind its first waypoint
         (SITL_SCENARIO, CMAC, ["sysid 1 (U1) is 8,", "km from its start", "--homes"]),
     ],

@@ -23,7 +23,9 @@ def scenario_and_plan():
 def _fly(scenario, plan, out, speedup=None, progress=None, **kw):
     """Fly against mock vehicles, in lockstep unless paced at ``speedup``."""
     vehicles = MockVehicles(plan.vehicles, plan.origin, speedup)
-    return lockstep.run(fly(scenario, plan, FlyOptions(out_dir=out, **kw), vehicles, progress), vehicles.lockstep)
+    return lockstep.run(
+        fly(scenario, plan, FlyOptions(out_dir=out, **kw), vehicles, progress), vehicles.lockstep
+    )
 
 
 def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_plan, tmp_path):
@@ -101,7 +103,12 @@ def test_fly_flies_a_coalition_scenario_award_by_award(tmp_path, monkeypatch, ca
     monkeypatch.setattr(fly_coalition, "run", lambda args: seen.append(args) or 0)
     scenario = str(SCENARIO.parent / "coalition_paper.toml")
     assert cli.main(["fly", scenario, "-o", str(tmp_path), "--seed", "7"]) == 0
-    assert (seen[0].scenario, seen[0].out, seen[0].speedup, seen[0].seed) == (scenario, str(tmp_path), None, 7)
+    assert (seen[0].scenario, seen[0].out, seen[0].speedup, seen[0].seed) == (
+        scenario,
+        str(tmp_path),
+        None,
+        7,
+    )
     assert cli.main(["fly", scenario, "--speedup", "10"]) == 0 and seen[1].speedup == 10.0
     assert cli.main(["fly", scenario, "--plan", "p.json", "--tlog"]) == 2 and len(seen) == 2
     assert "--plan, --tlog not supported" in capsys.readouterr().err

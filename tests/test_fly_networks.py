@@ -123,7 +123,9 @@ def test_a_fleet_over_two_networks_flies_each_vehicle_its_own_mission(tmp_path):
     scenario = load_scenario(_two_networks(tmp_path))
     plan = plan_scenario(scenario)
     vehicles = MockVehicles(plan.vehicles, plan.origin)
-    result = lockstep.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False, tlog=True), vehicles), True)
+    result = lockstep.run(
+        fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False, tlog=True), vehicles), True
+    )
     assert result.passed, [r.failures for r in result.reports]
     assert sorted(r.sysid for r in result.reports if r.completed and r.cross_track_max_m < 5.0) == [
         1,

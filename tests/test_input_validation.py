@@ -38,8 +38,6 @@ def _plan(tmp_path, edit=None, name="p.json"):
     return str(path)
 
 
-
-
 def _veh(i, key, value):
     def edit(d):
         d["vehicles"][i][key] = value

@@ -27,8 +27,6 @@ KEY = key_from_passphrase("correct horse battery staple")
 JUNK = bytes((0xFD, 0xFF, 0x00))  # a MAVLink 2 start claiming 255 payload bytes, then nothing
 
 
-
-
 def signing_timestamp() -> int:
     """Now in signing units (10 us since 2015-01-01), computed here, independent of the code."""
     return int((time.time() - 1_420_070_400) * 100_000)

@@ -21,8 +21,6 @@ ORIGIN = Origin(47.397742, 8.545594, 488.0)
 HOME = "0\t1\t0\t16\t0\t0\t0\t0\t47.3977420\t8.5455940\t488.0\t1\n"
 
 
-
-
 def _plan_doc(**edit):
     doc = {"fileType": "Plan", "version": 1, "groundStation": "QGroundControl",
            "mission": {"version": 2, "firmwareType": 3, "vehicleType": 2, "cruiseSpeed": 15, "hoverSpeed": 5,

@@ -73,7 +73,9 @@ def test_a_forged_completion_from_the_vehicles_address_does_not_end_the_flight(t
                 fleet.call(lambda v=v, a=reached, b=complete: (v.link.send(a), v.link.send(b)))
             forged.append(True)
 
-    result = lockstep.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress), True)
+    result = lockstep.run(
+        fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress), True
+    )
     assert forged and result.passed, [(r.sysid, r.failures) for r in result.reports]
     for r in result.reports:
         assert r.flight_time_s == pytest.approx(r.planned_time_s, rel=0.1), (r.sysid, r.flight_time_s)
@@ -98,7 +100,9 @@ def test_impossible_positions_are_flagged_and_never_pass(tmp_path):
                 bad = mavlink.MAVLink_global_position_int_message(0, lat, 85_455_940, 500_000, 0, 0, 0, 0, 0)
                 fleet.call(lambda b=bad: v.link.send(b))
 
-    result = lockstep.run(fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress), True)
+    result = lockstep.run(
+        fly(scenario, plan, FlyOptions(out_dir=tmp_path, rrd=False), vehicles, progress), True
+    )
     by_sysid = {r.sysid: r for r in result.reports}
     assert "2 impossible positions reported (ignored)" in by_sysid[2].failures, by_sysid[2].failures
     assert all(by_sysid[s].passed for s in (1, 3, 4)) and not result.passed

@@ -38,8 +38,6 @@ async def _bridge(master_fd: int, vehicle: tuple[str, int]) -> tuple[asyncio.Dat
     return transport, radio
 
 
-
-
 def test_upload_and_verify_over_a_serial_line(mission_of):
     async def main():
         master, slave = os.openpty()

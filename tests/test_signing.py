@@ -19,8 +19,6 @@ KEY = key_from_passphrase("correct horse battery staple")
 SIGNED = 0x01  # MAVLink 2 incompat flag: a signature block follows
 
 
-
-
 async def _link(fleet: MockFleet, key: bytes | None) -> tuple[MavlinkLink, list[bytes]]:
     link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses), signing_key=key)
     frames: list[bytes] = []

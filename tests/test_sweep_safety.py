@@ -29,8 +29,6 @@ def _study(tmp_path: Path, extra: str = "", grid: str = "waypoint_spacing_m = [5
     return path
 
 
-
-
 @pytest.fixture
 def evil(tmp_path, monkeypatch):
     """A module whose import leaves a marker file: proof that a study ran someone's code."""

@@ -137,7 +137,15 @@ def goal_pose(world, award: dict) -> np.ndarray:
 
 
 def timed_leg(
-    world, uav, q0, t0_s: float, goal, t_goal_s: float, known, kind: str, max_speed_factor=1.0,
+    world,
+    uav,
+    q0,
+    t0_s: float,
+    goal,
+    t_goal_s: float,
+    known,
+    kind: str,
+    max_speed_factor=1.0,
     run_in_m: float = 0.0,
 ) -> Leg:
     """A threat-avoiding Dubins leg from pose q0 at t0_s to pose goal at t_goal_s (poses: x, y,
@@ -183,8 +191,14 @@ def _straight_into(goal: np.ndarray, length_m: float, r_m: float) -> list:
 
 
 def plan_live_leg(
-    world, award: dict, q0: np.ndarray, t0_s: float, max_speed_factor: float = 1.0, known=None,
-    run_in_s: float = 0.0, turn_factor: float = 1.0,
+    world,
+    award: dict,
+    q0: np.ndarray,
+    t0_s: float,
+    max_speed_factor: float = 1.0,
+    known=None,
+    run_in_s: float = 0.0,
+    turn_factor: float = 1.0,
 ) -> Leg:
     """The award's leg from pose q0 (x, y, heading [rad]) at t0_s (see ``timed_leg``): to the strike
     entry pose, or to the assessment arc start followed by the assessment arc, arriving at

@@ -245,4 +245,3 @@ def idle_mission(
     ts = np.r_[np.concatenate(parts_t), ext_t + late]
     xys = np.vstack([*parts_xy, ext_xy])
     return _piece_plan(uav, ts, xys, t_route0, dt_s, list(prefix_wp_s) + [float(leg.t[0])])
-

@@ -202,7 +202,7 @@ class OnlineRun(_HilRun):
                 continue
             if fault.kind == "cut":
                 self.vehicles.cut_link(awarded[fault.member]["sysid"])
-            elif not self._threat_across_a_leg(awarded[fault.member:], fault.radius_m, now):
+            elif not self._threat_across_a_leg(awarded[fault.member :], fault.radius_m, now):
                 continue
             self.faults.remove(fault)
 

@@ -165,6 +165,7 @@ def formation_rows(sim_events: list[dict], online_events: list[dict], targets) -
     """The coalitions formed by the simulation and by the online run, side by side in the order they
     were formed (per target: the n-th formation of each), for the flown targets. The online run's
     re-tenders of single tasks (a lost or released member's) follow, with no simulated side."""
+
     def formed(events):
         return [e for e in events if e["event"] == "formed" and e["target"] in targets]
 

@@ -20,7 +20,9 @@ DEMO_SCENARIO = Path(__file__).resolve().parents[2] / "missions" / "swarm_small.
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("-o", "--out", default="out/demo", help="output folder [out/demo]")
     p.add_argument(
-        "--speedup", type=SPEEDUP, default=None,
+        "--speedup",
+        type=SPEEDUP,
+        default=None,
         help="pace the mock vehicles at this rate of the wall clock [none: lockstep, as fast as it goes]",
     )
 

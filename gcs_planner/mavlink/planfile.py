@@ -283,7 +283,7 @@ def loads_plan(text: str, where: str = ".plan file") -> MissionFile:
     elif isinstance(doc, dict) and doc.get("fileType") == "Plan":
         if not isinstance(doc.get("mission"), dict) or not isinstance(doc["mission"].get("items"), list):
             # QGroundControl and MAVSDK refuse such a file; reading it as empty would clear the vehicle
-            raise MissionFileError(f"{where}: a .plan needs a \"mission\" object with an \"items\" list")
+            raise MissionFileError(f'{where}: a .plan needs a "mission" object with an "items" list')
         mission, fence, rally = (
             doc.get("mission", {}),
             doc.get("geoFence") or {},

@@ -318,9 +318,7 @@ EVALUATIONS: contextvars.ContextVar[list[int] | None] = contextvars.ContextVar("
 class CostModel:
     """Eqs. 3-14 for one UAV, vectorised over a swarm (P, D) -> (P,), with a term breakdown."""
 
-    def __init__(
-        self, prob: VehicleProblem, obstacles: Obstacles, traffic: Traffic, cfg: Config
-    ) -> None:
+    def __init__(self, prob: VehicleProblem, obstacles: Obstacles, traffic: Traffic, cfg: Config) -> None:
         self.prob, self.obs, self.traffic, self.cfg = prob, obstacles, traffic, cfg
         self.evaluations = 0
         self._obs_tree = cKDTree(np.column_stack([obstacles.cx, obstacles.cy])) if len(obstacles.cx) else None

@@ -94,7 +94,11 @@ def import_tlog(
     if origin is None:
         origin = plan.origin if plan is not None else _origin_from_tlog(tlog_path)
     with FlightLogger(
-        mcap_path, origin, plan=plan, scenario_text=scenario_text, max_pending=50_000,
+        mcap_path,
+        origin,
+        plan=plan,
+        scenario_text=scenario_text,
+        max_pending=50_000,
         flush_interval_s=3600.0,  # an import flushes every max_pending frames, in this thread
     ) as logger:
         for t_s, msg, raw in iter_tlog(tlog_path):

@@ -161,9 +161,7 @@ def load_world(scenario: Scenario) -> World:
         raise ScenarioError(f"{where}: {exc}") from None
     rows = raw.get("vehicles", [])
     uavs = [_uav(i, v, rows[i] if i < len(rows) else {}, where) for i, v in enumerate(scenario.vehicles)]
-    targets = [
-        _target(t, f"{where}: coalition.targets[{i}]") for i, t in enumerate(targets_rows)
-    ]
+    targets = [_target(t, f"{where}: coalition.targets[{i}]") for i, t in enumerate(targets_rows)]
     ids = {u.id for u in uavs}
     for t in targets:
         if t.recon_uav is not None and t.recon_uav not in ids:

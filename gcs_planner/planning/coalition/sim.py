@@ -503,9 +503,12 @@ class CoalitionSim:
         goals = self._task_poses(target, kind, angle)
         speed = np.array([self.uavs[i].speed_mps for i in cands])
         rmin = np.array([self.uavs[i].r_min_m for i in cands])
-        L = paths.shortest_lengths(
-            np.repeat(poses, K, 0), np.tile(goals, (n, 1)), np.repeat(rmin, K)
-        ).reshape(n, K) + self.approach_s * speed[:, None]
+        L = (
+            paths.shortest_lengths(
+                np.repeat(poses, K, 0), np.tile(goals, (n, 1)), np.repeat(rmin, K)
+            ).reshape(n, K)
+            + self.approach_s * speed[:, None]
+        )
         prob = CoalitionProblem(
             length_m=L,
             speed_mps=speed,
