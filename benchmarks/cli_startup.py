@@ -23,7 +23,14 @@ CASES = {
     "gcs-planner --help": [PY, "-m", "gcs_planner.cli", "--help"],
     "import cli + upload module": [PY, "-c", "import gcs_planner.cli, gcs_planner.commands.upload"],
     "gcs-planner upload (missing file)": [
-        PY, "-m", "gcs_planner.cli", "upload", "--connect", "udpout:127.0.0.1:9", "--sysid", "1",
+        PY,
+        "-m",
+        "gcs_planner.cli",
+        "upload",
+        "--connect",
+        "udpout:127.0.0.1:9",
+        "--sysid",
+        "1",
         "/missing.plan",
     ],  # fmt: skip
     "mavproxy.py --help (peer)": [PY, "-m", "MAVProxy.mavproxy", "--help"],

@@ -157,7 +157,9 @@ def run(args) -> list[dict]:
 def table(rows: list[dict]) -> None:
     pairs = {(r["scenario"], r["method"]) for r in rows}
     keys = sorted(pairs, key=lambda k: (k[0], k[1] != "priority_swarm", k))
-    print("| scenario | method | seeds | cost per UAV, mean (std) | feasible UAVs | evaluations / UAV | CPU s |")  # noqa: E501
+    print(
+        "| scenario | method | seeds | cost per UAV, mean (std) | feasible UAVs | evaluations / UAV | CPU s |"
+    )  # noqa: E501
     print("|---|---|---|---|---|---|---|")
     for sc, method in keys:
         sel = [r for r in rows if (r["scenario"], r["method"]) == (sc, method)]

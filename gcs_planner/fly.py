@@ -349,7 +349,7 @@ class _Flight:
         """Now on the tracks' clock: the fleet's simulated time for mocks, else the receive time
         scaled to the vehicles' rate."""
         if not self.vehicles.simulated:
-            return self.recorder.clock(None, time.time())
+            return self.recorder.clock(None, unix_s())
         now = self.vehicles.sim_time_s()  # read directly: reports lag on a busy machine
         return self.recorder.now_s() if now is None else now
 

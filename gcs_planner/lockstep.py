@@ -6,10 +6,11 @@ GCS and the mock fleet (sitl_mock) share one asyncio loop whose clock is virtual
 waits on a timer and no socket has anything to read or write, the clock jumps to the next timer
 instead of sleeping. Time never passes while there is work: a datagram on loopback is in the
 receiver's socket before ``sendto`` returns, and work handed to a thread (``asyncio.to_thread``:
-the coalition planner) freezes the clock until it is back, as the simulator waits for its
-controller. The cost: nothing outside this process can take part (real vehicles and a mock in
-another process run on the wall clock, ``run(..., lockstep=False)``), and a run is as fast as the
-CPU allows, not paced: a live viewer sees it at that rate.
+the coalition planner) is done at once in the loop's own thread, so the clock stands still while
+it works, as a simulator waits for its controller. The cost: nothing outside this process can
+take part (real vehicles and a mock in another process run on the wall clock,
+``run(..., lockstep=False)``), planning no longer overlaps the fleet on a second core, and a run
+is as fast as the CPU allows, not paced: a live viewer sees it at that rate.
 
 Code on a flight's path reads time from its loop (``now_s``), never ``time.monotonic()``; the
 Unix time it logs is ``unix_s``: the loop's start plus its virtual time.
@@ -28,7 +29,6 @@ __all__ = ["LockstepLoop", "check_loop", "now_s", "run", "unix_s"]
 T = TypeVar("T")
 
 LOOP_START_S = 1000.0  # the virtual clock's first reading (not 0: nothing may read it as "unset")
-THREAD_POLL_S = 0.1  # wall time one wait for a thread's work lasts before the loop looks again
 
 
 class _IdleJumps:
@@ -42,8 +42,8 @@ class _IdleJumps:
         events = self._selector.select(0)
         if events or timeout == 0:
             return events
-        if self._loop.threads_busy or timeout is None:  # a thread's result or outside I/O is awaited
-            return self._selector.select(THREAD_POLL_S if self._loop.threads_busy else None)
+        if timeout is None:  # no timer at all: only outside I/O (a signal) can wake the loop
+            return self._selector.select(None)
         self._loop.advance(timeout)
         return []
 
@@ -59,7 +59,6 @@ class LockstepLoop(asyncio.SelectorEventLoop):
         self._virtual_s = LOOP_START_S
         self._unix_start_s = time.time()
         self._clock_resolution = 1e-6  # a jump lands on its timer: rounding must not leave it due later
-        self.threads_busy = 0
 
     def time(self) -> float:
         return self._virtual_s
@@ -72,14 +71,14 @@ class LockstepLoop(asyncio.SelectorEventLoop):
         self._virtual_s += max(0.0, seconds)
 
     def run_in_executor(self, executor: Any, func: Callable[..., T], *args: Any) -> asyncio.Future[T]:
-        """As asyncio's, and the clock stands still until ``func`` has returned."""
-        future = super().run_in_executor(executor, func, *args)
-        self.threads_busy += 1
-
-        def done(_: asyncio.Future) -> None:
-            self.threads_busy -= 1
-
-        future.add_done_callback(done)
+        """Runs ``func`` at once in this thread (``asyncio.to_thread`` too): the clock stands still
+        while it works, as a simulator waits for its controller, and results come back in the
+        order they were asked for, not in the order a pool's threads happen to finish."""
+        future = self.create_future()
+        try:
+            future.set_result(func(*args))
+        except Exception as exc:  # noqa: BLE001 - handed to the awaiting task, as a pool would
+            future.set_exception(exc)
         return future
 
 

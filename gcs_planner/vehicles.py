@@ -56,15 +56,18 @@ class VehicleSource(Protocol):
 class ConnectedVehicles:
     """Vehicles this tool does not start: real autopilots or SITL reached at ``urls``, or with
     ``per_network``, each URL a network of its own (network k: the k-th URL). ``speedup``: the
-    rate their clocks run at (1 for real vehicles; SITL's --speedup)."""
+    rate their clocks run at (1 for real vehicles; SITL's --speedup). ``lockstep``: they run in
+    the flight's own loop (a mock fleet a test treats as connected vehicles)."""
 
     simulated = False
-    lockstep = False
     lag_events = 0
 
-    def __init__(self, urls: Sequence[str], per_network: bool = False, speedup: float = 1.0) -> None:
+    def __init__(
+        self, urls: Sequence[str], per_network: bool = False, speedup: float = 1.0, lockstep: bool = False
+    ) -> None:
         self.networks = [[u] for u in urls] if per_network else [list(urls)]
         self.speedup = float(speedup)
+        self.lockstep = lockstep
 
     async def __aenter__(self) -> list[list[str]]:
         return self.networks
@@ -85,15 +88,15 @@ class ConnectedVehicles:
 class MixedVehicles:
     """Some vehicles connected (``connected``: real or SITL), the rest mock vehicles (``mock``),
     on one network and one link. Their clocks differ, so the flight times frames on receipt
-    (``simulated`` is False); the mock runs at the connected vehicles' rate, paced by the wall
-    clock (``mock`` is not lockstep)."""
+    (``simulated`` is False); the mock runs at the connected vehicles' rate, in lockstep with the
+    flight where they are."""
 
     simulated = False
-    lockstep = False
 
     def __init__(self, mock: VehicleSource, connected: ConnectedVehicles, mock_sysids: set[int]) -> None:
         self.mock, self.connected, self.mock_sysids = mock, connected, mock_sysids
         self.speedup = connected.speedup
+        self.lockstep = connected.lockstep
 
     async def __aenter__(self) -> list[list[str]]:
         (mock_urls,) = await self.mock.__aenter__()

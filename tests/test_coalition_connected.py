@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import sitl_mock
+from gcs_planner import lockstep
 from gcs_planner.cli import main
 from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.live_legs import RUN_IN_S, TURN_FACTOR
@@ -24,6 +25,7 @@ from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.scenario import load_scenario
 from gcs_planner.starts import CLIMB_RUN_PER_M, check_starts, starts
 from gcs_planner.telemetry import read_flight
+from sitl_mock.l1 import SITL_PLANE
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
@@ -34,16 +36,22 @@ CONNECTED = frozenset({1, 8, 11, 13})  # U1 does T1's recon and leads its tender
 
 
 def test_online_run_with_some_vehicles_connected_on_clocks_of_their_own(tmp_path):
-    """The connected vehicles are a second mock fleet process reached over --connect: its clock
-    (time_boot_ms) starts apart from the tool's own mock fleet, so only frames timed on receipt
-    put both on one flight clock, and every strike and assessment is still on time and angle."""
+    """The connected vehicles are a second mock fleet reached over --connect, planes on ArduPlane's
+    L1 law: its clock (time_boot_ms) starts apart from the tool's own mock fleet, so only frames
+    timed on receipt put both on one flight clock, and every strike and assessment is still on
+    time and angle. Both fleets run in lockstep with the run: the same flight however busy."""
     scenario = load_scenario(SITL_SCENARIO)
-    options = HilOptions(out_dir=tmp_path, speedup=5.0, targets=("T1",), online=True)
+    options = HilOptions(out_dir=tmp_path, speedup=1.0, targets=("T1",), online=True)
     plans = [vp for vp in initial_plans(scenario, options, OnlineRun) if vp.sysid in CONNECTED]
-    with MockVehiclesProcess(plans, scenario.origin, options.speedup) as networks:
-        vehicles_for = connected_fleet(networks[0], CONNECTED)
-        said: list[str] = []
-        result = asyncio.run(run_coalition_hil(scenario, options, vehicles_for, OnlineRun, said.append))
+    said: list[str] = []
+
+    async def fly():  # the "connected" planes fly ArduPlane's L1 law, in lockstep with the run
+        async with MockVehiclesProcess(plans, scenario.origin, l1=SITL_PLANE) as networks:
+            await asyncio.sleep(30.0)  # booted half a minute before the tool's own mock fleet
+            vehicles_for = connected_fleet(networks[0], CONNECTED, lockstep=True)
+            return await run_coalition_hil(scenario, options, vehicles_for, OnlineRun, said.append)
+
+    result = lockstep.run(fly(), True)
     assert not result.failures, result.failures
     stages = ("vehicles heard", "first missions uploaded", "routes started")
     order = [next(i for i, line in enumerate(said) if stage in line) for stage in stages]

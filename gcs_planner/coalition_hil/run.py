@@ -68,7 +68,7 @@ from gcs_planner.flight_ops import (
 from gcs_planner.fly import HEARTBEAT_WAIT_S, REAL_HEARTBEAT_WAIT_S
 from gcs_planner.geo import Origin
 from gcs_planner.l1_guidance import L1Response, shape_for_l1
-from gcs_planner.lockstep import check_loop, now_s
+from gcs_planner.lockstep import check_loop, now_s, unix_s
 from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.fleet import upload_fleet
@@ -338,7 +338,7 @@ class _HilRun:
     def connect(self, speedup: float) -> None:
         """Fly vehicles on clocks of their own (frames timed on receipt), whose guidance lags a turn
         (legs with a run-in and wide turns)."""
-        self.recorder.clock = self.telemetry.clock = receive_clock(speedup, time.time())
+        self.recorder.clock = self.telemetry.clock = receive_clock(speedup, unix_s())
         self.run_in_s, self.turn_factor = RUN_IN_S, TURN_FACTOR
 
     # --- clocks and estimates ----------------------------------------------------------------
@@ -576,9 +576,9 @@ class _HilRun:
         return vp, leg
 
     def _live_leg(self, sched: VehicleSchedule, award: Award, state: LiveState, now: float):
-        """Plan the award's leg from the vehicle's newest reports (see live_legs). Runs in a thread,
-        so that the event loop keeps draining the sockets: a loop blocked for ~0.1 s overflows them
-        and a lost mission message costs a 1 s (wall) re-request."""
+        """Plan the award's leg from the vehicle's newest reports (see live_legs). Runs in a thread
+        on the wall clock, so that the event loop keeps draining the sockets (a loop blocked for
+        ~0.1 s overflows them); under lockstep at once, the clock standing still."""
         e = award.event
         t_plan = time.perf_counter()
         items = self.timing.items

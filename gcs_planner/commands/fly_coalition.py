@@ -102,16 +102,18 @@ def mock_fleet_process(plans, origin, speedup):
     return mock_vehicles("mock-process", plans, origin=origin, speedup=speedup)
 
 
-def connected_fleet(urls: list[str], connected: frozenset[int] | None):
+def connected_fleet(urls: list[str], connected: frozenset[int] | None, lockstep: bool = False):
     """The run's vehicles when some (``connected``; None: all) are reached at ``urls``: those
-    connected, the others mock fixed wings in their own process, all on one link."""
+    connected, the others mock fixed wings, all on one link. ``lockstep``: the connected ones run
+    in the flight's loop (a test's mock fleet), and so do the mock ones, else in their own process."""
 
     def vehicles_for(plans, origin, speedup):
-        reached = ConnectedVehicles(urls, speedup=speedup)
+        reached = ConnectedVehicles(urls, speedup=speedup, lockstep=lockstep)
         mock = [vp for vp in plans if connected is not None and vp.sysid not in connected]
         if not mock:
             return reached
-        return MixedVehicles(mock_fleet_process(mock, origin, speedup), reached, {vp.sysid for vp in mock})
+        fleet = mock_fleet_process(mock, origin, None if lockstep else speedup)
+        return MixedVehicles(fleet, reached, {vp.sysid for vp in mock})
 
     return vehicles_for
 
