@@ -11,6 +11,13 @@ A fleet larger than ``--per-network`` (default 250; a MAVLink network has 254 sy
 GCS) runs as several networks, one process each on one shared simulated clock: network k holds
 vehicles k x per + 1 ... with system ids 1, 2, ... on consecutive ports, and one log line per
 network gives its ``--connect udpout:HOST:FIRST-LAST`` for `gcs-planner fly`.
+
+``--homes FILE``: one vehicle per line of FILE, the lines `gcs-planner fly SCENARIO --homes` prints
+(``sysid N (ID): --home LAT,LON,ALT,HEADING  ...``): vehicle N stands at that home, as an operator
+starts ArduPilot SITL with ``--home``, and the vehicles take the file's order on consecutive ports
+(the world's ENU frame is centred on the first home).
+Blank lines and ``#`` comments are skipped. The mock's fixed wing takes off heading north whatever
+the heading (its fleets from a plan place its home south of the first waypoint: plan_fleet).
 """
 
 from __future__ import annotations
@@ -19,16 +26,18 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import math
+import re
 import signal
 import sys
 import threading
 import time
 
-from gcs_planner.geo import Origin
 from gcs_planner.mavlink.signing import key_from_passphrase
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.flight import AIRFRAMES
+from sitl_mock.geodesy import Home
 from sitl_mock.process import MockFleetProcess
 from sitl_mock.profiles import PROFILES
 from sitl_mock.vehicle import DEFAULT_HOME
@@ -36,12 +45,12 @@ from sitl_mock.vehicle import DEFAULT_HOME
 log = logging.getLogger("sitl_mock")
 
 
-def _home(text: str) -> Origin:
+def _home(text: str) -> Home:
     try:
         parts = [float(p) for p in text.split(",")]
         if len(parts) not in (2, 3):
             raise ValueError("expected lat,lon[,alt]")
-        return Origin(*parts)
+        return Home(*parts)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(f"--home {text!r}: {exc}") from None
 
@@ -55,12 +64,14 @@ def _host_port(text: str) -> tuple[str, int]:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="sitl-mock", description=__doc__.splitlines()[0])
-    p.add_argument("--vehicles", type=int, default=1, help="number of vehicles (system ids 1..N)")
-    p.add_argument(
-        "--plan",
-        metavar="PLAN",
-        help="one vehicle per vehicle of this plan.json, with its sysid and airframe type, standing at"
-        " its start (where `gcs-planner fly --homes` says a SITL should stand); replaces --vehicles",
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--vehicles", type=int, default=1, help="number of vehicles (system ids 1..N)")
+    which.add_argument(
+        "--homes",
+        metavar="FILE",
+        help="one vehicle (of --type) per line of FILE, the output of `gcs-planner fly SCENARIO --homes`"
+        " ('sysid N (ID): --home LAT,LON,ALT,HDG ...'): vehicle N at that home, as SITL's --home;"
+        " replaces --vehicles",
     )
     p.add_argument("--base-port", type=int, default=14550, help="UDP port of vehicle 1 (0: ephemeral ports)")
     p.add_argument("--host", default="127.0.0.1", help="address to bind (0.0.0.0 for other machines)")
@@ -78,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--type", dest="vehicle_type", choices=sorted(AIRFRAMES), default="multirotor")
     p.add_argument("--speedup", type=float, default=1.0, help="simulated seconds per wall second")
     p.add_argument(
-        "--home", type=_home, default=DEFAULT_HOME, help="lat,lon[,alt AMSL] of every vehicle's home"
+        "--home", type=_home, default=None, help="lat,lon[,alt AMSL] of every vehicle's home [PX4 SITL's]"
     )
     p.add_argument("--rate", type=float, default=10.0, help="position telemetry rate [Hz, wall clock]")
     p.add_argument("--loss", type=float, default=0.0, help="datagram loss probability, each direction")
@@ -109,10 +120,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--per-network must be in 1..254, got {args.per_network}")
     if 0 < args.base_port < 1024:
         parser.error(f"--base-port {args.base_port} is a privileged port: use 0 (ephemeral) or 1024..65535")
+    if args.homes and args.home:
+        parser.error("--homes gives each vehicle its home: no --home")
     try:
+        homes = _homes_vehicles(args.homes) if args.homes else None
+        frame = homes[0]["home"] if homes else args.home or DEFAULT_HOME  # with --homes: the first home
         faults = LinkFaults(args.loss, args.delay, args.jitter, args.duplicate, args.reorder, args.seed)
         options = dict(
-            speedup=args.speedup, home=args.home, profile=args.profile, vehicle_type=args.vehicle_type,
+            speedup=args.speedup, home=frame, profile=args.profile, vehicle_type=args.vehicle_type,
             host=args.host, faults=faults, rate_hz=args.rate,
             signing_key=key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None,
             transport="tcp" if args.tcp else "udpclient" if args.out else "udpin", gcs=args.out,
@@ -121,8 +136,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.tcp or args.out:
                 raise ValueError("a fleet over several networks runs on UDP ports: no --tcp or --out")
             return _serve_networks(args, options)
-        if args.plan:
-            fleet = MockFleet(vehicles=_plan_vehicles(args.plan), base_port=args.base_port, **options)
+        if homes:
+            fleet = MockFleet(vehicles=homes, base_port=args.base_port, **options)
         else:
             fleet = MockFleet(count=args.vehicles, base_port=args.base_port, **options)
     except ValueError as exc:
@@ -135,16 +150,51 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _plan_vehicles(path: str) -> list[dict]:
-    """A vehicle spec per vehicle of a plan.json, each standing at its planned start."""
-    from gcs_planner.plan import Plan
-    from gcs_planner.starts import starts
+# a line of `gcs-planner fly --homes` (gcs_planner/starts.py format_homes):
+# "sysid N (ID): --home LAT,LON,ALT,HEADING  (MAV_SYSID N; ...) | PX4: ..."
+HOMES_LINE = re.compile(r"sysid\s+(?P<sysid>\d+)\s+\(.*\):\s+--home\s+(?P<home>\S+)(?:\s.*)?")
+HOMES_FORMAT = "'sysid N (ID): --home LAT,LON,ALT,HEADING', as `gcs-planner fly SCENARIO --homes` prints"
 
-    plan = Plan.load(path)  # a bad file: an InputError (a ValueError) naming the field
-    at = {s.sysid: s.home for s in starts(plan.vehicles, plan.origin)}
-    return [
-        {"sysid": vp.sysid, "home": at[vp.sysid], "vehicle_type": vp.vehicle_type} for vp in plan.vehicles
-    ]
+
+def _homes_vehicles(path: str) -> list[dict]:
+    """A vehicle spec per home line of ``path`` (module docstring); ValueError naming a bad line."""
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--homes {path}: cannot read it ({exc})") from None
+    specs: list[dict] = []
+    for number, line in enumerate(lines, 1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            sysid, home = _home_line(line.strip())
+            if sysid in {s["sysid"] for s in specs}:
+                raise ValueError(f"sysid {sysid} stands at two homes")
+        except ValueError as exc:
+            shown = line.strip().split("  ")[0]  # without format_homes' notes for ArduPilot and PX4
+            raise ValueError(f"--homes {path} line {number} ({shown}): {exc}") from None
+        specs.append({"sysid": sysid, "home": home})
+    if not specs:
+        raise ValueError(f"--homes {path}: no home line; expected {HOMES_FORMAT}")
+    return specs
+
+
+def _home_line(line: str) -> tuple[int, Home]:
+    """The system id and home of one line of `gcs-planner fly --homes`."""
+    match = HOMES_LINE.fullmatch(line)
+    if match is None:
+        raise ValueError(f"expected {HOMES_FORMAT}")
+    sysid = int(match["sysid"])
+    if not 1 <= sysid <= 254:
+        raise ValueError(f"sysid {sysid} is not a system id of one MAVLink network (1..254)")
+    parts = match["home"].split(",")
+    if len(parts) not in (3, 4):
+        raise ValueError("--home must be LAT,LON,ALT[,HEADING]")
+    lat, lon, alt, *heading = (float(p) for p in parts)  # a ValueError names the bad number
+    if heading and not (math.isfinite(heading[0]) and 0.0 <= heading[0] <= 360.0):
+        raise ValueError(f"heading must be in [0, 360] degrees, got {heading[0]!r}")
+    return sysid, Home(lat, lon, alt)
 
 
 def _serve_networks(args: argparse.Namespace, options: dict) -> int:

@@ -32,9 +32,9 @@ from typing import Any
 
 import numpy as np
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from sitl_mock import telemetry
 from sitl_mock.faults import LinkFaults
+from sitl_mock.geodesy import HomeLike, to_enu, to_geodetic
 from sitl_mock.mission_server import Failure
 from sitl_mock.vehicle import DEFAULT_HOME, MockVehicle, VehicleState
 from sitl_mock.world import World
@@ -77,7 +77,7 @@ class MockFleet:
         vehicles: list[dict[str, Any] | MockVehicle] | None = None,
         base_port: int = 0,
         speedup: float = 1.0,
-        home: Origin = DEFAULT_HOME,
+        home: HomeLike = DEFAULT_HOME,
         *,
         profile: str = "ardupilot",
         vehicle_type: str = "multirotor",
@@ -126,7 +126,7 @@ class MockFleet:
         if len(set(sysids)) != len(sysids):
             log.warning("MockFleet: duplicate system ids %s (on purpose, to test a GCS?)", sysids)
         homes = [v.home for v in self.vehicles]
-        ground = np.column_stack(geodetic_to_enu(
+        ground = np.column_stack(to_enu(
             np.array([h.lat_deg for h in homes]), np.array([h.lon_deg for h in homes]),
             np.array([h.alt_m for h in homes]), home,
         ))  # fmt: skip
@@ -246,7 +246,7 @@ class MockFleet:
         kin = self.world.kin
         pos = kin.reported_pos()
         vel = kin.ground_vel()
-        lat, lon, alt = enu_to_geodetic(pos[:, 0], pos[:, 1], pos[:, 2], self.home)
+        lat, lon, alt = to_geodetic(pos[:, 0], pos[:, 1], pos[:, 2], self.home)
         return [
             VehicleSnapshot(
                 v.state,
@@ -402,7 +402,7 @@ class MockFleet:
         if idx:
             kin = self.world.kin
             pos = kin.reported_pos()[idx]
-            lat, lon, alt = enu_to_geodetic(pos[:, 0], pos[:, 1], pos[:, 2], self.home)
+            lat, lon, alt = to_geodetic(pos[:, 0], pos[:, 1], pos[:, 2], self.home)
             rel = (pos[:, 2] - kin.ground_z[idx]).tolist()
             vel = kin.ground_vel()[idx].tolist()
             psi, roll, pitch, rate = (a[idx].tolist() for a in (kin.psi, kin.roll, kin.pitch, kin.turn_rate))

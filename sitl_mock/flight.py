@@ -42,7 +42,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from gcs_planner.geo import wrap_pi
+from sitl_mock.geodesy import wrap_pi
 from sitl_mock.l1 import L1Plane, l1_lateral_accel
 
 __all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]

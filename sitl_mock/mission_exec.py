@@ -37,10 +37,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gcs_planner.geo import geodetic_to_enu
 from gcs_planner.mavlink.enums import MissionState
 from gcs_planner.mavlink.types import MissionItem
 from sitl_mock.flight import Airframe, Arrival, Guidance
+from sitl_mock.geodesy import to_enu
 from sitl_mock.profiles import FlightRules
 from sitl_mock.world import World
 
@@ -378,5 +378,5 @@ class Navigator:
         rel = np.array([it.frame not in AMSL_FRAMES for it in items])
         z = np.array([it.z for it in items], dtype=float)
         alt_amsl = np.where(rel, z + self.world.frame.alt_m + self.home_enu_m[2], z)
-        e, n, u = geodetic_to_enu(lat, lon, alt_amsl, self.world.frame)
+        e, n, u = to_enu(lat, lon, alt_amsl, self.world.frame)
         return np.column_stack([e, n, u])

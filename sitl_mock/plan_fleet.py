@@ -22,20 +22,18 @@ import contextlib
 import time
 from collections.abc import Sequence
 from dataclasses import replace
+from typing import Protocol
 
 import numpy as np
 
-from gcs_planner.errors import UserError
-from gcs_planner.fleet_ids import network_of, wire_sysid
-from gcs_planner.geo import Origin, enu_to_geodetic
-from gcs_planner.plan import VehiclePlan
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.flight import AIRFRAMES, G_MPS2, Airframe, climb_run_m
+from sitl_mock.geodesy import Home, HomeLike, to_geodetic
 from sitl_mock.l1 import L1Plane
 from sitl_mock.process import MockFleetProcess
 
-__all__ = ["CATCH_UP_FACTOR", "MockVehicles", "MockVehiclesProcess", "airframe_for"]
+__all__ = ["CATCH_UP_FACTOR", "MockVehicles", "MockVehiclesProcess", "PlannedVehicle", "airframe_for"]
 
 CATCH_UP_FACTOR = 1.3  # mock top speed / planned speed (headroom for schedule keeping)
 PHYSICS_DT_S = 0.05  # the mock's physics step [s of flight time]
@@ -43,9 +41,41 @@ MOCK_TELEMETRY_HZ = 10.0  # wanted position-report rate [Hz of flight time]
 MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock keeps up
 FLY_TAKEOFF_CLIMB_MPS = 2.0  # a fixed wing's take-off climb in `fly`: the rate its flight-time budget assumes
 HIL_TAKEOFF_CLIMB_MPS = 40.0  # coalition HIL: the take-off is not part of the measurement
+# fleet ids name a vehicle across MAVLink networks: fleet id = network x 256 + sysid (the interface
+# between the GCS and its vehicle sources, documented in gcs_planner/fleet_ids.py and
+# gcs_planner/mavlink/networks.py); on network 0 the fleet id is the system id
+NETWORK_SPAN = 256
 
 
-def airframe_for(vp: VehiclePlan) -> Airframe:
+def network_of(fleet_id: int) -> int:
+    """The MAVLink network of fleet id ``fleet_id``."""
+    return fleet_id // NETWORK_SPAN
+
+
+def wire_sysid(fleet_id: int) -> int:
+    """The MAVLink system id of fleet id ``fleet_id`` on its own network."""
+    return fleet_id % NETWORK_SPAN
+
+
+class PlannedVehicle(Protocol):
+    """What a fleet reads of a planned vehicle (a GCS's VehiclePlan has these): its fleet id, airframe
+    type, route waypoints and path [m ENU about the fleet origin], planned speeds [m/s], turn radius [m]."""
+
+    @property
+    def sysid(self) -> int: ...
+    @property
+    def vehicle_type(self) -> str: ...  # a key of sitl_mock.flight.AIRFRAMES
+    @property
+    def waypoints(self) -> np.ndarray: ...  # (N, 3)
+    @property
+    def path(self) -> np.ndarray: ...  # (M, 3)
+    @property
+    def speeds_mps(self) -> np.ndarray: ...  # (N,)
+    @property
+    def turn_radius_m(self) -> float: ...
+
+
+def airframe_for(vp: PlannedVehicle) -> Airframe:
     """The mock airframe tuned to the planned vehicle (module docstring)."""
     base = AIRFRAMES[vp.vehicle_type]
     speed = float(np.max(vp.speeds_mps))
@@ -69,10 +99,10 @@ def airframe_for(vp: VehiclePlan) -> Airframe:
     return replace(frame, accel_mps2=max(base.accel_mps2, lateral_mps2))
 
 
-def _home(vp: VehiclePlan, origin: Origin, climb_run: float) -> Origin:
+def _home(vp: PlannedVehicle, origin: HomeLike, climb_run: float) -> Home:
     """On the ground under the first waypoint, ``climb_run`` metres south of it."""
-    lat, lon, alt = enu_to_geodetic(vp.waypoints[0, 0], vp.waypoints[0, 1] - climb_run, 0.0, origin)
-    return Origin(float(lat), float(lon), float(alt))
+    lat, lon, alt = to_geodetic(vp.waypoints[0, 0], vp.waypoints[0, 1] - climb_run, 0.0, origin)
+    return Home(float(lat), float(lon), float(alt))
 
 
 def _fleet_options(speedup: float | None) -> dict:
@@ -142,8 +172,8 @@ class MockVehicles(_PlanFleet):
 
     def __init__(
         self,
-        plans: Sequence[VehiclePlan],
-        origin: Origin,
+        plans: Sequence[PlannedVehicle],
+        origin: HomeLike,
         speedup: float | None = None,
         autopilot: str = "ardupilot",
     ) -> None:
@@ -179,8 +209,8 @@ class MockVehiclesProcess(_PlanFleet):
 
     def __init__(
         self,
-        plans: Sequence[VehiclePlan],
-        origin: Origin,
+        plans: Sequence[PlannedVehicle],
+        origin: HomeLike,
         speedup: float | None = None,
         l1: L1Plane | None = None,
     ) -> None:
@@ -199,7 +229,7 @@ class MockVehiclesProcess(_PlanFleet):
                      profile="ardupilot", airframe=frame)
             )  # fmt: skip
         if len(_networks(specs)) > 1:
-            raise UserError("the coalition run flies one network: its vehicles need sysids 1..254")
+            raise ValueError("the coalition run flies one network: its vehicles need sysids 1..254")
         options = dict(vehicles=specs, home=origin, **_fleet_options(speedup))
         fleet = MockFleet(**options) if speedup is None else MockFleetProcess(**options)
         super().__init__([fleet], airframes, speedup)

@@ -35,7 +35,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from gcs_planner.geo import Origin, enu_to_geodetic
 from gcs_planner.mavlink.dialect import has_position
 from gcs_planner.mavlink.enums import CommandResult, MissionState, px4_custom_mode
 from gcs_planner.mavlink.signing import NO_KEY
@@ -44,6 +43,7 @@ from gcs_planner.mavlink.wire import MissionCurrentMessage
 from sitl_mock import telemetry
 from sitl_mock.faults import LinkFaults
 from sitl_mock.flight import AIRFRAMES, Airframe
+from sitl_mock.geodesy import Home, HomeLike, to_geodetic
 from sitl_mock.link import TRANSPORTS, VehicleLink, mavlink
 from sitl_mock.mission_exec import Navigator
 from sitl_mock.mission_server import MissionServer
@@ -54,7 +54,7 @@ __all__ = ["DEFAULT_HOME", "MockVehicle", "VehicleState"]
 
 log = logging.getLogger(__name__)
 
-DEFAULT_HOME = Origin(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zurich)
+DEFAULT_HOME = Home(47.397742, 8.545594, 488.0)  # PX4 SITL's default home (Zurich)
 COMPID = 1
 FORCE_MAGIC = 21196
 DEFAULT_TAKEOFF_ALT_M = 10.0
@@ -145,7 +145,7 @@ class MockVehicle:
         sysid: int,
         profile: str = "ardupilot",
         vehicle_type: str = "multirotor",
-        home: Origin = DEFAULT_HOME,
+        home: HomeLike = DEFAULT_HOME,
         port: int = 0,
         faults: LinkFaults | None = None,
         capacity: int | None = None,
@@ -269,7 +269,7 @@ class MockVehicle:
     def position_geodetic(self) -> tuple[float, float, float]:
         """Reported position: latitude, longitude [deg], altitude [m AMSL]."""
         e, n, u = self.position_enu()
-        lat, lon, alt = enu_to_geodetic(e, n, u, self._world.frame)
+        lat, lon, alt = to_geodetic(e, n, u, self._world.frame)
         return lat, lon, alt
 
     @property

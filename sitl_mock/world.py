@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from gcs_planner.geo import Origin
 from sitl_mock.flight import Airframe, Kinematics
+from sitl_mock.geodesy import HomeLike
 
 __all__ = ["World"]
 
@@ -23,7 +23,7 @@ CURRENT_A = {"airborne": 15.0, "armed": 1.5, "idle": 0.3}
 class World:
     """Simulated time [s], kinematics and per-vehicle arrays for ``len(airframes)`` vehicles."""
 
-    def __init__(self, frame: Origin, airframes: list[Airframe], ground_enu_m: np.ndarray) -> None:
+    def __init__(self, frame: HomeLike, airframes: list[Airframe], ground_enu_m: np.ndarray) -> None:
         n = len(airframes)
         self.frame = frame
         self.kin = Kinematics(airframes, ground_enu_m)

@@ -60,15 +60,19 @@ def test_a_mock_at_another_speedup_is_refused_before_arming(tmp_path, capsys):
 
 
 def test_the_readme_recipe_sitl_mock_at_the_plans_starts_then_fly_connect_passes(tmp_path, capsys):
-    """`sitl-mock --plan` stands each vehicle at its start, so `fly --connect` to it passes the gate
-    (the old recipe put four vehicles on one spot); a privileged --base-port is refused."""
+    """`sitl-mock --homes` stands each vehicle where `fly --homes` says, as SITL's --home, so `fly
+    --connect` to it passes the gate (the old recipe put four vehicles on one spot); a privileged
+    --base-port is refused."""
     from child_process import child
     from test_fly_networks import _free_port_run
 
-    plan_path = tmp_path / "plan.json"
+    plan_path, homes_path = tmp_path / "plan.json", tmp_path / "homes.txt"
     assert main(["plan", str(SCENARIO), "-o", str(plan_path)]) == 0
+    capsys.readouterr()
+    assert main(["fly", str(SCENARIO), "--plan", str(plan_path), "--homes"]) == 0
+    homes_path.write_text(capsys.readouterr().out)
     base = _free_port_run(4)
-    cli = [sys.executable, "-m", "sitl_mock.cli", "--plan", str(plan_path), "--base-port", str(base),
+    cli = [sys.executable, "-m", "sitl_mock.cli", "--homes", str(homes_path), "--base-port", str(base),
            "--profile", "px4", "--speedup", "10"]  # fmt: skip
     with child(cli, stderr=subprocess.DEVNULL) as mock:
         argv = ["fly", str(SCENARIO), "--plan", str(plan_path), "--speedup", "10",
@@ -80,3 +84,10 @@ def test_the_readme_recipe_sitl_mock_at_the_plans_starts_then_fly_connect_passes
     assert rc == 0 and "PASS: 4/4 vehicles conform" in out, out
     refused = subprocess.run([*cli[:3], "--base-port", "80"], capture_output=True, text=True)
     assert refused.returncode == 2 and "privileged" in refused.stderr
+    bad = tmp_path / "bad.txt"  # a typo in the first line's --home
+    bad.write_text(homes_path.read_text().replace(",", ";", 1))
+    refused = subprocess.run([*cli[:3], "--homes", str(bad)], capture_output=True, text=True)
+    first = bad.read_text().splitlines()[0].split("  ")[0]  # "sysid 1 (uav1): --home LAT;LON,ALT,HDG"
+    error = f"sitl-mock: error: --homes {bad} line 1 ({first}): could not convert string to float"
+    assert refused.returncode == 2 and refused.stderr.splitlines()[-1].startswith(error), refused.stderr
+    assert "Traceback" not in refused.stderr and refused.stderr.count("error:") == 1, refused.stderr

@@ -53,6 +53,7 @@ from gcs_planner.coalition_hil.missions import (
 )
 from gcs_planner.coalition_hil.report import TaskRow, add_prediction_errors, task_rows
 from gcs_planner.errors import UserError
+from gcs_planner.fleet_ids import network_of
 from gcs_planner.flight_limits import check_limits, read_l1_params, read_limits
 from gcs_planner.flight_ops import (
     KEEPER_PERIOD_S,
@@ -263,6 +264,8 @@ async def run_coalition_hil(
     run = (runner or _HilRun)(scenario, options)
     if say is not None:
         run.say = say
+    if any(network_of(vp.sysid) > 0 for vp in run.initial.vehicles):
+        raise UserError("the coalition run flies one network: its vehicles need sysids 1..254")
     vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
     check_loop(vehicles.lockstep)
     run.vehicles = vehicles
