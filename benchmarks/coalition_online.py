@@ -2,19 +2,21 @@
 
     python benchmarks/coalition_online.py --runs 2 [--speedup 5] [--targets T1]
 
-Each run flies all 32 UAVs (sitl_mock in its own process) with the contract net deciding in flight
-(coalition_hil.online_run). Printed per run: strikes and assessments within 1 s / 10 deg, the
-largest time and angle errors, uploads, wall time and the CPU / wall time per formation in flight;
-then the first run's formations (leader, time, members) beside the event simulation's.
+Each run flies all 32 UAVs with the contract net deciding in flight (coalition_hil.online_run):
+sitl_mock in lockstep with the run (gcs_planner.lockstep), or with --speedup in its own process
+paced by the wall clock. Printed per run: strikes and assessments within 1 s / 10 deg, the largest
+time and angle errors, uploads, the CPU / wall time per formation in flight, the flight time
+(first to last position report), wall time and their ratio (times real time); then the first
+run's formations (leader, time, members) beside the event simulation's.
 """
 
 from __future__ import annotations
 
 import argparse
-import asyncio
 import tempfile
 from pathlib import Path
 
+from gcs_planner import lockstep
 from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.online_run import run_online
 from gcs_planner.coalition_hil.report import format_formations
@@ -27,18 +29,20 @@ SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.t
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=1)
-    ap.add_argument("--speedup", type=float, default=5.0)
+    ap.add_argument("--speedup", type=float, default=None, help="pace the mock [none: lockstep]")
     ap.add_argument("--targets", default="", help="comma-separated target ids [all]")
     args = ap.parse_args()
     targets = tuple(t for t in args.targets.split(",") if t) or None
     print("| run | strikes ok | assessments ok | max abs dt [s] | max abs dangle [deg] | uploads ok "
-          "| formations in flight: CPU / wall max [ms] | wall [s] |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|")
+          "| formations in flight: CPU / wall max [ms] | flight [s] | wall [s] | x real time |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|")
     first = None
     for run in range(args.runs):
         with tempfile.TemporaryDirectory() as out:
             options = HilOptions(out_dir=Path(out), speedup=args.speedup, online=True, targets=targets)
-            r = asyncio.run(run_online(load_scenario(SCENARIO), options, MockVehiclesProcess))
+            run_main = run_online(load_scenario(SCENARIO), options, MockVehiclesProcess)
+            r = lockstep.run(run_main, args.speedup is None)
+        flight_s = max(t[-1] for t, _ in r.tracks.values()) - min(t[0] for t, _ in r.tracks.values())
         strikes = [x for x in r.rows if x.task == "strike"]
         assess = [x for x in r.rows if x.task == "assess"]
         dt = max(abs(x.time_error_s) for x in r.rows)
@@ -48,7 +52,7 @@ def main() -> None:
         print(f"| {run + 1} | {sum(x.passed for x in strikes)} / {len(strikes)} "
               f"| {sum(x.passed for x in assess)} / {len(assess)} | {dt:.2f} | {da:.1f} "
               f"| {ok} / {len(r.uploads)} | {len(r.tender_cpu_s)}: {cpu:.1f} / {wall:.1f} "
-              f"| {r.wall_time_s:.1f} |")  # fmt: skip
+              f"| {flight_s:.0f} | {r.wall_time_s:.1f} | {flight_s / r.wall_time_s:.1f} |")  # fmt: skip
         first = first or r
         for f in r.failures:
             print(f"  failure: {f}")
