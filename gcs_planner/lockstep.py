@@ -19,6 +19,7 @@ Unix time it logs is ``unix_s``: the loop's start plus its virtual time.
 from __future__ import annotations
 
 import asyncio
+import gc
 import selectors
 import time
 from collections.abc import Callable, Coroutine
@@ -28,6 +29,7 @@ __all__ = ["LockstepLoop", "check_loop", "now_s", "run", "unix_s"]
 
 T = TypeVar("T")
 
+GC_THRESHOLD = 10_000  # allocations between first-generation collections during a run (CPython: 700)
 LOOP_START_S = 1000.0  # the virtual clock's first reading (not 0: nothing may read it as "unset")
 
 
@@ -83,9 +85,18 @@ class LockstepLoop(asyncio.SelectorEventLoop):
 
 
 def run(main: Coroutine[Any, Any, T], lockstep: bool) -> T:
-    """``asyncio.run(main)``, on a LockstepLoop when ``lockstep`` (every vehicle in this process)."""
-    with asyncio.Runner(loop_factory=LockstepLoop if lockstep else None) as runner:
-        return runner.run(main)
+    """``asyncio.run(main)``, on a LockstepLoop when ``lockstep`` (every vehicle in this process).
+
+    A flight makes ~10^4 short-lived message objects per second of wall time beside tracks that
+    only grow; CPython's collector at its default first threshold (700) then walks those tracks
+    over and over, so the run raises it (docs/results/lockstep.md: 18.4x -> 20.6x real time)."""
+    thresholds = gc.get_threshold()
+    gc.set_threshold(GC_THRESHOLD, *thresholds[1:])
+    try:
+        with asyncio.Runner(loop_factory=LockstepLoop if lockstep else None) as runner:
+            return runner.run(main)
+    finally:
+        gc.set_threshold(*thresholds)
 
 
 def check_loop(lockstep: bool) -> None:

@@ -6,7 +6,8 @@ Each tick (every ``tick_s`` of wall time) the fleet
    events after every step (numpy over all vehicles; Python only for vehicles with an event),
 2. runs the mission servers' re-request/timeout timers (wall clock, the GCS's clock),
 3. sends the telemetry that is due (positions for all due vehicles converted to geodetic in one
-   pyproj call).
+   pyproj call); each vehicle's frames of the tick leave as one datagram, as a real autopilot's
+   UDP driver sends what its buffer holds (sitl_mock/link.py ``batching``).
 
 If the process cannot keep up (more than ``MAX_CATCH_UP_WALL_S`` behind), simulated time slips
 instead of bursting: the lag is logged and counted in ``lag_events``.
@@ -93,11 +94,13 @@ class MockFleet:
         clock_zero_s: float | None = None,
         transport: str = "udpin",
         gcs: tuple[str, int] | None = None,
+        batch_frames: bool = True,
     ) -> None:
         """``flight``: FlightRules fields to override for every vehicle (e.g. ``{"arm_ready_s": 0}`` in
         a test about something else); the profile's real behaviour is the default. ``clock_zero_s``:
         the time.monotonic() (one clock for every process of the machine) at which simulated time
-        is 0, so that fleets in several processes share one simulated clock (default: the start)."""
+        is 0, so that fleets in several processes share one simulated clock (default: the start).
+        ``batch_frames``: each vehicle's frames of a tick leave in one datagram (False: one each)."""
         if (count is None) == (vehicles is None):
             raise ValueError("MockFleet needs exactly one of count= or vehicles=")
         if count is not None and not (isinstance(count, int) and 1 <= count <= 254):
@@ -140,6 +143,7 @@ class MockFleet:
         self.lag_events = 0
         self.ticks = 0
         self.clock_zero_s = clock_zero_s
+        self.batch_frames = batch_frames
         self._script: list[tuple[float, int, Callable[[MockFleet], None]]] = []
         self._script_counter = itertools.count()
         self._task: asyncio.Task | None = None
@@ -353,12 +357,16 @@ class MockFleet:
         if self.clock_zero_s is not None:  # on the ground until the first mission: nothing to step
             self._sim_base = self.speedup * (time.monotonic() - self.clock_zero_s)
             self.world.sim_time_s = max(0.0, self._sim_base)
+        for v in self.vehicles:
+            v.link.batching = self.batch_frames
         while True:
             now = loop.time()
             self._advance(now)
             for v in self.vehicles:
                 v.poll(now)
             self._stream(now, *streams)
+            for v in self.vehicles:
+                v.link.flush()
             self.ticks += 1
             await asyncio.sleep(max(0.0, self.tick_s - (loop.time() - now)))
 

@@ -50,6 +50,7 @@ __all__ = ["MAX_PEERS", "TRANSPORTS", "VehicleLink"]
 log = logging.getLogger(__name__)
 
 MAX_PEERS = 8
+MAX_DATAGRAM_BYTES = 1400  # a batch of frames stays within one Ethernet MTU
 TRANSPORTS = ("udpin", "udpclient", "tcp")
 OnMessage = Callable[[mavlink.MAVLink_message, tuple], None]
 
@@ -82,6 +83,9 @@ class VehicleLink(asyncio.DatagramProtocol):
         self._fixed_peers: list[tuple] = []  # udpclient: the GCS, a peer from the start
         self._server: asyncio.AbstractServer | None = None  # tcp: the listening socket
         self._conn: _TcpConnection | None = None  # tcp: the GCS connection served
+        self.batching = False  # hold frames until flush() (the fleet flushes every tick)
+        self._held: list[bytes] = []
+        self._held_bytes = 0
 
     async def open(
         self, host: str, port: int, kind: str = "udpin", gcs: tuple[str, int] | None = None
@@ -139,7 +143,9 @@ class VehicleLink(asyncio.DatagramProtocol):
     def forget_peers(self) -> None:
         """Reboot: peers forgotten. The replay table is kept: ArduPilot loses it with RAM but restarts
         its clock 60 s past the stored timestamp (``load_signing_key``), closing the same window.
-        A udpclient keeps sending to its GCS; a TCP connection is dropped (the GCS reconnects)."""
+        A udpclient keeps sending to its GCS; a TCP connection is dropped (the GCS reconnects).
+        What was said before (the reboot's COMMAND_ACK) leaves first."""
+        self.flush()
         self.peers[:] = self._fixed_peers
         if self._conn is not None:
             self._conn.transport.close()
@@ -157,11 +163,29 @@ class VehicleLink(asyncio.DatagramProtocol):
 
     # --- send / receive ------------------------------------------------------------------------
     def send(self, msg: mavlink.MAVLink_message) -> None:
-        """Encode ``msg`` (one sequence number) and send it to every peer."""
+        """Encode ``msg`` (one sequence number) and send it to every peer, at once or, while
+        ``batching``, with the other frames of this tick (``flush``)."""
         if not self.peers:
             return
         data = self.signing.pack(msg)
         self._mav.seq = (self._mav.seq + 1) % 256
+        if not self.batching:
+            for peer in self.peers:
+                self.out.send(data, peer)
+            return
+        if self._held_bytes + len(data) > MAX_DATAGRAM_BYTES:
+            self.flush()
+        self._held.append(data)
+        self._held_bytes += len(data)
+
+    def flush(self) -> None:
+        """Send the frames held while batching, as one datagram to each peer (ArduPilot's and PX4's
+        UDP drivers send what their MAVLink buffer holds when they run, several frames a datagram)."""
+        if not self._held:
+            return
+        data = b"".join(self._held)
+        self._held.clear()
+        self._held_bytes = 0
         for peer in self.peers:
             self.out.send(data, peer)
 
@@ -193,6 +217,7 @@ class VehicleLink(asyncio.DatagramProtocol):
             msg._signed = self.signing.key is not None  # verified above
             attach_extensions(msg, frame)
             self._on_message(msg, addr)
+        self.flush()  # the replies leave now, not at the next tick
 
     def _decode(self, frame: bytes) -> mavlink.MAVLink_message | None:
         if frame[0] == 0xFD and frame[2] & ~mavlink.MAVLINK_IFLAG_SIGNED:

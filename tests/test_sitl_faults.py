@@ -88,8 +88,9 @@ def _both(a: Probe, b: Probe, seconds: float) -> tuple[int, int]:
 
 
 def test_faults_measured_over_udp():
-    """Same fleet, vehicle 1 clean, vehicle 2 lossy then duplicating then reordering (set at run time)."""
-    with MockFleet(flight=UNGATED, count=2, rate_hz=50.0) as fleet:
+    """Same fleet, vehicle 1 clean, vehicle 2 lossy then duplicating then reordering (set at run time),
+    each frame a datagram of its own so that every fault acts on single frames."""
+    with MockFleet(flight=UNGATED, count=2, rate_hz=50.0, batch_frames=False) as fleet:
         clean, faulty = Probe(fleet.addresses[0]), Probe(fleet.addresses[1])
         time.sleep(0.1)
         fleet.set_faults(2, LinkFaults(loss=0.5, seed=2))
