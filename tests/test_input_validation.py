@@ -166,7 +166,7 @@ def test_full_disk_still_reports_the_flight(tmp_path, capsys, monkeypatch):
         d["vehicles"][0]["goal"] = [60.0, 0.0, 20.0]
 
     scen = _scenario(tmp_path, one_short_vehicle)
-    assert main(["fly", scen, "-o", str(tmp_path / "o"), "--no-rrd", "--speedup", "40"]) == 2
+    assert main(["fly", scen, "-o", str(tmp_path / "o"), "--no-rrd"]) == 2
     out, err = capsys.readouterr()
     assert err.strip().splitlines()[-1].endswith("No space left on device")
     assert "vehicles conform" in out  # the report came before the error line

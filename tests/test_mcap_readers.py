@@ -37,7 +37,7 @@ def stock_reads(path: Path) -> Counter:
 
 def test_a_flown_log_and_its_imported_tlog_read_completely_in_foxglove_and_python(tmp_path):
     out = tmp_path / "out"
-    argv = ["fly", str(ROOT / "missions" / "straight_4uav.toml"), "--speedup", "20", "--tlog", "--no-rrd",
+    argv = ["fly", str(ROOT / "missions" / "straight_4uav.toml"), "--tlog", "--no-rrd",
             "-o", str(out)]  # fmt: skip
     assert main(argv) == 0
     assert main(["import-log", str(out / "flight.tlog"), "-o", str(tmp_path / "imported.mcap")]) == 0
