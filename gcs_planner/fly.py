@@ -40,7 +40,7 @@ import numpy as np
 from gcs_planner.clock_check import MIN_SPAN_S, ClockRate
 from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, MovingObstacle, VehicleReport, conformance_report
 from gcs_planner.errors import UserError
-from gcs_planner.fleet_ids import network_of, wire_sysid
+from gcs_planner.fleet_ids import id_runs, network_of, wire_sysid
 from gcs_planner.flight_limits import check_limits, read_limits, read_ramps
 from gcs_planner.flight_ops import (
     TrackRecorder,
@@ -495,15 +495,4 @@ def end_summary(end_states: dict[int, str]) -> str:
     by_state: dict[str, list[int]] = {}
     for sysid, what in sorted(end_states.items()):
         by_state.setdefault(what, []).append(sysid)
-    return "; ".join(f"sysid {_runs(ids)} {what}" for what, ids in by_state.items())
-
-
-def _runs(ids: list[int]) -> str:
-    """Sorted ids as runs: [1, 2, 3, 7] -> "1-3, 7"."""
-    runs: list[list[int]] = []
-    for i in ids:
-        if runs and i == runs[-1][1] + 1:
-            runs[-1][1] = i
-        else:
-            runs.append([i, i])
-    return ", ".join(str(a) if a == b else f"{a}-{b}" for a, b in runs)
+    return "; ".join(f"sysid {id_runs(ids)} {what}" for what, ids in by_state.items())

@@ -1,9 +1,12 @@
 """One colour per vehicle, the same in Foxglove (GeoJSON/LocationFix) and Rerun views.
 
-Tableau-10 by system id, so vehicle 1 is blue, 2 orange, 3 green ... in every view of every log.
+Tableau-10 for system ids 1-10, so vehicle 1 is blue, 2 orange, 3 green ... in every view of
+every log; past 10 (a swarm) hues a golden angle apart, so no two vehicles of a fleet share one.
 """
 
 from __future__ import annotations
+
+import colorsys
 
 __all__ = ["vehicle_color"]
 
@@ -21,7 +24,14 @@ _PALETTE = (
 )
 
 
+GOLDEN_FRACTION = 0.6180339887498949  # hue step past the palette: spreads any count of hues evenly
+
+
 def vehicle_color(sysid: int) -> tuple[int, int, int, int]:
     """RGBA [0-255] of vehicle ``sysid``."""
-    r, g, b = _PALETTE[(sysid - 1) % len(_PALETTE)]
-    return r, g, b, 255
+    if 1 <= sysid <= len(_PALETTE):
+        return (*_PALETTE[sysid - 1], 255)
+    hue = (sysid * GOLDEN_FRACTION) % 1.0
+    value = 0.95 - 0.25 * (sysid % 3) / 2  # alternate brightness: neighbours in hue still differ
+    r, g, b = colorsys.hsv_to_rgb(hue, 0.75, value)
+    return round(255 * r), round(255 * g), round(255 * b), 255
