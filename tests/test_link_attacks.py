@@ -18,6 +18,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink import errors
+from gcs_planner.mavlink.framing import frames
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.signing import key_from_passphrase, setup_signing_message
@@ -54,6 +55,7 @@ class Peer:
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
         self.codec = _codec(sysid, compid, key)
+        self.pending: list[bytes] = []  # frames of a datagram not yet returned by recv
 
     @property
     def address(self) -> tuple[str, int]:
@@ -69,7 +71,11 @@ class Peer:
         self.sock.sendto(data, to)
 
     async def recv(self, timeout_s: float = 3.0) -> bytes:
-        return await asyncio.wait_for(asyncio.get_running_loop().sock_recv(self.sock, 2048), timeout_s)
+        """The next frame received (a vehicle sends a tick's frames in one datagram)."""
+        while not self.pending:
+            data = await asyncio.wait_for(asyncio.get_running_loop().sock_recv(self.sock, 2048), timeout_s)
+            self.pending.extend(frames(data)[0])
+        return self.pending.pop(0)
 
     def close(self) -> None:
         self.sock.close()
