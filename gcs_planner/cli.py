@@ -35,6 +35,7 @@ COMMANDS = {
     "clear": "Clear a vehicle's mission, fence or rally list (or all three) and confirm each was cleared.",
     "start": "Start a vehicle's mission: optionally upload FILE first, then arm and send MISSION_START.",
     "signing-setup": "Give a vehicle a MAVLink 2 signing key (SETUP_SIGNING), or turn its signing off, and check it took.",
+    "params": "Get, set or diff a vehicle's parameters against a Mission Planner .param or QGroundControl .params file.",
 }  # fmt: skip
 
 

@@ -2,7 +2,8 @@
 
 The vehicle owns no physics: a fleet `World` holds every vehicle's kinematics in arrays and the
 vehicle keeps its row index (`attach`). Mission-protocol messages go to the I/O-free
-`MissionServer` (sitl_mock/mission_server.py); the vehicle sends whatever it returns.
+`MissionServer` (sitl_mock/mission_server.py), parameter messages to the I/O-free `ParamServer`
+(sitl_mock/param_server.py); the vehicle sends whatever they return.
 
 Commands (COMMAND_LONG or COMMAND_INT), each answered with COMMAND_ACK:
 COMPONENT_ARM_DISARM, DO_SET_MODE (ArduPilot: param2 = custom mode; PX4: param2/param3 = main/sub
@@ -47,6 +48,7 @@ from sitl_mock.geodesy import Home, HomeLike, to_geodetic
 from sitl_mock.link import TRANSPORTS, VehicleLink, mavlink
 from sitl_mock.mission_exec import Navigator
 from sitl_mock.mission_server import MissionServer
+from sitl_mock.param_server import ParamServer, stock_params
 from sitl_mock.profiles import PROFILES
 from sitl_mock.world import World
 
@@ -177,19 +179,7 @@ class MockVehicle:
             sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer, signing_key
         )
         self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
-        self.params = dict(self.flight.params)
-        if self.flight.airspeed_range:  # the airframe's limits, as a plane's parameters say them
-            af = self.airframe
-            self.params.update(AIRSPEED_MIN=af.min_speed_mps, AIRSPEED_MAX=af.max_speed_mps,
-                               ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad),
-                               NAVL1_PERIOD=af.l1.period_s if af.l1 else 0.0,
-                               RLL2SRV_TCONST=af.l1.roll_tau_s if af.l1 else 0.0)  # fmt: skip
-        if self.flight.ramp_params and self.airframe.kind == "multirotor":  # the ramp it flies
-            accel, jerk = self.flight.ramp_params
-            self.params.update({accel: self.airframe.accel_mps2, jerk: UNLIMITED_JERK_MPS3})
-        if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
-            for name, value in (("MAV_OPTIONS", 0.0), ("MAV_GCS_SYSID", 255.0), ("MAV_GCS_SYSID_HI", 0.0)):
-                self.params.setdefault(name, value)
+        self._init_params()
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission
         self._armed_at_s = math.inf  # sim time of arming while on the ground
@@ -206,6 +196,29 @@ class MockVehicle:
         self._after_ack: Callable[[], None] | None = None  # runs once the COMMAND_ACK is sent
         self._dispatch, self._commands = self._handlers()
 
+    def _init_params(self) -> None:
+        """The parameters it serves (``params``, name -> value; ``param_types``, name -> MAV_PARAM_TYPE,
+        REAL32 where absent): the flight rules' own, then a handful of its autopilot's stock ones
+        (sitl_mock/param_server.py), served by ``param_server``."""
+        self.params = dict(self.flight.params)
+        if self.flight.airspeed_range:  # the airframe's limits, as a plane's parameters say them
+            af = self.airframe
+            self.params.update(AIRSPEED_MIN=af.min_speed_mps, AIRSPEED_MAX=af.max_speed_mps,
+                               ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad),
+                               NAVL1_PERIOD=af.l1.period_s if af.l1 else 0.0,
+                               RLL2SRV_TCONST=af.l1.roll_tau_s if af.l1 else 0.0)  # fmt: skip
+        if self.flight.ramp_params and self.airframe.kind == "multirotor":  # the ramp it flies
+            accel, jerk = self.flight.ramp_params
+            self.params.update({accel: self.airframe.accel_mps2, jerk: UNLIMITED_JERK_MPS3})
+        if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
+            for name, value in (("MAV_OPTIONS", 0.0), ("MAV_GCS_SYSID", 255.0), ("MAV_GCS_SYSID_HI", 0.0)):
+                self.params.setdefault(name, value)
+        self.param_types: dict[str, int] = {}
+        for name, (value, param_type) in stock_params(self.flight.name, self.sysid).items():
+            if name not in self.params:
+                self.params[name], self.param_types[name] = value, param_type
+        self.param_server = ParamServer(self.profile.name, self.params, self.param_types)
+
     def _handlers(self) -> tuple[dict[str, Callable], dict[int, Callable]]:
         """The handler of each message type and of each command the mock emulates."""
         messages = {
@@ -214,8 +227,9 @@ class MockVehicle:
             "SET_MODE": self._on_set_mode,
             "SETUP_SIGNING": self._on_setup_signing,
             "REQUEST_DATA_STREAM": self._on_request_data_stream,
-            "PARAM_SET": self._on_param_set,
-            "PARAM_REQUEST_READ": self._on_param_request_read,
+            "PARAM_SET": self._on_param_message,
+            "PARAM_REQUEST_READ": self._on_param_message,
+            "PARAM_REQUEST_LIST": self._on_param_message,
         }
         commands = {
             mavlink.MAV_CMD_COMPONENT_ARM_DISARM: self._cmd_arm,
@@ -310,6 +324,7 @@ class MockVehicle:
         world.kin.speed_cmd[i] = self.airframe.cruise_speed_mps
         nav.load(self.mission_server.items(MissionType.MISSION))
         self.boot_sim_s = world.sim_time_s
+        self.param_server.stop()
         self.link.forget_peers()
         log.info("vehicle %d rebooted", self.sysid)
 
@@ -326,6 +341,8 @@ class MockVehicle:
         """Mission-protocol timers (wall clock: the GCS's re-request and timeout clock) and the
         ground auto-disarm (simulated clock)."""
         for msg in self.mission_server.poll(wall_now_s):
+            self.send(msg)
+        for msg in self.param_server.poll():
             self.send(msg)
         if self.armed and self._world.sim_time_s - self._armed_at_s >= self.flight.auto_disarm_s:
             running = self.mode == "AUTO" and self._nav.running
@@ -461,21 +478,9 @@ class MockVehicle:
             return
         self.streams = self.streams | set(ids) if on else self.streams - set(ids)
 
-    def _on_param_set(self, msg: mavlink.MAVLink_message) -> None:
-        name = msg.param_id
-        if name in self.params and math.isfinite(msg.param_value):
-            self.params[name] = float(msg.param_value)
-            self._send_param(name)
-
-    def _on_param_request_read(self, msg: mavlink.MAVLink_message) -> None:
-        if msg.param_id in self.params:
-            self._send_param(msg.param_id)
-
-    def _send_param(self, name: str) -> None:
-        index = sorted(self.params).index(name)
-        self.send(mavlink.MAVLink_param_value_message(
-            name.encode(), self.params[name], mavlink.MAV_PARAM_TYPE_REAL32, len(self.params), index
-        ))  # fmt: skip
+    def _on_param_message(self, msg: mavlink.MAVLink_message) -> None:
+        for reply in self.param_server.handle(msg):
+            self.send(reply)
 
     def _wall_now(self) -> float:
         return asyncio.get_running_loop().time()

@@ -9,17 +9,15 @@ Choices:
   and it is unhealthy, wait; then arm. An arming refusal (FAILED, TEMPORARILY_REJECTED, DENIED) is
   retried every ``ARM_RETRY_S`` until the deadline (ArduCopter refuses for ~40-45 s after boot,
   "Arm: Need Position Estimate"); the error names the autopilot's own last STATUSTEXT.
-- ``set_param``: PARAM_SET, confirmed by the PARAM_VALUE echo (ArduPilot and PX4 answer every
-  PARAM_SET with the parameter's new value), resent like a command. ``read_param``:
-  PARAM_REQUEST_READ by name, resent the same way; ArduPilot does not answer for a name it does
-  not have (``GCS_MAVLINK::handle_param_request_read``), so no reply means None.
+- ``set_param`` (PARAM_SET confirmed by the PARAM_VALUE echo) and ``read_param`` (PARAM_REQUEST_READ
+  by name) live in gcs_planner/mavlink/params.py with the rest of the parameter protocol; they are
+  re-exported here for the flight code.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-import math
 from collections.abc import Callable, Mapping
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -30,6 +28,7 @@ from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S, Comman
 from gcs_planner.mavlink.enums import CommandResult
 from gcs_planner.mavlink.errors import CommandError, MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.params import read_param, set_param
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
 __all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "read_param", "request_streams", "set_param"]
@@ -125,46 +124,3 @@ async def arm_when_ready(
         if waiting is not None:
             waiting(sysid, reason)
         await asyncio.sleep(min(ARM_RETRY_S / time_scale, max(0.0, deadline - loop.time())))
-
-
-async def _param_value(link: MavlinkLink, sysid: int, name: str, request, retry_s: float) -> float | None:
-    """Send ``request`` until the vehicle answers with PARAM_VALUE for ``name``; None when it never does."""
-    link.check_target(sysid)
-
-    def answer(msg) -> bool:
-        return msg.get_type() == "PARAM_VALUE" and msg.get_srcSystem() == sysid and msg.param_id == name
-
-    for _ in range(COMMAND_RETRIES + 1):
-        waiting = asyncio.ensure_future(link.wait_for(answer, timeout_s=retry_s))
-        await asyncio.sleep(0)  # the matcher exists before the request goes out
-        link.send(request)
-        try:
-            return float((await waiting).param_value)
-        except TimeoutError:
-            continue
-    return None
-
-
-async def read_param(
-    link: MavlinkLink, sysid: int, name: str, compid: int = 1, retry_s: float = COMMAND_RETRY_S
-) -> float | None:
-    """Parameter ``name``'s value, or None when the vehicle does not answer for it."""
-    request = mavlink.MAVLink_param_request_read_message(sysid, compid, name.encode(), -1)
-    return await _param_value(link, sysid, name, request, retry_s)
-
-
-async def set_param(
-    link: MavlinkLink, sysid: int, name: str, value: float, compid: int = 1, retry_s: float = COMMAND_RETRY_S
-) -> float:
-    """Set parameter ``name`` to ``value`` (a REAL32); returns the value the vehicle echoed."""
-    if not math.isfinite(value):
-        raise UserError(f"parameter {name} must be a finite number, got {value!r}")
-    request = mavlink.MAVLink_param_set_message(
-        sysid, compid, name.encode(), float(value), mavlink.MAV_PARAM_TYPE_REAL32
-    )
-    echoed = await _param_value(link, sysid, name, request, retry_s)
-    if echoed is None:
-        raise UserError(f"vehicle {sysid}: no PARAM_VALUE for {name} after {COMMAND_RETRIES + 1} PARAM_SETs")
-    if abs(echoed - value) > 1e-3 * max(1.0, abs(value)):
-        raise UserError(f"vehicle {sysid} kept {name} = {echoed:g}, asked for {value:g}")
-    return echoed
