@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from gcs_planner.errors import UserError
 from gcs_planner.mavlink.autopilots import AutopilotQuirks
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.mavlink.preflight import read_param
+from gcs_planner.mavlink.params import read_param
 from gcs_planner.plan import VehiclePlan
 
 __all__ = ["FlightLimits", "check_limits", "read_l1_params", "read_limits", "read_ramps"]

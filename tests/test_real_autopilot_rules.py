@@ -24,7 +24,8 @@ from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.preflight import arm_when_ready, read_param, request_streams
+from gcs_planner.mavlink.params import read_param
+from gcs_planner.mavlink.preflight import arm_when_ready, request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.mavlink.wpl import loads_wpl
 from gcs_planner.planning import plan_scenario

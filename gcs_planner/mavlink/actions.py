@@ -17,7 +17,8 @@ from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.preflight import arm_when_ready, set_param
+from gcs_planner.mavlink.params import set_param
+from gcs_planner.mavlink.preflight import arm_when_ready
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""Getting a vehicle ready to fly: telemetry streams, pre-arm readiness, arming, one parameter.
+"""Getting a vehicle ready to fly: telemetry streams, pre-arm readiness, arming.
 
 Choices:
 - Streams: every message a run needs is asked for with MAV_CMD_SET_MESSAGE_INTERVAL (as MAVSDK
@@ -9,9 +9,6 @@ Choices:
   and it is unhealthy, wait; then arm. An arming refusal (FAILED, TEMPORARILY_REJECTED, DENIED) is
   retried every ``ARM_RETRY_S`` until the deadline (ArduCopter refuses for ~40-45 s after boot,
   "Arm: Need Position Estimate"); the error names the autopilot's own last STATUSTEXT.
-- ``set_param`` (PARAM_SET confirmed by the PARAM_VALUE echo) and ``read_param`` (PARAM_REQUEST_READ
-  by name) live in gcs_planner/mavlink/params.py with the rest of the parameter protocol; they are
-  re-exported here for the flight code.
 """
 
 from __future__ import annotations
@@ -28,10 +25,9 @@ from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S, Comman
 from gcs_planner.mavlink.enums import CommandResult
 from gcs_planner.mavlink.errors import CommandError, MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.mavlink.params import read_param, set_param
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
-__all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "read_param", "request_streams", "set_param"]
+__all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "request_streams"]
 
 log = logging.getLogger(__name__)
 
