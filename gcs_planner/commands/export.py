@@ -11,6 +11,7 @@ import argparse
 
 from gcs_planner.commands._mission_cli import print_losses
 from gcs_planner.errors import UserError
+from gcs_planner.geofence import check_fence, overflown
 from gcs_planner.mavlink.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
 from gcs_planner.mavlink.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
 from gcs_planner.planning import load_scenario
@@ -34,16 +35,17 @@ def run(args: argparse.Namespace) -> int:
     out_dir = output_dir(args.output_dir, "-o")
     plan = load_plan_json(args.plan)
     vehicles = select_vehicles(plan, args.vehicle)
-    fence, rally = [], []
+    scenario = None
     if args.scenario:
         if args.format != "qgc":
             raise UserError("--scenario (fence and rally points) needs --format qgc; WPL holds one list")
         scenario = load_scenario(args.scenario)
-        fence, rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
     files = []  # every vehicle's file is built (and validated) before the first is written
     for vp in vehicles:
         mf = plan_mission_file(vp, plan.origin, args.autopilot)
-        mf.fence, mf.rally = fence, rally
+        if scenario is not None:  # each vehicle's fence is what its own plan keeps out of
+            check_fence(scenario, vp)
+            mf.fence, mf.rally = scenario_fence_items(scenario, vp), scenario_rally_items(scenario)
         stem = file_stem(vp.vehicle_id, "vehicle id")  # ../../x or /abs/x must not leave -o
         files.append((vp, mf, out_dir / f"{stem}{SUFFIX[args.format]}"))
     unique([path.name for _, _, path in files], "output file")
@@ -58,6 +60,10 @@ def run(args: argparse.Namespace) -> int:
         with atomic_write(path) as tmp:
             losses = save_mission_file(tmp, mf)
         n = len(mf.items(args.autopilot))
-        print(f"{vp.vehicle_id:<10} {vp.sysid:>5} {n:>6} {len(fence):>6} {len(rally):>6}  {path}")
+        print(f"{vp.vehicle_id:<10} {vp.sysid:>5} {n:>6} {len(mf.fence):>6} {len(mf.rally):>6}  {path}")
+        if scenario is not None and (over := overflown(scenario, vp)):
+            print(
+                f"  {vp.vehicle_id} flies over {', '.join(over)}: not in its fence (a MAVLink fence is 2-D)"
+            )
         print_losses(losses)
     return 0

@@ -107,11 +107,16 @@ def read_input(args: argparse.Namespace, autopilot: str, sysid: int) -> MissionF
     """FILE (+ --scenario's fence and rally) for vehicle ``sysid`` with ``autopilot``'s conventions."""
     mf = mission_input(args.file, autopilot=autopilot, vehicle=args.vehicle, sysid=sysid)
     if args.scenario:
+        from gcs_planner.geofence import check_fence
+        from gcs_planner.mavlink.files import planned_vehicle
         from gcs_planner.mavlink.items import scenario_fence_items, scenario_rally_items
         from gcs_planner.planning import load_scenario  # only with --scenario: upload starts lean
 
         scenario = load_scenario(args.scenario)
-        mf.fence, mf.rally = scenario_fence_items(scenario), scenario_rally_items(scenario)
+        vp = planned_vehicle(args.file, args.vehicle, sysid)  # plan.json: the fence its plan keeps to
+        if vp is not None:
+            check_fence(scenario, vp)
+        mf.fence, mf.rally = scenario_fence_items(scenario, vp), scenario_rally_items(scenario)
         mf.lists = mf.lists | {MissionType.FENCE, MissionType.RALLY}
     return mf
 

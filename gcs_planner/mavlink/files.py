@@ -342,8 +342,17 @@ def mission_input(
     path = Path(path)
     if path.suffix.lower() == ".json":
         plan = load_plan_json(path)
-        (vp,) = select_vehicles(plan, [vehicle] if vehicle else None, sysid=sysid if not vehicle else None)[
-            :1
-        ]
-        return plan_mission_file(vp, plan.origin, autopilot)
+        return plan_mission_file(_one_vehicle(plan, vehicle, sysid), plan.origin, autopilot)
     return load_mission_file(path, autopilot=autopilot)
+
+
+def planned_vehicle(path: str | Path, vehicle: str | None = None, sysid: int | None = None):
+    """The VehiclePlan ``mission_input`` flies from a plan.json; None for a .plan or WPL file."""
+    if Path(path).suffix.lower() != ".json":
+        return None
+    return _one_vehicle(load_plan_json(path), vehicle, sysid)
+
+
+def _one_vehicle(plan, vehicle: str | None, sysid: int | None):
+    (vp,) = select_vehicles(plan, [vehicle] if vehicle else None, sysid=sysid if not vehicle else None)[:1]
+    return vp

@@ -39,9 +39,8 @@ Choices where MAVLink or the autopilots leave room (all documented here, nowhere
   "loiter" is NAV_LOITER_UNLIM over the last waypoint (radius = turn radius for fixed wings).
 - Fence (mission_type 1): the scenario's x/y bounds as an inclusion polygon, each cylinder
   (radius + buffer) and each radar dome (its footprint) as an exclusion circle, in
-  MAV_FRAME_GLOBAL as QGroundControl sends fences. A MAVLink fence is 2-D, so an obstacle with a
-  finite top is excluded at every altitude: conservative, and a backstop only (the planner already
-  keeps clear).
+  MAV_FRAME_GLOBAL as QGroundControl sends fences; for one vehicle's plan only the obstacles its
+  path keeps out of (gcs_planner/geofence.py: a 2-D fence cannot let a vehicle over a tower).
 - Rally (mission_type 2): one point over each vehicle's start at its min_alt_m.
 """
 
@@ -55,6 +54,7 @@ import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.geo import Origin, enu_to_geodetic
+from gcs_planner.geofence import vehicle_geofence
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.units import SPEED_AIRSPEED, SPEED_GROUNDSPEED, e7, half_away
 from gcs_planner.mavlink.validate import MissionValidationError, validate_items
@@ -239,8 +239,10 @@ def _numbered(items: list[MissionItem]) -> list[MissionItem]:
     return [item.with_seq(i) for i, item in enumerate(items)]
 
 
-def scenario_fence_items(scenario: Scenario) -> list[MissionItem]:
-    """Scenario bounds (inclusion polygon) and obstacles (exclusion circles) -> fence items (type 1)."""
+def scenario_fence_items(scenario: Scenario, vp: VehiclePlan | None = None) -> list[MissionItem]:
+    """The fence items (type 1) of the scenario, or of one vehicle's plan (gcs_planner.geofence:
+    the bounds as an inclusion polygon, the obstacles its path keeps out of as exclusion circles)."""
+    fence = vehicle_geofence(scenario, vp)
     origin = scenario.origin
     items: list[MissionItem] = []
 
@@ -248,27 +250,25 @@ def scenario_fence_items(scenario: Scenario) -> list[MissionItem]:
         lat, lon, _ = enu_to_geodetic(np.asarray(east, float), np.asarray(north, float), 0.0, origin)
         return deg_to_e7(lat), deg_to_e7(lon)
 
-    fence, fence_frame = MissionType.FENCE, mavlink.MAV_FRAME_GLOBAL
-    if "x" in scenario.bounds and "y" in scenario.bounds:
-        (x0, x1), (y0, y1) = scenario.bounds["x"], scenario.bounds["y"]
+    fence_type, fence_frame = MissionType.FENCE, mavlink.MAV_FRAME_GLOBAL
+    if fence.inclusion is not None:
+        x0, x1, y0, y1 = fence.inclusion
         lats, lons = geo([x0, x1, x1, x0], [y0, y0, y1, y1])  # counter-clockwise seen from above
         cmd = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
         items += [
-            MissionItem(0, fence_frame, cmd, 0, 1, 4.0, x=int(a), y=int(b), mission_type=fence)
+            MissionItem(0, fence_frame, cmd, 0, 1, 4.0, x=int(a), y=int(b), mission_type=fence_type)
             for a, b in zip(lats, lons, strict=True)
         ]
-    circles = [(c.x, c.y, c.radius_m + c.buffer_m) for c in scenario.cylinders]
-    circles += [(h.x, h.y, h.radius_m) for h in scenario.hemispheres]
-    if circles:
-        cx, cy, radii = np.asarray(circles, dtype=float).T
+    if fence.exclusions:
+        cx, cy, radii = np.array([(c.x, c.y, c.radius_m) for c in fence.exclusions], dtype=float).T
         lats, lons = geo(cx, cy)
         cmd = mavlink.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION
         items += [
-            MissionItem(0, fence_frame, cmd, 0, 1, float(r), x=int(a), y=int(b), mission_type=fence)
+            MissionItem(0, fence_frame, cmd, 0, 1, float(r), x=int(a), y=int(b), mission_type=fence_type)
             for a, b, r in zip(lats, lons, radii, strict=True)
         ]
     items = _numbered(items)
-    validate_items(items, mission_type=fence)
+    validate_items(items, mission_type=fence_type)
     return items
 
 
