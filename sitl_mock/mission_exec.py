@@ -33,6 +33,7 @@ Choices where the spec or the autopilots differ:
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -177,13 +178,26 @@ class Navigator:
         kin.loiter_r[self.i] = max(self.airframe.loiter_radius_m, 1.0)
         kin.command(self.i, Guidance.HOLD, kin.pos[self.i].copy())
 
-    def takeoff(self, alt_m: float, done: Callable[[], None] | None = None) -> None:
-        """Climb to ``alt_m`` above home, then hold (or call ``done``)."""
+    def takeoff(self, alt_m: float, done: Callable[[], None] | None = None, run_m: float = math.inf) -> None:
+        """Climb to ``alt_m`` above home, then hold (or call ``done``); with ``run_m`` the climb also
+        ends that far from where it began, flown at cruise (ArduPlane's TAKEOFF mode:
+        ModeTakeoff::update levels off at TKOFF_DIST from the take-off point)."""
         kin = self.world.kin
         target = kin.pos[self.i].copy()
         target[2] = self.home_enu_m[2] + alt_m
-        self._wait(done or self.hold)
+        end = done or self.hold
+        ended = []
+
+        def finish() -> None:  # whichever comes first: the altitude or the run
+            if not ended:
+                ended.append(True)
+                self._wait(None)
+                end()
+
+        self._wait(finish)
         kin.command(self.i, Guidance.CLIMB, target, Arrival.ALTITUDE)
+        if math.isfinite(run_m) and run_m > 0:
+            self._after(run_m / max(self.airframe.cruise_speed_mps, 1e-3), finish)
 
     def land(self, target_m: np.ndarray | None = None, done: Callable[[], None] | None = None) -> None:
         """Land at ``target_m``'s horizontal position (default: here); disarm on touchdown."""

@@ -533,7 +533,7 @@ class MockVehicle:
                     self._pending_start = None
                     self._nav.start(first, last)
                 elif self.mode == "TAKEOFF":
-                    self._nav.takeoff(self._takeoff_mode_alt_m())
+                    self._takeoff_mode()
             return CommandResult.ACCEPTED
         if not self.armed:
             return CommandResult.ACCEPTED
@@ -555,12 +555,13 @@ class MockVehicle:
             return "PreArm: DO_LAND_START set and RTL_AUTOLAND disable"
         return ""
 
-    def _takeoff_mode_alt_m(self) -> float:
-        """Where TAKEOFF mode levels off: ArduPlane's ModeTakeoff::update ends the climb within 2 m
-        of TKOFF_ALT and turns into its loiter (docs/real-autopilots.md, ArduPlane table)."""
+    def _takeoff_mode(self) -> None:
+        """TAKEOFF mode's climb: ArduPlane's ModeTakeoff::update ends it within 2 m of TKOFF_ALT
+        or TKOFF_DIST from where it began, whichever comes first, and turns into its loiter
+        (docs/real-autopilots.md, ArduPlane table: measured on SITL 4.8.0-dev)."""
         name = self.flight.takeoff_param
         alt = self.params.get(name, DEFAULT_TAKEOFF_ALT_M) if name else DEFAULT_TAKEOFF_ALT_M
-        return alt - TAKEOFF_MODE_EARLY_M
+        self._nav.takeoff(alt - TAKEOFF_MODE_EARLY_M, run_m=self.params.get("TKOFF_DIST", math.inf))
 
     def _cmd_set_mode(self, p1: float, p2: float, p3: float, *_: float) -> CommandResult:
         custom = px4_custom_mode(int(p2), int(p3)) if self.profile.name == "px4" else int(p2)
@@ -717,7 +718,7 @@ class MockVehicle:
             nav.land() if airborne else nav.idle()
         elif name == "TAKEOFF":
             if start and self.armed and not airborne:
-                nav.takeoff(DEFAULT_TAKEOFF_ALT_M)
+                self._takeoff_mode()
         else:
             nav.hold()
         if changed:

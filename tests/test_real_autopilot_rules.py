@@ -314,3 +314,31 @@ def test_fly_homes_puts_a_plane_one_climb_run_behind_its_first_waypoint_and_a_co
         assert f"PX4_HOME_LAT={lat:.7f} PX4_HOME_LON={lon:.7f}" in line and f"MAV_SYS_ID {vp.sysid}" in line
         assert math.hypot(x0 - x, y0 - y) == pytest.approx(z0 * run_per_m, abs=0.5)
         assert abs(math.remainder(heading - math.degrees(math.atan2(x1 - x0, y1 - y0)), 360.0)) < 1.0
+
+
+@pytest.mark.parametrize("run_m", [150.0, 0.0])
+def test_arduplane_takeoff_mode_levels_off_at_tkoff_dist_or_near_tkoff_alt(run_m):
+    """The mock's TAKEOFF mode ends as ArduPlane's ModeTakeoff::update does: 2 m below TKOFF_ALT,
+    or TKOFF_DIST from where the climb began if that comes first (SITL 4.8.0-dev levelled off at
+    75 and 44 m with the default 200 m, docs/real-autopilots.md); TKOFF_DIST 0 sets no limit."""
+
+    async def climb() -> tuple:
+        ready = {"arm_ready_s": 0.0, "position_fix_s": 0.0}
+        async with sitl_mock.MockFleet(
+            count=1, profile="ardupilot", vehicle_type="fixed_wing", home=ORIGIN, flight=ready
+        ) as fleet:
+            plane = fleet.vehicle(1)
+            plane.params.update(TKOFF_ALT=100.0, TKOFF_DIST=run_m)
+            assert plane._set_mode_name("TAKEOFF", start=False)
+            assert plane._cmd_arm(1.0, 0.0) == 0  # ACCEPTED
+            start = fleet.positions_enu()[0].copy()
+            await asyncio.sleep(90.0)  # flight time: lockstep
+            return start, fleet.positions_enu()[0], AIRFRAMES["fixed_wing"]
+
+    start, end, frame = lockstep.run(climb(), True)
+    run_s = run_m / frame.cruise_speed_mps
+    if run_m:
+        assert end[2] - start[2] == pytest.approx(frame.climb_rate_mps * run_s, abs=3.0)  # short of 98 m
+        assert math.hypot(*(end - start)[:2]) < run_m + 2.5 * frame.loiter_radius_m  # loitering there
+    else:
+        assert end[2] - start[2] == pytest.approx(98.0, abs=1.0)
