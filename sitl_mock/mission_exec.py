@@ -179,25 +179,39 @@ class Navigator:
         kin.command(self.i, Guidance.HOLD, kin.pos[self.i].copy())
 
     def takeoff(self, alt_m: float, done: Callable[[], None] | None = None, run_m: float = math.inf) -> None:
-        """Climb to ``alt_m`` above home, then hold (or call ``done``); with ``run_m`` the climb also
-        ends that far from where it began, flown at cruise (ArduPlane's TAKEOFF mode:
-        ModeTakeoff::update levels off at TKOFF_DIST from the take-off point)."""
-        kin = self.world.kin
-        target = kin.pos[self.i].copy()
+        """Climb to ``alt_m`` above home, then hold (or call ``done``). With ``run_m`` (ArduPlane's
+        TAKEOFF mode, TKOFF_DIST) the straight climb ends that far from its start, flown at cruise,
+        and the plane climbs on to ``alt_m`` circling there (ModeTakeoff::update: the take-off stage
+        ends at TKOFF_ALT - 2 m or TKOFF_DIST from the start, whichever first, then it loiters at the
+        point TKOFF_DIST along its climb-out at TKOFF_ALT; TKOFF_DIST 0 ends the stage at once)."""
+        kin, i = self.world.kin, self.i
+        start = kin.pos[i].copy()
+        target = start.copy()
         target[2] = self.home_enu_m[2] + alt_m
         end = done or self.hold
-        ended = []
 
-        def finish() -> None:  # whichever comes first: the altitude or the run
-            if not ended:
-                ended.append(True)
-                self._wait(None)
-                end()
+        def arrived() -> None:
+            self.world.timers[i], self._next_timer = np.inf, None  # the run no longer ends it
+            end()
 
-        self._wait(finish)
-        kin.command(self.i, Guidance.CLIMB, target, Arrival.ALTITUDE)
-        if math.isfinite(run_m) and run_m > 0:
-            self._after(run_m / max(self.airframe.cruise_speed_mps, 1e-3), finish)
+        self._wait(arrived)
+        kin.command(i, Guidance.CLIMB, target, Arrival.ALTITUDE)
+        if math.isfinite(run_m):
+            self._after(max(run_m, 0.0) / max(self.airframe.cruise_speed_mps, 1e-3),
+                        lambda: self._loiter_climb(start, max(run_m, 0.0), float(target[2])))  # fmt: skip
+
+    def _loiter_climb(self, start: np.ndarray, run_m: float, z_m: float) -> None:
+        """Circle the point ``run_m`` from ``start`` along the climb-out, climbing to ``z_m``."""
+        kin, i = self.world.kin, self.i
+        away = kin.pos[i, :2] - start[:2]
+        along = (
+            away / np.hypot(*away)
+            if np.hypot(*away) > 1e-3
+            else np.array([np.cos(kin.psi[i]), np.sin(kin.psi[i])])
+        )
+        self._wait(None)
+        kin.loiter_r[i] = max(self.airframe.loiter_radius_m, 1.0)
+        kin.command(i, Guidance.HOLD, np.array([*(start[:2] + run_m * along), z_m]))
 
     def land(self, target_m: np.ndarray | None = None, done: Callable[[], None] | None = None) -> None:
         """Land at ``target_m``'s horizontal position (default: here); disarm on touchdown."""

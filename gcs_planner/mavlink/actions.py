@@ -46,16 +46,16 @@ async def take_off(
     takeoff_dist_m: float = 0.0,
 ) -> None:
     """Arm (once the vehicle is ready) and climb to ``alt_m`` above home, as the autopilot takes it.
-    ``climb_past_m``: a TAKEOFF-mode plane is given that much more, and TKOFF_DIST ``takeoff_dist_m``,
-    so that it is still climbing straight along its launch heading when it passes ``alt_m``
-    (ArduPlane's ModeTakeoff::update ends the take-off 2 m below TKOFF_ALT or TKOFF_DIST from its
-    start, default 200 m, and turns into a loiter: SITL planes began their routes 44-80 m off the
-    line)."""
+    A TAKEOFF-mode plane gets TKOFF_ALT ``alt_m`` + ``climb_past_m`` and TKOFF_DIST
+    ``takeoff_dist_m``, so that it climbs straight along its launch heading until it is up
+    (ArduPlane's ModeTakeoff::update ends the straight climb 2 m below TKOFF_ALT or TKOFF_DIST from
+    its start, default 200 m, and climbs on circling: SITL planes began their routes 44-80 m off the
+    line; a coalition plane climbing to 300-500 m would circle most of its climb)."""
     command = CommandClient(link, sysid)
     if quirks.takeoff is Takeoff.TAKEOFF_MODE:
         value = await set_param(link, sysid, TAKEOFF_ALT_PARAM, alt_m + climb_past_m)
         log.info("vehicle %d: %s set to %.1f m for the take-off", sysid, TAKEOFF_ALT_PARAM, value)
-        if climb_past_m > 0:  # nor may the take-off end by distance before the plane is up
+        if takeoff_dist_m > 0:
             await set_param(link, sysid, TAKEOFF_DIST_PARAM, takeoff_dist_m)
     if quirks.arm_mode is not None:
         await command.set_mode(quirks.arm_mode)
