@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import asyncio
 import gc
+import os
 import selectors
 import time
 from collections.abc import Callable, Coroutine
@@ -43,6 +44,10 @@ class _IdleJumps:
     def select(self, timeout: float | None = None) -> list:
         events = self._selector.select(0)
         if events or timeout == 0:
+            return events
+        os.sched_yield()  # a busy kernel may leave loopback delivery to ksoftirqd: let it run first
+        events = self._selector.select(0)
+        if events:
             return events
         if timeout is None:  # no timer at all: only outside I/O (a signal) can wake the loop
             return self._selector.select(None)
