@@ -260,7 +260,12 @@ class _Flight:
         self.status = VehicleStatus(link, self.sysids)
         scenario_text = self.scenario.path.read_text() if self.scenario.path else None
         try:
-            flight_log = FlightLogger(self.mcap_path, plan.origin, plan, scenario_text, self.tlog_path)
+            # clock_rate: the log's receive times run at 1/speedup of flight time where they are
+            # wall time (a paced mock, SITL); in lockstep speedup is 1 (telemetry.mcap_log)
+            rate = self.vehicles.speedup
+            flight_log = FlightLogger(
+                self.mcap_path, plan.origin, plan, scenario_text, self.tlog_path, clock_rate=rate
+            )
         except OSError as exc:
             self.status.close()
             await link.close()
@@ -270,7 +275,8 @@ class _Flight:
             link.subscribe(self.recorder.on_frame)
             link.subscribe(self.clocks.on_frame)
             if self.options.live is not None:
-                link.subscribe(_live_views(self.options.live, plan, self.scenario).on_frame)
+                live = _live_views(self.options.live, plan, self.scenario, self.vehicles.speedup)
+                link.subscribe(live.on_frame)
             try:
                 await self._missions(link, logger)
             except BaseException as exc:  # noqa: BLE001 - any failure or Ctrl-C ends safely, then re-raises
@@ -471,11 +477,12 @@ class _Flight:
         )  # fmt: skip
 
 
-def _live_views(rec, plan: Plan, scenario: Scenario):
-    """The views of a log (telemetry.rerun_views), fed frame by frame while flying."""
+def _live_views(rec, plan: Plan, scenario: Scenario, rate: float):
+    """The views of a log (telemetry.rerun_views), fed frame by frame while flying; ``rate``: the
+    vehicles' speed-up, so that the timeline counts seconds of flight as the log's .rrd does."""
     from gcs_planner.telemetry.rerun_views import LiveRerunLogger
 
-    live = LiveRerunLogger(rec, plan.origin, unix_s())
+    live = LiveRerunLogger(rec, plan.origin, unix_s(), rate)
     live.start(plan, scenario)
     return live
 

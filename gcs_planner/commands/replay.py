@@ -6,12 +6,16 @@
 
 MAVLink replay re-emits every recorded frame byte for byte with its original timing divided by
 --speed, so QGroundControl or MAVProxy listening on that port sees the flight again. Truncated
-logs (a killed recorder) are replayed up to their last complete chunk.
+logs (a killed recorder) are replayed up to their last complete chunk. On Linux without a
+display (neither DISPLAY nor WAYLAND_DISPLAY set) --viewer is refused before anything is read or
+spawned: a spawned viewer there waits for a display that never comes.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
 
 from gcs_planner.errors import UserError
@@ -41,6 +45,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("nothing to do: give --rrd FILE, --viewer and/or --to udpout:HOST:PORT")
     if args.speed < 0:
         raise UserError(f"--speed must be >= 0, got {args.speed}")
+    if args.viewer:
+        check_display("--viewer")
     if args.to:
         parse_udp_url(args.to)
     if args.rrd:
@@ -69,6 +75,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def check_display(flag: str) -> None:
+    """UserError on Linux when neither DISPLAY nor WAYLAND_DISPLAY is set: a viewer spawned there
+    never shows and the command hangs waiting for it."""
+    if not sys.platform.startswith("linux") or os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return
+    raise UserError(
+        f"{flag} needs a display and neither DISPLAY nor WAYLAND_DISPLAY is set: write the views with"
+        " --rrd FILE, then `rerun FILE` where there is a display or `rerun --serve-web FILE` for a browser"
+    )
+
+
 def _check_mcap(path: str) -> None:
     """UserError unless ``path`` is a readable file that starts with the MCAP magic."""
     try:
@@ -89,16 +106,17 @@ def _to_rerun(flight, rrd_path: str | None, viewer: bool, speed: float) -> None:
         APPLICATION_ID,
         flight_blueprint,
         log_flight_to_rerun,
+        recording_id,
         rrd_recording,
     )
 
     start = time.monotonic()
     if rrd_path:  # written whole or not at all: a full disk is one line, no partial .rrd
-        with rrd_recording(rrd_path, str(flight.path)) as rec:
+        with rrd_recording(rrd_path, recording_id(flight.path.name)) as rec:
             log_flight_to_rerun(flight, rec=rec)
         print(f"wrote {rrd_path} in {time.monotonic() - start:.1f} s; open it with: rerun {rrd_path}")
     if viewer:
-        rec = rr.RecordingStream(APPLICATION_ID, recording_id=f"{flight.path} replay")
+        rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id(flight.path.name))
         try:
             rec.spawn(default_blueprint=flight_blueprint())
         except Exception as exc:  # noqa: BLE001 - no viewer binary / no display

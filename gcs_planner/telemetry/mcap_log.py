@@ -13,8 +13,8 @@ they had on their network):
 - ``/plan/routes`` and ``/scenario/obstacles``: foxglove.GeoJSON, written once at the start.
 - ``/events``: planner/flight events from ``log_event`` (JSON objects).
 - Attachments ``plan.json`` and ``scenario.toml``; metadata ``gcs_planner`` (tool version,
-  origin, vehicles, altitude datums, time base) at the start and ``gcs_planner.summary`` (frames
-  per vehicle) at close.
+  origin, vehicles, altitude datums, time base, and ``clock_rate`` when the caller knows it) at
+  the start and ``gcs_planner.summary`` (frames per vehicle) at close.
 
 Hot path: ``on_frame`` only appends to a list under a lock. The list is encoded (JSON from
 per-type templates, see encode.py), written into the open chunk and flushed as a zstd chunk by a
@@ -28,6 +28,11 @@ once by a constant offset so that its first value maps to the wall clock at that
 MCAP log times are integer nanoseconds since the Unix epoch, rounded to whole microseconds: a
 float Unix time resolves only ~0.24 us, .tlog stores microseconds, and the sub-microsecond
 digits would be incompressible noise in every record header.
+
+``clock_rate``: seconds of flight (the vehicles' clocks) per second of receive time, as the
+flight assumed it: 1 in lockstep (the receive time is already the virtual flight time) and for
+real vehicles, the speed-up of a paced mock or a SITL (wall-clock receive times). Readers turn
+receive times into flight time with it (``Flight.clock_rate``, the Rerun timeline).
 """
 
 from __future__ import annotations
@@ -87,6 +92,8 @@ class FlightLogger:
     tlog_path: also write the .tlog stream (8-byte big-endian Unix time [us] + raw frame). A tlog
     holds one MAVLink network, where system ids are unique: the frames of fleet ids on network
     n > 0 go to ``tlog_network_path(tlog_path, n)`` beside it.
+    clock_rate: seconds of flight per second of receive time (module docstring), written to the
+    ``gcs_planner`` metadata when given; None (unknown, e.g. ``watch``): not written.
     """
 
     def __init__(
@@ -99,8 +106,12 @@ class FlightLogger:
         flush_interval_s: float = 0.5,
         max_pending: int = 20_000,
         zstd_level: int = 3,
+        clock_rate: float | None = None,
     ) -> None:
+        if clock_rate is not None and not clock_rate > 0:
+            raise ValueError(f"clock_rate must be > 0, got {clock_rate}")
         self.origin = origin
+        self.clock_rate = clock_rate
         self.plan = plan
         self.scenario_text = scenario_text
         self.flush_interval_s = flush_interval_s
@@ -353,6 +364,7 @@ class FlightLogger:
         self._event_channel = w.register_channel("/events", "json", event_schema)
         o = self.origin
         planned = [v.sysid for v in self.plan.vehicles] if self.plan is not None else []
+        rate = {} if self.clock_rate is None else {"clock_rate": repr(float(self.clock_rate))}
         w.add_metadata(
             "gcs_planner",
             {
@@ -364,6 +376,7 @@ class FlightLogger:
                 "altitude_datums": ALTITUDE_DATUMS,
                 "time_base": "MCAP log_time = receive time, ns since Unix epoch",
                 "start_time_ns": str(self._start_ns),
+                **rate,
             },
         )
         if self.plan is not None:

@@ -12,12 +12,19 @@ summary-less file is complete).
 Positions, ground speed and mission progress are decoded from the raw frames (the lossless
 channel) with pymavlink's own payload structs, so they do not depend on the JSON channels; the
 JSON channels are kept as bytes and decoded on demand by ``Flight.messages``.
+
+Flight time: receive times are the log's time base. ``Flight.clock_rate`` (seconds of flight per
+second of receive time) turns them into flight time: the ``clock_rate`` the log's metadata
+records (``fly`` writes the vehicles' rate: 1 in lockstep and for real vehicles, the speed-up of a
+paced mock or a SITL), else, for logs without it (older logs, ``watch``, imports), the rate of the
+vehicles' own ``time_boot_ms`` against the receive time (the median over vehicles), else 1.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import struct
 from collections import defaultdict
@@ -39,7 +46,7 @@ from gcs_planner.validation import load_json
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["Flight", "RawFrame", "Track", "frame_msgid", "read_flight"]
+__all__ = ["Flight", "RawFrame", "Track", "boot_clock_rate", "frame_msgid", "read_flight"]
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +65,8 @@ class Track:
     """One vehicle's GLOBAL_POSITION_INT stream, as arrays of equal length.
 
     t_s: receive time [s, Unix]; lat_deg / lon_deg [deg]; alt_m [m AMSL]; rel_alt_m [m above
-    home]; ground_speed_mps from vx, vy [m/s]; heading_deg [deg] (nan if unknown).
+    home]; ground_speed_mps from vx, vy [m/s]; heading_deg [deg] (nan if unknown); time_boot_s:
+    the vehicle's own clock (time_boot_ms) [s].
     """
 
     t_s: np.ndarray
@@ -68,6 +76,7 @@ class Track:
     rel_alt_m: np.ndarray
     ground_speed_mps: np.ndarray
     heading_deg: np.ndarray
+    time_boot_s: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -131,6 +140,26 @@ class Flight:
     def end_time_s(self) -> float:
         return self.frames[-1].t_ns * 1e-9 if self.frames else 0.0
 
+    @property
+    def clock_rate(self) -> float:
+        """Seconds of flight per second of receive time (module docstring): the metadata's
+        ``clock_rate``, else estimated from the vehicles' time_boot_ms, else 1."""
+        recorded = self.metadata.get("gcs_planner", {}).get("clock_rate")
+        if recorded is not None:
+            try:
+                rate = float(recorded)
+            except ValueError:
+                rate = 0.0
+            if math.isfinite(rate) and rate > 0:
+                return rate
+            log.warning("%s: clock_rate %r in the metadata ignored", self.path, recorded)
+        rate = boot_clock_rate(self.positions.values())
+        return 1.0 if rate is None else rate
+
+    def flight_time_s(self, t_s):
+        """Receive time(s) [s, Unix] -> seconds of flight since the first frame (``clock_rate``)."""
+        return (np.asarray(t_s, dtype=float) - self.start_time_s) * self.clock_rate
+
     def messages(self, msg_type: str, sysid: int | None = None) -> list[tuple[float, int, dict]]:
         """Decoded messages of one MAVLink type as (t_s, sysid, fields), in log order."""
         out = []
@@ -184,6 +213,27 @@ class Flight:
 
 
 GCS_DEFAULT_SYSID = 255
+BOOT_RATE_MIN_SPAN_S = 1.0  # vehicle time (time_boot_ms) a vehicle's clock rate is estimated over [s]
+BOOT_RATE_REAL_TIME = 0.05  # an estimate within 5 % of 1 is real time (link jitter, clock drift)
+
+
+def boot_clock_rate(tracks) -> float | None:
+    """The vehicles' clock rate against the receive time: the median over ``tracks`` (Track) of
+    time_boot span / receive span, from each vehicle's first to last position report. A vehicle
+    whose clock restarts (a reboot), or with under BOOT_RATE_MIN_SPAN_S of its own time in
+    reports, is left out; None without one. Within BOOT_RATE_REAL_TIME of 1 it is taken as 1."""
+    rates = []
+    for track in tracks:
+        boot = track.time_boot_s
+        if boot is None or len(boot) < 2 or np.any(np.diff(boot) < 0):
+            continue
+        span_s = track.t_s[-1] - track.t_s[0]
+        if boot[-1] - boot[0] >= BOOT_RATE_MIN_SPAN_S and span_s > 0:
+            rates.append((boot[-1] - boot[0]) / span_s)
+    if not rates:
+        return None
+    rate = float(np.median(rates))
+    return 1.0 if abs(rate - 1.0) <= BOOT_RATE_REAL_TIME else rate
 
 
 def _heartbeat_type(frames: list[RawFrame]) -> int | None:
@@ -380,6 +430,7 @@ def _decode_positions(flight: Flight) -> None:
             rel_alt_m=a[:, 5] * 1e-3,
             ground_speed_mps=np.hypot(a[:, 6], a[:, 7]) * 1e-2,
             heading_deg=np.where(hdg == 65535, np.nan, hdg / 100.0),
+            time_boot_s=a[:, 1] * 1e-3,
         )
     for sysid, m in mission.items():
         a = np.asarray(m, dtype=float)

@@ -93,13 +93,16 @@ def paced(
 def replay_to_rerun_live(flight: Flight, rec, speed: float = 1.0) -> int:
     """Re-play a log into a live Rerun recording (e.g. a spawned viewer) with timing scaled by speed.
 
-    Frames go through LiveRerunLogger exactly as they did while flying; returns frames shown.
+    Frames go through LiveRerunLogger exactly as they did while flying, on the timeline of the
+    log's .rrd (seconds of flight: receive time x ``flight.clock_rate``); the pacing stays the
+    recorded receive timing divided by ``speed``, as for MAVLink replay. Returns frames shown.
     """
     from gcs_planner.telemetry.rerun_views import LiveRerunLogger, scenario_from_text
 
     parser = mavlink.MAVLink(None)
     parser.robust_parsing = True
-    live = LiveRerunLogger(rec, flight.origin or Origin(0.0, 0.0, 0.0), flight.start_time_s)
+    origin = flight.origin or Origin(0.0, 0.0, 0.0)
+    live = LiveRerunLogger(rec, origin, flight.start_time_s, flight.clock_rate)
     live.start(flight.plan, scenario_from_text(flight.scenario_text))
     shown = 0
     for frame in paced(flight, speed):

@@ -1,8 +1,25 @@
 """Rerun views of a flight, live or from a log, through the Rerun SDK (pinned: rerun-sdk 0.41).
 
 Rerun's own MCAP import does not show our JSON channels, so the views are logged through the
-SDK. One timeline, ``flight``: seconds since the first frame (``rr.set_time("flight",
-duration=...)`` / ``rr.TimeColumn("flight", duration=...)``). Entity layout:
+SDK. One timeline, ``flight``: seconds of flight since the first frame (``rr.set_time("flight",
+duration=...)`` / ``rr.TimeColumn("flight", duration=...)``), i.e. receive time since the first
+frame times the clock rate (seconds of flight per second of receive time). Receive times are the
+one clock every frame and event shares, whatever the vehicles' boot clocks; the rate scales them:
+
+- a log: ``Flight.clock_rate`` (telemetry.reader): the ``clock_rate`` that ``fly`` records in the
+  MCAP metadata (1 in lockstep, where the receive time already is the virtual flight time, and
+  for real vehicles; the speed-up of a paced mock or a SITL, whose frames carry wall time); for a
+  log without it (older logs, ``watch``, imports) the rate of the vehicles' own time_boot_ms
+  against the receive time, else 1. The recorded rate comes first: it is exact, and ``fly``
+  refuses connected vehicles whose clocks run off it; time_boot_ms serves where nothing was
+  recorded (boot clocks of real vehicles differ, so they are used for a rate, not as the
+  timeline).
+- live (``fly --live`` / ``--serve-web``): the vehicles' rate, ``VehicleSource.speedup``;
+  ``watch``: 1 (its vehicles' rate is not known; its .rrd, from the log, is estimated as above).
+
+Each .rrd and live view is its own recording: its id is the log's file name plus a uuid4
+(``recording_id``), so two runs, or two replays of one log, opened together do not merge.
+Entity layout:
 
 - ``map/...`` (map view, EPSG:4326): ``map/plan/{sysid}`` planned route (GeoLineStrings, static),
   ``map/track/{sysid}`` flown track, ``map/vehicle/{sysid}`` the vehicle now (GeoPoints),
@@ -17,7 +34,7 @@ duration=...)`` / ``rr.TimeColumn("flight", duration=...)``). Entity layout:
 
 The same ``FlightViews`` methods serve both modes: a log sends whole columns at once
 (``send_columns``), the live logger sends one-row columns as frames arrive. A default blueprint
-lays out map, 3-D view and the time series.
+lays out map, 3-D view, the time series and the events (a text log).
 """
 
 from __future__ import annotations
@@ -25,6 +42,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import tomllib
+import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -40,19 +58,27 @@ from gcs_planner.telemetry.colors import vehicle_color
 from gcs_planner.telemetry.reader import Flight
 from gcs_planner.validation import atomic_write
 
-__all__ = ["FlightViews", "LiveRerunLogger", "flight_blueprint", "log_flight_to_rerun", "rrd_recording"]
+__all__ = [
+    "FlightViews",
+    "LiveRerunLogger",
+    "flight_blueprint",
+    "log_flight_to_rerun",
+    "recording_id",
+    "rrd_recording",
+]
 
 log = logging.getLogger(__name__)
 
 APPLICATION_ID = "gcs-planner"
 TIMELINE = "flight"
+EVENTS = "events"  # the entity of the events' text log
 SERIES = ("altitude_m", "ground_speed_mps", "mission_item", "link_loss")
 _UNBOUNDED_CYLINDER_TOP_M = 150.0  # drawn height of a cylinder with no z_max
 _TRACK_REFRESH_S = 1.0  # live: redraw the flown track this often per vehicle
 
 
 def flight_blueprint() -> rrb.Blueprint:
-    """Map and 3-D view side by side, the four time series below."""
+    """Map and 3-D view side by side, the four time series and the events below."""
     return rrb.Blueprint(
         rrb.Vertical(
             rrb.Horizontal(
@@ -61,6 +87,7 @@ def flight_blueprint() -> rrb.Blueprint:
             ),
             rrb.Horizontal(
                 *(rrb.TimeSeriesView(origin=f"series/{name}", name=name) for name in SERIES),
+                rrb.TextLogView(origin=EVENTS, name="events"),
             ),
             row_shares=[3, 2],
         ),
@@ -68,17 +95,32 @@ def flight_blueprint() -> rrb.Blueprint:
     )
 
 
-class FlightViews:
-    """Log a flight's views into a Rerun recording; times are Unix seconds, shown from ``t0_s``."""
+def recording_id(name: str) -> str:
+    """A recording id of its own: ``name`` (the log's file name) plus a uuid4, so that two runs, or
+    two replays of one log, opened together in one viewer stay apart."""
+    return f"{name}-{uuid.uuid4()}"
 
-    def __init__(self, rec: rr.RecordingStream, origin: Origin, t0_s: float) -> None:
+
+class FlightViews:
+    """Log a flight's views into a Rerun recording. Times are Unix seconds of receive time,
+    shown as seconds of flight: (t - ``t0_s``) x ``rate`` (seconds of flight per second of
+    receive time, module docstring)."""
+
+    def __init__(self, rec: rr.RecordingStream, origin: Origin, t0_s: float, rate: float = 1.0) -> None:
+        if not rate > 0:
+            raise ValueError(f"rate must be > 0, got {rate}")
         self.rec = rec
         self.origin = origin
         self.t0_s = t0_s
+        self.rate = float(rate)
         self._styled: set[tuple[str, int]] = set()
 
+    def flight_s(self, t_s):
+        """Receive time(s) [s, Unix] -> seconds of flight on the timeline."""
+        return (np.asarray(t_s, dtype=float) - self.t0_s) * self.rate
+
     def _time(self, t_s) -> rr.TimeColumn:
-        return rr.TimeColumn(TIMELINE, duration=np.asarray(t_s, dtype=float) - self.t0_s)
+        return rr.TimeColumn(TIMELINE, duration=self.flight_s(t_s))
 
     def log_scene(
         self,
@@ -209,7 +251,7 @@ class FlightViews:
         )
         static = t_s is None
         if not static:
-            self.rec.set_time(TIMELINE, duration=t_s - self.t0_s)
+            self.rec.set_time(TIMELINE, duration=float(self.flight_s(t_s)))
         self.rec.log(
             f"map/track/{sysid}",
             rr.GeoLineStrings(lat_lon=[track], colors=[color], radii=rr.Radius.ui_points(2.5)),
@@ -233,10 +275,10 @@ class FlightViews:
 
     def log_event(self, t_s: float, event: dict) -> None:
         """An event as one text line, named by its "type" (or "event") key."""
-        self.rec.set_time(TIMELINE, duration=t_s - self.t0_s)
+        self.rec.set_time(TIMELINE, duration=float(self.flight_s(t_s)))
         key = "type" if "type" in event else "event"
         details = ", ".join(f"{k}={v}" for k, v in event.items() if k != key)
-        self.rec.log("events", rr.TextLog(f"{event.get(key, 'event')}: {details}"))
+        self.rec.log(EVENTS, rr.TextLog(f"{event.get(key, 'event')}: {details}"))
 
 
 def log_flight_to_rerun(
@@ -253,7 +295,7 @@ def log_flight_to_rerun(
     if rec is None:
         if rrd_path is None:
             raise ValueError("log_flight_to_rerun needs rrd_path or rec")
-        with rrd_recording(rrd_path, str(flight.path)) as rec:
+        with rrd_recording(rrd_path, recording_id(flight.path.name)) as rec:
             _log_flight(flight, rec, terrain)
         return rec
     _log_flight(flight, rec, terrain)
@@ -283,7 +325,7 @@ def rrd_recording(rrd_path: str | Path, recording_id: str) -> Iterator[rr.Record
 
 def _log_flight(flight: Flight, rec: rr.RecordingStream, terrain) -> None:
     origin = flight.origin or _origin_from_flight(flight)
-    views = FlightViews(rec, origin, flight.start_time_s)
+    views = FlightViews(rec, origin, flight.start_time_s, flight.clock_rate)
     views.log_scene(flight.plan, scenario_from_text(flight.scenario_text), terrain)
     for sysid, track in flight.positions.items():
         views.log_positions(
@@ -300,8 +342,8 @@ def _log_flight(flight: Flight, rec: rr.RecordingStream, terrain) -> None:
         views.log_series("mission_item", sysid, t, seq)
     for sysid in flight.sysids:
         t, loss = flight.link_loss(sysid)
-        if len(t):
-            views.log_series("link_loss", sysid, t, loss)
+        if len(t):  # the last window is cut short by the log's end: stamped at its last frame
+            views.log_series("link_loss", sysid, np.minimum(t, flight.end_time_s), loss)
     for t_s, event in flight.events:
         views.log_event(t_s, event)
     rec.flush()
@@ -311,11 +353,13 @@ class LiveRerunLogger:
     """Live views while flying: ``on_frame(msg, raw, t_s)`` matches MavlinkLink.subscribe.
 
     Call ``start(plan, scenario)`` once, then feed frames. Uses the same FlightViews methods and
-    entity paths as a log, so a live session and a replayed log look the same.
+    entity paths as a log, so a live session and a replayed log look the same. ``rate``: seconds
+    of flight per second of receive time (the vehicles' speed-up where frames carry wall time).
+    The link-loss window is one second of receive time, as in a log.
     """
 
-    def __init__(self, rec: rr.RecordingStream, origin: Origin, t0_s: float) -> None:
-        self.views = FlightViews(rec, origin, t0_s)
+    def __init__(self, rec: rr.RecordingStream, origin: Origin, t0_s: float, rate: float = 1.0) -> None:
+        self.views = FlightViews(rec, origin, t0_s, rate)
         self._tracks: dict[int, list[tuple[float, float, float]]] = {}
         self._last_track_s: dict[int, float] = {}
         self._last_seq: dict[tuple[int, int], int] = {}
