@@ -9,10 +9,8 @@ nothing for over 5 minutes). These tests count those operations, not seconds.
 
 from __future__ import annotations
 
-import random
-import socket
-
 import numpy as np
+from ports import free_port_run
 
 from gcs_planner.cli import build_parser, main
 from gcs_planner.commands import upload
@@ -56,23 +54,6 @@ def _counting(monkeypatch) -> dict[str, int]:
     return counts
 
 
-def _free_port_run(count: int) -> int:
-    """The first of ``count`` consecutive UDP ports on 127.0.0.1 that are free now."""
-    for base in random.Random().sample(range(20000, 60000, 32), 50):
-        socks = []
-        try:
-            for port in range(base, base + count):
-                socks.append(socket.socket(socket.AF_INET, socket.SOCK_DGRAM))
-                socks[-1].bind(("127.0.0.1", port))
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError("no free port run")
-
-
 def test_preparing_the_uploads_reads_the_plan_once_at_any_fleet_size(tmp_path, monkeypatch):
     """The set-up before any I/O, as `upload` runs it (UploadSource, then prepare per vehicle):
     one plan read and no scan, for 10 vehicles as for 500."""
@@ -97,7 +78,7 @@ def test_uploading_a_fleet_over_two_networks_reads_the_plan_once(tmp_path, monke
     plan_path = tmp_path / "plan.json"
     _plan(fleet_ids).save(plan_path)
     counts = _counting(monkeypatch)
-    base = _free_port_run(2 * per_network)
+    base = free_port_run(2 * per_network)
     argv = ["upload", str(plan_path), "--sysid", "all", "--workers", str(len(fleet_ids))]
     with (
         MockFleet(count=per_network, home=ORIGIN, base_port=base, speedup=20.0),

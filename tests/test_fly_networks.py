@@ -2,9 +2,7 @@
 
 import asyncio
 import queue
-import random
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -14,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from child_process import child, group_alive
+from ports import free_port_run
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -155,29 +154,11 @@ def test_a_fleet_over_two_networks_flies_each_vehicle_its_own_mission(tmp_path):
             assert fixed == np.round(track.lat_deg * 1e7).astype(int).tolist()
 
 
-def _free_port_run(count: int) -> int:
-    """The first of ``count`` consecutive UDP ports on 127.0.0.1 that are free now."""
-    for base in random.Random().sample(range(20000, 60000, 16), 50):
-        socks = []
-        try:
-            for port in range(base, base + count):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(s)
-                s.bind(("127.0.0.1", port))
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError("no free port run")
-
-
 def test_sitl_mock_runs_one_process_per_network_reached_by_its_connect_range(tmp_path):
     """`sitl-mock --vehicles 4 --per-network 2`: two processes, sysids 1-2 on each, and the two
     --connect ranges it prints reach them as fleet ids 1, 2, 257, 258 on one shared clock; fly with
     one --connect for the two-network plan is refused before anything is sent."""
-    base = _free_port_run(4)
+    base = free_port_run(4)
     cli = [sys.executable, "-m", "sitl_mock.cli", "--vehicles", "4", "--per-network", "2"]
     with child([*cli, "--base-port", str(base)], stderr=subprocess.PIPE, text=True) as mock:
         lines: queue.Queue[str] = queue.Queue()
@@ -244,7 +225,7 @@ def test_upload_names_vehicles_by_fleet_id_with_one_connect_per_network(tmp_path
     plan = plan_scenario(scenario)
     plan_path = tmp_path / "plan.json"
     plan.save(plan_path)
-    base = _free_port_run(4)
+    base = free_port_run(4)
     with (
         MockFleet(count=2, home=plan.origin, base_port=base) as a,
         MockFleet(count=2, home=plan.origin, base_port=base + 2) as b,
