@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from ports import free_port_run
 
 from gcs_planner.cli import main
 from gcs_planner.planning import load_scenario, plan_scenario
@@ -64,14 +65,13 @@ def test_the_readme_recipe_sitl_mock_at_the_plans_starts_then_fly_connect_passes
     --connect` to it passes the gate (the old recipe put four vehicles on one spot); a privileged
     --base-port is refused."""
     from child_process import child
-    from test_fly_networks import _free_port_run
 
     plan_path, homes_path = tmp_path / "plan.json", tmp_path / "homes.txt"
     assert main(["plan", str(SCENARIO), "-o", str(plan_path)]) == 0
     capsys.readouterr()
     assert main(["fly", str(SCENARIO), "--plan", str(plan_path), "--homes"]) == 0
     homes_path.write_text(capsys.readouterr().out)
-    base = _free_port_run(4)
+    base = free_port_run(4)
     cli = [sys.executable, "-m", "sitl_mock.cli", "--homes", str(homes_path), "--base-port", str(base),
            "--profile", "px4", "--speedup", "10"]  # fmt: skip
     with child(cli, stderr=subprocess.DEVNULL) as mock:

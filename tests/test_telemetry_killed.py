@@ -38,12 +38,20 @@ while True:  # until SIGKILL: frame k of vehicle 1 + (k % 2) carries time_boot_m
 
 
 def _killed_log(path: Path, kill_after_bytes: int = 20_000, then_s: float = 0.12) -> None:
-    """Run WRITER into ``path`` and SIGKILL it once the file has ``kill_after_bytes`` and ``then_s``
-    more have passed (the writer is then somewhere inside its next chunk)."""
+    """Run WRITER into ``path`` and SIGKILL it once the file has ``kill_after_bytes``, a flush of
+    over 300 messages reads back, and ``then_s`` more have passed (the writer is then somewhere
+    inside its next chunk). The size alone is not enough: a flush writes its new end first, so the
+    file has its full size before the chunk behind it is whole (and a reader sees no messages)."""
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+
+    def ready() -> bool:
+        if not path.exists() or path.stat().st_size < kill_after_bytes:
+            return False
+        return read_flight(path).recovered_messages > 300
+
     with child([sys.executable, "-c", WRITER, str(path)], env=env) as proc:
         deadline = time.monotonic() + 30
-        while time.monotonic() < deadline and (not path.exists() or path.stat().st_size < kill_after_bytes):
+        while time.monotonic() < deadline and not ready():
             assert proc.poll() is None, "the writer died by itself"
             time.sleep(0.05)
         time.sleep(then_s)
