@@ -4,7 +4,7 @@
         [--out out/fly500] [--vehicles 500]
 
 Plans missions/swarm500.toml (or flies a saved --plan), starts one mock process per network
-(sitl_mock.plan_fleet.MockVehicles, one shared simulated clock) and runs gcs_planner.fly.fly on
+(sitl_mock.plan_fleet.MockVehicles, one shared simulated clock) and runs gcs_planner.flight.fly on
 them as `gcs-planner fly` does: every mission uploaded, the fleet taken off, each route started
 on time, every received frame logged to MCAP, each vehicle judged by the conformance report.
 Prints one table: vehicles uploaded / completed / conforming, frames the link delivered against
@@ -20,7 +20,7 @@ import asyncio
 import time
 from pathlib import Path
 
-from gcs_planner.fly import FlyOptions, fly, networks
+from gcs_planner.flight import FlyOptions, fly, networks
 from gcs_planner.plan import Plan
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario

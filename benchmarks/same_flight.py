@@ -22,7 +22,7 @@ from pathlib import Path
 from gcs_planner import lockstep
 from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.online_run import run_online
-from gcs_planner.fly import FlyOptions, fly
+from gcs_planner.flight import FlyOptions, fly
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
 from sitl_mock.plan_fleet import MockVehicles, MockVehiclesProcess

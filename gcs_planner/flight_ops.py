@@ -1,7 +1,7 @@
 """Flight operations shared by `fly` and the coalition HIL run: wait for vehicles, take off, start
 routes on time, record tracks, keep the schedule, wait until done.
 
-Choices (see also gcs_planner.fly):
+Choices (see also gcs_planner.flight):
 - Two-phase start: every vehicle is armed and climbs (MAV_CMD_NAV_TAKEOFF) to its first
   waypoint's altitude; once all are there, each route starts (MAV_CMD_MISSION_START at the item
   after NAV_TAKEOFF) at the common start plus its planned delay, less the time it loses

@@ -45,6 +45,10 @@ class VehicleSource(Protocol):
     def accel_mps2(self, sysid: int) -> float:
         """The vehicle's acceleration from the hover [m/s^2] (route starts lead by v / 2a)."""
 
+    def homed_here(self, sysid: int) -> bool:
+        """Whether this source stood the vehicle at its start itself (a mock homed for its plan):
+        the pre-flight gate checks only the others."""
+
     def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
         """Fault injection: a wind-like drift on one vehicle (mock vehicles only)."""
 
@@ -81,6 +85,9 @@ class ConnectedVehicles:
     def accel_mps2(self, sysid: int) -> float:
         return ROUTE_ACCEL_MPS2
 
+    def homed_here(self, sysid: int) -> bool:
+        return False
+
     def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
         raise UserError("--drift injects a fault into mock vehicles; it cannot act on connected vehicles")
 
@@ -113,6 +120,9 @@ class MixedVehicles:
 
     def accel_mps2(self, sysid: int) -> float:
         return self._source(sysid).accel_mps2(sysid)
+
+    def homed_here(self, sysid: int) -> bool:
+        return self._source(sysid).homed_here(sysid)
 
     def set_drift(self, sysid: int, east_mps: float, north_mps: float) -> None:
         self._source(sysid).set_drift(sysid, east_mps, north_mps)

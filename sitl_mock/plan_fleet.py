@@ -140,6 +140,9 @@ class _PlanFleet:
     def accel_mps2(self, sysid: int) -> float:
         return self.airframes[sysid].accel_mps2
 
+    def homed_here(self, sysid: int) -> bool:
+        return True  # every mock stands where _home put it for its plan
+
     def sim_time_s(self) -> float | None:
         """The fleet's simulated clock now (its vehicles' time_boot_ms), where this process runs it."""
         return getattr(self.fleets[0], "sim_time_s", None)

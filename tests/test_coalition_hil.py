@@ -154,7 +154,10 @@ def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_pa
     flight = read_flight(result.mcap_path)
     kinds = [e.get("event") for _, e in flight.events]
     assert {"tender", "bid", "award", "upload", "route_start"} <= set(kinds)
-    assert kinds.count("award") == 10 and kinds.count("upload") == len(result.uploads)
+    in_flight = [e for _, e in flight.events if e.get("event") == "upload" and e["kind"] != "first"]
+    first = [e for _, e in flight.events if e.get("event") == "upload" and e["kind"] == "first"]
+    assert kinds.count("award") == 10 and len(in_flight) == len(result.uploads)
+    assert len(first) == len(result.tracks) and all(e["ok"] for e in first)  # one first mission each
 
 
 def test_a_vehicle_away_from_its_simulated_state_still_strikes_because_its_leg_is_planned_live(tmp_path):

@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner import lockstep
 from gcs_planner.errors import UserError
-from gcs_planner.fly import FlyOptions, check_flight, end_summary, fly
+from gcs_planner.flight import FlyOptions, check_flight, end_summary, fly
 from gcs_planner.mavlink.networks import open_networks
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.planning import plan_scenario

@@ -12,9 +12,9 @@ import pytest
 from cli_checks import refused as _fails
 from input_mutations import SCENARIO, base_mcap, base_plan, base_tlog, toml_dumps
 
-from gcs_planner import fly as fly_module
 from gcs_planner.cli import main
 from gcs_planner.commands import fly as fly_command
+from gcs_planner.flight import runner as fly_module
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import MissionValidationError, validate_items
 from gcs_planner.telemetry import FlightLogger

@@ -13,7 +13,7 @@ from gcs_planner import lockstep
 from gcs_planner.coalition_hil import HilOptions
 from gcs_planner.coalition_hil.run import run_coalition_hil
 from gcs_planner.conformance import format_report
-from gcs_planner.fly import FlyOptions, fly
+from gcs_planner.flight import FlyOptions, fly
 from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import load_scenario
 from gcs_planner.vehicles import ConnectedVehicles

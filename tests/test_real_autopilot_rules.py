@@ -16,9 +16,9 @@ import sitl_mock
 from gcs_planner import lockstep
 from gcs_planner.cli import main
 from gcs_planner.errors import UserError
+from gcs_planner.flight import FlyOptions, fly
 from gcs_planner.flight_limits import FlightLimits, check_limits, read_l1_params, read_limits
 from gcs_planner.flight_ops import vehicle_quirks
-from gcs_planner.fly import FlyOptions, fly
 from gcs_planner.geo import Origin
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandError

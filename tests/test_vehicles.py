@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from gcs_planner.errors import UserError
-from gcs_planner.fly import FlyOptions, fly
+from gcs_planner.flight import FlyOptions, fly
 from gcs_planner.planning import load_scenario, plan_scenario
 from gcs_planner.vehicles import ConnectedVehicles, mock_vehicles
 from sitl_mock.plan_fleet import MockVehicles, MockVehiclesProcess

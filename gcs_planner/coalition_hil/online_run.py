@@ -39,16 +39,15 @@ from gcs_planner.coalition_hil.run import (
     IDLE_LEAD_S,
     START_AHEAD_S,
     UPLOAD_WORKERS,
+    CoalitionRun,
     HilOptions,
     HilResult,
+    UploadJob,
     VehiclesFor,
-    _HilRun,
-    _Job,
-    _keep,
+    keep_current,
     run_coalition_hil,
 )
 from gcs_planner.coalition_hil.tracks import drop_spikes
-from gcs_planner.errors import UserError
 from gcs_planner.flight_ops import KEEPER_PERIOD_S
 from gcs_planner.lockstep import now_s
 from gcs_planner.mavlink.link import MavlinkLink
@@ -83,7 +82,7 @@ class Fault:
     radius_m: float = 120.0
 
 
-class OnlineRun(_HilRun):
+class OnlineRun(CoalitionRun):
     """One online coalition run (module docstring); ``fly`` and ``result`` as the offline run's."""
 
     def __init__(self, scenario: Scenario, options: HilOptions) -> None:
@@ -108,16 +107,15 @@ class OnlineRun(_HilRun):
         self.award_events: dict[tuple[str, str], dict] = {}
         self.faults = list(options.faults)
         self.awards_open = 0  # award jobs queued or uploading
-        self.vehicles = None
         self.t_end = float("inf")
         first_chunk = self.t_start + FIRST_SPAN_S - IDLE_LEAD_S
         for s in self.sched.values():
             idle = Idle(first_chunk, {"uav": s.uav.id, "target": None, "task": "idle", "t_s": first_chunk},
                         self._end_s(), None)  # fmt: skip
-            self.due.append(_Job(first_chunk, (2, first_chunk), "idle", s, idle, 0))
+            self.due.append(UploadJob(first_chunk, (2, first_chunk), "idle", s, idle, 0))
 
-    def connect(self, speedup: float) -> None:
-        super().connect(speedup)
+    def connect(self) -> None:
+        super().connect()
         self.engine.approach_s = self.run_in_s
 
     # --- the engine's view of the fleet (online.LiveFleet) -----------------------------------
@@ -144,7 +142,7 @@ class OnlineRun(_HilRun):
         legs = self.engine.st[uav.index].track.legs
         return legs[-1] if legs else None
 
-    async def _mission(self, job: _Job, entry: dict):
+    async def _mission(self, job: UploadJob, entry: dict):
         """The job's mission over the engine's plan as it is now. An award leg that would be late
         (or early: no path of the right length, paths.timed_route) beyond the time bound releases
         the award (the engine re-tenders it); the mission is still
@@ -177,12 +175,12 @@ class OnlineRun(_HilRun):
             if key is not None:
                 self.awards_open += 1
                 e = self.award_events[key]
-                job = _Job(now, (False, self.deadline_s(uav, e, now)), "award", sched,
+                job = UploadJob(now, (False, self.deadline_s(uav, e, now)), "award", sched,
                            Award(e, leg, self._end_s()), self.gen[sysid])  # fmt: skip
             else:
                 event = {"uav": uav.id, "target": leg.info.get("target"), "task": leg.kind, "t_s": now}
                 idle = Idle(now, event, self._end_s(), None)
-                job = _Job(now, (1, now), "idle", sched, idle, self.gen[sysid])
+                job = UploadJob(now, (1, now), "idle", sched, idle, self.gen[sysid])
             self.queue.put_nowait((job.rank, next(self.order), job))
 
     def _check_losses(self) -> None:
@@ -270,8 +268,6 @@ class OnlineRun(_HilRun):
     async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
         options = self.options
         self.logger = logger
-        if any(f.kind == "cut" for f in self.faults) and not hasattr(self.vehicles, "cut_link"):
-            raise UserError("a link-cut fault needs the mock fleet (this vehicle source cannot cut a link)")
         workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
         self.due.sort()
         deadline = now_s() + (self._end_s() - self.t_route0 + 10.0) * 2.0 / self.vehicles.speedup + 10.0
@@ -286,12 +282,12 @@ class OnlineRun(_HilRun):
                 job = self.due.pop(0)
                 self.queue.put_nowait((job.rank, next(self.order), job))
             if options.keep_schedule:
-                _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
+                keep_current(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
             await asyncio.sleep(KEEPER_PERIOD_S / self.vehicles.speedup)
         self.t_end = self.scenario_now()
         await self._drain(workers, deadline)
 
-    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> dict | None:
+    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: UploadJob) -> dict | None:
         """One vehicle's jobs one at a time (a vehicle takes one mission transfer at a time); a job
         superseded by a newer plan of the engine, or of a lost vehicle, is dropped."""
         sysid = job.sched.uav.sysid
@@ -305,12 +301,12 @@ class OnlineRun(_HilRun):
         if job.kind == "award" and entry["ok"]:  # back onto the engine's track after the leg
             t_end = float(job.payload.sim_leg.t[-1])
             idle = Idle(t_end, job.payload.event, self._end_s(), None)
-            self.due.append(_Job(t_end, (2, t_end), "idle", job.sched, idle, job.gen))
+            self.due.append(UploadJob(t_end, (2, t_end), "idle", job.sched, idle, job.gen))
             self.due.sort()
         return entry
 
     # --- the report --------------------------------------------------------------------------
-    def result(self, lag_events: int, wall_s: float) -> HilResult:
+    def _result(self, lag_events: int, wall_s: float) -> HilResult:
         tracks = self.recorder.tracks()
         flown = {s: (tr.times_s - self.route_t0 + self.t_route0, tr.positions) for s, tr in tracks.items()}
         lost = {self.world.uavs[i].id for i in self.engine.lost}
@@ -326,7 +322,7 @@ class OnlineRun(_HilRun):
         add_prediction_errors(self.uploads, flown)
         result = HilResult(
             rows, self.uploads, self.mcap_path, self.t_start, wall_s, lag_events, self.failures + missing,
-            flown, self.flown_legs, end_states=self.end_states,
+            flown, self.flown_legs,
         )  # fmt: skip
         result.events = list(self.engine.events)
         result.formations = formation_rows(self.sim.events, self.engine.events, self.targets)

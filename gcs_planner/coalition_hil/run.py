@@ -22,6 +22,7 @@ import asyncio
 import itertools
 import math
 import time
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -54,43 +55,29 @@ from gcs_planner.coalition_hil.missions import (
 from gcs_planner.coalition_hil.report import TaskRow, add_prediction_errors, task_rows
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import network_of
-from gcs_planner.flight_limits import check_limits, read_l1_params, read_limits
-from gcs_planner.flight_ops import (
-    KEEPER_PERIOD_S,
-    NAV_TAKEOFF,
-    TrackRecorder,
-    boot_clock,
-    receive_clock,
-    start_routes,
-    take_off_all,
-    vehicle_quirks,
-    wait_for_vehicles,
-)
-from gcs_planner.fly import HEARTBEAT_WAIT_S, REAL_HEARTBEAT_WAIT_S
+from gcs_planner.flight import Flight, RunOptions, run_flight
+from gcs_planner.flight_limits import read_l1_params
+from gcs_planner.flight_ops import KEEPER_PERIOD_S, NAV_TAKEOFF
 from gcs_planner.geo import Origin
 from gcs_planner.l1_guidance import L1Response, shape_for_l1
-from gcs_planner.lockstep import check_loop, now_s, unix_s
-from gcs_planner.mavlink.actions import change_speed, safe_end, start_mission_at
+from gcs_planner.lockstep import now_s
+from gcs_planner.mavlink.actions import change_speed, start_mission_at
 from gcs_planner.mavlink.errors import MavlinkError
-from gcs_planner.mavlink.fleet import upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
-from gcs_planner.mavlink.link import FLEET_RCVBUF_BYTES, MavlinkLink
+from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.transfer import Timing
-from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.planning.coalition import load_world, paths, simulate
 from gcs_planner.planning.coalition.track import Leg
 from gcs_planner.scenario import Scenario
-from gcs_planner.starts import START_FIX_WAIT_S, check_starts, starts
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.timekeeping import ScheduleKeeper
 from gcs_planner.vehicles import VehicleSource
 
 __all__ = [
-    "UPLOAD_SAFETY", "HilOptions", "HilResult", "UploadTiming", "VehiclesFor", "initial_plans",
-    "run_coalition_hil",
+    "UPLOAD_SAFETY", "CoalitionRun", "HilOptions", "HilResult", "OfflineRun", "UploadJob", "UploadTiming",
+    "VehiclesFor", "initial_plans", "keep_current", "run_coalition_hil",
 ]  # fmt: skip
 
 NAV_WAYPOINT = 16
@@ -125,7 +112,6 @@ class HilOptions:
     waypoint_dt_s: float = 4.0  # longest time between waypoints [s]
     max_time_error_s: float = 1.0
     max_angle_error_deg: float = 10.0
-    autopilot: str = "ardupilot"
     keep_schedule: bool = True
     replay_legs: bool = False  # upload the simulation's legs instead of live-planned ones (comparison)
     offset_m: dict[str, tuple[float, float]] = field(default_factory=dict)  # UAV id: first-mission shift
@@ -153,7 +139,8 @@ class HilResult:
     released_awards: list[dict] = field(default_factory=list)  # online: awards handed on (late live leg)
     tender_compute_s: list[float] = field(default_factory=list)  # online: wall time per formation
     tender_cpu_s: list[float] = field(default_factory=list)  # online: CPU time per formation (closed tender)
-    end_states: dict[int, str] = field(default_factory=dict)  # connected vehicles: how each was left
+    end_states: dict[int, str] = field(default_factory=dict)  # how each vehicle was left (safe end)
+    interrupted: str | None = None  # the signal that ended the run early (SIGINT, SIGTERM, SIGHUP)
 
     @property
     def strikes(self) -> list[TaskRow]:
@@ -161,7 +148,8 @@ class HilResult:
 
     @property
     def passed(self) -> bool:
-        return bool(self.rows) and all(r.passed for r in self.rows) and not self.failures
+        judged = bool(self.rows) and all(r.passed for r in self.rows)
+        return judged and not self.failures and self.interrupted is None
 
 
 def _first_ahead(items, vp: VehiclePlan, route_now_s: float, margin_s: float, pose=None) -> int:
@@ -234,7 +222,7 @@ class UploadTiming:
 
 
 @dataclass(order=True)
-class _Job:
+class UploadJob:
     """A mission to plan and upload: due at ``t_s`` [scenario s], then served in ``rank`` order
     (earliest deadline first, idle missions last; equal ranks in arrival order)."""
 
@@ -257,49 +245,43 @@ async def run_coalition_hil(
     say: Callable[[str], None] | None = None,
 ) -> HilResult:
     """Simulate, fly the awarded vehicles (``vehicles_for(initial plans, origin, speed-up)``, the mock
-    fleet from the CLI), upload each award as a leg planned from the vehicle's live state (or, with
-    ``replay_legs``, the simulation's leg). ``runner``: the run's class (online_run.OnlineRun);
-    ``say(line)``: where the run's stages are told (each vehicle not ready to arm, once per reason)."""
-    t_wall = time.monotonic()
-    run = (runner or _HilRun)(scenario, options)
-    if say is not None:
-        run.say = say
-    if any(network_of(vp.sysid) > 0 for vp in run.initial.vehicles):
+    fleet from the CLI) with the one flight runner (gcs_planner.flight), upload each award as a leg
+    planned from the vehicle's live state (or, with ``replay_legs``, the simulation's leg).
+    ``runner``: the run's class (OfflineRun, online_run.OnlineRun); ``say(line)``: where the run's stages are
+    told (each vehicle not ready to arm, once per reason)."""
+    run = (runner or OfflineRun)(scenario, options)
+    if any(network_of(vp.sysid) > 0 for vp in run.plan.vehicles):
         raise UserError("the coalition run flies one network: its vehicles need sysids 1..254")
-    vehicles = vehicles_for(run.initial.vehicles, scenario.origin, options.speedup)
-    check_loop(vehicles.lockstep)
-    run.vehicles = vehicles
-    if not vehicles.simulated:
-        run.connect(vehicles.speedup)
-    options.out_dir.mkdir(parents=True, exist_ok=True)
-    scenario_text = scenario.path.read_text() if scenario.path else None
-    async with vehicles as networks:
-        # ~2000 reports/s arrive; the default 208 kB buffer holds ~0.1 s of them, and a mission
-        # message lost when it overflows costs a re-send timer
-        link = await MavlinkLink.open(*networks[0], receive_buffer_bytes=FLEET_RCVBUF_BYTES)
-        try:
-            with FlightLogger(run.mcap_path, scenario.origin, run.initial, scenario_text) as logger:
-                await run.fly(link, logger)
-        finally:
-            await link.close()
-    return run.result(vehicles.lag_events, time.monotonic() - t_wall)
+    vehicles = vehicles_for(run.plan.vehicles, scenario.origin, options.speedup)
+    said: dict[int, str] = {}
+
+    def waiting(stage: str, sysid, reason) -> None:
+        if stage == "wait" and say is not None and said.get(sysid) != reason:
+            said[sysid] = reason
+            say(f"sysid {sysid} not ready to arm yet: {reason} (waiting)")
+
+    return await run_flight(run, vehicles, RunOptions(options.out_dir), waiting, say)
 
 
 def initial_plans(scenario: Scenario, options: HilOptions, runner: type | None = None) -> list[VehiclePlan]:
     """The first mission of every vehicle the run flies (what ``vehicles_for`` gets)."""
-    return (runner or _HilRun)(scenario, options).initial.vehicles
+    return (runner or OfflineRun)(scenario, options).plan.vehicles
 
 
-class _HilRun:
-    """One coalition HIL run: the simulation's awards, the fleet's live state, the upload queue."""
+class CoalitionRun(ABC):
+    """A coalition HIL run, the FlightStrategy of the one flight runner (gcs_planner.flight) for
+    missions uploaded in flight: the fleet's live state, live legs, the upload queue. Who decides
+    the awards is a subclass's: ``OfflineRun`` (the simulation) or ``online_run.OnlineRun`` (the
+    contract net in flight); each builds its first missions (``__init__`` ending in
+    ``_init_flight``), serves the run (``_serve``) and judges it (``_result``)."""
 
-    def __init__(self, scenario: Scenario, options: HilOptions) -> None:
-        self._simulate(scenario, options)
-        window = (self.t_start, self.t_stop)
-        self.schedules = build_schedules(
-            self.world, self.sim, self.awards, *window, options.waypoint_dt_s, options.offset_m
-        )
-        self._init_flight([s.initial for s in self.schedules])
+    command = "fly-coalition"
+    # a connected plane joins the run from where it is (its first leg is planned live from its
+    # pose): the gate only refuses a SITL left at its default home, another continent
+    start_bound_m = COALITION_START_M
+    speed_factor = LEG_SPEED_FACTOR  # live legs fly up to this x cruise
+    limit_hint = "missions/coalition_sitl.toml is the paper scenario sized for SITL's stock plane"
+    climb_into_route = False  # every plane loiters up until all routes start at once
 
     def _simulate(self, scenario: Scenario, options: HilOptions) -> int:
         """Run the event simulation; its awards to fly and the window. The seed used."""
@@ -312,37 +294,93 @@ class _HilRun:
 
     def _init_flight(self, initial: list[VehiclePlan]) -> None:
         """The flight's state: the initial missions, the telemetry, the schedule keeper, the queue."""
-        scenario, options = self.scenario, self.options
+        scenario = self.scenario
         self.t_route0 = self.t_start - LEAD_IN_S  # scenario time of route time 0 (the lead-in start)
         self.run_in_s = 0.0  # straight into each goal pose (live_legs.RUN_IN_S for connected vehicles)
         self.turn_factor = 1.0  # legs' turns x r_min (live_legs.TURN_FACTOR for connected vehicles)
         self.say: Callable[[str], None] = lambda line: None  # where the run's stages are told
         self.flying = sorted(vp.sysid for vp in initial)
-        self.initial = Plan(scenario.origin, "coalition", initial)
-        self.missions = {
-            vp.sysid: plan_to_items(vp, scenario.origin, options.autopilot) for vp in self.initial.vehicles
-        }
-        self.mcap_path = options.out_dir / "flight.mcap"
+        self.plan = Plan(scenario.origin, "coalition", initial)
         self.uploads: list[dict] = []
         self.failures: list[str] = []
         self.flown_legs: dict[tuple[str, str], Leg] = {}
-        self.recorder = TrackRecorder(scenario.origin, boot_clock, list(self.missions))
         self.telemetry = Telemetry(set(self.flying))
         self.keeper = ScheduleKeeper()
-        self.current = {vp.sysid: vp for vp in self.initial.vehicles}
+        self.current = {vp.sysid: vp for vp in self.plan.vehicles}
         self.route_t0 = 0.0  # the fleet clock's value at route time 0
-        self.due: list[_Job] = []
-        self.queue: asyncio.PriorityQueue[tuple[tuple, int, _Job]] = asyncio.PriorityQueue()
+        self.due: list[UploadJob] = []
+        self.queue: asyncio.PriorityQueue[tuple[tuple, int, UploadJob]] = asyncio.PriorityQueue()
         self.order = itertools.count()
-        self.end_states: dict[int, str] = {}  # connected vehicles: how each was left (safe end)
         # planes on L1 guidance: NAVL1_PERIOD [s], RLL2SRV_TCONST [s], bank limit [rad]
         self.l1: dict[int, tuple[float, float, float]] = {}
 
-    def connect(self, speedup: float) -> None:
-        """Fly vehicles on clocks of their own (frames timed on receipt), whose guidance lags a turn
-        (legs with a run-in and wide turns)."""
-        self.recorder.clock = self.telemetry.clock = receive_clock(speedup, unix_s())
+    @abstractmethod
+    async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        """From the route starts until the window ends: queue the missions as they come due."""
+
+    @abstractmethod
+    def _result(self, lag_events: int, wall_s: float) -> HilResult:
+        """The task rows of the flown awards."""
+
+    # --- the FlightStrategy ------------------------------------------------------------------
+    def check(self, vehicles: VehicleSource) -> None:
+        """A link-cut fault needs a vehicle source that can cut a link (the mock fleet)."""
+        if any(f.kind == "cut" for f in self.options.faults) and not hasattr(vehicles, "cut_link"):
+            raise UserError("a link-cut fault needs the mock fleet (this vehicle source cannot cut a link)")
+
+    def attach(self, flight: Flight) -> None:
+        """Share the flight's recorder and clock; vehicles on clocks of their own (connected ones)
+        lag a turn: their legs get a run-in and wide turns (``connect``)."""
+        self.vehicles, self.recorder, self.say = flight.vehicles, flight.recorder, flight.say
+        self.mcap_path = flight.mcap_path
+        self.telemetry.clock = flight.clock
+        flight.link.subscribe(self.telemetry.on_frame)
+        if not flight.vehicles.simulated:
+            self.connect()
+
+    def connect(self) -> None:
+        """Fly vehicles whose guidance lags a turn (legs with a run-in and wide turns)."""
         self.run_in_s, self.turn_factor = RUN_IN_S, TURN_FACTOR
+
+    async def prepare(self, flight: Flight) -> None:
+        """Hold the schedule within the vehicles' speed limits; learn connected planes' L1 guidance."""
+        self.quirks = flight.quirks
+        for sysid, lim in flight.limits.items():
+            self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
+        if not self.vehicles.simulated:
+            l1 = await read_l1_params(flight.link, self.flying, self.quirks)
+            limits = flight.limits
+            self.l1 = {s: (*p, math.radians(limits[s].roll_deg)) for s, p in l1.items() if s in limits}
+
+    def leads(self, flight: Flight) -> tuple[float, dict[int, float]]:
+        """Every route starts at once, 2 s after the fleet is up (fixed wings, already at speed)."""
+        return 2.0, {s: 0.0 for s in self.flying}
+
+    async def fly(self, flight: Flight) -> None:
+        """The routes start, then the awards are served until the window ends."""
+        n_items = sum(len(m) for m in flight.missions.values())
+        concurrent = min(flight.options.workers, len(flight.missions))
+        self.timing = UploadTiming(flight.upload_s * concurrent / n_items)
+        self.route_t0 = flight.route_t0_s
+        await flight.routes
+        for vp in self.plan.vehicles:
+            self.keeper.add(vp)
+        self.say(f"routes started; flying scenario time {self.t_start:.0f}-{self.t_stop:.0f} s")
+        await self._serve(flight.link, flight.logger)
+
+    def done(self, flight: Flight) -> bool:
+        return False  # the planes fly on past the window: every one is sent home
+
+    def result(self, flight: Flight, wall_s: float) -> HilResult:
+        """The task rows (``task_rows``), with the flight's lag events and end states."""
+        failed = {s: r.error for s, r in flight.uploads.items() if not r.ok}
+        if failed:
+            booting = "" if self.vehicles.simulated else "; a SITL answers uploads only once booted (~30 s)"
+            self.failures.append(f"first mission upload failed for sysid {sorted(failed)}: "
+                                 f"{next(iter(failed.values()))}{booting}")  # fmt: skip
+        result = self._result(flight.vehicles.lag_events, wall_s)
+        result.end_states = flight.end_states
+        return result
 
     # --- clocks and estimates ----------------------------------------------------------------
     def scenario_now(self) -> float:
@@ -379,118 +417,6 @@ class _HilRun:
         late = np.nonzero(spare < 0.0)[0]
         return float(at[late[0]] if len(late) else at[-1] + spare[-1])
 
-    # --- the fleet ---------------------------------------------------------------------------
-    async def fly(self, link: MavlinkLink, logger: FlightLogger) -> None:
-        """Fly the run; connected vehicles (which nobody stops with the run) are then sent home,
-        however it ended (flight_ops' safe end: RTL when airborne)."""
-        for subscriber in (logger, self.recorder, self.telemetry):
-            link.subscribe(subscriber.on_frame)
-        wait_s = HEARTBEAT_WAIT_S if self.vehicles.simulated else REAL_HEARTBEAT_WAIT_S
-        await wait_for_vehicles(link, self.flying, wait_s)
-        self.quirks = vehicle_quirks(link, self.flying)
-        status = VehicleStatus(link, self.flying)
-        try:
-            await self._fly(link, logger, status)
-        finally:
-            if not self.vehicles.simulated:
-                self.end_states = await asyncio.shield(safe_end(link, status, self.quirks))
-                states = {str(k): v for k, v in self.end_states.items()}
-                logger.log_event({"event": "safe_end", "states": states})
-            status.close()
-
-    async def _fly(self, link: MavlinkLink, logger: FlightLogger, status: VehicleStatus) -> None:
-        """Upload the initial missions, take off, start the routes, then serve the awards."""
-        await request_streams(link, self.flying)
-        limits = await read_limits(link, self.flying, self.quirks)
-        try:
-            check_limits(self.initial.vehicles, limits, LEG_SPEED_FACTOR)  # live legs fly up to this x cruise
-        except UserError as exc:
-            hint = "missions/coalition_sitl.toml is the paper scenario sized for SITL's stock plane"
-            raise UserError(f"{exc} ({hint})") from None
-        for sysid, lim in limits.items():
-            self.keeper.limit(sysid, lim.min_mps, lim.max_mps)
-        if not self.vehicles.simulated:
-            l1 = await read_l1_params(link, self.flying, self.quirks)
-            self.l1 = {s: (*p, math.radians(limits[s].roll_deg)) for s, p in l1.items() if s in limits}
-            await self._check_starts()
-        n_items = sum(len(m) for m in self.missions.values())
-        self.say(f"{len(self.flying)} vehicles heard, within their limits; uploading {n_items} mission items")
-        t_up = now_s()
-        first = await upload_fleet(link, self.missions, workers=8)
-        bad = {s: r.error for s, r in first.items() if not r.ok}
-        if bad:
-            first_error = next(iter(bad.values()))
-            booting = "" if self.vehicles.simulated else "; a SITL answers uploads only once booted (~30 s)"
-            raise UserError(f"initial mission upload failed for sysid {sorted(bad)}: {first_error}{booting}")
-        self.timing = UploadTiming((now_s() - t_up) * min(8, len(self.missions)) / n_items)
-        self.say("first missions uploaded; arming and taking off")
-        speedup = self.vehicles.speedup
-        said: dict[int, str] = {}
-
-        def waiting(stage: str, sysid: int, reason: str) -> None:
-            if said.get(sysid) != reason:
-                said[sysid] = reason
-                self.say(f"sysid {sysid} not ready to arm yet: {reason} (waiting)")
-
-        await take_off_all(link, self.initial, status, speedup, self.quirks, progress=waiting)
-        lead_s = 2.0
-        self.route_t0 = self.recorder.now_s() + lead_s
-        no_lead = {s: 0.0 for s in self.flying}
-        await start_routes(link, self.initial, self.missions, speedup, logger, lead_s, no_lead, self.quirks)
-        for vp in self.initial.vehicles:
-            self.keeper.add(vp)
-        self.say(f"routes started; flying scenario time {self.t_start:.0f}-{self.t_stop:.0f} s")
-        await self._serve(link, logger)
-
-    async def _check_starts(self) -> None:
-        """Refuse, before anything is sent, a vehicle that is not where --homes starts it; wait up
-        to START_FIX_WAIT_S for the positions (ArduPilot reports none for ~10 s after boot)."""
-        rows = self.telemetry.rows
-        deadline = now_s() + START_FIX_WAIT_S
-        while not all(rows[s] for s in self.flying) and now_s() < deadline:
-            await asyncio.sleep(0.2)
-        unfixed = [s for s in self.flying if not rows[s]]
-        if unfixed:
-            self.say(f"sysid {unfixed} report no position yet: their starts are not checked")
-        where = {s: r[-1][1:3] for s, r in rows.items() if r}
-        name = self.scenario.path.name if self.scenario.path else "SCENARIO"
-        hint = f"start it there: fly-coalition {name} --connect ... --homes prints each --home"
-        fixed = [s for s in starts(self.initial.vehicles, self.scenario.origin) if s.sysid in where]
-        check_starts(fixed, where, hint, COALITION_START_M)
-
-    async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
-        """Until the window ends: log the simulation's events as they come due, queue the awards
-        and idle missions at their times, keep the schedule; then let the queue drain."""
-        options = self.options
-        workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
-        self.due = sorted(
-            [_Job(a.event["t_s"], (a.event["task"] != "strike", a.event["time_s"]), "award", s, a)
-             for s in self.schedules for a in s.awards]
-            + [_Job(i.t_s, (2, i.t_s), "idle", s, i)
-               for s in self.schedules for i in s.idles if i.t_s <= self.t_stop]
-        )  # fmt: skip
-        targets = {e["target"] for e in self.awards}
-        events = sorted(
-            (e for e in self.sim.events if e["event"] in LOGGED_EVENTS
-             and self.t_start <= e["t_s"] <= self.t_stop and e.get("target") in targets),
-            key=lambda e: e["t_s"],
-        )  # fmt: skip
-        route_end = self.t_stop - self.t_route0
-        deadline = now_s() + (route_end + 10.0) * 2.0 / self.vehicles.speedup + 10.0
-        while self.scenario_now() - self.t_route0 < route_end and now_s() < deadline:
-            now = self.scenario_now()
-            while events and events[0]["t_s"] <= now:
-                logger.log_event({**events.pop(0), "source": "coalition_simulation"})
-            while self.due and self.due[0].t_s <= now:
-                job = self.due.pop(0)
-                if job.kind == "award" and not options.replay_legs:
-                    job.rank = (False, self.deadline_s(job.sched.uav, job.payload.event, now))
-                self.queue.put_nowait((job.rank, next(self.order), job))
-            if options.keep_schedule:
-                _keep(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
-            await asyncio.sleep(KEEPER_PERIOD_S / self.vehicles.speedup)
-        await self._drain(workers, deadline)
-
     async def _drain(self, workers: list[asyncio.Task], deadline: float) -> None:
         """Let the upload queue empty (10 s at most), stop the workers; a failure when the window
         end was not reached by the wall-clock deadline."""
@@ -512,7 +438,7 @@ class _HilRun:
                 self.queue.task_done()
 
     # --- one upload --------------------------------------------------------------------------
-    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: _Job) -> dict:
+    async def _upload(self, link: MavlinkLink, logger: FlightLogger, job: UploadJob) -> dict:
         """Plan the job's mission, upload it in flight, start it at the first waypoint ahead; the
         upload's log entry."""
         kind, sched, payload, e = job.kind, job.sched, job.payload, job.payload.event
@@ -521,7 +447,7 @@ class _HilRun:
                  "task": e["task"], "award_t_s": e["t_s"], "ok": False}  # fmt: skip
         try:
             vp, leg = await self._mission(job, entry)
-            items = plan_to_items(vp, self.scenario.origin, self.options.autopilot)
+            items = plan_to_items(vp, self.scenario.origin, self.quirks[sysid].conventions)
             entry["upload_start_s"] = self.scenario_now()
             t_up = now_s()
             await MissionClient(link, sysid, timing=UPLOAD_TIMING).upload(items)
@@ -542,7 +468,7 @@ class _HilRun:
             if entry.get("covered_s", math.inf) < payload.end_s - 1.0:  # the next idle chunk
                 t_next = entry["covered_s"] - IDLE_LEAD_S
                 idle = Idle(t_next, e, payload.end_s, None)
-                self.due.append(_Job(t_next, (2, t_next), "idle", sched, idle, job.gen))
+                self.due.append(UploadJob(t_next, (2, t_next), "idle", sched, idle, job.gen))
                 self.due.sort()
         except MavlinkError as exc:
             entry["error"] = str(exc)
@@ -557,7 +483,7 @@ class _HilRun:
         logger.log_event({"event": "upload", **entry})
         return entry
 
-    async def _mission(self, job: _Job, entry: dict) -> tuple[VehiclePlan, Leg | None]:
+    async def _mission(self, job: UploadJob, entry: dict) -> tuple[VehiclePlan, Leg | None]:
         """The job's mission and leg: planned live (in a thread) or, replaying, the simulation's."""
         sched, payload = job.sched, job.payload
         if job.kind == "idle" and self.options.replay_legs:
@@ -655,8 +581,53 @@ class _HilRun:
         }
         return vp, info
 
-    # --- the report --------------------------------------------------------------------------
-    def result(self, lag_events: int, wall_s: float) -> HilResult:
+
+class OfflineRun(CoalitionRun):
+    """The offline run: every decision is the simulation's (module docstring); only the awarded
+    UAVs fly."""
+
+    def __init__(self, scenario: Scenario, options: HilOptions) -> None:
+        self._simulate(scenario, options)
+        window = (self.t_start, self.t_stop)
+        self.schedules = build_schedules(
+            self.world, self.sim, self.awards, *window, options.waypoint_dt_s, options.offset_m
+        )
+        self._init_flight([s.initial for s in self.schedules])
+
+    async def _serve(self, link: MavlinkLink, logger: FlightLogger) -> None:
+        """Until the window ends: log the simulation's events as they come due, queue the awards
+        and idle missions at their times, keep the schedule; then let the queue drain."""
+        options = self.options
+        workers = [asyncio.create_task(self._worker(link, logger)) for _ in range(UPLOAD_WORKERS)]
+        self.due = sorted(
+            [UploadJob(a.event["t_s"], (a.event["task"] != "strike", a.event["time_s"]), "award", s, a)
+             for s in self.schedules for a in s.awards]
+            + [UploadJob(i.t_s, (2, i.t_s), "idle", s, i)
+               for s in self.schedules for i in s.idles if i.t_s <= self.t_stop]
+        )  # fmt: skip
+        targets = {e["target"] for e in self.awards}
+        events = sorted(
+            (e for e in self.sim.events if e["event"] in LOGGED_EVENTS
+             and self.t_start <= e["t_s"] <= self.t_stop and e.get("target") in targets),
+            key=lambda e: e["t_s"],
+        )  # fmt: skip
+        route_end = self.t_stop - self.t_route0
+        deadline = now_s() + (route_end + 10.0) * 2.0 / self.vehicles.speedup + 10.0
+        while self.scenario_now() - self.t_route0 < route_end and now_s() < deadline:
+            now = self.scenario_now()
+            while events and events[0]["t_s"] <= now:
+                logger.log_event({**events.pop(0), "source": "coalition_simulation"})
+            while self.due and self.due[0].t_s <= now:
+                job = self.due.pop(0)
+                if job.kind == "award" and not options.replay_legs:
+                    job.rank = (False, self.deadline_s(job.sched.uav, job.payload.event, now))
+                self.queue.put_nowait((job.rank, next(self.order), job))
+            if options.keep_schedule:
+                keep_current(link, self.recorder, self.keeper, self.current, self.route_t0, self.quirks)
+            await asyncio.sleep(KEEPER_PERIOD_S / self.vehicles.speedup)
+        await self._drain(workers, deadline)
+
+    def _result(self, lag_events: int, wall_s: float) -> HilResult:
         tracks = self.recorder.tracks()
         flown = {s: (tr.times_s - self.route_t0 + self.t_route0, tr.positions) for s, tr in tracks.items()}
         sim_tracks = {s.uav.id: s.track for s in self.schedules}
@@ -665,7 +636,7 @@ class _HilRun:
         add_prediction_errors(self.uploads, flown)
         return HilResult(
             rows, self.uploads, self.mcap_path, self.t_start, wall_s, lag_events, self.failures + missing,
-            flown, self.flown_legs, end_states=self.end_states,
+            flown, self.flown_legs,
         )  # fmt: skip
 
 
@@ -681,7 +652,9 @@ async def next_report_after(clock, t_s: float, timeout_s: float = NEXT_REPORT_TI
     return now
 
 
-def _keep(link, recorder, keeper: ScheduleKeeper, current: dict, route_t0: float, quirks: dict) -> None:
+def keep_current(
+    link, recorder, keeper: ScheduleKeeper, current: dict, route_t0: float, quirks: dict
+) -> None:
     """One ScheduleKeeper step: a speed command to each vehicle off its current mission's timing."""
     for sysid, vp in current.items():
         latest = recorder.latest(sysid)

@@ -26,7 +26,7 @@ from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
 from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, format_report
 from gcs_planner.errors import UserError
-from gcs_planner.fly import FlyOptions, check_flight, check_networks, end_summary, fly, networks
+from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_summary, fly, networks
 from gcs_planner.plan import Plan
 from gcs_planner.planning import load_scenario
 from gcs_planner.progress import plan_with_progress, progress_bar

@@ -28,7 +28,7 @@ from gcs_planner.coalition_hil.report import format_formations
 from gcs_planner.coalition_hil.run import initial_plans
 from gcs_planner.commands.plan import SEED
 from gcs_planner.errors import UserError
-from gcs_planner.fly import end_summary
+from gcs_planner.flight import end_summary
 from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import load_world
 from gcs_planner.starts import format_homes, starts
