@@ -120,6 +120,33 @@ def test_no_import_cycle_between_packages_or_layers():
     assert _cycle(units) is None, _cycle(units)
 
 
+# the steps of a flight: only the one flight runner (gcs_planner/flight/runner.py) takes them, so
+# that fly and fly-coalition, its two front ends, cannot drift apart again; the telemetry package
+# and `watch` (which logs without flying) write logs too
+FLIGHT_STEPS = {
+    "wait_for_vehicles", "take_off_all", "start_routes", "safe_end", "FlightLogger", "SafeEndSignals",
+}  # fmt: skip
+TAKERS = {"gcs_planner.flight.runner": FLIGHT_STEPS, "gcs_planner.commands.watch": {"FlightLogger"}}
+
+
+def _calls(name: str) -> set[str]:
+    """The names ``name`` calls (``f(...)`` and ``x.f(...)``)."""
+    calls = set()
+    for node in ast.walk(ast.parse(MODULES[name].read_text())):
+        if isinstance(node, ast.Call):
+            f = node.func
+            calls.add(f.id if isinstance(f, ast.Name) else getattr(f, "attr", ""))
+    return calls
+
+
+def test_only_the_flight_runner_takes_the_steps_of_a_flight():
+    modules = [m for m in MODULES_OF["gcs_planner"] if not m.startswith("gcs_planner.telemetry")]
+    taken = {m: _calls(m) & FLIGHT_STEPS for m in modules}
+    stray = {m: sorted(steps - TAKERS.get(m, set())) for m, steps in taken.items()}
+    assert {m: steps for m, steps in stray.items() if steps} == {}
+    assert taken["gcs_planner.flight.runner"] == FLIGHT_STEPS  # the test looks where the steps are
+
+
 def test_the_cycle_finder_finds_cycles():
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None

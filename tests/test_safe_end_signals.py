@@ -106,3 +106,27 @@ def test_impossible_positions_are_flagged_and_never_pass(tmp_path):
     by_sysid = {r.sysid: r for r in result.reports}
     assert "2 impossible positions reported (ignored)" in by_sysid[2].failures, by_sysid[2].failures
     assert all(by_sysid[s].passed for s in (1, 3, 4)) and not result.passed
+
+
+def test_a_signal_mid_coalition_run_brings_the_planes_home_as_fly_does(tmp_path):
+    """fly-coalition is the other front end of the one flight runner: a SIGTERM as its routes start
+    sends every plane home and the run is reported, interrupted; its log carries the clock rate."""
+    from gcs_planner.coalition_hil import HilOptions
+    from gcs_planner.coalition_hil.run import run_coalition_hil
+    from sitl_mock.plan_fleet import MockVehiclesProcess
+
+    scenario = load_scenario(SCENARIO.parent / "coalition_paper.toml")
+    said = []
+
+    def say(line: str) -> None:
+        said.append(line)
+        if "routes started" in line:
+            os.kill(os.getpid(), signal.SIGTERM)
+
+    options = HilOptions(out_dir=tmp_path, targets=("T1",))
+    result = lockstep.run(run_coalition_hil(scenario, options, MockVehiclesProcess, say=say), True)
+    assert result.interrupted == "SIGTERM" and not result.passed, said
+    assert set(result.end_states.values()) == {"returning (RTL)"}, result.end_states  # planes circle home
+    flight = read_flight(result.mcap_path)
+    assert any(e["event"] == "safe_end" for _, e in flight.events)
+    assert flight.metadata["gcs_planner"]["clock_rate"] == "1.0"  # lockstep: flight time on the log's clock
