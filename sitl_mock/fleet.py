@@ -420,7 +420,7 @@ class MockFleet:
                 t_ms = v.time_boot_ms
                 fix = (lat[k], lon[k], alt[k], rel[k], vel[k]) if v.has_position else _NO_FIX
                 v.send(telemetry.global_position_int(t_ms, *fix, psi[k]))
-                if v.wants(_ATTITUDE):
+                if v.wants(_ATTITUDE) and v.due(_ATTITUDE, now):
                     v.send(telemetry.attitude(t_ms, roll[k], pitch[k], psi[k], rate[k]))
         for i in status.due(now).tolist():
             if vehicles[i].link.peers:

@@ -181,6 +181,8 @@ class MockVehicle:
         self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
         self._init_params()
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
+        self.intervals: dict[int, float] = {}  # message id -> requested interval [s, the stream clock]
+        self._streamed_at: dict[int, float] = {}  # message id -> when it was last streamed
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission
         self._armed_at_s = math.inf  # sim time of arming while on the ground
         self._modes = self.profile.modes[vehicle_type]
@@ -365,6 +367,18 @@ class MockVehicle:
     def wants(self, message_id: int) -> bool:
         """The GCS asked for this message's stream (always true where everything streams unasked)."""
         return self.streams is None or message_id in self.streams
+
+    def due(self, message_id: int, now_s: float) -> bool:
+        """Whether a message the fleet offers at its own rate is due at the interval the GCS asked
+        for it (ArduPilot GCS_MAVLINK::set_message_interval: each message on its own interval), on
+        the clock the fleet streams by (vehicle time in lockstep, the wall clock when paced); a
+        message without one goes at the fleet's rate. Marks it sent when due."""
+        interval = self.intervals.get(message_id)
+        last = self._streamed_at.get(message_id)
+        if interval is not None and last is not None and now_s - last < interval - 1e-6:
+            return False
+        self._streamed_at[message_id] = now_s
+        return True
 
     # --- telemetry ---------------------------------------------------------------------------
     def send_status(self) -> None:
@@ -675,9 +689,13 @@ class MockVehicle:
         return CommandResult.ACCEPTED
 
     def _cmd_message_interval(self, p1: float, p2: float, *_: float) -> CommandResult:
-        """SET_MESSAGE_INTERVAL(message id, interval [us]; -1 = off, 0 = default): on / off only,
-        the fleet streams at its own rate."""
+        """SET_MESSAGE_INTERVAL(message id, interval [us]; -1 = off, 0 = default): a positive
+        interval is kept (``due``), never faster than the fleet's own rate for the message."""
         self._set_streams((int(p1),), p2 >= 0)
+        if p2 > 0:
+            self.intervals[int(p1)] = p2 / 1e6
+        else:
+            self.intervals.pop(int(p1), None)
         return CommandResult.ACCEPTED
 
     def _cmd_capabilities(self, *_: float) -> CommandResult:

@@ -1,5 +1,6 @@
 """The mock fleet over real UDP, with a pymavlink ``udpout`` connection as the GCS."""
 
+import asyncio
 import contextlib
 import queue
 import signal
@@ -26,6 +27,7 @@ COMPLETES = {**UNGATED, "final_land_disarms": False}  # a final LAND reports COM
 
 ARM, TAKEOFF, RTL, SET_MODE, MISSION_START, SET_CURRENT, REBOOT = 400, 22, 20, 176, 300, 224, 246
 ACCEPTED, DENIED, UNSUPPORTED, FAILED = 0, 2, 3, 4
+INTERVAL = 511  # MAV_CMD_SET_MESSAGE_INTERVAL
 
 
 def _wp(seq: int, e: float, n: float, up: float, command: int = 16, frame: int = 6, **kw) -> MissionItem:
@@ -90,6 +92,36 @@ def test_stream_rates_and_telemetry_fields():
     home_msg = by_type["HOME_POSITION"][-1]
     assert (home_msg.latitude, home_msg.longitude, home_msg.altitude) == (470000000, 80000000, 500000)
     assert by_type["MISSION_CURRENT"][-1].mission_state == MissionState.NO_MISSION
+
+
+def test_a_requested_message_interval_is_kept():
+    """SET_MESSAGE_INTERVAL(ATTITUDE, 200 ms) gives ATTITUDE at 5 Hz beside 10 Hz positions
+    (ArduPilot keeps each message's own interval). In lockstep: on vehicle time."""
+    from gcs_planner import lockstep
+    from gcs_planner.mavlink.link import MavlinkLink
+    from gcs_planner.mavlink.preflight import request_streams
+
+    async def fly() -> list:
+        async with MockFleet(
+            flight=UNGATED, count=1, speedup=1.0, tick_s=0.05, physics_dt_s=0.05, rate_hz=10
+        ) as fleet:
+            ((host, port),) = fleet.addresses
+            link = await MavlinkLink.open(f"udpout:{host}:{port}")
+            seen: list = []
+            link.subscribe(lambda msg, raw, t_s: seen.append(msg))
+            await request_streams(link, [1], {30: 5.0, 33: 10.0})
+            await asyncio.sleep(0.5)
+            start = len(seen)
+            await asyncio.sleep(5.0)
+            await link.close()
+            return seen[start:]
+
+    msgs = lockstep.run(fly(), True)
+    boot_ms = {
+        k: [m.time_boot_ms for m in msgs if m.get_type() == k] for k in ("ATTITUDE", "GLOBAL_POSITION_INT")
+    }
+    att, gpi = np.diff(boot_ms["ATTITUDE"]), np.diff(boot_ms["GLOBAL_POSITION_INT"])
+    assert len(att) >= 20 and np.abs(att - 200).max() <= 1 and np.abs(gpi - 100).max() <= 1, (att, gpi)
 
 
 def test_commands_are_acknowledged(fleet, gcs):

@@ -38,7 +38,7 @@ PREARM_TEXTS = ("PreArm", "Arm", "Preflight")  # how ArduPilot and PX4 word a pr
 M = mavlink
 FLIGHT_STREAMS: dict[int, float] = {  # message id -> rate [Hz] a flight needs
     M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 10.0,
-    M.MAVLINK_MSG_ID_ATTITUDE: 10.0,
+    M.MAVLINK_MSG_ID_ATTITUDE: 5.0,
     M.MAVLINK_MSG_ID_MISSION_CURRENT: 2.0,
     M.MAVLINK_MSG_ID_SYS_STATUS: 2.0,
     M.MAVLINK_MSG_ID_VFR_HUD: 2.0,
