@@ -71,6 +71,27 @@ def test_replay_schedule_scales_with_speed(flight_path):
     assert sum(sleeps) == pytest.approx((flight.end_time_s - flight.start_time_s) / 4.0, rel=1e-6)
 
 
+def test_replay_paces_by_flight_time_for_a_log_flown_faster_than_real_time(tmp_path):
+    """A log of vehicles at 10x (clock_rate 10: its receive times span a tenth of the flight)
+    replays at --speed 1 in flight time: ten times its receive span."""
+    path = tmp_path / "fast.mcap"
+    with FlightLogger(
+        path, ORIGIN, plan=make_plan([1]), scenario_text=SCENARIO_TEXT, clock_rate=10.0
+    ) as logger:
+        for msg, raw, t_s in flight_frames([1], samples=20):
+            logger.on_frame(msg, raw, t_s)
+    flight = read_flight(path)
+    now, sleeps = [0.0], []
+
+    def sleep(dt: float) -> None:
+        sleeps.append(dt)
+        now[0] += dt
+
+    frames = list(paced(flight, 1.0, sleep=sleep, clock=lambda: now[0]))
+    span_s = (frames[-1].t_ns - frames[0].t_ns) * 1e-9
+    assert span_s > 0 and sum(sleeps) == pytest.approx(10.0 * span_s, rel=1e-6)
+
+
 def test_bad_udp_url_is_a_user_error():
     with pytest.raises(UserError, match="udpout:HOST:PORT"):
         parse_udp_url("tcp:localhost:14550")

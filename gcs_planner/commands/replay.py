@@ -4,10 +4,11 @@
     gcs-planner replay FLIGHT.mcap --to udpout:127.0.0.1:14550 --speed 4
     gcs-planner replay FLIGHT.mcap --viewer --speed 4   (spawns the Rerun viewer, paced)
 
-MAVLink replay re-emits every recorded frame byte for byte with its original timing divided by
---speed, so QGroundControl or MAVProxy listening on that port sees the flight again. Truncated
-logs (a killed recorder) are replayed up to their last complete chunk. On Linux without a
-display (neither DISPLAY nor WAYLAND_DISPLAY set) --viewer is refused before anything is read or
+MAVLink replay re-emits every recorded frame byte for byte with its flight-time timing (the
+log's receive times x its clock rate) divided by --speed, so QGroundControl or MAVProxy
+listening on that port sees the flight again. Truncated logs (a killed recorder) are replayed up
+to their last complete chunk. On Linux without a display (neither DISPLAY nor WAYLAND_DISPLAY
+set) --viewer is refused before anything is read or
 spawned: a spawned viewer there waits for a display that never comes.
 """
 
@@ -36,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--speed",
         type=number_flag(0, 1000),
         default=1.0,
-        help="replay speed factor for --to / --viewer (0 = max) [1]",
+        help="replay speed for --to / --viewer, times the pace the vehicles flew (1: as flown; 0 = max) [1]",
     )
 
 

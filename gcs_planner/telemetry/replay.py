@@ -75,15 +75,18 @@ def paced(
     max_rate: float = math.inf,
 ) -> Iterator[RawFrame]:
     """The vehicles' frames (a ground station's are not replayed), frame k yielded at
-    start + max((t_k - t_0) / speed, k / max_rate); speed 0 or inf: no recorded timing."""
+    start + max((t_k - t_0) x clock_rate / speed, k / max_rate): ``speed`` 1 replays at the pace
+    the vehicles flew (a log of a 10x SITL as slowly as it was flown, in flight time); speed 0 or
+    inf: no recorded timing."""
     frames = flight.vehicle_frames
     if not frames:
         return
     realtime = speed > 0 and math.isfinite(speed)
+    scale = flight.clock_rate * 1e-9 / speed if realtime else 0.0  # s of replay per ns of receive time
     t0_ns = frames[0].t_ns
     start = clock()
     for k, frame in enumerate(frames):
-        due = max((frame.t_ns - t0_ns) * 1e-9 / speed if realtime else 0.0, k / max_rate)
+        due = max((frame.t_ns - t0_ns) * scale, k / max_rate)
         delay = start + due - clock()
         if delay > 0:
             sleep(delay)
