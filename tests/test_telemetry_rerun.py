@@ -148,11 +148,11 @@ def test_default_blueprint_has_a_text_log_view_of_the_events(tmp_path):
 def test_replay_viewer_without_a_display_is_refused_in_one_line(tmp_path, monkeypatch, capsys):
     import rerun as rr
 
-    import gcs_planner.commands.replay as replay
+    import gcs_planner.commands._viewer as viewer
 
     spawned = []
     monkeypatch.setattr(rr.RecordingStream, "spawn", lambda *a, **k: spawned.append(1))
-    monkeypatch.setattr(replay.sys, "platform", "linux")
+    monkeypatch.setattr(viewer.sys, "platform", "linux")
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     path = _log(tmp_path / "flight.mcap", samples=10)
@@ -161,7 +161,16 @@ def test_replay_viewer_without_a_display_is_refused_in_one_line(tmp_path, monkey
     assert len(err.splitlines()) == 1 and "--viewer needs a display" in err and "--rrd FILE" in err
     assert "--serve-web" in err and spawned == []
     monkeypatch.setenv("WAYLAND_DISPLAY", "wayland-0")
-    replay.check_display("--viewer")  # a display: no refusal
+    viewer.check_display("--viewer")  # a display: no refusal
+    monkeypatch.delenv("WAYLAND_DISPLAY")
+    fly = ["fly", str(SCENARIO), "--live", "-o", str(tmp_path / "fly")]
+    watch = ["watch", "--connect", "udpin:127.0.0.1:0", "--live", "-o", str(tmp_path / "watch")]
+    for argv in (fly, watch):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "--live needs a display" in err, err
+        assert not (tmp_path / argv[-1].rpartition("/")[2]).exists()  # refused before anything is written
+    assert spawned == []
 
 
 def test_serve_web_chooses_free_ports_and_prints_the_url(monkeypatch, capsys):
@@ -170,7 +179,7 @@ def test_serve_web_chooses_free_ports_and_prints_the_url(monkeypatch, capsys):
 
     import rerun as rr
 
-    from gcs_planner.commands.fly import free_ports, live_recording
+    from gcs_planner.commands._viewer import free_ports, live_recording
 
     ports = free_ports(2)
     assert len(set(ports)) == 2 and all(0 < p < 65536 for p in ports)

@@ -15,10 +15,9 @@ spawned: a spawned viewer there waits for a display that never comes.
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 import time
 
+from gcs_planner.commands._viewer import check_display
 from gcs_planner.errors import UserError
 from gcs_planner.progress import progress_bar
 from gcs_planner.telemetry.reader import read_flight
@@ -74,17 +73,6 @@ def run(args: argparse.Namespace) -> int:
             sent = replay_to_mavlink(flight, args.to, speed=args.speed, progress=progress)
         print(f"sent {sent} frames to {args.to} in {time.monotonic() - start:.1f} s")
     return 0
-
-
-def check_display(flag: str) -> None:
-    """UserError on Linux when neither DISPLAY nor WAYLAND_DISPLAY is set: a viewer spawned there
-    never shows and the command hangs waiting for it."""
-    if not sys.platform.startswith("linux") or os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
-        return
-    raise UserError(
-        f"{flag} needs a display and neither DISPLAY nor WAYLAND_DISPLAY is set: write the views with"
-        " --rrd FILE, then `rerun FILE` where there is a display or `rerun --serve-web FILE` for a browser"
-    )
 
 
 def _check_mcap(path: str) -> None:

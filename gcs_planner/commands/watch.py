@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from gcs_planner.commands._mission_cli import open_link
-from gcs_planner.commands.fly import live_recording
+from gcs_planner.commands._viewer import check_display, live_recording
 from gcs_planner.commands.import_log import parse_origin
 from gcs_planner.errors import UserError
 from gcs_planner.geo import Origin
@@ -54,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         value = getattr(args, name)
         if value is not None and not value > 0:
             raise UserError(f"--{name} must be > 0, got {value}")
+    if args.live:
+        check_display("--live")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rec = live_recording(args.live, args.serve_web)
