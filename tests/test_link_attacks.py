@@ -16,8 +16,10 @@ import time
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from refusals import refused
 
 from gcs_planner.mavlink import errors
+from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.framing import frames
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
@@ -381,8 +383,9 @@ def test_nan_hold_time_is_refused_like_ardupilot_and_the_mission_kept(mission_of
             before = vehicle.mission_server.items()
             bad = mission_of(4)
             bad[2] = dataclasses.replace(bad[2], param1=math.nan)
-            with pytest.raises(errors.InvalidParam1Error):
+            with pytest.raises(errors.MissionError) as caught:
                 await client.upload(bad)
+            assert refused(caught.value, MissionResult.INVALID_PARAM1)
             assert vehicle.mission_server.items() == before
             await link.close()
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
+from refusals import refused
 
 from gcs_planner.mavlink import errors
 from gcs_planner.mavlink.enums import MissionResult
@@ -240,7 +241,7 @@ def test_request1_no_response_vehicle_cancels_previous_intact(profile, cancel_at
     sim = Sim(srv)
     new = mission(6, base_lat=400_000_000)
     up = upload(sim, new, timing=Timing(push_ahead=False, window=1))
-    assert isinstance(up.outcome.error, errors.OperationCancelledError)
+    assert refused(up.outcome.error, MissionResult.OPERATION_CANCELLED)
     assert sim.now == pytest.approx(cancel_at_s, abs=0.1)
     assert not srv.busy()
     if profile == "px4":
@@ -353,20 +354,20 @@ def test_incorrect_sequence_requests_are_recovered(profile, failure, window):
 
 
 @pytest.mark.parametrize(
-    ("failure", "result", "error"),
+    ("failure", "result"),
     [
-        (Failure.WRITE_REQUEST0_ERROR_ACK, MissionResult.ERROR, errors.GenericMissionError),
-        (Failure.WRITE_REQUEST1_ERROR_ACK, MissionResult.UNSUPPORTED_FRAME, errors.UnsupportedFrameError),
-        (Failure.WRITE_FINAL_ACK_ERROR_ACK, MissionResult.INVALID_PARAM5_X, errors.InvalidParam5XError),
+        (Failure.WRITE_REQUEST0_ERROR_ACK, MissionResult.ERROR),
+        (Failure.WRITE_REQUEST1_ERROR_ACK, MissionResult.UNSUPPORTED_FRAME),
+        (Failure.WRITE_FINAL_ACK_ERROR_ACK, MissionResult.INVALID_PARAM5_X),
     ],
 )
-def test_error_acks_become_typed_errors_and_keep_previous(failure, result, error):
+def test_error_acks_become_typed_errors_and_keep_previous(failure, result):
     srv = server("px4")  # PX4 keeps the previous list; ArduPilot stores in place (test below)
     preload(srv, mission(3))
     before, before_id = srv.items(), srv.opaque_id()
     srv.failure, srv.failure_result = failure, result
     up = upload(Sim(srv), mission(4, base_lat=400_000_000))
-    assert type(up.outcome.error) is error and up.outcome.error.result == result
+    assert refused(up.outcome.error, result)
     assert srv.items() == before and srv.opaque_id() == before_id
 
 
@@ -376,7 +377,7 @@ def test_non_atomic_final_error_leaves_a_mix_but_is_reported():
     srv.failure = Failure.WRITE_FINAL_ACK_ERROR_ACK
     new = mission(4, base_lat=400_000_000)
     up = upload(Sim(srv), new)
-    assert isinstance(up.outcome.error, errors.GenericMissionError)
+    assert refused(up.outcome.error, MissionResult.ERROR)
     assert [i.x for i in srv.items()] == [i.x for i in new]  # ArduPilot wrote the items anyway
     assert srv.opaque_id() == 0  # ... and the list is no known plan
 
@@ -391,7 +392,7 @@ def test_final_ack_no_response_resends_only_last_item(profile, acked):
     assert up.outcome.ack_lost
     timing = Timing()
     if profile == "ardupilot":  # the resent last item is answered MISSION_ACK(ERROR): no upload runs
-        assert isinstance(up.outcome.error, errors.GenericMissionError)
+        assert refused(up.outcome.error, MissionResult.ERROR)
         assert sim.sent("MISSION_ITEM_INT", 4) == 2
     else:
         assert isinstance(up.outcome.error, errors.MissionTimeoutError)
@@ -500,7 +501,7 @@ def test_over_capacity_is_no_space_with_statustext():
     srv = server(capacity=10)
     sim = Sim(srv)
     up = upload(sim, mission(11))
-    assert isinstance(up.outcome.error, errors.NoSpaceError)
+    assert refused(up.outcome.error, MissionResult.NO_SPACE)
     assert any(m.get_type() == "STATUSTEXT" and b"10" in m.text.encode() for m in sim.to_gcs)
 
 
@@ -509,7 +510,7 @@ def test_clear_refused_in_auto_on_ardupilot_but_empty_upload_works():
     preload(srv, mission(3))
     srv.mission_running = True
     clear = Sim(srv).run(ClearTransfer(1))
-    assert isinstance(clear.outcome.error, errors.GenericMissionError) and srv.count() == 3
+    assert refused(clear.outcome.error, MissionResult.ERROR) and srv.count() == 3
     assert upload(Sim(srv), []).outcome.error is None and srv.count() == 0
     srv2 = server("px4")
     preload(srv2, mission(3))
@@ -537,8 +538,8 @@ def test_set_current_legacy_confirmed_by_mission_current():
         (Failure.READ_REQUEST1_FIRST_RESPONSE, True, None),
         (Failure.READ_REQUEST0_INCORRECT_SEQUENCE, False, errors.MissionTimeoutError),
         (Failure.READ_REQUEST1_INCORRECT_SEQUENCE, False, errors.MissionTimeoutError),
-        (Failure.READ_REQUEST0_ERROR_ACK, False, errors.GenericMissionError),
-        (Failure.READ_REQUEST1_ERROR_ACK, False, errors.GenericMissionError),
+        (Failure.READ_REQUEST0_ERROR_ACK, False, MissionResult.ERROR),
+        (Failure.READ_REQUEST1_ERROR_ACK, False, MissionResult.ERROR),
     ],
 )
 def test_download_failure_matrix(failure, ok, error):
@@ -551,7 +552,9 @@ def test_download_failure_matrix(failure, ok, error):
     if ok:
         assert down.outcome.error is None and down.outcome.items == kept(srv, items)
     else:
-        assert type(down.outcome.error) is error and down.outcome.items is None
+        refusal = isinstance(error, MissionResult)
+        assert refused(down.outcome.error, error) if refusal else type(down.outcome.error) is error
+        assert down.outcome.items is None
     if failure == Failure.READ_REQUEST1_NO_RESPONSE:
         assert sim.sent("MISSION_REQUEST_INT", 1) == 1 + Timing().download_retries
     if failure == Failure.READ_REQUEST_LIST_NO_RESPONSE:
@@ -567,7 +570,7 @@ def test_cancel_mid_upload_releases_px4_session():
     assert srv.busy()
     sim._send("gcs", up.cancel(sim.now), sim.now)
     sim.run(DownloadTransfer(1))  # delivers the cancel first, then downloads
-    assert isinstance(up.outcome.error, errors.OperationCancelledError) and not srv.busy()
+    assert refused(up.outcome.error, MissionResult.OPERATION_CANCELLED) and not srv.busy()
 
 
 def test_bad_items_rejected_before_anything_is_sent():
@@ -580,12 +583,12 @@ def test_bad_items_rejected_before_anything_is_sent():
 
 def test_server_rejects_unknown_command_and_bad_latitude():
     for item, error in (
-        (MissionItem(seq=0, frame=3, command=60000, x=1, y=1), errors.UnsupportedCommandError),
-        (MissionItem(seq=0, frame=3, command=16, x=910_000_000, y=1), errors.InvalidParam5XError),
+        (MissionItem(seq=0, frame=3, command=60000, x=1, y=1), MissionResult.UNSUPPORTED),
+        (MissionItem(seq=0, frame=3, command=16, x=910_000_000, y=1), MissionResult.INVALID_PARAM5_X),
     ):
         srv = server()
         up = upload(Sim(srv), [item])
-        assert type(up.outcome.error) is error and srv.count() == 0
+        assert refused(up.outcome.error, error) and srv.count() == 0
 
 
 def test_partial_write_replaces_only_its_range_on_ardupilot_and_px4_refuses_it():
@@ -604,7 +607,7 @@ def test_partial_write_replaces_only_its_range_on_ardupilot_and_px4_refuses_it()
     px4 = server("px4")
     preload(px4, old)
     up = Sim(px4).run(UploadTransfer(1, new, partial=True))
-    assert isinstance(up.outcome.error, errors.UnsupportedCommandError)
+    assert refused(up.outcome.error, MissionResult.UNSUPPORTED)
     assert "partial upload: UNSUPPORTED" in str(up.outcome.error) and px4.items() == kept(px4, old)
 
 

@@ -13,9 +13,11 @@ import math
 from dataclasses import replace
 
 import pytest
+from refusals import refused
 
 from gcs_planner.mavlink import errors
 from gcs_planner.mavlink.command import CommandClient
+from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.fleet import start_fleet, upload_fleet
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
@@ -160,7 +162,7 @@ def test_scripted_failures_over_udp():
             before = server.items()
 
             fleet.set_mission_failure(1, Failure.READ_REQUEST1_ERROR_ACK)
-            with pytest.raises(errors.GenericMissionError, match="download"):
+            with pytest.raises(errors.MissionError, match="download: ERROR"):
                 await client.download()
 
             fleet.set_mission_failure(1, Failure.WRITE_COUNT_NO_RESPONSE)
@@ -258,19 +260,15 @@ def test_bad_input_is_refused_and_vehicle_unchanged():
                 await client.upload([mission(3)[0], mission(3)[2]])
             assert link.frames_sent - sent_before <= 1  # at most a heartbeat went out
             bad = [
-                (
-                    MissionItem(seq=0, frame=3, command=16, x=910_000_000, y=1, z=10.0),
-                    errors.InvalidParam5XError,
-                ),
-                (
-                    MissionItem(seq=0, frame=3, command=31_999, x=1, y=1, z=10.0),
-                    errors.UnsupportedCommandError,
-                ),
-                (MissionItem(seq=0, frame=3, command=16, x=1, y=1, z=math.nan), errors.InvalidParam7Error),
+                (dict(x=910_000_000, y=1, z=10.0), MissionResult.INVALID_PARAM5_X),
+                (dict(command=31_999, x=1, y=1, z=10.0), MissionResult.UNSUPPORTED),
+                (dict(x=1, y=1, z=math.nan), MissionResult.INVALID_PARAM7),
             ]
-            for item, error in bad:
-                with pytest.raises(error, match="vehicle 1 refused the mission upload"):
+            for fields, result in bad:
+                item = MissionItem(**{"seq": 0, "frame": 3, "command": 16, **fields})
+                with pytest.raises(errors.MissionError, match="vehicle 1 refused the mission up") as caught:
                     await client.upload([item])
+                assert refused(caught.value, result)
                 assert server.items() == before
             await link.close()
 
@@ -319,7 +317,7 @@ def test_fleet_upload_pool_retries_and_reports_per_vehicle():
                 assert results[s].ok and results[s].attempts == 1
                 assert results[s].opaque_id == fleet.vehicle(s).mission_server.opaque_id()
             assert not results[3].ok and results[3].attempts == 3
-            assert isinstance(results[7].error, errors.NoSpaceError) and results[7].attempts == 1
+            assert refused(results[7].error, MissionResult.NO_SPACE) and results[7].attempts == 1
             started = await start_fleet(link, [1, 2])
             assert all(r.ok for r in started.values())
             await link.close()
@@ -365,7 +363,7 @@ def test_clear_in_auto_falls_back_to_empty_upload_on_ardupilot():
             await command.arm()
             await command.mission_start()
             assert fleet.vehicle(1).mission_server.mission_running
-            with pytest.raises(errors.GenericMissionError, match="the list is unchanged .* --force"):
+            with pytest.raises(errors.MissionError, match="the list is unchanged .* --force"):
                 await client.clear()
             assert fleet.vehicle(1).mission_server.count() == 4
             notes = await client.clear(force=True)

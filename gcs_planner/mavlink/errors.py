@@ -1,9 +1,9 @@
-"""Typed errors of the MAVLink services: one class per MAV_MISSION_RESULT, plus timeout, busy,
-protocol violations, read-back mismatch, duplicate system id and command failures.
+"""Typed errors of the MAVLink services: one MissionError carrying the vehicle's MAV_MISSION_RESULT,
+plus timeout, busy, protocol violations, read-back mismatch, duplicate system id and command failures.
 
-All subclass :class:`gcs_planner.errors.UserError` so the CLI prints them as one line. The one table
-:data:`RESULT_ERRORS` maps every non-ACCEPTED MissionResult to its class (a test checks it covers the
-whole pymavlink enum); :func:`error_for_result` is the only place a MISSION_ACK becomes an exception.
+All subclass :class:`gcs_planner.errors.UserError` so the CLI prints them as one line.
+:func:`error_for_result` is the only place a MISSION_ACK becomes an exception; ``RESULT_TEXT``
+says what each result means (a test checks it covers the whole enum).
 """
 
 from __future__ import annotations
@@ -12,38 +12,41 @@ from gcs_planner.errors import UserError
 from gcs_planner.mavlink.enums import CommandResult, MissionResult
 
 __all__ = [
+    "RESULT_TEXT",
     "BusyError",
     "CommandError",
     "CommandTimeoutError",
-    "DeniedError",
     "DuplicateSysidError",
-    "GenericMissionError",
-    "InvalidItemError",
-    "InvalidParam1Error",
-    "InvalidParam2Error",
-    "InvalidParam3Error",
-    "InvalidParam4Error",
-    "InvalidParam5XError",
-    "InvalidParam6YError",
-    "InvalidParam7Error",
-    "InvalidParamError",
-    "InvalidSequenceError",
     "MavlinkError",
     "MissionError",
     "MissionInputError",
     "MissionProtocolError",
     "MissionRejectedError",
     "MissionTimeoutError",
-    "NoSpaceError",
-    "OperationCancelledError",
-    "RESULT_ERRORS",
-    "UnsupportedCommandError",
-    "UnsupportedFrameError",
     "VerifyError",
     "command_error",
     "error_for_result",
     "mission_type_name",
 ]
+
+# what each refusal means, in the words of the MAVLink spec (common.xml MAV_MISSION_RESULT)
+RESULT_TEXT: dict[MissionResult, str] = {
+    MissionResult.ERROR: "the vehicle refused without saying why (e.g. clear while in AUTO)",
+    MissionResult.UNSUPPORTED_FRAME: "an item's coordinate frame is not supported",
+    MissionResult.UNSUPPORTED: "an item's command, or the request (a partial write), is not supported",
+    MissionResult.NO_SPACE: "more items than the vehicle can store",
+    MissionResult.INVALID: "an item parameter is invalid",
+    MissionResult.INVALID_PARAM1: "param1 is invalid",
+    MissionResult.INVALID_PARAM2: "param2 is invalid",
+    MissionResult.INVALID_PARAM3: "param3 is invalid",
+    MissionResult.INVALID_PARAM4: "param4 is invalid",
+    MissionResult.INVALID_PARAM5_X: "x / latitude is invalid",
+    MissionResult.INVALID_PARAM6_Y: "y / longitude is invalid",
+    MissionResult.INVALID_PARAM7: "z / altitude is invalid",
+    MissionResult.INVALID_SEQUENCE: "an item came out of sequence",
+    MissionResult.DENIED: "the vehicle does not accept this partner now (another GCS is uploading)",
+    MissionResult.OPERATION_CANCELLED: "the transfer was cancelled (by the vehicle's timeout or by us)",
+}
 
 
 class MavlinkError(UserError):
@@ -51,9 +54,9 @@ class MavlinkError(UserError):
 
 
 class MissionError(MavlinkError):
-    """A mission-protocol transfer failed. ``result`` is the vehicle's MAV_MISSION_RESULT, if any."""
-
-    result: MissionResult | None = None
+    """A mission-protocol transfer failed. ``result``: the vehicle's MAV_MISSION_RESULT when it
+    refused (or OPERATION_CANCELLED when we cancelled), else None; the subclasses below are the
+    failures without one."""
 
     def __init__(
         self,
@@ -66,88 +69,8 @@ class MissionError(MavlinkError):
         super().__init__(message)
         self.sysid = sysid
         self.mission_type = mission_type
-        if result is not None:
-            self.result = MissionResult(result) if result in MissionResult._value2member_map_ else None
-
-
-class GenericMissionError(MissionError):
-    """MAV_MISSION_ERROR: the vehicle refused without saying why (e.g. clear while in AUTO)."""
-
-
-class UnsupportedFrameError(MissionError):
-    """MAV_MISSION_UNSUPPORTED_FRAME: an item's coordinate frame is not supported."""
-
-
-class UnsupportedCommandError(MissionError):
-    """MAV_MISSION_UNSUPPORTED: an item's command, or the request (a partial write), is not supported."""
-
-
-class NoSpaceError(MissionError):
-    """MAV_MISSION_NO_SPACE: more items than the vehicle can store."""
-
-
-class InvalidItemError(MissionError):
-    """MAV_MISSION_INVALID: an item parameter is invalid."""
-
-
-class InvalidParamError(InvalidItemError):
-    """MAV_MISSION_INVALID_PARAMn: parameter ``param_index`` (1..7; 5 = x/lat, 6 = y/lon, 7 = z) invalid."""
-
-    param_index = 0
-
-
-class InvalidParam1Error(InvalidParamError):
-    """MAV_MISSION_INVALID_PARAM1."""
-
-    param_index = 1
-
-
-class InvalidParam2Error(InvalidParamError):
-    """MAV_MISSION_INVALID_PARAM2."""
-
-    param_index = 2
-
-
-class InvalidParam3Error(InvalidParamError):
-    """MAV_MISSION_INVALID_PARAM3."""
-
-    param_index = 3
-
-
-class InvalidParam4Error(InvalidParamError):
-    """MAV_MISSION_INVALID_PARAM4."""
-
-    param_index = 4
-
-
-class InvalidParam5XError(InvalidParamError):
-    """MAV_MISSION_INVALID_PARAM5_X (latitude / x)."""
-
-    param_index = 5
-
-
-class InvalidParam6YError(InvalidParamError):
-    """MAV_MISSION_INVALID_PARAM6_Y (longitude / y)."""
-
-    param_index = 6
-
-
-class InvalidParam7Error(InvalidParamError):
-    """MAV_MISSION_INVALID_PARAM7 (altitude / z)."""
-
-    param_index = 7
-
-
-class InvalidSequenceError(MissionError):
-    """MAV_MISSION_INVALID_SEQUENCE as a final answer (mid-upload it is recoverable and not raised)."""
-
-
-class DeniedError(MissionError):
-    """MAV_MISSION_DENIED: the vehicle does not accept this partner now (another GCS is uploading)."""
-
-
-class OperationCancelledError(MissionError):
-    """MAV_MISSION_OPERATION_CANCELLED: the transfer was cancelled (by the vehicle's timeout or by us)."""
+        known = result is not None and result in MissionResult._value2member_map_
+        self.result: MissionResult | None = MissionResult(result) if known else None
 
 
 class MissionTimeoutError(MissionError):
@@ -201,24 +124,6 @@ class CommandTimeoutError(MavlinkError):
     """No COMMAND_ACK after all retries."""
 
 
-RESULT_ERRORS: dict[MissionResult, type[MissionError]] = {
-    MissionResult.ERROR: GenericMissionError,
-    MissionResult.UNSUPPORTED_FRAME: UnsupportedFrameError,
-    MissionResult.UNSUPPORTED: UnsupportedCommandError,
-    MissionResult.NO_SPACE: NoSpaceError,
-    MissionResult.INVALID: InvalidItemError,
-    MissionResult.INVALID_PARAM1: InvalidParam1Error,
-    MissionResult.INVALID_PARAM2: InvalidParam2Error,
-    MissionResult.INVALID_PARAM3: InvalidParam3Error,
-    MissionResult.INVALID_PARAM4: InvalidParam4Error,
-    MissionResult.INVALID_PARAM5_X: InvalidParam5XError,
-    MissionResult.INVALID_PARAM6_Y: InvalidParam6YError,
-    MissionResult.INVALID_PARAM7: InvalidParam7Error,
-    MissionResult.INVALID_SEQUENCE: InvalidSequenceError,
-    MissionResult.DENIED: DeniedError,
-    MissionResult.OPERATION_CANCELLED: OperationCancelledError,
-}
-
 _MISSION_TYPE_NAMES = {0: "mission", 1: "fence", 2: "rally", 255: "all lists"}
 
 
@@ -234,9 +139,8 @@ def error_for_result(result: int, *, sysid: int, mission_type: int, operation: s
             f"{what}: unknown MAV_MISSION_RESULT {result}", sysid=sysid, mission_type=mission_type
         )
     member = MissionResult(result)
-    cls = RESULT_ERRORS.get(member, MissionError)
-    doc = (cls.__doc__ or "").split(":", 1)[-1].strip().rstrip(".")
-    return cls(f"{what}: {member.name} ({doc})", sysid=sysid, mission_type=mission_type, result=member)
+    text = f"{member.name} ({RESULT_TEXT[member]})" if member in RESULT_TEXT else member.name
+    return MissionError(f"{what}: {text}", sysid=sysid, mission_type=mission_type, result=member)
 
 
 def command_error(sysid: int, command: int, result: int, command_name: str) -> CommandError:

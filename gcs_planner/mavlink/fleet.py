@@ -21,16 +21,8 @@ from gcs_planner.errors import UserError
 from gcs_planner.lockstep import now_s
 from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
-from gcs_planner.mavlink.errors import (
-    BusyError,
-    DeniedError,
-    GenericMissionError,
-    InvalidSequenceError,
-    MavlinkError,
-    MissionTimeoutError,
-    OperationCancelledError,
-    VerifyError,
-)
+from gcs_planner.mavlink.enums import MissionResult
+from gcs_planner.mavlink.errors import BusyError, MavlinkError, MissionError, MissionTimeoutError, VerifyError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.preflight import arm_when_ready
@@ -38,18 +30,21 @@ from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
-__all__ = ["DEFAULT_WORKERS", "RETRYABLE", "VehicleResult", "start_fleet", "upload_fleet"]
+__all__ = ["DEFAULT_WORKERS", "VehicleResult", "retryable", "start_fleet", "upload_fleet"]
 
 DEFAULT_WORKERS = 8
-RETRYABLE: tuple[type[MavlinkError], ...] = (
-    MissionTimeoutError,
-    OperationCancelledError,
-    GenericMissionError,
-    DeniedError,
-    InvalidSequenceError,
-    BusyError,
-    VerifyError,
+RETRYABLE_FAILURES: tuple[type[MavlinkError], ...] = (MissionTimeoutError, BusyError, VerifyError)
+# refusals of the moment, not of the items: another attempt may be accepted
+RETRYABLE_RESULTS = frozenset(
+    MissionResult[name] for name in ("OPERATION_CANCELLED", "ERROR", "DENIED", "INVALID_SEQUENCE")
 )
+
+
+def retryable(exc: MavlinkError) -> bool:
+    """Whether another attempt may succeed: a timeout, a busy or mismatched transfer, or a refusal
+    of the moment (cancelled, generic, denied, out of sequence), not of the items themselves."""
+    refused_now = isinstance(exc, MissionError) and exc.result in RETRYABLE_RESULTS
+    return isinstance(exc, RETRYABLE_FAILURES) or refused_now
 
 
 @dataclass(frozen=True)
@@ -108,7 +103,7 @@ async def upload_fleet(
                 try:
                     up = await client.upload(missions[sysid], mission_type=mission_type, verify=verify)
                 except MavlinkError as exc:
-                    if isinstance(exc, RETRYABLE) and attempt <= retries:
+                    if retryable(exc) and attempt <= retries:
                         queue.put_nowait((sysid, attempt + 1))
                     else:
                         finish(VehicleResult(sysid, False, attempt, now_s() - t0, error=exc))

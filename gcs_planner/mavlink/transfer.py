@@ -84,7 +84,6 @@ from gcs_planner.mavlink.errors import (
     MissionInputError,
     MissionProtocolError,
     MissionTimeoutError,
-    OperationCancelledError,
     error_for_result,
     mission_type_name,
 )
@@ -250,12 +249,13 @@ class Transfer:
         return self.stats.count(self._timeout(now_s))
 
     def cancel(self, now_s: float) -> list[mavlink.MAVLink_message]:
-        """Abort on the user's request: tell the vehicle, end with OperationCancelledError."""
+        """Abort on the user's request: tell the vehicle, end with a MissionError (OPERATION_CANCELLED)."""
         if self.done:
             return []
         what = mission_type_name(self.mission_type)
         msg = f"{self.operation} of the {what} on vehicle {self.sysid} cancelled"
-        self._finish(OperationCancelledError(msg, sysid=self.sysid, mission_type=self.mission_type))
+        cancelled = MissionResult.OPERATION_CANCELLED
+        self._finish(MissionError(msg, sysid=self.sysid, mission_type=self.mission_type, result=cancelled))
         return self.stats.count([self._ack(MissionResult.OPERATION_CANCELLED)])
 
     # ----------------------------------------------------------------- for subclasses
