@@ -130,3 +130,24 @@ def test_a_signal_mid_coalition_run_brings_the_planes_home_as_fly_does(tmp_path)
     flight = read_flight(result.mcap_path)
     assert any(e["event"] == "safe_end" for _, e in flight.events)
     assert flight.metadata["gcs_planner"]["clock_rate"] == "1.0"  # lockstep: flight time on the log's clock
+
+
+def test_fly_coalition_exits_128_plus_the_signal_after_its_safe_end(tmp_path):
+    """The command line: SIGTERM once the routes have started -> the planes are sent home, the
+    report is printed, and the exit status says which signal ended the run (143), as fly's does."""
+    import subprocess
+    import sys
+
+    from child_process import child
+
+    scenario = SCENARIO.parent / "coalition_paper.toml"
+    argv = [sys.executable, "-m", "gcs_planner.cli", "fly-coalition", str(scenario), "--targets", "T1"]
+    argv += ["-o", str(tmp_path)]
+    with child(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as proc:
+        for line in proc.stderr:
+            if "routes started" in line:
+                proc.send_signal(signal.SIGTERM)
+                break
+        out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "interrupted by SIGTERM" in err and "end: sysid" in out, (out, err)

@@ -18,6 +18,7 @@ against its award. Exits 1 when one is more than --max-time-error late or early 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -166,6 +167,8 @@ def run(args: argparse.Namespace) -> int:
         )
     except TimeoutError as exc:  # the mock fleet's process did not start
         raise UserError(str(exc)) from None
+    if result.interrupted:
+        print(f"interrupted by {result.interrupted}: the report covers the run until then", file=sys.stderr)
     print(format_strike_report(result.rows))
     ok = sum(u["ok"] for u in result.uploads)
     print(f"{ok}/{len(result.uploads)} missions (award + idle) uploaded in flight; log {result.mcap_path}; "
@@ -178,6 +181,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"end: {end_summary(result.end_states)}")
     for f in result.failures:
         print(f"failure: {f}")
+    if result.interrupted:
+        return 128 + signal.Signals[result.interrupted].value
     return 0 if result.passed else 1
 
 
