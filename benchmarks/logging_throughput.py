@@ -26,6 +26,7 @@ import argparse
 import asyncio
 import os
 import struct
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -209,7 +210,7 @@ def main() -> None:
     t = time.perf_counter()
     frames = synthetic_flight(args.vehicles, args.seconds)
     print(f"generated {len(frames)} frames ({args.vehicles} vehicles x {args.seconds:.0f} s) in "
-          f"{time.perf_counter() - t:.1f} s")  # fmt: skip
+          f"{time.perf_counter() - t:.1f} s", file=sys.stderr)  # fmt: skip
     tlog_cpu = min(bench_tlog(frames, tmp / "flight.tlog") for _ in range(args.repeat))
     mcap_cpu = min(bench_mcap(frames, tmp / "flight.mcap", args.zstd_level) for _ in range(args.repeat))
     tlog_size = (tmp / "flight.tlog").stat().st_size
