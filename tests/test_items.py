@@ -24,6 +24,7 @@ from gcs_planner.mavlink.items import (
 from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.validate import MissionValidationError, validate_items
 from gcs_planner.plan import VehiclePlan
+from gcs_planner.planning import plan_scenario
 from gcs_planner.scenario import parse_scenario
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
@@ -265,3 +266,6 @@ def test_rally_points():
         it.mission_type == MissionType.RALLY for it in rally
     )
     assert rally_items([], ORIGIN) == []
+    plan = plan_scenario(sc)
+    own = scenario_rally_items(sc, plan.vehicles[1])  # one vehicle's upload: its own start only
+    assert len(own) == 1 and (own[0].x, own[0].y, own[0].z) == (rally[1].x, rally[1].y, rally[1].z)

@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         mf = plan_mission_file(vp, plan.origin, args.autopilot)
         if scenario is not None:  # each vehicle's fence is what its own plan keeps out of
             check_fence(scenario, vp)
-            mf.fence, mf.rally = scenario_fence_items(scenario, vp), scenario_rally_items(scenario)
+            mf.fence, mf.rally = scenario_fence_items(scenario, vp), scenario_rally_items(scenario, vp)
         stem = file_stem(vp.vehicle_id, "vehicle id")  # ../../x or /abs/x must not leave -o
         files.append((vp, mf, out_dir / f"{stem}{SUFFIX[args.format]}"))
     unique([path.name for _, _, path in files], "output file")

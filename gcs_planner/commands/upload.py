@@ -162,7 +162,7 @@ def read_input(
         if vp is not None:
             check_fence(source.scenario, vp)
         mf.fence = scenario_fence_items(source.scenario, vp)
-        mf.rally = scenario_rally_items(source.scenario)
+        mf.rally = scenario_rally_items(source.scenario, vp)
         mf.lists = mf.lists | {MissionType.FENCE, MissionType.RALLY}
     return mf
 

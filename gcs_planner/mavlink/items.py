@@ -294,6 +294,10 @@ def rally_items(points_enu: Iterable, origin: Origin) -> list[MissionItem]:
     return items
 
 
-def scenario_rally_items(scenario: Scenario) -> list[MissionItem]:
-    """One rally point over each vehicle's start, at the vehicle's minimum altitude."""
-    return rally_items([(v.start[0], v.start[1], v.min_alt_m) for v in scenario.vehicles], scenario.origin)
+def scenario_rally_items(scenario: Scenario, vp: VehiclePlan | None = None) -> list[MissionItem]:
+    """A rally point over a vehicle's start at its minimum altitude: for one vehicle's plan its own
+    only (an RTL goes to the nearest rally point: a neighbour's would send it into the neighbour's
+    return), else (or when the scenario does not name the plan's vehicle) one per scenario vehicle."""
+    own = [v for v in scenario.vehicles if vp is not None and v.id == vp.vehicle_id]
+    vehicles = own or scenario.vehicles
+    return rally_items([(v.start[0], v.start[1], v.min_alt_m) for v in vehicles], scenario.origin)
