@@ -7,8 +7,8 @@ Tools/autotest/models/plane.parm) cannot. Every length and speed of coalition_pa
 multiplied by SCALE, so that the times (recon, tenders, delays) stay about the same: 20-24 m/s
 cruise, up to 28.8 m/s on a leg flown 1.2x faster. Turn radii are multiplied by TURN_SCALE
 instead, 100-133 m (5.0-5.6 s of cruise): ArduPlane's L1 controller (NAVL1_PERIOD 15: an L1
-distance of ~80 m at 22 m/s) flew 60 m arcs 40 m wide ("Passed waypoint ... dist 40m", measured
-on SITL 4.8.0-dev, docs/coalition.md). Flight altitude ALT_M keeps the take-off short.
+distance of ~80 m at 22 m/s) flies 60 m arcs 40 m wide (docs/coalition.md, "L1 shaping"). Flight
+altitude ALT_M keeps the take-off short.
 """
 
 from __future__ import annotations

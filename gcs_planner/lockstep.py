@@ -9,7 +9,7 @@ receiver's socket before ``sendto`` returns, and work handed to a thread (``asyn
 the coalition planner) is done at once in the loop's own thread, so the clock stands still while
 it works, as a simulator waits for its controller. The cost: nothing outside this process can
 take part (real vehicles and a mock in another process run on the wall clock,
-``run(..., lockstep=False)``), planning no longer overlaps the fleet on a second core, and a run
+``run(..., lockstep=False)``), planning does not overlap the fleet on a second core, and a run
 is as fast as the CPU allows, not paced: a live viewer sees it at that rate.
 
 Code on a flight's path reads time from its loop (``now_s``), never ``time.monotonic()``; the

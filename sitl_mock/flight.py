@@ -23,7 +23,7 @@ Models (choices where the brief leaves them open):
   response, tracks the line from the previous waypoint as ArduPlane's L1 controller does
   (sitl_mock.l1, the mock's own copy of ``AP_L1_Control::update_waypoint``, the previous waypoint
   as the line's start, ``Plane::set_next_WP``), its bank lagging the demand and its turn at the
-  airframe's gain (``l1.SITL_PLANE``: ArduPlane SITL's plane, measured). The L1
+  airframe's gain (``l1.SITL_PLANE``: fitted to ArduPlane SITL's plane). The L1
   plane flies arcs wide and overshoots a turn onto a new line, as ArduPlane SITL does
   (docs/coalition.md). Loiter is a
   clockwise circle (ArduPilot's default direction): turn-rate feed-forward ``v / R`` plus a

@@ -5,7 +5,7 @@ The mock vehicle feeds every MISSION_* message to :meth:`MissionServer.handle` a
 objects, targeted at the partner). One server holds the three lists (mission, fence, rally).
 
 Choices where the autopilots differ or the spec is open:
-- Storage as the profile says (``AutopilotProfile.stores_as_received``, issue 14): ArduPilot's
+- Storage as the profile says (``AutopilotProfile.stores_as_received``): ArduPilot's
   mission and rally lists are truncated at MISSION_COUNT and written as items arrive, so a failed
   upload leaves a mix of old and new; its fence and every PX4 list are replaced only when an upload
   completes. ``non_atomic=True`` writes every list in place, ``non_atomic=False`` none.
@@ -84,7 +84,7 @@ class Failure(StrEnum):
     WRITE_REQUEST1_ERROR_ACK = "write_request1_error_ack"
     WRITE_FINAL_ACK_NO_RESPONSE = "write_final_ack_no_response"
     WRITE_FINAL_ACK_ERROR_ACK = "write_final_ack_error_ack"
-    # not QGC's: a vehicle stuck asking for item 0 whatever it gets (issue 14, the client's deadline)
+    # not QGC's: a vehicle stuck asking for item 0 whatever it gets (the client's overall deadline ends it)
     WRITE_REQUEST0_REPEAT = "write_request0_repeat"
 
 

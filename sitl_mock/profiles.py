@@ -38,9 +38,8 @@ __all__ = [
 class FlightRules:
     """How one autopilot build behaves in flight, beyond the mission protocol.
 
-    Each value is what real ArduCopter / ArduPlane 4.7.0-dev and PX4 main (2026-08) SITL did with
-    stock parameters (measured, issue 12) or what their source says (file and function named in
-    docs/real-autopilots.md):
+    Each value is what real ArduCopter / ArduPlane and PX4 SITL do with stock parameters or what
+    their source says (docs/real-autopilots.md names the run or the file and function):
 
     arm_ready_s: simulated seconds after boot before pre-arm checks pass (ArduCopter ~40-45 s: the
         EKF has no position estimate; PX4 ~5 s). Until then SYS_STATUS reports the PREARM_CHECK bit
@@ -48,7 +47,7 @@ class FlightRules:
     position_fix_s: simulated seconds after boot (at most arm_ready_s) before GLOBAL_POSITION_INT
         carries a position; until then lat = lon = alt = relative_alt = 0. ArduPilot sends the
         location whether ``get_location`` succeeded or not (GCS_Common.cpp
-        ``GCS_MAVLINK::send_global_position_int``); measured on ArduPlane SITL 4.8.0-dev: (0, 0),
+        ``GCS_MAVLINK::send_global_position_int``); ArduPlane SITL: (0, 0),
         then dead reckoning up to 0.0004 deg from it, until boot + 10 s, when its GPS is detected.
     auto_disarm_s: armed on the ground without taking off this long -> disarmed (ArduPilot
         DISARM_DELAY 10 s, PX4 COM_DISARM_PRFLT 10 s); not while a mission runs in AUTO.
@@ -78,8 +77,8 @@ class FlightRules:
         instead (ArduPlane has no such values: the mock says so).
     params: the parameters the mock serves over PARAM_SET / PARAM_REQUEST_READ.
     land_start_needs_autoland: a mission holding DO_LAND_START while parameter RTL_AUTOLAND is 0
-        is refused at arming, "PreArm: DO_LAND_START set and RTL_AUTOLAND disable" (measured on
-        ArduPlane SITL 4.8.0-dev, 2026-12-04).
+        is refused at arming, "PreArm: DO_LAND_START set and RTL_AUTOLAND disable" (ArduPlane SITL,
+        docs/real-autopilots.md).
     ramp_params: the names of the waypoint acceleration [m/s^2] and jerk [m/s^3] limits
         (ArduCopter AC_WPNav WP_ACC / WP_JERK, PX4 MPC_ACC_HOR / MPC_JERK_AUTO); the mock serves
         its airframe's acceleration and a jerk it never limits (it ramps linearly), which is
@@ -166,7 +165,7 @@ class AutopilotProfile:
     clear_denied_while_running: MISSION_CLEAR_ALL of the mission in AUTO -> ERROR (ArduPilot).
     flight: the in-flight behaviour per vehicle type (FlightRules).
 
-    A second uploader (issue 14; an upload session belongs to the sysid/compid of its MISSION_COUNT):
+    A second uploader (an upload session belongs to the sysid/compid of its MISSION_COUNT):
     second_uploader_result: the answer to a MISSION_COUNT from other ids during an upload. ArduPilot
         DENIED (MissionItemProtocol::handle_mission_count: ``msg.sysid != dest_sysid || msg.compid !=
         dest_compid`` -> MAV_MISSION_DENIED); PX4 ERROR, sent to the newcomer, the upload goes on

@@ -572,7 +572,7 @@ class MockVehicle:
     def _takeoff_mode(self) -> None:
         """TAKEOFF mode's climb: ArduPlane's ModeTakeoff::update ends it within 2 m of TKOFF_ALT
         or TKOFF_DIST from where it began, whichever comes first, and turns into its loiter
-        (docs/real-autopilots.md, ArduPlane table: measured on SITL 4.8.0-dev)."""
+        (docs/real-autopilots.md, ArduPlane table)."""
         name = self.flight.takeoff_param
         alt = self.params.get(name, DEFAULT_TAKEOFF_ALT_M) if name else DEFAULT_TAKEOFF_ALT_M
         self._nav.takeoff(alt - TAKEOFF_MODE_EARLY_M, run_m=self.params.get("TKOFF_DIST", math.inf))

@@ -3,8 +3,8 @@
 ``quirks_for(autopilot, mav_type)`` returns the entry for a vehicle from its HEARTBEAT fields
 (MAV_AUTOPILOT, MAV_TYPE), as Skybrush server's autopilot registry does; a command-line flag only
 decides for a vehicle that has not said what it is. The read-back model (what a vehicle returns of
-an uploaded item) is in readback.py. docs/real-autopilots.md has the table with the sources and
-what was measured on SITL.
+an uploaded item) is in readback.py. docs/real-autopilots.md has the table with each behaviour's
+source (the autopilot's code or a SITL run).
 """
 
 from __future__ import annotations
@@ -106,7 +106,7 @@ ARDUCOPTER = AutopilotQuirks(
     readback="ARDUCOPTER",
     stores_as_received=frozenset({0, 2}),
     ramp_params=("WP_ACC", "WP_JERK", 1.0),  # AC_WPNav (4.7+; WPNAV_ACCEL [cm/s^2] before)
-    start_latency_s=1.0,  # SITL 4.8.0-dev: with it four copters kept a 10 m/s plan within 2.1 s
+    start_latency_s=1.0,  # SITL copters move ~0.5-1 s after MISSION_START (docs/real-autopilots.md)
 )
 ARDUPLANE = AutopilotQuirks(
     name="ArduPlane",

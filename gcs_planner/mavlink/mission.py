@@ -25,7 +25,7 @@ Choices:
 - clear(): MISSION_CLEAR_ALL; ALL list by list where the vehicle does not take mission_type 255
   (ArduPilot: UNSUPPORTED); when the vehicle answers ERROR or DENIED (ArduPilot in AUTO cannot
   clear) that is raised, and only ``force=True`` uploads an empty list instead (ArduPilot accepts it).
-- A failed upload's error ends with what the vehicle holds now (issue 14): unchanged when it refused
+- A failed upload's error ends with what the vehicle holds now: unchanged when it refused
   the MISSION_COUNT, its previous list on an autopilot that switches lists on completion (PX4),
   otherwise what a read-back shows (ArduPilot writes items as they arrive).
 - set_current(): MAV_CMD_DO_SET_MISSION_CURRENT first; if the vehicle does not support it (or never
@@ -332,7 +332,7 @@ class MissionClient:
         back: list[MissionItem] | None = None,
         problem: str | None = None,
     ) -> MissionError:
-        """``error`` with what the vehicle holds now appended (issue 14): never a silent mix."""
+        """``error`` with what the vehicle holds now appended: never a silent mix."""
         if isinstance(error, MissionInputError):
             return error
         q = self.quirks

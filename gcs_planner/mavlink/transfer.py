@@ -35,7 +35,7 @@ Choices (where the spec leaves room):
   a push goes unanswered too, up to Timing.push_rounds (3) follow, each at twice the previous
   timeout and one item wider, which also covers a lost push. Then the client waits for the vehicle,
   so a silent vehicle gets a few frames, not the mission. Without push-ahead every lost frame waits
-  for the vehicle's re-request: 1 s on ArduPilot, which made a 10 % loss link 6x slower.
+  for the vehicle's re-request: 1 s on ArduPilot (docs/mavlink-protocol.md).
   ``Timing(push_ahead=False)`` turns it off.
 - MISSION_ACK(INVALID_SEQUENCE) mid-upload is ignored: ArduPilot sends it for an out-of-order item
   and then re-requests the expected one (QGC PR #6718). Success only on MISSION_ACK(ACCEPTED) after
@@ -44,7 +44,7 @@ Choices (where the spec leaves room):
   (the vehicle cannot hold them: it may hold a mix of old and new items).
 - After the final-item retries the outcome is a timeout with ``ack_lost=True``: the vehicle may hold
   the new mission (ArduPilot never repeats a final ACK). mission.py then verifies by download.
-- Overall deadline (issue 14): an upload ends after DEADLINE_BASE_S + DEADLINE_PER_ITEM_S x items
+- Overall deadline: an upload ends after DEADLINE_BASE_S + DEADLINE_PER_ITEM_S x items
   (20 s + 1 s per item: 1000 items on a 0.5 s round-trip radio with two in flight take ~250 s) however
   busy the vehicle keeps it, e.g. one that re-requests item 0 for ever (each request resets the
   inactivity timer). Giving up sends MISSION_ACK(OPERATION_CANCELLED).

@@ -59,7 +59,7 @@ class PeaksTerrain:
     """Sum of Gaussian peaks (paper eq. 1); each array has one entry per peak.
 
     The exponential is evaluated in float32 (relative error < 1e-7: under 1 mm on a 10 km peak):
-    it is the fitness's hot spot and float32 exp is ~3x faster; everything else is float64.
+    it is the fitness's hot spot (docs/acmpso.md); everything else is float64.
     """
 
     h: np.ndarray

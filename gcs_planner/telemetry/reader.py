@@ -358,7 +358,7 @@ _MESSAGE_HEAD = struct.Struct("<HIQ")  # channel id, sequence, log time (publish
 def _chunk_messages(chunk: Chunk) -> list[tuple[int, int, bytes]] | None:
     """(channel id, log time, data) of a zstd/uncompressed chunk holding only messages, else None.
 
-    The fast path for our own logs: ~3x faster than building an mcap Message object per record.
+    The fast path for our own logs: no mcap Message object is built per record.
     """
     if chunk.compression == "zstd":
         data = zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)

@@ -23,14 +23,14 @@ the excluded tasks are re-covered (``aco.repair``: a free candidate or a swap wi
 member, schedule-keeping moves first, then the best J), instead of a new colony run. Members
 that keep their task and required time keep their memoised paths (``paths.FormationPaths``).
 The colony re-runs only when no move covers a task; the polynomial and global baselines re-run
-their optimiser as before (measured effect: docs/coalition.md, Decisions).
+their optimiser (effect: docs/coalition.md, Decisions).
 Look-alike exclusion (choice, for compute): candidates that start within the excluded member's turn
 radius and 30 deg of its heading (``lookalikes``; idle UAVs share loiter stations, so there are
 often several) are excluded from the same task with it (logged as ``alike``). Their timed paths to
 the same entry pose at the same time cross the same airspace, and finding out that each of them
-fails too cost a whole attempt (~10-15 ms) apiece (the risk: a look-alike that would have cleared
+fails too costs a whole attempt apiece (the risk: a look-alike that would have cleared
 is lost, and if that leaves a task uncovered the formation fails and the leader re-tenders, as for
-any exclusion; measured effect: docs/coalition.md, Decisions).
+any exclusion; effect: docs/coalition.md, Decisions).
 
 ``SimResult.events`` is the timeline (tenders, bids, awards with time, vehicle, strike point,
 arrival time and attack angle, failures, strikes, assessments, re-plans); ``SimResult.award_legs``
