@@ -99,6 +99,7 @@ FIGURES: tuple[Figure, ...] = (
         quick=("python benchmarks/upload_latency.py --profile px4 --quick",),
         minutes=8,
         needs=("mavsdk",),
+        markdown=False,
     ),
     Figure(
         "upload_cpu",
@@ -151,6 +152,7 @@ FIGURES: tuple[Figure, ...] = (
         ("python benchmarks/input_fuzz.py --n 4000 --seed 1",),
         quick=("python benchmarks/input_fuzz.py --n 100 --seed 1",),
         minutes=5,
+        markdown=False,
     ),
     Figure(
         "priority_swarm_compare",
@@ -193,6 +195,7 @@ FIGURES: tuple[Figure, ...] = (
         ("python benchmarks/acmpso_table3.py --runs 100 --out {out}/acmpso_table3.csv",),
         quick=("python benchmarks/acmpso_table3.py --runs 3 --variants literal,tuned --out {out}/runs.csv",),
         minutes=20,
+        markdown=False,
     ),
     Figure(
         "acmpso_fly",

@@ -112,13 +112,16 @@ def main() -> None:
     p.add_argument("--base-port", type=int, default=24550)
     p.add_argument("--profile-dir", type=Path, help="run each upload under cProfile, writing here")
     args = p.parse_args()
-    print(f"{'N':>5} {'wall_s':>8} {'s/vehicle':>10} {'items/s':>8} {'accepted':>8} {'rc':>3}", flush=True)
+    print(
+        "| N | wall s | s / vehicle | items/s | accepted | exit |\n|---:|---:|---:|---:|---:|---:|",
+        flush=True,
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for count in args.counts:
             r = run_one(count, args.base_port, args.waypoints, Path(tmp), args.profile_dir)
             print(
-                f"{r['n']:>5} {r['wall_s']:>8.1f} {r['wall_s'] / r['n']:>10.3f}"
-                f" {r['items'] / r['wall_s']:>8.0f} {r['accepted']:>8} {r['rc']:>3}",
+                f"| {r['n']} | {r['wall_s']:.1f} | {r['wall_s'] / r['n']:.3f}"
+                f" | {r['items'] / r['wall_s']:.0f} | {r['accepted']} | {r['rc']} |",
                 flush=True,
             )
 

@@ -75,10 +75,11 @@ def main() -> None:
     stock_s = best_cpu_s(stock, rows, args.channels, args.repeat)
     machine = platform.processor() or platform.machine()
     load = os.getloadavg()[0]
-    print(f"machine: {machine}, {os.cpu_count()} cores, load {load:.1f}, {time.strftime('%Y-%m-%d')}")
-    print(f"ChunkedMcapWriter (message indexes): {args.messages / ours_s:,.0f} msg/s")
-    print(f"mcap.writer.Writer (stock):          {args.messages / stock_s:,.0f} msg/s")
-    print(f"ratio ours / stock: {stock_s / ours_s:.2f}x")
+    print(f"machine: {machine}, {os.cpu_count()} cores, load {load:.1f}, {time.strftime('%Y-%m-%d')}\n")
+    print("| writer | msg/s (CPU) |\n|---|---:|")
+    print(f"| ChunkedMcapWriter (message indexes) | {args.messages / ours_s:,.0f} |")
+    print(f"| mcap.writer.Writer (stock) | {args.messages / stock_s:,.0f} |")
+    print(f"| ratio ours / stock | {stock_s / ours_s:.2f}x |")
 
 
 if __name__ == "__main__":

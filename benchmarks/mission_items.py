@@ -44,9 +44,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     rng = np.random.default_rng(1)
-    print(
-        f"{'waypoints':>9} {'items':>6} {'plan_to_items_ms':>16} {'wpl_rw_ms':>10} {'plan_rw_ms':>11}  exact"
-    )
+    print("| waypoints | items | plan_to_items ms | WPL write+read ms | .plan write+read ms | exact |")
+    print("|---:|---:|---:|---:|---:|---|")
     for n in args.sizes:
         vp = random_plan(n, rng)
         t_items, items = best_ms(lambda vp=vp: plan_to_items(vp, ORIGIN, "ardupilot"), args.repeat)
@@ -54,7 +53,7 @@ def main() -> None:
         mf = MissionFile.from_items(items, "ardupilot")
         t_plan, mf_back = best_ms(lambda mf=mf: loads_plan(dumps_plan(mf)), args.repeat)
         exact = back == items and mf_back.items("ardupilot") == items
-        print(f"{n:>9} {len(items):>6} {t_items:>16.1f} {t_wpl:>10.1f} {t_plan:>11.1f}  {exact}")
+        print(f"| {n} | {len(items)} | {t_items:.1f} | {t_wpl:.1f} | {t_plan:.1f} | {exact} |")
 
 
 if __name__ == "__main__":

@@ -3,8 +3,10 @@
 The fleet runs in a child process pinned to one CPU core (speed-up 1, half multirotors, half fixed
 wings, all armed and flying after a MAVLink takeoff command, so physics, navigation and telemetry
 all run). The parent is the GCS: one UDP socket that greets every vehicle, then counts
-GLOBAL_POSITION_INT frames per system id from the raw MAVLink 2 header (no full decode, so the
-GCS side is not the bottleneck). Achieved rate per vehicle = frames / window. On a shared machine
+GLOBAL_POSITION_INT frames per system id from the raw MAVLink 2 headers of every frame in a
+datagram (no full decode, so the GCS side is not the bottleneck). The mock, as stock ArduPilot,
+streams only on request: the GCS asks every vehicle for all its streams (REQUEST_DATA_STREAM,
+MAVProxy's way) before it arms them. Achieved rate per vehicle = frames / window. On a shared machine
 the fleet may get less than its core; the last column (vehicles x achieved/target rate / CPU share
 used) estimates what one whole core carries, independent of that.
 
@@ -46,8 +48,10 @@ def _child(count: int, rate_hz: float, conn, core: int | None) -> None:
 def _greet_and_fly(sock: socket.socket, addresses: list[tuple[str, int]]) -> None:
     mav = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
     hb = mav.heartbeat_encode(mavlink.MAV_TYPE_GCS, mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-    for addr in addresses:
+    for sysid, addr in enumerate(addresses, 1):
         sock.sendto(hb.pack(mav), addr)
+        streams = mav.request_data_stream_encode(sysid, 1, mavlink.MAV_DATA_STREAM_ALL, 10, 1)
+        sock.sendto(streams.pack(mav), addr)
     time.sleep(0.3)
     for sysid, addr in enumerate(addresses, 1):
         arm = mav.command_long_encode(sysid, 1, mavlink.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
@@ -59,7 +63,7 @@ def _greet_and_fly(sock: socket.socket, addresses: list[tuple[str, int]]) -> Non
 
 
 def _count(sock: socket.socket, seconds: float, n: int) -> tuple[np.ndarray, int]:
-    """GLOBAL_POSITION_INT frames per sysid (index sysid-1) and all datagrams, over ``seconds``."""
+    """GLOBAL_POSITION_INT frames per sysid (index sysid-1) and all frames, over ``seconds``."""
     gpi = np.zeros(n + 1, dtype=int)
     total = 0
     deadline = time.monotonic() + seconds
@@ -69,10 +73,20 @@ def _count(sock: socket.socket, seconds: float, n: int) -> tuple[np.ndarray, int
             data = sock.recv(512)
         except TimeoutError:
             continue
-        total += 1
-        if data[0] == 0xFD and int.from_bytes(data[7:10], "little") == GPI_ID and data[5] <= n:
-            gpi[data[5]] += 1
+        for sysid, msg_id in _headers(data):
+            total += 1
+            if msg_id == GPI_ID and sysid <= n:
+                gpi[sysid] += 1
     return gpi[1:], total
+
+
+def _headers(data: bytes) -> list[tuple[int, int]]:
+    """(sysid, message id) of every MAVLink 2 frame in a datagram (a vehicle batches a tick's frames)."""
+    out, i = [], 0
+    while i + 12 <= len(data) and data[i] == 0xFD:
+        out.append((data[i + 5], int.from_bytes(data[i + 7 : i + 10], "little")))
+        i += 12 + data[i + 1] + (13 if data[i + 2] & 1 else 0)
+    return out
 
 
 def measure(count: int, rate_hz: float, window_s: float, warmup_s: float, core: int | None) -> dict:
@@ -114,13 +128,14 @@ def main() -> None:
     ap.add_argument("--core", type=int, default=0, help="CPU core to pin the fleet to (-1: no pinning)")
     args = ap.parse_args()
     core = None if args.core < 0 else args.core
-    print(f"{'vehicles':>8} {'target Hz':>9} {'min Hz':>7} {'median Hz':>9} {'msgs/s':>8} {'mock CPU %':>10} "
-          f"{'ticks/s':>8} {'lag events':>10} {'est. vehicles/core':>18}")  # fmt: skip
+    print("| vehicles | target Hz | min Hz | median Hz | msgs/s | mock CPU % | ticks/s | lag events"
+          " | est. vehicles/core |")  # fmt: skip
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for count in args.counts:
         r = measure(count, args.rate, args.window, args.warmup, core)
-        print(f"{r['vehicles']:>8} {args.rate:>9.1f} {r['min_hz']:>7.2f} {r['median_hz']:>9.2f} "
-              f"{r['msgs_per_s']:>8.0f} {r['cpu_pct']:>10.0f} {r['tick_hz']:>8.1f} "
-              f"{r['lag']:>10} {r['per_core']:>18.0f}")  # fmt: skip
+        print(f"| {r['vehicles']} | {args.rate:.1f} | {r['min_hz']:.2f} | {r['median_hz']:.2f} "
+              f"| {r['msgs_per_s']:.0f} | {r['cpu_pct']:.0f} | {r['tick_hz']:.1f} "
+              f"| {r['lag']} | {r['per_core']:.0f} |")  # fmt: skip
 
 
 if __name__ == "__main__":
