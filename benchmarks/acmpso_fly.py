@@ -17,11 +17,13 @@ import time
 from pathlib import Path
 
 import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.fleet import start_fleet, upload_fleet
 from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.planning import config_of, plan_scenario
 from gcs_planner.planning.threat_env import ThreatEnv, resample_path, validate_path
 from gcs_planner.scenario import load_scenario
@@ -54,6 +56,8 @@ async def fly(args: argparse.Namespace) -> int:
     async with MockFleet(vehicles=vehicles, home=plan.origin, **fleet_kw) as fleet:
         link = await MavlinkLink.open(*(f"udpout:{h}:{p}" for h, p in fleet.addresses))
         await link.wait_for(lambda m: m.get_type() == "HEARTBEAT" and m.get_srcSystem() == vp.sysid, 5)
+        # the mock, as stock ArduPilot, streams positions only when asked
+        await request_streams(link, [vp.sysid], {mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: args.rate_hz})
         positions: list[tuple[float, float, float]] = []
 
         def record(msg, raw, t_s) -> None:  # telemetry at the mock's rate in simulated time
