@@ -415,12 +415,13 @@ class MockFleet:
             vel = kin.ground_vel()[idx].tolist()
             psi, roll, pitch, rate = (a[idx].tolist() for a in (kin.psi, kin.roll, kin.pitch, kin.turn_rate))
             lat, lon, alt = lat.tolist(), lon.tolist(), alt.tolist()
+            period_s = positions.period_s * self.speedup  # of vehicle time
             for k, i in enumerate(idx):
                 v = vehicles[i]
                 t_ms = v.time_boot_ms
                 fix = (lat[k], lon[k], alt[k], rel[k], vel[k]) if v.has_position else _NO_FIX
                 v.send(telemetry.global_position_int(t_ms, *fix, psi[k]))
-                if v.wants(_ATTITUDE) and v.due(_ATTITUDE, now):
+                if v.wants(_ATTITUDE) and v.due(_ATTITUDE, period_s):
                     v.send(telemetry.attitude(t_ms, roll[k], pitch[k], psi[k], rate[k]))
         for i in status.due(now).tolist():
             if vehicles[i].link.peers:

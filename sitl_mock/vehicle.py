@@ -181,8 +181,8 @@ class MockVehicle:
         self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
         self._init_params()
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
-        self.intervals: dict[int, float] = {}  # message id -> requested interval [s, the stream clock]
-        self._streamed_at: dict[int, float] = {}  # message id -> when it was last streamed
+        self.intervals: dict[int, float] = {}  # message id -> requested interval [s of vehicle time]
+        self._offered: dict[int, int] = {}  # message id -> times the fleet's stream offered it
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission
         self._armed_at_s = math.inf  # sim time of arming while on the ground
         self._modes = self.profile.modes[vehicle_type]
@@ -368,17 +368,19 @@ class MockVehicle:
         """The GCS asked for this message's stream (always true where everything streams unasked)."""
         return self.streams is None or message_id in self.streams
 
-    def due(self, message_id: int, now_s: float) -> bool:
-        """Whether a message the fleet offers at its own rate is due at the interval the GCS asked
-        for it (ArduPilot GCS_MAVLINK::set_message_interval: each message on its own interval), on
-        the clock the fleet streams by (vehicle time in lockstep, the wall clock when paced); a
-        message without one goes at the fleet's rate. Marks it sent when due."""
+    def due(self, message_id: int, stream_period_s: float) -> bool:
+        """Whether a message the fleet offers with a stream of period ``stream_period_s`` [s of
+        vehicle time] goes this time: every k-th offer, k the interval the GCS asked for it in
+        stream periods (rounded, at least 1), as ArduPilot sends each message on its own interval
+        quantised to its scheduler (GCS_MAVLINK::set_message_interval); without one, every offer.
+        Counting offers, not clock readings, keeps the rate whatever the ticks' jitter."""
         interval = self.intervals.get(message_id)
-        last = self._streamed_at.get(message_id)
-        if interval is not None and last is not None and now_s - last < interval - 1e-6:
-            return False
-        self._streamed_at[message_id] = now_s
-        return True
+        if interval is None:
+            return True
+        every = max(1, round(interval / stream_period_s))
+        offered = self._offered.get(message_id, 0)
+        self._offered[message_id] = offered + 1
+        return offered % every == 0
 
     # --- telemetry ---------------------------------------------------------------------------
     def send_status(self) -> None:
