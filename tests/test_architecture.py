@@ -1,4 +1,4 @@
-"""The layering the README draws holds: imports go one way, and no function grows past 80 lines.
+"""The layering docs/architecture.md draws holds: imports go one way, and no function grows past 80 lines.
 
 Every import in gcs_planner/ and sitl_mock/ is read from the source (function-level ones too), so
 a lazy import cannot hide a cycle."""

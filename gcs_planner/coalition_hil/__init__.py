@@ -49,8 +49,8 @@ Flow:
    "idle" mission (the simulated track up to the next award or the window end) is uploaded, so the
    urgent award missions stay short (19-45 items). Waypoints are placed every ``TURN_STEP_DEG`` of
    turn and at least every ``waypoint_dt_s``: fewer items on straights, so uploads land sooner.
-   ``HilOptions.replay_legs`` uploads the simulation's own legs instead (the earlier behaviour,
-   kept for comparison; the test shows it missing where the live leg hits).
+   ``HilOptions.replay_legs`` uploads the simulation's own legs instead, for comparison (the test
+   shows it missing where the live leg hits).
 4. A ScheduleKeeper holds every vehicle to its current mission's timing (it is replaced at each
    upload), as in ``gcs-planner fly``; it gets the path every ``KEEPER_SAMPLE_S`` so that its
    60-sample look-ahead stays shorter than a loiter lap.

@@ -115,8 +115,7 @@ def absent_lists(mf: MissionFile, clear_absent: bool) -> list[str]:
 
 class UploadSource:
     """FILE and --scenario, each read once. A plan.json's vehicles are looked up by fleet id, so
-    preparing the uploads of N vehicles is linear in N (reading plan.json again for each vehicle
-    made it quadratic: 1,000 vehicles sent nothing for over 5 minutes, issue 36)."""
+    preparing the uploads of N vehicles is linear in N (docs/results/fleet_upload.md)."""
 
     def __init__(self, args: argparse.Namespace) -> None:
         self.args = args
