@@ -111,7 +111,7 @@ def plan_peer(scenario, seed: int, peer: str, budget: int, seeded: bool):
         evaluations += model.evaluations
         xs[prob.index] = np.clip(x, prob.lower, prob.upper)
         slices, pos = timed_samples(prob, xs[prob.index], cfg)
-        traffic.add(prob.index, slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
+        traffic.add(slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
     metrics = {"evaluations": int(evaluations)}
     order = list(range(len(problems)))
     return repair_and_check(scenario, problems, obstacles, cfg, rng, xs, order, peer, metrics), evaluations

@@ -144,7 +144,7 @@ def test_cost_model_prices_obstacles_and_traffic():
     # the same vehicle already flying the detour blocks the detour (separation on the timed grid)
     traffic = Traffic(cfg.dt_s)
     slices, pos = timed_samples(prob, detour, cfg)
-    traffic.add(99, slices, pos, 8.0, prob.vehicle.speed_mps)
+    traffic.add(slices, pos, 8.0, prob.vehicle.speed_mps)
     assert CostModel(prob, obstacles, traffic, cfg)(detour[None, :])[0] > HARD_PENALTY
 
 

@@ -135,7 +135,7 @@ def plan_baseline(
         evaluations += model.evaluations
         xs[prob.index] = x
         slices, pos = timed_samples(prob, x, cfg)
-        traffic.add(prob.index, slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
+        traffic.add(slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
         if progress:
             progress((n + 1) / len(problems), prob.vehicle.id)
     cfg_check = msgspec.structs.replace(cfg, repairs=0)

@@ -34,9 +34,11 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
   depth. F3 altitude (eqs. 7-8, the digest's reading): mean |z - band middle| / half band, HARD
   outside. F4 (eqs. 9-11) = a1 sum(turn angles) + a2 sum(|climb-angle changes|) of the polyline,
   each divided by pi (W - 2); climb angle above ``max_climb_deg`` = HARD + excess. F5 (eqs. 12-13):
-  on the shared 0.5 s time grid a 4-D cKDTree (x, y, z, big * slice) finds higher-priority samples
-  near each particle sample; the closest approach of the two linear motions over the slice must
-  exceed max(separation_i, separation_j) + ``separation_margin_m``, else HARD + shortfall. HARD =
+  on the shared 0.5 s time grid a spatial hash per slice (planning/traffic.py) finds
+  higher-priority samples near each particle sample; the closest approach of the two linear
+  motions over the slice, under any relative schedule error up to ``timing_error_s`` (the time
+  errors flown, docs/timing-separation.md), must exceed max(separation_i, separation_j) +
+  ``separation_margin_m``, else HARD + shortfall. HARD =
   1e4 replaces the paper's infinity (violations still rank by size).
 - Weights b1..b4 = 1, 1, 0.1, 0.2 and a1 = a2 = 0.5 (the paper gives none).
 - PSO: the shared engine (gcs_planner.planning.pso), linear inertia ``w_max`` 0.9 -> ``w_min``
@@ -58,6 +60,7 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
 from __future__ import annotations
 
 import contextvars
+import functools
 import logging
 import math
 import time
@@ -78,13 +81,13 @@ from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.pso import PSOConfig, minimize
 from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
+from gcs_planner.planning.traffic import TIMING_ERROR_S, Traffic
 from gcs_planner.scenario import Scenario, Vehicle
 from gcs_planner.validation import MAX_DURATION_S
 
 __all__ = ["NAME", "Config", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
 
 log = logging.getLogger(__name__)
-SLICE_SCALE = 1e7  # 4-D tree: samples of different time slices are this far apart
 
 
 NAME = "priority_swarm"
@@ -101,6 +104,7 @@ class Config(PlannerConfig, tag=NAME):
     random_fraction: Fraction = 0.25
     dt_s: Annotated[float, Meta(gt=0.0, le=0.5)] = 0.5
     separation_margin_m: Distance = 2.0
+    timing_error_s: Annotated[float, Meta(ge=0.0, le=60.0)] = TIMING_ERROR_S  # docs/timing-separation.md
     obstacle_margin_m: Distance = 1.5
     max_climb_deg: Annotated[float, Meta(gt=0.0, le=90.0)] = 20.0
     b1: NonNegative = 1.0
@@ -232,82 +236,33 @@ def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
     return np.concatenate([xy.reshape(p, k, 2), z[..., None]], axis=2)
 
 
-class Traffic:
-    """Timed samples of already-planned UAVs on the shared time grid, in a 4-D cKDTree."""
+@dataclass(frozen=True)
+class _Raster:
+    """Cells (``cell_m`` square, from ``lo``) that lie within ``reach`` of a cylinder axis: a point
+    outside them has no axis in reach, so the nearest-axis query can skip it."""
 
-    def __init__(self, dt_s: float) -> None:
-        self.dt_s = dt_s
-        self._pos: list[np.ndarray] = []
-        self._slice: list[np.ndarray] = []
-        self._sep: list[np.ndarray] = []
-        self.owner: dict[int, int] = {}  # vehicle index -> block number
-        self._tree: cKDTree | None = None
-        self.v_max = 0.0
+    lo: np.ndarray
+    cell_m: float
+    mask: np.ndarray  # (nx, ny) bool
 
-    def add(
-        self, vehicle_index: int, slices: np.ndarray, pos: np.ndarray, sep_m: float, speed: float
-    ) -> None:
-        """Add one UAV's samples at grid slices (K,) -> positions (K, 3)."""
-        self.owner[vehicle_index] = len(self._pos)
-        self._pos.append(np.asarray(pos, dtype=float))
-        self._slice.append(np.asarray(slices, dtype=int))
-        self._sep.append(np.full(len(slices), sep_m))
-        self.v_max = max(self.v_max, speed)
-        self._tree = None
+    def covers(self, xy: np.ndarray) -> np.ndarray:
+        c = np.floor((xy - self.lo) / self.cell_m).astype(np.int64)
+        inside = (c >= 0).all(axis=1) & (c[:, 0] < self.mask.shape[0]) & (c[:, 1] < self.mask.shape[1])
+        out = np.zeros(len(xy), dtype=bool)
+        out[inside] = self.mask[c[inside, 0], c[inside, 1]]
+        return out
 
-    def _build(self) -> None:
-        pos = np.concatenate(self._pos)
-        sl = np.concatenate(self._slice)
-        self.pos, self.slice, self.sep = pos, sl, np.concatenate(self._sep)
-        # index of the same vehicle's sample at the next slice (-1 at its last sample)
-        nxt = np.arange(1, len(pos) + 1)
-        ends = np.cumsum([len(p) for p in self._pos]) - 1
-        nxt[ends] = -1
-        self.next = nxt
-        self._tree = cKDTree(np.column_stack([pos, sl * SLICE_SCALE]))
 
-    def violations(
-        self, slices: np.ndarray, pos: np.ndarray, valid: np.ndarray, sep_m: float, margin_m: float
-    ):
-        """Separation shortfall [m] summed per particle and the number of violating samples.
-
-        slices (K,), pos (P, K, 3), valid (P, K): the particle samples on the grid.
-        """
-        p, k, _ = pos.shape
-        if not self._pos:
-            return np.zeros(p), np.zeros(p)
-        if self._tree is None:
-            self._build()
-        sep_max = max(float(self.sep.max()), sep_m) + margin_m
-        radius = sep_max + 2.0 * max(self.v_max, 1e-6) * self.dt_s
-        q = np.concatenate([pos, np.broadcast_to(slices * SLICE_SCALE, (p, k))[..., None]], axis=2)
-        idx = np.flatnonzero(valid.ravel())
-        if not len(idx):
-            return np.zeros(p), np.zeros(p)
-        n_nb = min(4, len(self.pos))
-        dist, nb = self._tree.query(q.reshape(-1, 4)[idx], k=n_nb, distance_upper_bound=radius)
-        dist, nb = dist.reshape(len(idx), n_nb), nb.reshape(len(idx), n_nb)
-        hit = np.isfinite(dist)
-        if not hit.any():
-            return np.zeros(p), np.zeros(p)
-        row, col = np.nonzero(hit)
-        j = nb[row, col]
-        flat = idx[row]
-        part, ks = np.divmod(flat, k)
-        a0 = pos[part, ks]
-        b0 = self.pos[j]
-        has_next = (ks + 1 < k) & valid[part, np.minimum(ks + 1, k - 1)] & (self.next[j] >= 0)
-        a1 = np.where(has_next[:, None], pos[part, np.minimum(ks + 1, k - 1)], a0)
-        b1 = np.where(has_next[:, None], self.pos[np.where(self.next[j] >= 0, self.next[j], j)], b0)
-        d0 = b0 - a0
-        dv = (b1 - a1) - d0
-        vv = np.sum(dv * dv, axis=1)
-        tau = np.clip(-np.sum(d0 * dv, axis=1) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
-        dmin = np.linalg.norm(d0 + tau[:, None] * dv, axis=1)
-        short = np.maximum(0.0, np.maximum(self.sep[j], sep_m) + margin_m - dmin)
-        depth = np.bincount(part, weights=short, minlength=p)
-        count = np.bincount(part, weights=(short > 0).astype(float), minlength=p)
-        return depth, count
+@functools.lru_cache(maxsize=16)
+def _near_axes(cx: bytes, cy: bytes, reach: float) -> _Raster:
+    """The raster of the cylinder axes (x, y as bytes: a cache key) within ``reach``."""
+    axes = np.column_stack([np.frombuffer(cx), np.frombuffer(cy)])
+    cell = max(reach / 4.0, 1.0)
+    lo = axes.min(axis=0) - reach - cell
+    n = np.ceil((axes.max(axis=0) + reach + cell - lo) / cell).astype(int) + 1
+    centre = lo + cell * (np.stack(np.meshgrid(np.arange(n[0]), np.arange(n[1]), indexing="ij"), -1) + 0.5)
+    d = cKDTree(axes).query(centre.reshape(-1, 2), distance_upper_bound=reach + cell)[0]
+    return _Raster(lo, cell, np.isfinite(d).reshape(n[0], n[1]))  # a cell's corner is cell / sqrt 2 off
 
 
 # Every cost evaluation of one plan() call (swarms, inherited-path checks, repairs), for a budget
@@ -325,18 +280,22 @@ class CostModel:
         self._reach = (
             float(np.max(obstacles.radius_m + obstacles.buffer_m, initial=0.0)) + cfg.obstacle_margin_m
         )
+        if self._obs_tree is not None:
+            self._near = _near_axes(obstacles.cx.tobytes(), obstacles.cy.tobytes(), self._reach)
 
     def _cylinder_terms(self, mid: np.ndarray, ds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Soft buffer integral and hard term per particle; only the <= 4 nearest cylinders in reach count."""
         p, k, _ = mid.shape
         flat = mid.reshape(-1, 3)
         n_nb = min(4, len(self.obs.cx))
-        dxy, j = self._obs_tree.query(flat[:, :2], k=n_nb, distance_upper_bound=self._reach)
-        dxy, j = dxy.reshape(len(flat), n_nb), j.reshape(len(flat), n_nb)
+        close = np.flatnonzero(self._near.covers(flat[:, :2]))  # the tree is asked about these only
+        dxy, j = self._obs_tree.query(flat[close, :2], k=n_nb, distance_upper_bound=self._reach)
+        dxy, j = dxy.reshape(len(close), n_nb), j.reshape(len(close), n_nb)
         row, col = np.nonzero(np.isfinite(dxy))
         if not len(row):
             return np.zeros(p), np.zeros(p)
         jj, d = j[row, col], dxy[row, col]
+        row = close[row]
         z = flat[row, 2]
         band = (z >= self.obs.z_min_m[jj]) & (z <= self.obs.z_max_m[jj])
         r = self.obs.radius_m[jj] + self.cfg.obstacle_margin_m
@@ -400,7 +359,7 @@ class CostModel:
         hard = hard + (climb_excess > 0).sum(axis=1) * HARD_PENALTY + climb_excess.sum(axis=1)
         # F5 separation from higher-priority UAVs on the shared time grid
         depth, count = self.traffic.violations(
-            slices, pos[:, 1:-1], valid, veh.separation_m, cfg.separation_margin_m
+            slices, pos[:, 1:-1], valid, veh.separation_m, cfg.separation_margin_m, cfg.timing_error_s
         )
         f5 = count * HARD_PENALTY + depth
         total = cfg.b1 * f1 + cfg.b2 * soft + cfg.b3 * f3 + cfg.b4 * f4 + hard + f5
@@ -564,9 +523,16 @@ def _column(a: np.ndarray, b: np.ndarray, t_start: float, speed_mps: float, dt_s
     return k, a + np.clip(frac, 0, 1)[:, None] * (b - a)
 
 
+def new_traffic(problems: list[VehicleProblem], cfg: Config) -> Traffic:
+    """Empty traffic whose hash cells are twice the widest reach of a query: four cells per sample."""
+    v_max = max(p.vehicle.speed_mps for p in problems)
+    reach = max(p.vehicle.separation_m for p in problems) + cfg.separation_margin_m
+    return Traffic(cfg.dt_s, cell_m=2.0 * (reach + (cfg.timing_error_s + 2.0 * cfg.dt_s) * v_max))
+
+
 def _run_round(problems, obstacles, cfg, rng, order, init, elites, previous, progress, frac0, frac1):
     """Plan every UAV in ``order`` against the ones before it. Returns best x, cost, result per UAV."""
-    traffic = Traffic(cfg.dt_s)
+    traffic = new_traffic(problems, cfg)
     best_x, best_cost, results = {}, {}, {}
     for n, i in enumerate(order):
         prob = problems[i]
@@ -584,7 +550,7 @@ def _run_round(problems, obstacles, cfg, rng, order, init, elites, previous, pro
             best_x[i], best_cost[i], results[i] = x, res.best_cost, res
             elites[i] = res.pbest_x
         slices, pos = timed_samples(prob, best_x[i], cfg)
-        traffic.add(i, slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
+        traffic.add(slices, pos, prob.vehicle.separation_m, prob.vehicle.speed_mps)
         if progress:
             progress(frac0 + (frac1 - frac0) * (n + 1) / len(order), f"{prob.vehicle.id}")
     return best_x, best_cost, results
@@ -672,6 +638,15 @@ def repair_and_check(
     """Independent check; re-plan then delay conflicting UAVs; flag whatever still fails."""
     rank = {i: n for n, i in enumerate(order)}
     repairs = []
+    memo: dict[int, tuple[bytes, float, tuple[np.ndarray, np.ndarray]]] = {}
+
+    def samples(prob: VehicleProblem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """timed_samples, kept per UAV until its path or delay changes (every repair needs them all)."""
+        key, delay = x.tobytes(), prob.delay_s
+        if prob.index not in memo or memo[prob.index][:2] != (key, delay):
+            memo[prob.index] = (key, delay, timed_samples(prob, x, cfg))
+        return memo[prob.index][2]
+
     for attempt in range(cfg.repairs + 1):
         plan_ = build_plan(scenario, problems, obstacles, cfg, xs, planner, metrics)
         report = check_plan(plan_, scenario, step_s=cfg.dt_s, max_climb_rad=math.radians(cfg.max_climb_deg))
@@ -685,11 +660,11 @@ def repair_and_check(
             prob = problems[i]
             if attempt > 0:  # re-planning alone did not do it: wait on the ground as well
                 prob.delay_s += cfg.delay_step_s
-            traffic = Traffic(cfg.dt_s)
+            traffic = new_traffic(problems, cfg)
             for other in problems:
                 if other.index != i:
-                    slices, pos = timed_samples(other, xs[other.index], cfg)
-                    traffic.add(other.index, slices, pos, other.vehicle.separation_m, other.vehicle.speed_mps)
+                    slices, pos = samples(other, xs[other.index])
+                    traffic.add(slices, pos, other.vehicle.separation_m, other.vehicle.speed_mps)
             x0 = seed_swarm(prob, xs[i], None, cfg, rng)
             x, res, _ = optimise(prob, obstacles, traffic, cfg, rng, x0)
             if res.best_cost <= float(CostModel(prob, obstacles, traffic, cfg)(xs[i][None, :])[0]):

@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from gcs_planner.geometry.timing import closest_under_timing
+
 __all__ = [
     "candidate_pairs",
     "closest_approach",
@@ -49,8 +51,12 @@ def _velocity(p0: np.ndarray, p1: np.ndarray, t0: np.ndarray, t1: np.ndarray) ->
     return np.where((dt > 0)[..., None], (p1 - p0) / np.where(dt > 0, dt, 1.0)[..., None], 0.0)
 
 
-def _legs_cpa(pa0, ta0, ta1, va, pb0, tb0, tb1, vb, scale_b=None) -> tuple[np.ndarray, np.ndarray]:
-    """Closest approach of legs given by start point, time span and velocity; +inf without overlap."""
+def _legs_cpa(
+    pa0, ta0, ta1, va, pb0, tb0, tb1, vb, scale_b=None, timing_s: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Closest approach of legs given by start point, time span and velocity; +inf without overlap.
+    With ``timing_s`` the distance is the closest under any relative schedule error up to that
+    (gcs_planner.geometry.timing: leg b moved along its velocity by up to ``vb timing_s``)."""
     lo = np.maximum(ta0, tb0)
     hi = np.minimum(ta1, tb1)
     valid = hi > lo
@@ -59,7 +65,10 @@ def _legs_cpa(pa0, ta0, ta1, va, pb0, tb0, tb1, vb, scale_b=None) -> tuple[np.nd
     if scale_b is not None:
         inv = 1.0 / scale_b
         d0, dv = d0 * inv, dv * inv
-    dist, s = _cpa(d0, dv, np.where(valid, hi - lo, 0.0))
+    span = np.where(valid, hi - lo, 0.0)
+    dist, s = _cpa(d0, dv, span)
+    if timing_s > 0:
+        dist = closest_under_timing(d0, dv * span[..., None], vb * timing_s)
     return np.where(valid, dist, np.inf), lo + s
 
 
@@ -128,9 +137,14 @@ def candidate_pairs(points: np.ndarray, times: np.ndarray, reach_m: np.ndarray) 
 
 
 def pair_closest_approach(
-    points: np.ndarray, times: np.ndarray, pairs: np.ndarray, reach_m: np.ndarray | None = None
+    points: np.ndarray,
+    times: np.ndarray,
+    pairs: np.ndarray,
+    reach_m: np.ndarray | None = None,
+    timing_s: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Closest approach (B, P) distance [m] and time [s] for the given UAV pairs (P, 2).
+    """Closest approach (B, P) distance [m] and time [s] for the given UAV pairs (P, 2); with
+    ``timing_s`` the distance under any relative schedule error up to that (``_legs_cpa``).
 
     With ``reach_m`` (U,) only leg pairs whose space-time boxes (over all B candidates) come
     within ``reach_i + reach_j`` are computed; the others report +inf, which is exact for every
@@ -181,6 +195,7 @@ def pair_closest_approach(
             t0[:, j, b],
             t1[:, j, b],
             vel[:, j, b],
+            timing_s=timing_s,
         )
     starts = np.flatnonzero(np.r_[True, k_p[1:] != k_p[:-1]])
     group = k_p[starts]
@@ -213,6 +228,7 @@ def zone_closest_approach(
     d_out = np.full((n_b, n_u, n_z), np.inf)
     t_out = np.zeros((n_b, n_u, n_z))
     t_lo, t_hi = times.min(), times.max()
+    ta0, ta1 = times[..., :-1], times[..., 1:]
     for z in range(n_z):  # few zones (manned aircraft x motion modes); vectorised inside
         # only the zone legs that overlap the UAVs' time span matter
         legs = np.nonzero((zone_times[z, 1:] > t_lo) & (zone_times[z, :-1] < t_hi))[0]
@@ -220,14 +236,32 @@ def zone_closest_approach(
             continue
         sl = slice(legs[0], legs[-1] + 2)
         rot = zone_rot[z]
-        scale = zone_axes[z, legs[0] : legs[-1] + 1][None, None] + margin_m[..., None, None]
-        d_out[..., z], t_out[..., z] = closest_approach(
-            points @ rot.T,
-            times,
-            (zone_points[z, sl] @ rot.T)[None, None],
-            zone_times[z, sl][None, None],
-            scale,
+        zt = zone_times[z, sl]
+        zp = zone_points[z, sl] @ rot.T
+        axes = zone_axes[z, legs[0] : legs[-1] + 1]
+        # per UAV leg only the zone legs that overlap it in time (zt[k] < ta1 and zt[k + 1] > ta0)
+        first = np.clip(np.searchsorted(zt, ta0, side="right") - 1, 0, len(legs) - 1)
+        last = np.clip(np.searchsorted(zt, ta1, side="left") - 1, 0, len(legs) - 1)
+        width = max(int((last - first).max()) + 1, 1)
+        k = first[..., None] + np.arange(width)
+        overlap = k <= last[..., None]
+        k = np.minimum(k, len(legs) - 1)
+        pts = (points @ rot.T)[..., None, :]
+        dist, t = segment_closest_approach(
+            pts[..., :-1, :, :],
+            pts[..., 1:, :, :],
+            ta0[..., None],
+            ta1[..., None],
+            zp[k],
+            zp[k + 1],
+            zt[k],
+            zt[k + 1],
+            axes[k] + margin_m[..., None, None, None],
         )
+        flat = np.where(overlap, dist, np.inf).reshape(n_b, n_u, -1)
+        best = np.argmin(flat, axis=-1)[..., None]
+        d_out[..., z] = np.take_along_axis(flat, best, axis=-1)[..., 0]
+        t_out[..., z] = np.take_along_axis(t.reshape(flat.shape), best, axis=-1)[..., 0]
     return d_out, t_out
 
 

@@ -126,6 +126,9 @@ class Config(PlannerConfig, tag="deconflict_4d"):
     confidence: Annotated[float, Meta(gt=0.0, lt=1.0)] = 0.95  # manned-traffic zones (manned.py)
     safety_m: Distance = 5.0
     min_mode_weight: Fraction = 0.01
+    # UAV pairs keep their separation under any relative schedule error up to this [s]; 0 is the
+    # paper's exact timing; flown plans set the measured error (docs/timing-separation.md)
+    timing_error_s: Annotated[float, Meta(ge=0.0, le=60.0)] = 0.0
 
 
 @dataclass
@@ -309,6 +312,8 @@ def _stack_zones(zones: list[Zone]) -> tuple[np.ndarray, ...]:
 
 # ---------------------------------------------------------------------------- evaluation
 
+_LIMIT_TERMS = ("speed_excess", "blend_overlap_s", "turn_excess_m", "time_error_excess_s")  # 0 = within
+
 
 @dataclass
 class _Eval:
@@ -417,13 +422,16 @@ def _pair_conflicts(problem: Problem, pts, times, margin, active, act):
     """UAV-UAV conflicts: candidate pairs (with an active UAV), their closest approach, which are
     closer than their separation plus corner margins, and the conflict term of the cost."""
     n_b, n_u = pts.shape[:2]
+    timing = problem.settings.timing_error_s
     sep = np.array([u.separation_m for u in problem.uavs])
-    pairs = candidate_pairs(pts, times, sep[None, :] / 2 + margin)
+    speed = [u.dyn.v_max_mps * (1.0 if u.dyn.limit == "norm" else math.sqrt(3.0)) for u in problem.uavs]
+    reach = sep / 2 + timing * np.array(speed)  # + how far a schedule error moves a UAV
+    pairs = candidate_pairs(pts, times, reach[None, :] + margin)
     if active is not None and len(pairs):
         is_act = np.zeros(n_u, dtype=bool)
         is_act[act] = True
         pairs = pairs[is_act[pairs[:, 0]] | is_act[pairs[:, 1]]]
-    d, t = pair_closest_approach(pts, times, pairs, (sep / 2 + margin.max(axis=0)))
+    d, t = pair_closest_approach(pts, times, pairs, reach + margin.max(axis=0), timing)
     if len(pairs):
         need = (
             np.maximum(sep[pairs[:, 0]], sep[pairs[:, 1]]) + margin[:, pairs[:, 0]] + margin[:, pairs[:, 1]]
@@ -571,16 +579,16 @@ def _stage_pso(problem: Problem, tracks: list[Track], rng: np.random.Generator) 
 def _limit_excess(problem: Problem, tracks: list[Track]) -> np.ndarray:
     """Sum of the kinematic and time-error limit excesses per UAV (0 = within every limit)."""
     _, ev = _fleet_state(problem, tracks)
-    keys = ("speed_excess", "blend_overlap_s", "turn_excess_m", "time_error_excess_s")
-    return sum(ev.terms[k][0] for k in keys)
+    return sum(ev.terms[k][0] for k in _LIMIT_TERMS)
 
 
 def _stage_delay(problem: Problem, tracks: list[Track], events: list[dict]) -> tuple[list[Track], dict]:
     s = problem.settings
     steps, adjusted = 0, set()
     tracks = [replace(t) for t in tracks]
+    layout, ev = _fleet_state(problem, tracks)
+    pts, tms = layout.decode(np.zeros((1, 0)))
     for _ in range(s.delay_max_steps):
-        _, ev = _fleet_state(problem, tracks)
         counts = _counts(problem, ev)
         if not counts.any():
             break
@@ -600,6 +608,8 @@ def _stage_delay(problem: Problem, tracks: list[Track], events: list[dict]) -> t
         if pick is None:
             break
         tracks[pick].delay_s += s.delay_step_s
+        _delay_row(problem, tms, tracks[pick], pick)
+        ev = _changed(problem, ev, pts, tms, layout.goal_idx, pick)
         adjusted.add(pick)
         steps += 1
         events.append(
@@ -611,6 +621,44 @@ def _stage_delay(problem: Problem, tracks: list[Track], events: list[dict]) -> t
             }
         )
     return tracks, {"iterations": steps, "trajectories_adjusted": len(adjusted)}
+
+
+def _delay_row(problem: Problem, tms: np.ndarray, track: Track, u: int) -> None:
+    """UAV u's row of the B = 1 times ``tms`` after its delay changed, as ``_Layout.decode`` times it."""
+    _, t, _ = full_polyline(problem.uavs[u], track)
+    dur = np.zeros(tms.shape[-1] - 1)
+    dur[: len(t) - 1] = np.diff(t)
+    tms[0, u] = t[0] + np.concatenate([[0.0], np.cumsum(dur)])
+
+
+def _changed(
+    problem: Problem, ev: _Eval, pts: np.ndarray, tms: np.ndarray, goal_idx: np.ndarray, u: int
+) -> _Eval:
+    """The B = 1 fleet evaluation after only UAV u's trajectory changed (pts, tms: the new fleet):
+    the pairs and zones with u re-evaluated, the rest of ``ev`` kept (the same numbers a full
+    evaluation gives: a pair's closest approach depends on its two UAVs only)."""
+    new = evaluate(problem, pts, tms, goal_idx, np.array([u]))
+    keep = (ev.pairs[:, 0] != u) & (ev.pairs[:, 1] != u) if len(ev.pairs) else np.zeros(0, dtype=bool)
+    zone_conflict, zone_t, zone_d = ev.zone_conflict.copy(), ev.zone_t.copy(), ev.zone_d.copy()
+    zone_conflict[:, u], zone_t[:, u] = new.zone_conflict[:, 0], new.zone_t[:, 0]
+    zone_d[:, u] = new.zone_d[:, 0]
+    pair_conflict = np.concatenate([ev.pair_conflict[:, keep], new.pair_conflict], axis=1)
+    n_conf = pair_conflict.sum(axis=-1) + zone_conflict.sum(axis=(-1, -2))
+    limits_ok = np.array([all(float(new.terms[k].sum()) <= 1e-9 for k in _LIMIT_TERMS)])
+    return _Eval(
+        cost=new.cost,  # the pair and zone terms of u only: not a fleet cost
+        conflicts=n_conf,
+        feasible=(n_conf == 0) & limits_ok,
+        pairs=np.concatenate([ev.pairs[keep], new.pairs]),
+        pair_conflict=pair_conflict,
+        pair_t=np.concatenate([ev.pair_t[:, keep], new.pair_t], axis=1),
+        pair_d=np.concatenate([ev.pair_d[:, keep], new.pair_d], axis=1),
+        active=ev.active,
+        zone_conflict=zone_conflict,
+        zone_t=zone_t,
+        zone_d=zone_d,
+        terms=new.terms,
+    )
 
 
 def _insert_waypoint(problem: Problem, track: Track, u: int, t_c: float) -> tuple[Track, int]:
@@ -670,11 +718,10 @@ def _stage_waypoints(
     stage. Each UAV is repaired at most once per stage."""
     s = problem.settings
     iters, added, repaired, stuck = 0, 0, set(), set()
-    keys = ("speed_excess", "blend_overlap_s", "turn_excess_m", "time_error_excess_s")
+    _, ev = _fleet_state(problem, tracks)
     for _ in range(s.insert_max_steps):
-        _, ev = _fleet_state(problem, tracks)
         counts = _counts(problem, ev)
-        excess = sum(ev.terms[k][0] for k in keys)
+        excess = sum(ev.terms[k][0] for k in _LIMIT_TERMS)
         order = np.lexsort((np.arange(len(counts)), -counts))
         pick = next(
             (
@@ -709,6 +756,8 @@ def _stage_waypoints(
             continue
         tracks = list(tracks)
         tracks[pick] = candidate[0]
+        layout = _Layout(problem, tracks, {})
+        ev = _changed(problem, ev, *layout.decode(np.zeros((1, 0))), layout.goal_idx, pick)
         added += inserting
         events.append(
             {
@@ -790,8 +839,7 @@ def _finish(
     norm = np.array([u.dyn.limit == "norm" for u in problem.uavs])[:, None]
     tau = blend_times(pts[0], tms[0], a_max, norm)
     dense, samples = dense_check(problem, pts[0], tms[0], tau)
-    limit_terms = ("speed_excess", "blend_overlap_s", "turn_excess_m", "time_error_excess_s")
-    limits_ok = bool(all(float(ev.terms[k].sum()) <= 1e-9 for k in limit_terms))
+    limits_ok = bool(all(float(ev.terms[k].sum()) <= 1e-9 for k in _LIMIT_TERMS))
     remaining = []
     for (i, j), hit, d, t in zip(ev.pairs, ev.pair_conflict[0], ev.pair_d[0], ev.pair_t[0], strict=True):
         if hit:
@@ -828,9 +876,9 @@ def _finish(
         "wall_s": round(wall_s, 3),
         "limits_ok": limits_ok,
         "limit_violations": {
-            u.id: {k: round(float(ev.terms[k][0, i]), 4) for k in limit_terms if ev.terms[k][0, i] > 1e-9}
+            u.id: {k: round(float(ev.terms[k][0, i]), 4) for k in _LIMIT_TERMS if ev.terms[k][0, i] > 1e-9}
             for i, u in enumerate(problem.uavs)
-            if any(ev.terms[k][0, i] > 1e-9 for k in limit_terms)
+            if any(ev.terms[k][0, i] > 1e-9 for k in _LIMIT_TERMS)
         },
         "length_m": float(ev.terms["length_m"].sum()),
         "time_error_s": float(ev.terms["time_error_s"].sum()),

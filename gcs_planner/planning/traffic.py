@@ -1,0 +1,179 @@
+"""Timed samples of already-planned UAVs and the separation they leave a new path (priority swarm F5).
+
+Every planned UAV adds its positions on the shared time grid (slice k = time k * dt_s). A new
+path's samples are compared with the traffic samples of the same slice within reach: for each
+pair the closest approach of the two linear motions over the slice must exceed the larger
+separation plus a margin, else the shortfall counts.
+
+With ``timing_s`` > 0 the closest approach is the one under any relative schedule error up to
+``timing_s`` seconds (gcs_planner.geometry.timing: the traffic sample moved along its motion by
+up to its displacement in that time), so a crossing keeps its separation when the vehicles fly
+it that far off their schedules (docs/timing-separation.md). ``timing_s = 0`` is the plain one.
+
+Neighbours are found in a spatial hash of (slice, x cell, y cell) -> a linked list of samples
+(``head`` per hashed cell, ``next_in_cell`` per sample): adding a UAV is a vectorised insertion
+(its samples lie in distinct slices), a query reads the cells around each sample, and the tree
+rebuilt after every planned UAV (quadratic in the fleet) is gone. At most the four nearest
+traffic samples within reach count per particle sample, nearest first, as a k = 4 nearest-
+neighbour query would return them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from gcs_planner.geometry.timing import closest_under_timing
+
+__all__ = ["TIMING_ERROR_S", "Traffic"]
+
+# How far apart in time two vehicles' schedule errors may be where they meet [s]: measured on the
+# mock (docs/timing-separation.md), the default of the planners' ``timing_error_s``.
+TIMING_ERROR_S = 0.75
+
+_CELL_BITS = 6  # cells per axis and slice in the table: 64, aliased 64 cells apart (extra candidates)
+_CELLS = 1 << 2 * _CELL_BITS
+_NEAREST = 4  # traffic samples counted per particle sample
+_EMPTY = np.zeros(0, dtype=np.int64)
+
+
+def _key(slices: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+    """Table index of a (slice, x cell, y cell): one block of cells per slice."""
+    mask = (1 << _CELL_BITS) - 1
+    return (slices << _CELL_BITS | cy & mask) << _CELL_BITS | cx & mask
+
+
+class Traffic:
+    """Timed samples of already-planned UAVs on the shared time grid, hashed by slice and cell."""
+
+    def __init__(self, dt_s: float, cell_m: float = 40.0) -> None:
+        self.dt_s, self.cell_m = dt_s, cell_m
+        self.n = 0
+        self.pos = np.zeros((0, 3))
+        self.slice = _EMPTY
+        self.sep = np.zeros(0)
+        self.next = _EMPTY  # the same vehicle's sample at the next slice (-1 at its last)
+        self.next_in_cell = _EMPTY
+        self.head = np.zeros(0, dtype=np.int32)  # first sample per table cell; grows with the slices
+        self.v_max = 0.0
+        self.sep_max = 0.0
+
+    def __len__(self) -> int:
+        return self.n
+
+    def _grow(self, extra: int) -> None:
+        cap = len(self.slice)
+        if self.n + extra <= cap:
+            return
+        new = max(2 * cap, self.n + extra, 1024)
+        self.pos = np.concatenate([self.pos, np.zeros((new - cap, 3))])
+        self.slice, self.next, self.next_in_cell = (
+            np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)])
+            for a in (self.slice, self.next, self.next_in_cell)
+        )
+        self.sep = np.concatenate([self.sep, np.zeros(new - cap)])
+
+    def _cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c = np.floor(xy / self.cell_m).astype(np.int64)
+        return c[:, 0], c[:, 1]
+
+    def add(self, slices: np.ndarray, pos: np.ndarray, sep_m: float, speed: float) -> None:
+        """Add one UAV's samples at grid slices (K,) (each slice once) -> positions (K, 3)."""
+        slices = np.asarray(slices, dtype=np.int64)
+        k = len(slices)
+        if not k:
+            return
+        self._grow(k)
+        if slices.max() >= len(self.head) // _CELLS:
+            extra = (int(slices.max()) + 1) * _CELLS - len(self.head)
+            self.head = np.concatenate([self.head, np.full(extra, -1, dtype=np.int32)])
+        idx = np.arange(self.n, self.n + k)
+        self.pos[idx] = pos
+        self.slice[idx] = slices
+        self.sep[idx] = sep_m
+        self.next[idx[:-1]] = idx[1:]
+        self.next[idx[-1]] = -1
+        key = _key(slices, *self._cells(self.pos[idx, :2]))
+        self.next_in_cell[idx] = self.head[key]  # distinct slices, so distinct keys
+        self.head[key] = idx
+        self.n += k
+        self.v_max = max(self.v_max, speed)
+        self.sep_max = max(self.sep_max, sep_m)
+
+    def neighbours(
+        self, slices: np.ndarray, pos: np.ndarray, radius_m: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Pairs (query row, traffic sample) of the same slice closer than ``radius_m``: the
+        ``_NEAREST`` nearest per query, ordered by query then distance. slices (Q,), pos (Q, 3)."""
+        span = int(np.ceil(2.0 * radius_m / self.cell_m)) + 1  # cells per axis that [x - r, x + r] meets
+        cx, cy = self._cells(pos[:, :2] - radius_m)
+        off = np.arange(span)
+        ox, oy = (o.ravel() for o in np.meshgrid(off, off, indexing="ij"))
+        key = _key(slices[:, None], cx[:, None] + ox, cy[:, None] + oy).ravel()
+        inside = np.flatnonzero(key < len(self.head))  # no traffic after its last slice
+        cand = self.head[key[inside]].astype(np.int64)
+        q = inside // len(ox)
+        rows, samples = [], []
+        while len(q):
+            live = cand >= 0
+            q, cand = q[live], cand[live]
+            rows.append(q)
+            samples.append(cand)
+            cand = self.next_in_cell[cand]
+        row, j = np.concatenate(rows), np.concatenate(samples)
+        d2 = np.zeros(len(j))
+        for axis in range(3):  # axis by axis: a reduction over a last axis of 3 is slow
+            d2 += (self.pos[j, axis] - pos[row, axis]) ** 2
+        near = d2 < radius_m**2
+        row, j, d = row[near], j[near], d2[near]
+        order = np.lexsort((d, row))
+        row, j = row[order], j[order]
+        first = np.searchsorted(row, row)  # start of each query's run
+        keep = np.arange(len(row)) - first < _NEAREST
+        return row[keep], j[keep]
+
+    def violations(
+        self,
+        slices: np.ndarray,
+        pos: np.ndarray,
+        valid: np.ndarray,
+        sep_m: float,
+        margin_m: float,
+        timing_s: float = 0.0,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Separation shortfall [m] summed per particle and the number of violating samples.
+
+        slices (K,), pos (P, K, 3), valid (P, K): the particle samples on the grid; the margin is
+        ``margin_m`` beyond the separation under any relative schedule error up to ``timing_s``.
+        """
+        p, k, _ = pos.shape
+        zero = np.zeros(p)
+        idx = np.flatnonzero(valid.ravel())
+        if not self.n or not len(idx):
+            return zero, zero.copy()
+        v_max = max(self.v_max, 1e-6)
+        radius = max(self.sep_max, sep_m) + margin_m + timing_s * v_max + 2.0 * v_max * self.dt_s
+        row, j = self.neighbours(np.tile(slices, p)[idx], pos.reshape(-1, 3)[idx], radius)
+        if not len(row):
+            return zero, zero.copy()
+        flat = idx[row]
+        part, ks = np.divmod(flat, k)
+        a0 = pos[part, ks]
+        b0 = self.pos[j]
+        nxt = self.next[j]
+        has_next = (ks + 1 < k) & valid[part, np.minimum(ks + 1, k - 1)] & (nxt >= 0)
+        a1 = np.where(has_next[:, None], pos[part, np.minimum(ks + 1, k - 1)], a0)
+        b1 = np.where(has_next[:, None], self.pos[np.where(nxt >= 0, nxt, j)], b0)
+        d0 = b0 - a0
+        dv = (b1 - a1) - d0
+        vv = np.sum(dv * dv, axis=1)
+        tau = np.clip(-np.sum(d0 * dv, axis=1) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
+        dmin = np.linalg.norm(d0 + tau[:, None] * dv, axis=1)
+        need = np.maximum(self.sep[j], sep_m) + margin_m
+        if timing_s > 0:  # under any relative schedule error up to timing_s (geometry/timing.py)
+            w = (b1 - b0) * (timing_s / self.dt_s)
+            near = dmin - np.linalg.norm(w, axis=1) < need  # a shift by w moves it at most |w|
+            dmin[near] = closest_under_timing(d0[near], dv[near], w[near])
+        short = np.maximum(0.0, need - dmin)
+        depth = np.bincount(part, weights=short, minlength=p)
+        count = np.bincount(part, weights=(short > 0).astype(float), minlength=p)
+        return depth, count
