@@ -1,7 +1,7 @@
 """The geofence a vehicle gets: what its own plan keeps out of, so that a fenced vehicle flying its
 plan never breaches.
 
-A MAVLink fence is 2-D (inclusion polygons, exclusion circles; the altitude limit is a parameter),
+A MAVLink fence is 2-D (inclusion / exclusion polygons and circles; the altitude limit is a parameter),
 so an obstacle with a top cannot be fenced above it. A planner may fly over a tower (the demo's
 uav1 passes a 60 m tower at 64.8 m, 20 m from its axis): fenced for every vehicle at its footprint,
 that vehicle breached and returned home. Each vehicle's fence therefore holds the scenario's bounds
@@ -10,6 +10,11 @@ stays out of; the obstacles it overflies are left out of its fence, said by
 ``overflown``, and kept clear by the plan's own 3-D check (geometry/separation.py). ``breaches``
 is the check that the fence and the plan agree: empty for a fence built here, and what export /
 upload refuse on for a fence built otherwise.
+
+On a scenario with a ``[site]`` (gcs_planner.sites) the inclusion polygon is the site's area and
+each no-fly zone is an exclusion polygon (its exact outline, not the planners' circle round it);
+a zone with a floor or ceiling that a vehicle's path passes under or over is left out of that
+vehicle's fence, as an overflown tower is.
 """
 
 from __future__ import annotations
@@ -22,7 +27,15 @@ from gcs_planner.errors import UserError
 from gcs_planner.plan import VehiclePlan, land_point
 from gcs_planner.scenario import Scenario
 
-__all__ = ["Exclusion", "Geofence", "breaches", "check_fence", "overflown", "vehicle_geofence"]
+__all__ = [
+    "Exclusion",
+    "ExclusionPolygon",
+    "Geofence",
+    "breaches",
+    "check_fence",
+    "overflown",
+    "vehicle_geofence",
+]
 
 
 @dataclass(frozen=True)
@@ -36,18 +49,30 @@ class Exclusion:
 
 
 @dataclass(frozen=True)
-class Geofence:
-    """An inclusion rectangle (x0, x1, y0, y1; None: none) and exclusion circles, ENU [m]."""
+class ExclusionPolygon:
+    """A polygon the vehicle must stay out of: (N, 2) ENU [m] vertices, counter-clockwise."""
 
-    inclusion: tuple[float, float, float, float] | None
+    vertices: np.ndarray
+    name: str
+
+
+@dataclass(frozen=True)
+class Geofence:
+    """An inclusion polygon ((N, 2) ENU [m] vertices, counter-clockwise; None: none), exclusion
+    circles and exclusion polygons."""
+
+    inclusion: np.ndarray | None
     exclusions: list[Exclusion] = field(default_factory=list)
+    exclusion_polygons: list[ExclusionPolygon] = field(default_factory=list)
 
 
 def _obstacles(scenario: Scenario) -> list[Exclusion]:
-    """Every obstacle's footprint: a cylinder with its buffer, a radar dome's base circle."""
+    """Every obstacle's footprint: a cylinder with its buffer, a radar dome's base circle (a site's
+    no-fly zones are fenced as their polygons, not as their cylinders)."""
     out = [
         Exclusion(c.x, c.y, c.radius_m + c.buffer_m, f"cylinder {k}")
         for k, c in enumerate(scenario.cylinders)
+        if not c.zone
     ]
     return out + [Exclusion(h.x, h.y, h.radius_m, f"dome {k}") for k, h in enumerate(scenario.hemispheres)]
 
@@ -70,19 +95,51 @@ def _segment_distances(points: np.ndarray, x: float, y: float) -> float:
 def vehicle_geofence(scenario: Scenario, vp: VehiclePlan | None = None) -> Geofence:
     """The scenario's bounds and obstacles; for a vehicle (``vp``), only the obstacles its flown
     outline keeps out of (module docstring)."""
-    bounds = scenario.bounds
-    inclusion = (*bounds["x"], *bounds["y"]) if "x" in bounds and "y" in bounds else None
+    bounds, site = scenario.bounds, scenario.site
+    inclusion = None
+    if site is not None and site.area is not None:
+        inclusion = _ring(site.area)
+    elif "x" in bounds and "y" in bounds:
+        (x0, x1), (y0, y1) = bounds["x"], bounds["y"]
+        inclusion = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])  # counter-clockwise
     circles = _obstacles(scenario)
+    polygons = _zones(scenario)
     if vp is not None:
         outline = flown_outline(vp)
         circles = [c for c in circles if _segment_distances(outline, c.x, c.y) > c.radius_m]
-    return Geofence(inclusion, circles)
+        polygons = [z for z in polygons if not _crosses(outline, z.vertices)]
+    return Geofence(inclusion, circles, polygons)
+
+
+def _zones(scenario: Scenario) -> list[ExclusionPolygon]:
+    """A site's no-fly zones as exclusion polygons (their outer rings)."""
+    if scenario.site is None:
+        return []
+    return [ExclusionPolygon(_ring(z.polygon), f"no-fly zone {z.name!r}") for z in scenario.site.zones]
+
+
+def _ring(polygon) -> np.ndarray:
+    """A shapely polygon's outer ring, counter-clockwise, without the closing repeat."""
+    import shapely
+
+    return shapely.get_coordinates(shapely.orient_polygons(polygon).exterior)[:-1]
+
+
+def _crosses(outline: np.ndarray, vertices: np.ndarray) -> bool:
+    """Whether the ground track ``outline`` touches the polygon."""
+    import shapely
+
+    track = shapely.LineString(outline) if len(outline) > 1 else shapely.Point(outline[0])
+    return bool(shapely.intersects(track, shapely.Polygon(vertices)))
 
 
 def overflown(scenario: Scenario, vp: VehiclePlan) -> list[str]:
-    """The obstacles whose footprint the vehicle's plan passes over (left out of its fence)."""
-    kept = {c.name for c in vehicle_geofence(scenario, vp).exclusions}
-    return [c.name for c in _obstacles(scenario) if c.name not in kept]
+    """The obstacles and no-fly zones whose footprint the vehicle's plan passes over or under
+    (left out of its fence)."""
+    fence = vehicle_geofence(scenario, vp)
+    kept = {c.name for c in fence.exclusions} | {z.name for z in fence.exclusion_polygons}
+    every = [c.name for c in _obstacles(scenario)] + [z.name for z in _zones(scenario)]
+    return [name for name in every if name not in kept]
 
 
 def breaches(fence: Geofence, vp: VehiclePlan) -> list[str]:
@@ -91,10 +148,12 @@ def breaches(fence: Geofence, vp: VehiclePlan) -> list[str]:
     outline = flown_outline(vp)
     found = []
     if fence.inclusion is not None:
-        x0, x1, y0, y1 = fence.inclusion
-        outside = (outline[:, 0] < x0) | (outline[:, 0] > x1) | (outline[:, 1] < y0) | (outline[:, 1] > y1)
-        if outside.any():
-            x, y = outline[int(np.argmax(outside))]
+        import shapely
+
+        track = shapely.LineString(outline) if len(outline) > 1 else shapely.Point(outline[0])
+        out = track.difference(shapely.Polygon(fence.inclusion))
+        if not out.is_empty:
+            x, y = shapely.get_coordinates(out)[0]
             found.append(f"leaves the inclusion fence at ({x:.0f}, {y:.0f}) m")
     for c in fence.exclusions:
         d = _segment_distances(outline, c.x, c.y)
@@ -102,6 +161,11 @@ def breaches(fence: Geofence, vp: VehiclePlan) -> list[str]:
             found.append(
                 f"enters the exclusion circle of {c.name} ({d:.1f} m from its centre, r {c.radius_m:g} m)"
             )
+    found += [
+        f"enters the exclusion polygon of {z.name}"
+        for z in fence.exclusion_polygons
+        if _crosses(outline, z.vertices)
+    ]
     return found
 
 

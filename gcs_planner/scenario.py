@@ -30,7 +30,7 @@ from typing import Any
 
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import MAX_NETWORK, fleet_id
-from gcs_planner.geo import Origin
+from gcs_planner.geo import Origin, geodetic_to_enu
 from gcs_planner.validation import (
     MAX_ALT_M,
     MAX_DURATION_S,
@@ -90,6 +90,7 @@ class Cylinder:
     z_max_m: float
     z_min_m: float = 0.0
     buffer_m: float = 0.0
+    zone: str = ""  # the site no-fly zone this cylinder encloses (fenced and checked as its polygon)
 
 
 @dataclass(frozen=True)
@@ -113,6 +114,7 @@ class Scenario:
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     raw: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
+    site: Any = None  # gcs_planner.sites.Site: the exact area, no-fly zones and terrain of a [site]
 
     @property
     def planner_name(self) -> str:
@@ -138,6 +140,7 @@ SECTIONS = (
     "manned",
     "coalition",
     "terrain",
+    "site",
 )
 # the planner-specific world tables: table -> (its keys, {key: the keys of its rows})
 WORLD_TABLES: dict[str, tuple[tuple[str, ...], dict[str, tuple[str, ...]]]] = {
@@ -151,6 +154,7 @@ WORLD_TABLES: dict[str, tuple[tuple[str, ...], dict[str, tuple[str, ...]]]] = {
         },
     ),
     "terrain": (("type", "peaks", "file"), {"peaks": ("h_m", "x_m", "y_m", "sx_m", "sy_m")}),
+    "site": (("features", "dem", "terrain_clearance_m", "dem_spacing_m", "margin_m"), {}),
 }
 MAX_MANNED = 10_000  # manned tracks in a scenario, and tracks in one mode's history
 MAX_MANNED_SAMPLES = 100_000  # samples of one manned track (observed_s / dt_s, track rows)
@@ -164,6 +168,7 @@ VEHICLE_KEYS = (
     + ("turn_radius_m", "separation_m", "priority", "landing_mps", "waits_airborne", "takeoff_s", "arrival_s")
     + ("v_max_mps", "a_max_mps2", "climb_mps", "takeoff_settle_s", "descent_mps", "min_turn_radius_m")
     + ("max_time_error_s", "limit", "capabilities", "munitions", "heading_deg", "range_m")
+    + ("start_lla", "goal_lla")
 )
 
 
@@ -172,6 +177,13 @@ def load_scenario(path: str | Path) -> Scenario:
     data = load_toml(read_text(path, "scenario"), str(path))
     scenario = parse_scenario(data, where=str(path))
     scenario.path = path
+    if "site" in data:  # the map files are read only with the scenario's folder known
+        from gcs_planner.sites import apply_site
+
+        try:
+            scenario = apply_site(scenario, path.parent)
+        except InputError as exc:
+            raise ScenarioError(f"{path}: {exc}") from None
     return scenario
 
 
@@ -196,7 +208,7 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
     rows = items_of(data.get("vehicles", []), "vehicles")
     if not rows:
         raise InputError("the scenario has no [[vehicles]]; at least one is needed")
-    vehicles = [_vehicle(v, f"vehicles[{i}]") for i, v in enumerate(rows)]
+    vehicles = [_vehicle(v, f"vehicles[{i}]", origin) for i, v in enumerate(rows)]
     unique([v.id for v in vehicles], "vehicle id")
     unique([v.sysid for v in vehicles if v.sysid], "vehicle sysid")
     obstacles = known_keys(
@@ -328,8 +340,9 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
+def _vehicle(d: dict[str, Any], where: str, origin: Origin) -> Vehicle:
     known_keys(d, VEHICLE_KEYS, where)
+    d = {**d, **_geodetic_ends(d, where, origin)}
     vtype = d.get("type", "multirotor")
     if vtype not in VEHICLE_TYPES:
         raise InputError(f"{where}.type must be one of {VEHICLE_TYPES}, got {vtype!r}")
@@ -363,6 +376,25 @@ def _vehicle(d: dict[str, Any], where: str) -> Vehicle:
         landing_mps=number(d.get("landing_mps", 0.0), f"{where}.landing_mps", 0, MAX_SPEED_MPS),
         waits_airborne=_flag(d.get("waits_airborne", False), f"{where}.waits_airborne"),
     )
+
+
+def _geodetic_ends(d: dict[str, Any], where: str, origin: Origin) -> dict[str, list[float]]:
+    """start / goal in local metres from start_lla / goal_lla = [lat_deg, lon_deg, alt_m AMSL]."""
+    out = {}
+    for end in ("start", "goal"):
+        value = d.get(f"{end}_lla")
+        if value is None:
+            continue
+        field = f"{where}.{end}_lla"
+        if end in d:
+            raise InputError(f"{where}: give {end} or {end}_lla, not both")
+        if not (isinstance(value, list) and len(value) == 3):
+            raise InputError(f"{field} must be [lat_deg, lon_deg, alt_m AMSL], got {_short(value)}")
+        lat = number(value[0], f"{field} lat", -90.0, 90.0)
+        lon = number(value[1], f"{field} lon", -180.0, 180.0)
+        alt = number(value[2], f"{field} alt", MIN_ALT_M, MAX_ALT_M)
+        out[end] = [float(v) for v in geodetic_to_enu(lat, lon, alt, origin)]
+    return out
 
 
 def _flag(value: Any, field: str) -> bool:

@@ -24,6 +24,9 @@ turn radius (circumradius of consecutive xy samples after inserting points so no
 R/4: arcs sampled at <= R/4 are measured exactly, a polyline corner shows as a tiny radius),
 climb angle, speed along the timed path and the altitude band. Vertical
 take-off/landing columns directly above the start/goal are exempt from the band and climb limits.
+On a scenario with a ``[site]`` it also proves every path stays in the site's area, out of its
+no-fly zones (their exact polygons and altitude bands) and above the DEM by the terrain clearance
+(gcs_planner.sites.checks).
 """
 
 from __future__ import annotations
@@ -176,10 +179,13 @@ class CheckReport:
     altitude: dict[str, float] = field(default_factory=dict)  # vehicle -> worst band excess [m]
     climb: dict[str, float] = field(default_factory=dict)  # vehicle -> worst climb angle [rad]
     timing: dict[str, float] = field(default_factory=dict)  # vehicle -> worst speed excess [m/s]
+    outside_area: dict[str, tuple[float, float]] = field(default_factory=dict)  # site: where it leaves
+    no_fly: dict[str, list[str]] = field(default_factory=dict)  # site: the zones it enters
+    terrain: dict[str, float] = field(default_factory=dict)  # site: worst clearance shortfall [m]
 
     def bad_vehicles(self) -> set[str]:
         bad = set(self.collisions) | set(self.turn_radius) | set(self.altitude) | set(self.climb)
-        bad |= set(self.timing)
+        bad |= set(self.timing) | set(self.outside_area) | set(self.no_fly) | set(self.terrain)
         for a, b, *_ in self.conflicts:
             bad |= {a, b}
         return bad
@@ -192,7 +198,16 @@ class CheckReport:
         if self.ok:
             return "all checks passed"
         parts = []
-        for name in ("collisions", "turn_radius", "altitude", "climb", "timing"):
+        for name in (
+            "collisions",
+            "turn_radius",
+            "altitude",
+            "climb",
+            "timing",
+            "outside_area",
+            "no_fly",
+            "terrain",
+        ):
             if getattr(self, name):
                 parts.append(f"{name}: {sorted(getattr(self, name))}")
         if self.conflicts:
@@ -209,7 +224,9 @@ def check_plan(
     speed_tol: float = 0.05,
 ) -> CheckReport:
     """Check every vehicle's timed path (at <= step_s sampling) against the scenario's limits."""
-    obstacles = Obstacles.from_scenario(scenario.cylinders, scenario.hemispheres)
+    # a site's no-fly zones are checked as their polygons, not as the planners' cylinders round them
+    cylinders = [c for c in scenario.cylinders if not c.zone]
+    obstacles = Obstacles.from_scenario(cylinders, scenario.hemispheres)
     report = CheckReport()
     trajs = []
     for vp in plan.vehicles:
@@ -231,14 +248,17 @@ def check_plan(
         exempt[1:] &= seg_col
         # near-duplicate xy samples (< 1 cm apart) make the circumradius ill-conditioned: drop them
         distinct = np.concatenate([np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1) > 0.01, [True]])
-        dense, dense_exempt = _densify(p[distinct], exempt[distinct], 0.25 * veh.turn_radius_m)
-        radii = turn_radii(dense[:, :2])
-        radii = radii[~(dense_exempt[:-2] | dense_exempt[1:-1] | dense_exempt[2:])]
-        if radii.size and radii.min() < veh.turn_radius_m * (1 - radius_tol):
-            report.turn_radius[vp.vehicle_id] = float(radii.min())
+        if veh.turn_radius_m > 0:  # 0: a multirotor that may turn on the spot
+            dense, dense_exempt = _densify(p[distinct], exempt[distinct], 0.25 * veh.turn_radius_m)
+            radii = turn_radii(dense[:, :2])
+            radii = radii[~(dense_exempt[:-2] | dense_exempt[1:-1] | dense_exempt[2:])]
+            if radii.size and radii.min() < veh.turn_radius_m * (1 - radius_tol):
+                report.turn_radius[vp.vehicle_id] = float(radii.min())
         excess = altitude_violation(p[~exempt, 2], veh.min_alt_m, veh.max_alt_m)
         if excess.size and excess.max() > 1e-6:
             report.altitude[vp.vehicle_id] = float(excess.max())
+        if scenario.site is not None:
+            _check_site(report, scenario.site, vp.vehicle_id, p, seg_col)
         dxy = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1)
         dz = np.abs(np.diff(p[:, 2]))
         climb = np.arctan2(dz, dxy)[~seg_col]
@@ -253,6 +273,18 @@ def check_plan(
             (trajs[c.i].vehicle_id, trajs[c.j].vehicle_id, c.t_s, c.distance_m, c.required_m)
         )
     return report
+
+
+def _check_site(report: CheckReport, site, vehicle_id: str, p: np.ndarray, columns: np.ndarray) -> None:
+    """A site's area, no-fly zones and terrain clearance for one path (gcs_planner.sites.checks)."""
+    from gcs_planner.sites.checks import area_exit, terrain_shortfall, zone_entries
+
+    if (where := area_exit(site, p)) is not None:
+        report.outside_area[vehicle_id] = where
+    if zones := zone_entries(site, p):
+        report.no_fly[vehicle_id] = zones
+    if (short := terrain_shortfall(site, p, columns)) > 1e-6:
+        report.terrain[vehicle_id] = short
 
 
 def _resample(traj: Trajectory, step_s: float) -> Trajectory:

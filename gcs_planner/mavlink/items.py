@@ -37,8 +37,9 @@ Choices where MAVLink or the autopilots leave room (all documented here, nowhere
   approach is outside the planned path, checked only by the fence; no DO_LAND_START: ArduPlane
   refuses to arm with one while RTL_AUTOLAND is 0, docs/real-autopilots.md); "rtl" is NAV_RETURN_TO_LAUNCH,
   "loiter" is NAV_LOITER_UNLIM over the last waypoint (radius = turn radius for fixed wings).
-- Fence (mission_type 1): the scenario's x/y bounds as an inclusion polygon, each cylinder
-  (radius + buffer) and each radar dome (its footprint) as an exclusion circle, in
+- Fence (mission_type 1): the scenario's x/y bounds (a site's area) as an inclusion polygon, each
+  cylinder (radius + buffer) and each radar dome (its footprint) as an exclusion circle, a site's
+  no-fly zones as exclusion polygons, in
   MAV_FRAME_GLOBAL as QGroundControl sends fences; for one vehicle's plan only the obstacles its
   path keeps out of (gcs_planner/geofence.py: a 2-D fence cannot let a vehicle over a tower).
 - Rally (mission_type 2): one point over each vehicle's start at its min_alt_m.
@@ -241,7 +242,8 @@ def _numbered(items: list[MissionItem]) -> list[MissionItem]:
 
 def scenario_fence_items(scenario: Scenario, vp: VehiclePlan | None = None) -> list[MissionItem]:
     """The fence items (type 1) of the scenario, or of one vehicle's plan (gcs_planner.geofence:
-    the bounds as an inclusion polygon, the obstacles its path keeps out of as exclusion circles)."""
+    the bounds or site area as an inclusion polygon, the obstacles its path keeps out of as exclusion
+    circles, the site's no-fly zones it keeps out of as exclusion polygons)."""
     fence = vehicle_geofence(scenario, vp)
     origin = scenario.origin
     items: list[MissionItem] = []
@@ -251,12 +253,20 @@ def scenario_fence_items(scenario: Scenario, vp: VehiclePlan | None = None) -> l
         return deg_to_e7(lat), deg_to_e7(lon)
 
     fence_type, fence_frame = MissionType.FENCE, mavlink.MAV_FRAME_GLOBAL
-    if fence.inclusion is not None:
-        x0, x1, y0, y1 = fence.inclusion
-        lats, lons = geo([x0, x1, x1, x0], [y0, y0, y1, y1])  # counter-clockwise seen from above
-        cmd = mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION
+    polygons = (
+        []
+        if fence.inclusion is None
+        else [(mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION, fence.inclusion)]
+    )
+    polygons += [
+        (mavlink.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION, z.vertices) for z in fence.exclusion_polygons
+    ]
+    for cmd, vertices in polygons:  # counter-clockwise seen from above; param1 = the vertex count
+        lats, lons = geo(vertices[:, 0], vertices[:, 1])
         items += [
-            MissionItem(0, fence_frame, cmd, 0, 1, 4.0, x=int(a), y=int(b), mission_type=fence_type)
+            MissionItem(
+                0, fence_frame, cmd, 0, 1, float(len(vertices)), x=int(a), y=int(b), mission_type=fence_type
+            )
             for a, b in zip(lats, lons, strict=True)
         ]
     if fence.exclusions:

@@ -40,6 +40,10 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
   errors flown, docs/timing-separation.md), must exceed max(separation_i, separation_j) +
   ``separation_margin_m``, else HARD + shortfall. HARD =
   1e4 replaces the paper's infinity (violations still rank by size).
+- A ``[site]`` (gcs_planner.sites) adds a hard term at the same samples: below the DEM ground +
+  terrain clearance + margin, or outside the site's area less the margin; the start and goal are
+  lifted to that floor (a vertical column like the band's). No-fly zones and obstacles arrive as
+  cylinders.
 - Weights b1..b4 = 1, 1, 0.1, 0.2 and a1 = a2 = 0.5 (the paper gives none).
 - PSO: the shared engine (gcs_planner.planning.pso), linear inertia ``w_max`` 0.9 -> ``w_min``
   0.4, ``c1`` = ``c2`` = 1.5, v_max = ``v_max_fraction`` 0.2 of the bound span. Initial swarm:
@@ -83,6 +87,7 @@ from gcs_planner.planning.pso import PSOConfig, minimize
 from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
 from gcs_planner.planning.traffic import TIMING_ERROR_S, Traffic
 from gcs_planner.scenario import Scenario, Vehicle
+from gcs_planner.sites import Site
 from gcs_planner.validation import MAX_DURATION_S
 
 __all__ = ["NAME", "Config", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
@@ -149,6 +154,7 @@ class VehicleProblem:
     upper: np.ndarray
     n_wp: int
     delay_s: float = 0.0
+    site: Site | None = None  # a [site]: terrain clearance and the area, as a hard cost term
 
     @property
     def pre(self) -> np.ndarray:
@@ -345,6 +351,9 @@ class CostModel:
         f3 = np.mean(np.abs(z - mid_z), axis=1) / half
         out_band = np.maximum(0.0, np.maximum(veh.min_alt_m - z, z - veh.max_alt_m))
         hard = hard + (out_band > 1e-9).sum(axis=1) * HARD_PENALTY + out_band.sum(axis=1)
+        if prob.site is not None:  # below terrain + clearance, or out of the site's area
+            off = prob.site.violations(pos)
+            hard = hard + (off > 1e-9).sum(axis=1) * HARD_PENALTY + off.sum(axis=1)
         # F4 smoothness: turn angles and climb-angle changes of the polyline
         d = np.diff(dec.pts, axis=1)
         a, b = d[:, :-1], d[:, 1:]
@@ -401,6 +410,16 @@ def prepare(
         goal = np.array(v.goal, dtype=float)
         start[2] = np.clip(start[2], v.min_alt_m, v.max_alt_m)
         goal[2] = np.clip(goal[2], v.min_alt_m, v.max_alt_m)
+        if scenario.site is not None:  # climb / descend vertically to terrain + clearance + margin
+            site = scenario.site
+            for p in (start, goal):
+                floor = float(site.ground(p[0], p[1])) + site.clearance_m + site.margin_m
+                p[2] = max(p[2], min(floor, v.max_alt_m))
+                if site.violations(p)[()] > 1e-9:
+                    raise UserError(
+                        f"vehicle {v.id}: {tuple(np.round(p, 1))} is outside the site's area less its"
+                        f" {site.margin_m:g} m margin, or under terrain + clearance within the band"
+                    )
         for name, p in (("start", start), ("goal", goal)):
             if not (lo[0] <= p[0] <= hi[0] and lo[1] <= p[1] <= hi[1]):
                 raise UserError(f"vehicle {v.id}: {name} {tuple(p[:2])} is outside the scenario bounds")
@@ -408,7 +427,7 @@ def prepare(
                 raise UserError(f"vehicle {v.id}: {name} {tuple(p)} is inside an obstacle")
         lower = np.tile([lo[0], lo[1], v.min_alt_m], cfg.waypoints)
         upper = np.tile([hi[0], hi[1], v.max_alt_m], cfg.waypoints)
-        problems.append(VehicleProblem(i, v, start, goal, lower, upper, cfg.waypoints))
+        problems.append(VehicleProblem(i, v, start, goal, lower, upper, cfg.waypoints, site=scenario.site))
     return problems, obstacles, lo, hi
 
 

@@ -16,7 +16,8 @@ Scenario sections: radars are ``[[obstacles.hemispheres]]``, obstacles ``[[obsta
 (z_min_m..z_max_m, radius_m + buffer_m), terrain ``[terrain]`` with ``type = "peaks"`` and
 ``[[terrain.peaks]] h_m, x_m, y_m, sx_m, sy_m`` or ``type = "grid"``, ``file = "dem.npz"`` (keys
 ``elevation_m`` (ny, nx) and ``geotransform`` (6,), path relative to the scenario file); no
-``[terrain]`` means flat ground at z = 0.
+``[terrain]`` means flat ground at z = 0. A scenario's ``[site]`` DEM (gcs_planner.sites) is used
+in place of ``[terrain]``.
 
 Altitude repair (paper, sec. 2.1): a node lower than terrain + h_safe is lifted to exactly that
 height; it is a repair of the track, not a penalty.
@@ -185,7 +186,11 @@ class ThreatEnv:
     def from_scenario(cls, scenario: Scenario, h_safe_m: float) -> ThreatEnv:
         """Environment in metres from a scenario's [terrain] and [obstacles] sections."""
         base = scenario.path.parent if scenario.path is not None else Path(".")
-        terrain = terrain_from_config(scenario.raw.get("terrain"), base, scenario.name)
+        site = scenario.site
+        if site is not None and site.terrain is not None:  # a [site] DEM, in local metres
+            terrain = site.terrain
+        else:
+            terrain = terrain_from_config(scenario.raw.get("terrain"), base, scenario.name)
         hem, cyl = scenario.hemispheres, scenario.cylinders
         return cls(
             terrain=terrain,

@@ -5,6 +5,9 @@ per vehicle type, manned aircraft tracks -> predicted no-fly zones), runs the st
 planner.py and returns a Plan whose vehicles carry the timed waypoints, per-leg speeds (for
 DO_CHANGE_SPEED), the take-off delay and the densely sampled flown path.
 
+On a ``[site]`` (gcs_planner.sites) the DEM is a flat floor under the UAVs (``_over_site``); the
+planner does not route round static obstacles or no-fly zones, which the plan checker reports.
+
 Scenario keys (besides the common ones of gcs_planner.scenario):
     [planner]      name = "deconflict_4d", seed, any Config field (planner.py), and
                    confidence (0.95), safety_m (manned safety distance, 5.0), min_mode_weight (0.01)
@@ -146,7 +149,11 @@ def build_problem(scenario: Scenario, config: Config) -> Problem:
     """Scenario -> Problem (settings, UAV specs, manned no-fly zones, waypoint box)."""
     settings = config
     if scenario.cylinders or scenario.hemispheres:
-        log.warning("deconflict_4d ignores static obstacles (cylinders / hemispheres) in %s", scenario.name)
+        log.warning(
+            "deconflict_4d ignores static obstacles and no-fly zones (cylinders / hemispheres) in %s;"
+            " the plan checker reports any it crosses",
+            scenario.name,
+        )
     if not scenario.vehicles:
         raise ScenarioError(f"{scenario.name}: deconflict_4d needs at least one [[vehicles]] entry")
     uavs = [_uav(scenario, i) for i in range(len(scenario.vehicles))]
@@ -156,7 +163,13 @@ def build_problem(scenario: Scenario, config: Config) -> Problem:
     lower, upper = ends.min(axis=0) - pad, ends.max(axis=0) + pad
     for k, axis in enumerate("xy"):
         if axis in scenario.bounds:
-            lower[k], upper[k] = scenario.bounds[axis]
+            lo, hi = scenario.bounds[axis]
+            if scenario.site is not None:  # a site's area box holds the UAVs' own box (and its floor)
+                lower[k], upper[k] = max(lower[k], lo), min(upper[k], hi)
+            else:
+                lower[k], upper[k] = lo, hi
+    if scenario.site is not None:
+        uavs = _over_site(scenario, uavs, lower, upper)
     # zones must cover the latest instant any UAV can be airborne
     horizon = max(
         u.arrival_s + settings.max_delay_s + 3.0 * (u.arrival_s - u.takeoff_s) + u.goal[2] / u.dyn.descent_mps
@@ -175,6 +188,32 @@ def build_problem(scenario: Scenario, config: Config) -> Problem:
             settings.zone_step_s,
         )
     return Problem(uavs=uavs, zones=zones, settings=settings, lower_m=lower, upper_m=upper)
+
+
+def _over_site(
+    scenario: Scenario, uavs: list[UavSpec], lower: np.ndarray, upper: np.ndarray
+) -> list[UavSpec]:
+    """A site's terrain as a flat floor: each UAV's lowest altitude is raised to the highest DEM
+    ground in the waypoint box + clearance + margin (the planner has no terrain model); a start or
+    goal below that floor is refused."""
+    site = scenario.site
+    if site.terrain is None:
+        return uavs
+    step = abs(site.terrain.geotransform[1]) / 2
+    gx, gy = np.meshgrid(
+        np.arange(lower[0], upper[0] + step, step), np.arange(lower[1], upper[1] + step, step)
+    )
+    floor = float(site.ground(gx, gy).max()) + site.clearance_m + site.margin_m
+    out = []
+    for u in uavs:
+        low = min(u.start[2], u.goal[2])
+        if low < floor or floor > u.z_max_m:
+            raise ScenarioError(
+                f"{scenario.name}: vehicle {u.id}: start / goal z {low:g} m is under the site's terrain floor"
+                f" for deconflict_4d, {floor:.1f} m (highest ground in its box + clearance + margin)"
+            )
+        out.append(dataclasses.replace(u, z_min_m=max(u.z_min_m, floor)))
+    return out
 
 
 def to_plan(scenario: Scenario, problem: Problem, out: Outcome) -> Plan:
