@@ -35,7 +35,7 @@ def read_kml(path: Path) -> list[Feature]:
     if _local(root.tag) != "kml":
         raise InputError(f"{where}: not KML: the root element is <{_local(root.tag)}>, not <kml>")
     out: list[Feature] = []
-    for i, mark in enumerate(root.iter("{*}Placemark")):
+    for i, mark in enumerate(root.iterfind(".//{*}Placemark")):
         out += _placemark(mark, f"{where}: Placemark[{i}]")
     return out
 
@@ -70,10 +70,10 @@ def _placemark(mark: ET.Element, where: str) -> list[Feature]:
     name = mark.find("{*}name")
     if name is not None and (name.text or "").strip():
         props["name"] = name.text.strip()
-    for data in mark.iter("{*}Data"):
+    for data in mark.iterfind(".//{*}Data"):
         value = data.find("{*}value")
         props[data.get("name", "")] = _value(value.text if value is not None else "")
-    for data in mark.iter("{*}SimpleData"):
+    for data in mark.iterfind(".//{*}SimpleData"):
         props[data.get("name", "")] = _value(data.text or "")
     geometries = [g for g in mark.iter() if _local(g.tag) in ("Point", "Polygon")]
     if not geometries:
