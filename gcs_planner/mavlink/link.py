@@ -53,15 +53,17 @@ import contextlib
 import logging
 import os
 import socket
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from operator import methodcaller
 
 os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.errors import UserError  # noqa: E402
-from gcs_planner.lockstep import now_s, unix_s
+from gcs_planner.lockstep import LockstepLoop, now_s, unix_s  # noqa: E402
 from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD  # noqa: E402
@@ -100,6 +102,8 @@ VEHICLE_TYPES = frozenset({
     mavlink.MAV_TYPE_SPACECRAFT_ORBITER, mavlink.MAV_TYPE_GROUND_QUADRUPED, mavlink.MAV_TYPE_VTOL_GYRODYNE,
 })  # fmt: skip
 _UNKNOWN = mavlink.MAVLink_unknown
+_SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
+_is_closing = methodcaller("is_closing")
 
 Address = tuple[str, int]
 Callback = Callable[[mavlink.MAVLink_message, bytes, float], None]
@@ -214,6 +218,8 @@ class MavlinkLink:
         self.frames_sent = 0
         self.frames_dropped = 0  # undecodable, bad CRC, or (signing) unsigned / badly signed
         self.unverified: dict[int, int] = {}  # header sysid -> signed frames dropped (not our key)
+        self._now_s: Callable[[], float] = now_s  # the clocks; open() binds them to its loop
+        self._unix_s: Callable[[], float] = unix_s
 
     @classmethod
     async def open(
@@ -235,6 +241,7 @@ class MavlinkLink:
         urls = expand_ranges((url, *more_urls))
         parsed = [parse_url(u) for u in urls]
         link = cls(sysid, compid, signing_key)
+        link._bind_clocks(asyncio.get_running_loop())
         try:
             await link._open_endpoints(urls, parsed, receive_buffer_bytes)
         except BaseException:
@@ -269,6 +276,12 @@ class MavlinkLink:
                 port = open_serial(*addr, self._on_frames)
                 self._add_endpoint(port)
                 self._peers[addr] = (port, addr)
+
+    def _bind_clocks(self, loop: asyncio.AbstractEventLoop) -> None:
+        """Read the clocks of ``loop`` (the one the transports live on) directly: each received
+        datagram reads both, and asking asyncio for the running loop costs a system call (getpid)."""
+        self._now_s = loop.time
+        self._unix_s = loop.unix_time if isinstance(loop, LockstepLoop) else time.time
 
     def _add_endpoint(self, transport) -> None:
         self._endpoints.append(transport)
@@ -306,7 +319,7 @@ class MavlinkLink:
     # ----------------------------------------------------------------- sending
     def send(self, msg: mavlink.MAVLink_message) -> None:
         """Pack and send now; to the target system's address, or to every peer for broadcasts."""
-        if self._closed or all(t.is_closing() for t in self._endpoints):
+        if self._closed or all(map(_is_closing, self._endpoints)):
             raise ConnectionError("MAVLink link is closed")
         target = getattr(msg, "target_system", 0)
         raw = codec.encode(msg, self._mav) or self.signing.pack(msg)
@@ -317,7 +330,7 @@ class MavlinkLink:
                 transport.sendto(raw, addr)
         else:
             if len(info.addresses) > 1:  # fast path: one address can never be ambiguous
-                live = info.live_addresses(now_s())
+                live = info.live_addresses(self._now_s())
                 if len(live) > 1:
                     raise DuplicateSysidError(target, live)
             transport, addr = self._peers[info.address]
@@ -328,13 +341,13 @@ class MavlinkLink:
         """Raise DuplicateSysidError if ``sysid`` answers from more than one address."""
         info = self.vehicles.get(sysid)
         if info is not None:
-            live = info.live_addresses(now_s())
+            live = info.live_addresses(self._now_s())
             if len(live) > 1:
                 raise DuplicateSysidError(sysid, live)
 
     def duplicates(self) -> dict[int, list[Address]]:
         """System ids currently heard from more than one address."""
-        now = now_s()
+        now = self._now_s()
         return {s: v.live_addresses(now) for s, v in self.vehicles.items() if len(v.live_addresses(now)) > 1}
 
     def set_signing_key(self, key: bytes | None) -> None:
@@ -373,28 +386,33 @@ class MavlinkLink:
         by ``transport.sendto(data, raw_addr)``): each decoded, verified, then delivered."""
         if junk:
             self.frames_dropped += junk
-        t_s = unix_s()
-        now = now_s()
+        t_s = self._unix_s()
+        now = self._now_s()
+        signing = self.signing
+        verifying = signing.key is not None
         for frame in found:
             msg = self._decode(frame, addr)
-            accepted = msg is not None and self.signing.accept(frame)
-            signed = msg is not None and frame[0] == 0xFD and frame[2] & mavlink.MAVLINK_IFLAG_SIGNED
-            if signed and (not accepted or self.signing.key is None):  # signed with a key we lack
-                self.unverified[frame[5]] = self.unverified.get(frame[5], 0) + 1
+            if msg is None:
+                self.frames_dropped += 1
+                continue
+            accepted = signing.accept(frame)
+            if frame[0] == 0xFD and frame[2] & _SIGNED and not (accepted and verifying):
+                self.unverified[frame[5]] = self.unverified.get(frame[5], 0) + 1  # a key we lack
             if not accepted:
                 self.frames_dropped += 1
                 continue
-            raw = frame
-            msg._signed = self.signing.key is not None  # verified above
+            msg._signed = verifying  # verified above
             if addr not in self._peers:  # udpin: answer whoever talks to us (once a frame verified)
                 self._peers[addr] = (transport, raw_addr)
-            self._note_source(msg, addr, now)
-            attach_extensions(msg, raw)
+            sysid = msg.get_srcSystem()
+            self._note_source(msg, sysid, addr, now)
+            attach_extensions(msg, frame)
             self.frames_received += 1
             # the vehicle's own subscribers (transfers) first: their replies leave before logging
-            for callback in (*self._by_sysid.get(msg.get_srcSystem(), ()), *self._subscribers):
+            own = self._by_sysid.get(sysid)  # lists are replaced, never changed: safe to iterate
+            for callback in own + self._subscribers if own else self._subscribers:
                 try:
-                    callback(msg, raw, t_s)
+                    callback(msg, frame, t_s)
                 except UserError as exc:  # said once more, in one line, by the operation it ends
                     log.debug("MAVLink subscriber %r: %s", callback, exc)
                 except Exception:
@@ -413,8 +431,7 @@ class MavlinkLink:
             msg._header = _frame_header(frame)
         return msg
 
-    def _note_source(self, msg: mavlink.MAVLink_message, addr: Address, now: float) -> None:
-        sysid = msg.get_srcSystem()
+    def _note_source(self, msg: mavlink.MAVLink_message, sysid: int, addr: Address, now: float) -> None:
         info = self.vehicles.get(sysid)
         if info is None:
             if not is_autopilot_heartbeat(msg):

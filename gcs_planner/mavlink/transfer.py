@@ -428,12 +428,14 @@ class UploadTransfer(Transfer):
             self._rtt_sample(now_s - self._sent_at[i - 1])  # the first ask for i answers item i - 1
         # a request may skip items only where a lost request's item was already in flight: one never
         # sent cannot be stored, so the vehicle jumped past it (unless it comes back for it)
-        self._skipped.update(k for k in range(self._requested + 1, i) if math.isnan(self._sent_at[k]))
+        sent_at = self._sent_at
+        if i > self._requested + 1:
+            self._skipped.update(k for k in range(self._requested + 1, i) if math.isnan(sent_at[k]))
         self._skipped.discard(i)
         self._requested = max(self._requested, i)
         window = range(i, min(i + self.timing.window, len(self.items)))
-        if now_s - self._sent_at[i] < max(self.timing.duplicate_window_s, 2 * self._srtt_s):
-            due = [k for k in window if math.isnan(self._sent_at[k])]  # i is on its way: extend
+        if now_s - sent_at[i] < max(self.timing.duplicate_window_s, 2 * self._srtt_s):
+            due = [k for k in window if math.isnan(sent_at[k])]  # i is on its way: extend
         else:  # i was never sent or was lost; what went after it was dropped: send the window again
             due = list(window)
         if not due:

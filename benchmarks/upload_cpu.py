@@ -1,0 +1,212 @@
+"""Upload CPU per item and transfer time: our MissionClient vs MAVSDK's MissionRaw, in one run.
+
+One mock vehicle (sitl_mock, in a child process with its own GIL) listens on 127.0.0.1; each client
+uploads missions of every size to it over UDP loopback. Per upload it records:
+  wall      from the upload call to its return (MISSION_COUNT .. MISSION_ACK);
+  cpu       CPU time (user + system, every thread) of the client: this process, where MAVSDK's C++
+            library runs its own threads, plus any child process that is not the mock (none today:
+            MAVSDK 4 is a library, not a mavsdk_server process);
+  mock_cpu  CPU time of the mock's process, the other half of every round trip.
+Ours runs with ``Timing(verdict_s=0)``: the transfer only, without the second a PX4 vehicle is
+listened to after its ACK for a refusal (verdict.py), which MAVSDK does not do and which costs no
+CPU. Each round gives each client a fresh mock and rotates the client order, so drifting machine
+load hits both alike; medians over rounds x reps uploads. The markdown goes to stdout (and --out).
+
+    .venv/bin/python benchmarks/upload_cpu.py [--sizes 100 500] [--rounds 3] [--reps 5] [--out FILE]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import datetime
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from upload_latency import Mock, items  # noqa: E402
+
+from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
+from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
+from gcs_planner.mavlink.transfer import Timing  # noqa: E402
+
+Sample = tuple[float, float, float]  # wall, client cpu, mock cpu [s]
+
+
+def cpu_s(pid: int) -> float:
+    """On-CPU seconds of every thread of process ``pid`` (/proc schedstat: nanoseconds, not ticks)."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(FileNotFoundError):
+            total += int((task / "schedstat").read_text().split()[0])
+    return total * 1e-9
+
+
+def children(pid: int) -> list[int]:
+    """Process ids of ``pid``'s children and their descendants."""
+    out = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(FileNotFoundError):
+            out += [int(c) for c in (task / "children").read_text().split()]
+    return [d for c in out for d in (c, *children(c))]
+
+
+class CpuMeter:
+    """CPU seconds used so far by the client (this process and any child but the mock: a
+    mavsdk_server would be one) and by the mock's process."""
+
+    def __init__(self, mock_pid: int) -> None:
+        self.mock_pid = mock_pid
+
+    def read(self) -> tuple[float, float]:
+        client = cpu_s(os.getpid())
+        for pid in children(os.getpid()):
+            if pid != self.mock_pid:
+                with contextlib.suppress(FileNotFoundError):
+                    client += cpu_s(pid)
+        return client, cpu_s(self.mock_pid)
+
+
+def measured(meter: CpuMeter, upload: Callable[[], object]) -> Sample:
+    c0, m0 = meter.read()
+    t0 = time.perf_counter()
+    upload()
+    wall = time.perf_counter() - t0
+    c1, m1 = meter.read()
+    return wall, c1 - c0, m1 - m0
+
+
+async def measured_async(meter: CpuMeter, upload) -> Sample:
+    c0, m0 = meter.read()
+    t0 = time.perf_counter()
+    await upload
+    wall = time.perf_counter() - t0
+    c1, m1 = meter.read()
+    return wall, c1 - c0, m1 - m0
+
+
+def ours(address, meter: CpuMeter, sizes: list[int], reps: int) -> dict[int, list[Sample]]:
+    async def main() -> dict[int, list[Sample]]:
+        link = await MavlinkLink.open(f"udpout:{address[0]}:{address[1]}")
+        await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 30)
+        client = MissionClient(link, 1, timing=Timing(verdict_s=0))
+        await client.upload(items(10, 99))  # warm-up: first-call costs (caches, imports)
+        out = {}
+        for n in sizes:
+            runs = []
+            for r in range(reps):
+                mission = items(n, r)
+                runs.append(await measured_async(meter, client.upload(mission)))
+                await asyncio.sleep(0.05)  # let the mock's reply flush settle before the next
+            out[n] = runs
+        await link.close()
+        return out
+
+    return asyncio.run(main())
+
+
+def mavsdk(address, meter: CpuMeter, sizes: list[int], reps: int) -> dict[int, list[Sample]]:
+    from mavsdk import Configuration, Mavsdk, log_subscribe
+    from mavsdk.plugins.mission_raw import MissionItem as RawItem
+    from mavsdk.plugins.mission_raw import MissionRaw
+
+    log_subscribe(lambda *args: True)
+    sdk = Mavsdk(Configuration.create_manual(253, 190, True))
+    sdk.add_any_connection(f"udpout://{address[0]}:{address[1]}")
+    raw = MissionRaw(sdk.first_autopilot(10.0))
+
+    def mission(n: int, r: int) -> list:
+        fields = ("seq", "frame", "command", "current", "autocontinue", "param1", "param2", "param3")
+        fields += ("param4", "x", "y", "z")
+        return [RawItem(*(getattr(i, f) for f in fields), 0) for i in items(n, r)]
+
+    raw.upload_mission(mission(10, 99))  # warm-up, as for ours
+    out = {}
+    for n in sizes:
+        runs = []
+        for r in range(reps):
+            m = mission(n, r)
+            runs.append(measured(meter, lambda m=m: raw.upload_mission(m)))
+            time.sleep(0.05)
+        out[n] = runs
+    sdk.destroy()
+    return out
+
+
+CLIENTS = {"ours": ours, "mavsdk": mavsdk}
+
+
+def run(sizes: list[int], rounds: int, reps: int, profile: str) -> dict[str, dict[int, list[Sample]]]:
+    samples: dict[str, dict[int, list[Sample]]] = {c: {n: [] for n in sizes} for c in CLIENTS}
+    for r in range(rounds):
+        names = list(CLIENTS)[r % 2 :] + list(CLIENTS)[: r % 2]
+        for name in names:
+            with Mock(1, profile) as mock:
+                meter = CpuMeter(mock._proc.pid)
+                for n, runs in CLIENTS[name](mock.addresses[0], meter, sizes, reps).items():
+                    samples[name][n] += runs
+    return samples
+
+
+def table(samples: dict[str, dict[int, list[Sample]]]) -> str:
+    med = statistics.median
+    rows = [
+        "| items | client | wall ms | wall / MAVSDK | client CPU us/item | CPU / MAVSDK | mock CPU us/item |",
+        "|---:|---|---:|---:|---:|---:|---:|",
+    ]
+    for n in samples["mavsdk"]:
+        ref_wall = med(w for w, _, _ in samples["mavsdk"][n])
+        ref_cpu = med(c for _, c, _ in samples["mavsdk"][n])
+        for name in CLIENTS:
+            runs = samples[name][n]
+            wall, cpu, mock = (med(x[k] for x in runs) for k in range(3))
+            rows.append(
+                f"| {n} | {name} | {1e3 * wall:.1f} | {wall / ref_wall:.2f} | {1e6 * cpu / n:.1f}"
+                f" | {cpu / ref_cpu:.2f} | {1e6 * mock / n:.1f} |"
+            )
+    return "\n".join(rows)
+
+
+def uptime() -> str:
+    return subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=[100, 500])
+    p.add_argument("--rounds", type=int, default=3)
+    p.add_argument("--reps", type=int, default=5)
+    p.add_argument("--profile", choices=("px4", "ardupilot"), default="px4")
+    p.add_argument("--out", type=Path, help="also write the markdown here")
+    args = p.parse_args()
+    before = uptime()
+    samples = run(args.sizes, args.rounds, args.reps, args.profile)
+    text = "\n".join(
+        [
+            f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}."
+            f" Date: {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC.",
+            f"Load (`uptime`) before: {before}",
+            f"Load (`uptime`) after: {uptime()}",
+            f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}` (profile {args.profile},"
+            f" medians of {args.rounds} rounds x {args.reps} uploads)",
+            "",
+            table(samples),
+            "",
+        ]
+    )
+    print(text)
+    if args.out:
+        args.out.write_text(text)
+
+
+if __name__ == "__main__":
+    main()
