@@ -82,6 +82,13 @@ FIGURES: tuple[Figure, ...] = (
         minutes=0.5,
     ),
     Figure(
+        "site_inputs",
+        "Site inputs: import cost of the readers' libraries, reading the bundled site, planning it",
+        ("python benchmarks/site_inputs.py --runs 7",),
+        quick=("python benchmarks/site_inputs.py --runs 2",),
+        minutes=1,
+    ),
+    Figure(
         "sweep_throughput",
         "Sweep throughput: local workers and a Dask LocalCluster",
         ("python benchmarks/sweep_throughput.py studies/swarm_small_budget.toml --seeds 20",),
@@ -247,7 +254,7 @@ FIGURES: tuple[Figure, ...] = (
 )
 
 # scripts that write inputs (scenario files), not figures
-GENERATORS = ("make_coalition_sitl.py", "make_swarm_scenarios.py")
+GENERATORS = ("make_coalition_sitl.py", "make_site_valley.py", "make_swarm_scenarios.py")
 
 
 def by_name(name: str) -> Figure:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gcs_planner.errors import UserError
 from gcs_planner.fleet_ids import MAX_NETWORK, fleet_id
@@ -52,6 +52,9 @@ from gcs_planner.validation import (
 from gcs_planner.validation import (
     origin as checked_origin,
 )
+
+if TYPE_CHECKING:  # shapely is imported only when a scenario has a [site]
+    from gcs_planner.sites.world import Site
 
 __all__ = ["Cylinder", "Hemisphere", "Scenario", "ScenarioError", "Vehicle", "load_scenario"]
 
@@ -114,7 +117,7 @@ class Scenario:
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     raw: dict[str, Any] = field(default_factory=dict)
     path: Path | None = None
-    site: Any = None  # gcs_planner.sites.Site: the exact area, no-fly zones and terrain of a [site]
+    site: Site | None = None  # the exact area, no-fly zones and terrain of a [site] (gcs_planner.sites)
 
     @property
     def planner_name(self) -> str:
@@ -178,13 +181,26 @@ def load_scenario(path: str | Path) -> Scenario:
     scenario = parse_scenario(data, where=str(path))
     scenario.path = path
     if "site" in data:  # the map files are read only with the scenario's folder known
-        from gcs_planner.sites import apply_site
-
         try:
-            scenario = apply_site(scenario, path.parent)
+            _add_site(scenario, path.parent)
         except InputError as exc:
             raise ScenarioError(f"{path}: {exc}") from None
     return scenario
+
+
+def _add_site(scenario: Scenario, base_dir: Path) -> None:
+    """The scenario's ``[site]`` read (gcs_planner.sites): its area's box as [bounds] x / y, its
+    no-fly zones and obstacles as cylinders, the site itself as ``Scenario.site``."""
+    from gcs_planner.sites.world import read_site  # shapely and the map readers: only for a site
+
+    ends = [v.start[:2] for v in scenario.vehicles] + [v.goal[:2] for v in scenario.vehicles]
+    raw = scenario.raw
+    site = read_site(
+        table(raw["site"], "[site]"), scenario.origin, base_dir, ends, scenario.bounds, "terrain" in raw
+    )
+    scenario.bounds = {**scenario.bounds, **site.bounds}
+    scenario.cylinders = scenario.cylinders + [Cylinder(**c) for c in site.cylinders]
+    scenario.site = site
 
 
 def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:

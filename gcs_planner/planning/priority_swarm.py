@@ -69,7 +69,7 @@ import logging
 import math
 import time
 from dataclasses import dataclass
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 from msgspec import Meta
@@ -87,8 +87,10 @@ from gcs_planner.planning.pso import PSOConfig, minimize
 from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
 from gcs_planner.planning.traffic import TIMING_ERROR_S, Traffic
 from gcs_planner.scenario import Scenario, Vehicle
-from gcs_planner.sites import Site
 from gcs_planner.validation import MAX_DURATION_S
+
+if TYPE_CHECKING:  # shapely is imported only when a scenario has a [site]
+    from gcs_planner.sites.world import Site
 
 __all__ = ["NAME", "Config", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
 

@@ -1,8 +1,8 @@
 """A site turned into the scenario's local world: ENU polygons, cylinders and a terrain grid.
 
-``[site]`` in a scenario names the map files; :func:`apply_site` reads them and returns the
-scenario with what the planners already understand, plus the exact geometry the fence and the
-plan checker use (``Scenario.site``):
+``[site]`` in a scenario names the map files; :func:`read_site` reads them into what the planners
+already understand (bounds, cylinders: gcs_planner.scenario adds them to the scenario) and the
+exact geometry the fence and the plan checker use (``Scenario.site``):
 
 - the area polygon -> ``[bounds]`` x / y (its bounding box) and ``Site.area``, the inclusion fence;
 - each no-fly zone -> a cylinder around it (its minimum bounding circle grown by ``margin_m``,
@@ -19,33 +19,30 @@ as everywhere else (gcs_planner.geo).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import shapely
 
 from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.planning.threat_env import GridTerrain
-from gcs_planner.scenario import WORLD_TABLES, Cylinder, Scenario
 from gcs_planner.sites.dem import Dem, read_dem
 from gcs_planner.sites.features import Feature
 from gcs_planner.sites.geojson import read_geojson
 from gcs_planner.sites.kml import read_kml
+from gcs_planner.terrain import GridTerrain
 from gcs_planner.validation import (
     MAX_ALT_M,
     MAX_RADIUS_M,
     MIN_ALT_M,
     InputError,
     items_of,
-    known_keys,
     number,
-    table,
 )
 
-__all__ = ["SITE_KEYS", "NoFlyZone", "Site", "apply_site"]
+__all__ = ["NoFlyZone", "Site", "read_site"]
 
-SITE_KEYS = WORLD_TABLES["site"][0]
 READERS = {".geojson": read_geojson, ".json": read_geojson, ".kml": read_kml, ".kmz": read_kml}
 MAX_GRID_NODES = 4_000_000  # local terrain grid nodes (2000 x 2000)
 
@@ -70,6 +67,8 @@ class Site:
     terrain: GridTerrain | None
     clearance_m: float
     margin_m: float
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)  # x / y: the area's box
+    cylinders: tuple[dict[str, Any], ...] = ()  # scenario Cylinder fields: zones and obstacles
 
     def ground(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Ground height [m above the origin] at (x, y); 0 without a DEM."""
@@ -100,9 +99,17 @@ class Site:
         return inner
 
 
-def apply_site(scenario: Scenario, base_dir: Path) -> Scenario:
-    """The scenario with its ``[site]`` table read (module docstring); InputError on bad input."""
-    cfg = known_keys(table(scenario.raw.get("site"), "[site]"), SITE_KEYS, "[site]")
+def read_site(
+    cfg: dict[str, Any],
+    origin: Origin,
+    base_dir: Path,
+    ends: list[tuple[float, float]],
+    bounds: dict[str, tuple[float, float]],
+    has_terrain: bool,
+) -> Site:
+    """The ``[site]`` table ``cfg`` read into local metres (module docstring). ``ends``: the
+    vehicles' start and goal (x, y) [m]; ``bounds``: the scenario's [bounds]; ``has_terrain``:
+    whether it has a [terrain] table. InputError on bad input."""
     files = items_of(cfg.get("features", []), "site.features", str)
     clearance = number(cfg.get("terrain_clearance_m", 20.0), "site.terrain_clearance_m", 0.0, MAX_RADIUS_M)
     spacing = number(cfg.get("dem_spacing_m", 10.0), "site.dem_spacing_m", 1.0, 1000.0)
@@ -116,26 +123,25 @@ def apply_site(scenario: Scenario, base_dir: Path) -> Scenario:
         if reader is None:
             raise InputError(f"site.features[{k}] {file!r}: read are .geojson, .json, .kml and .kmz files")
         features += reader(path)
-    origin = scenario.origin
     polygons = [(f, _polygon(f, origin)) for f in features if not f.is_point]
     areas = [p for f, p in polygons if f.kind == "area"]
     if len(areas) > 1:
         raise InputError(f"site.features: {len(areas)} features of kind 'area'; a site has at most one")
     area = areas[0] if areas else None
-    bounds = dict(scenario.bounds)
+    box = dict(bounds)
     if area is not None:
         if "x" in bounds or "y" in bounds:
             raise InputError("[bounds] x / y and a site area both bound the world; give one of them")
         x0, y0, x1, y1 = area.bounds
-        bounds.update(x=(x0, x1), y=(y0, y1))
+        box.update(x=(x0, x1), y=(y0, y1))
     terrain = None
     if "dem" in cfg:
-        if "terrain" in scenario.raw:
+        if has_terrain:
             raise InputError("[terrain] and site.dem both give the ground; give one of them")
         dem = read_dem(base_dir / cfg["dem"], "site.dem")
-        terrain = _local_terrain(dem, origin, _site_box(scenario, features, bounds, origin), spacing)
-    site = Site(area, (), terrain, clearance, margin)
-    zones, cylinders = [], list(scenario.cylinders)
+        terrain = _local_terrain(dem, origin, _site_box(ends, features, box, origin), spacing)
+    site = Site(area, (), terrain, clearance, margin, {k: v for k, v in box.items() if k in "xy"})
+    zones, cylinders = [], []
     for f, poly in polygons:
         if f.kind == "no_fly":
             zone = NoFlyZone(f.name, poly, f.floor_m - origin.alt_m, f.ceiling_m - origin.alt_m)
@@ -147,7 +153,7 @@ def apply_site(scenario: Scenario, base_dir: Path) -> Scenario:
         if f.is_point:
             east, north, _ = geodetic_to_enu(f.rings[0][0, 1], f.rings[0][0, 0], 0.0, origin)
             cylinders.append(_obstacle_cylinder(f, shapely.Point(east, north).buffer(f.radius_m, 64), site))
-    return replace(scenario, cylinders=cylinders, bounds=bounds, site=replace(site, zones=tuple(zones)))
+    return replace(site, zones=tuple(zones), cylinders=tuple(cylinders))
 
 
 def _polygon(f: Feature, origin: Origin) -> shapely.Polygon:
@@ -170,9 +176,9 @@ def _circle(poly: shapely.Geometry) -> tuple[float, float, float]:
     return centre.x, centre.y, r * (1 + 1e-9) + 1e-6
 
 
-def _zone_cylinder(zone: NoFlyZone, margin: float) -> Cylinder:
+def _zone_cylinder(zone: NoFlyZone, margin: float) -> dict[str, Any]:
     x, y, r = _circle(zone.polygon)
-    return Cylinder(
+    return dict(
         x=x,
         y=y,
         radius_m=r + margin,
@@ -182,12 +188,12 @@ def _zone_cylinder(zone: NoFlyZone, margin: float) -> Cylinder:
     )
 
 
-def _obstacle_cylinder(f: Feature, footprint: shapely.Geometry, site: Site) -> Cylinder:
+def _obstacle_cylinder(f: Feature, footprint: shapely.Geometry, site: Site) -> dict[str, Any]:
     """A cylinder around the footprint from the lowest ground under it to the highest + height."""
     x, y, r = _circle(footprint)
     pts = np.vstack([shapely.get_coordinates(footprint), [[x, y]]])
     ground = site.ground(pts[:, 0], pts[:, 1])
-    return Cylinder(
+    return dict(
         x=x,
         y=y,
         radius_m=r,
@@ -198,13 +204,13 @@ def _obstacle_cylinder(f: Feature, footprint: shapely.Geometry, site: Site) -> C
     )
 
 
-def _site_box(scenario: Scenario, features: list[Feature], bounds: dict, origin: Origin) -> tuple[float, ...]:
+def _site_box(
+    ends: list[tuple[float, float]], features: list[Feature], bounds: dict, origin: Origin
+) -> tuple[float, ...]:
     """(x0, x1, y0, y1) [m]: the bounds, else the box of every vehicle end and feature, padded 50 m."""
     if "x" in bounds and "y" in bounds:
         return (*bounds["x"], *bounds["y"])
-    pts = [np.array(v.start[:2]) for v in scenario.vehicles] + [
-        np.array(v.goal[:2]) for v in scenario.vehicles
-    ]
+    pts = [np.array(e, dtype=float) for e in ends]
     for f in features:
         for ring in f.rings:
             east, north, _ = geodetic_to_enu(ring[:, 1], ring[:, 0], 0.0, origin)
