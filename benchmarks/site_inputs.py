@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 SITE = ROOT / "missions" / "site_valley"
 SCENARIOS = ("site_valley_swarm", "site_valley_acmpso", "site_valley_4d")
-IMPORTS = ("shapely", "tifffile", "gcs_planner.sites.kml", "fastkml", "rasterio")
+IMPORTS = ("shapely", "tifffile", "xml.etree.ElementTree", "zipfile", "fastkml", "rasterio")
 
 
 def _import_cpu_s(module: str, runs: int) -> float | None:
