@@ -1,7 +1,7 @@
 """Benchmark the priority swarm planner against PSO / DE / GWO baselines, and its scaling to 500 UAVs.
 
     nice .venv/bin/python benchmarks/priority_swarm.py compare --out bench_swarm.csv  # seeds 0..9
-    nice .venv/bin/python benchmarks/priority_swarm.py scale --out bench_scale.json
+    nice .venv/bin/python benchmarks/priority_swarm.py scale --out bench_scale.json [--timing-error-s 0]
     .venv/bin/python benchmarks/priority_swarm.py table bench_swarm.csv bench_scale.json
 
 compare: studies/priority_swarm_compare.toml through the sweep runner (--workers processes; the
@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -98,12 +99,18 @@ def scale(args) -> None:
     for n in args.sizes:
         scenario = load_scenario(MISSIONS / "swarm500.toml")
         scenario.vehicles = full.vehicles[:n] if n < len(full.vehicles) else full.vehicles
+        config = config_of(scenario)
+        if args.timing_error_s is not None:
+            config = msgspec.structs.replace(config, timing_error_s=args.timing_error_s)
         t0, cpu = time.perf_counter(), time.process_time()
-        plan = plan_method(scenario, config_of(scenario), np.random.default_rng(args.seed))
+        plan = plan_method(scenario, config, np.random.default_rng(args.seed))
         rec = _record(plan, f"swarm500[:{n}]", "priority_swarm", args.seed, time.process_time() - cpu)
         rec["wall_s"] = time.perf_counter() - t0
         rec["cpu_s_per_uav"] = rec["cpu_s"] / n
         rec["check"] = plan.metrics["check"]
+        rec["timing_error_s"] = config.timing_error_s
+        rec["evaluations"] = plan.metrics["evaluations"]
+        rec["load_1min"] = os.getloadavg()[0]
         _append(args.out, rec)
 
 
@@ -147,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     s = sub.add_parser("scale")
     s.add_argument("--sizes", type=int, nargs="+", default=[40, 500])
     s.add_argument("--seed", type=int, default=1)
+    s.add_argument("--timing-error-s", type=float, help="planner timing_error_s [the default]")
     s.add_argument("--out", type=Path, default=Path("bench_scale.json"))
     t = sub.add_parser("table")
     t.add_argument("files", nargs="+")

@@ -20,6 +20,7 @@ import numpy as np
 
 from gcs_planner.config import Config, Seed, parse
 from gcs_planner.errors import UserError
+from gcs_planner.heap import keep_heap_slack
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario, ScenarioError
 from gcs_planner.scenario import load_scenario as read_scenario
@@ -82,6 +83,7 @@ def load_scenario(path: str | Path) -> Scenario:
 
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:
     """Run the scenario's planner with a seeded generator (seed defaults to the file's)."""
+    keep_heap_slack()  # the planners' numpy temporaries reuse freed pages (gcs_planner/heap.py)
     config = config_of(scenario)
     module = planner(scenario.planner_name)
     rng = np.random.default_rng(config.seed if seed is None else seed)
