@@ -6,15 +6,15 @@
 Plans missions/swarm500.toml (or flies a saved --plan), starts the mock fleet (one per network;
 in lockstep with the GCS on one virtual clock, docs/clock.md, or with --speedup X paced on the
 wall clock, one process per network) and runs gcs_planner.flight.fly on them as `gcs-planner fly`
-does: every mission uploaded, the fleet taken off, each route started
-on time, every received frame logged to MCAP, each vehicle judged by the conformance report.
-Prints one table: vehicles uploaded / completed / conforming, frames the link delivered against
-raw frames read back from the MCAP (the stock mcap stream reader, via read_flight), MAVLink
-sequence gaps (frames lost before the GCS), the GCS process's CPU (the mock processes not
-counted), wall time and the mock's lag events, then the along-track time errors flown (every
-planned path point a second apart, conformance.schedule_errors_s: quantiles, and the pair errors
-at the closest planned approaches; --errors writes them as JSON for the separation model,
-docs/timing-separation.md). --vehicles N flies the first N of the plan.
+does: every mission uploaded, the fleet taken off, each route started on time, every received
+frame logged to MCAP, each vehicle judged by the conformance report. Prints one table: vehicles
+uploaded / completed / conforming, frames the link delivered against raw frames read back from
+the MCAP (the stock mcap stream reader, via read_flight), MAVLink sequence gaps (frames lost
+before the GCS), this process's CPU (the GCS; in lockstep the mock fleets too, paced mock
+processes not counted), wall time, the mock's lag events, then the along-track time errors flown
+(every planned path point a second apart, conformance.schedule_errors_s: quantiles, and the
+error differences of vehicles planned within 20 m of each other; --errors writes them as JSON for
+the separation model, docs/timing-separation.md). --vehicles N flies the first N of the plan.
 """
 
 from __future__ import annotations
@@ -166,8 +166,8 @@ def main() -> None:
         ("frames delivered by the link", result.frames_received),
         ("raw frames read back from the MCAP", len(flight.frames)),
         ("frames lost before the GCS (sequence gaps)", f"{100 * _sequence_loss(flight):.3f} %"),
-        ("GCS CPU [s] (this process)", f"{cpu_s:.1f}"),
-        ("GCS CPU / wall", f"{cpu_s / wall_s:.2f}"),
+        ("CPU [s] (this process: GCS, lockstep mock)", f"{cpu_s:.1f}"),
+        ("CPU / wall", f"{cpu_s / wall_s:.2f}"),
         ("fly wall [s]", f"{wall_s:.1f}"),
         ("telemetry logged over [s, wall]", f"{log_s:.1f}"),
         ("clock", "lockstep" if args.speedup is None else f"paced, speed-up {args.speedup:g}"),
