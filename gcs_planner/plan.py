@@ -33,6 +33,9 @@ class VehiclePlan:
     final_action: "land", "rtl" or "loiter" after the last waypoint.
     acceptance_radius_m: waypoint acceptance radius given to the autopilot.
     cost: named cost terms of the planner; feasible: the independent checker's verdict.
+    altitude_frame: how the mission gives altitudes: "relative" to home (home at the origin's
+    altitude: the default), or "amsl" (z + the origin's altitude), for plans over a site's terrain,
+    where each vehicle's home is on its own ground (gcs_planner.mavlink.items).
     """
 
     vehicle_id: str
@@ -50,6 +53,7 @@ class VehiclePlan:
     cost: dict[str, float] = field(default_factory=dict)
     feasible: bool = True
     notes: list[str] = field(default_factory=list)
+    altitude_frame: str = "relative"
 
     def __post_init__(self) -> None:
         self.waypoints = np.asarray(self.waypoints, dtype=float).reshape(-1, 3)
@@ -70,6 +74,7 @@ class VehiclePlan:
             )
 
     def to_dict(self) -> dict:
+        frame = {} if self.altitude_frame == "relative" else {"altitude_frame": self.altitude_frame}
         return {
             "vehicle_id": self.vehicle_id,
             "sysid": self.sysid,
@@ -86,6 +91,7 @@ class VehiclePlan:
             "cost": self.cost,
             "feasible": self.feasible,
             "notes": self.notes,
+            **frame,
         }
 
     @classmethod

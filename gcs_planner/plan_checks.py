@@ -38,7 +38,8 @@ FINAL_ACTIONS = ("land", "rtl", "loiter")
 MAX_PATH_SAMPLES = 1_000_000
 REQUIRED = ("vehicle_id", "sysid", "waypoints", "times_s", "speeds_mps", "path", "path_times_s")
 OPTIONAL = ("vehicle_type", "turn_radius_m", "takeoff_delay_s", "final_action", "acceptance_radius_m",
-            "cost", "feasible", "notes")  # fmt: skip
+            "cost", "feasible", "notes", "altitude_frame")  # fmt: skip
+ALTITUDE_FRAMES = ("relative", "amsl")
 
 
 def plan_fields(d: Any) -> tuple[Origin, str, list[dict], dict, list]:
@@ -80,7 +81,10 @@ def vehicle_fields(d: Any) -> dict[str, Any]:
     action = d.get("final_action", "land")
     if action not in FINAL_ACTIONS:
         raise InputError(f"{where}: final_action must be one of {FINAL_ACTIONS}, got {action!r}")
-    out.update(vehicle_type=vtype, final_action=action)
+    frame = d.get("altitude_frame", "relative")
+    if frame not in ALTITUDE_FRAMES:
+        raise InputError(f"{where}: altitude_frame must be one of {ALTITUDE_FRAMES}, got {frame!r}")
+    out.update(vehicle_type=vtype, final_action=action, altitude_frame=frame)
     for key, default, hi in (
         ("turn_radius_m", 0.0, MAX_RADIUS_M),
         ("acceptance_radius_m", 2.0, MAX_RADIUS_M),

@@ -157,6 +157,28 @@ def test_fence_items_are_the_site_polygons_in_lat_lon(swarm):
     assert len(exc) == 5 + 4 + 4  # school, substation, helicopter approach vertices
 
 
+def test_site_missions_give_altitudes_amsl(swarm, tmp_path):
+    """Each vehicle's home is on its own ground, not at the origin's altitude: a site plan's
+    mission altitudes are AMSL (z + origin altitude), and plan.json keeps that."""
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    from gcs_planner.mavlink.items import plan_to_items
+
+    plan = plan_scenario(swarm)
+    assert {vp.altitude_frame for vp in plan.vehicles} == {"amsl"}
+    vp = plan.vehicles[0]
+    wps = [i for i in plan_to_items(vp, plan.origin, "px4") if i.command == mavlink.MAV_CMD_NAV_WAYPOINT]
+    assert {i.frame for i in wps} == {mavlink.MAV_FRAME_GLOBAL}
+    planned = vp.waypoints[:, 2] + 488.0
+    assert all(np.isclose(i.z, planned, atol=1e-3).any() for i in wps) and wps[-1].z == pytest.approx(
+        planned[-1]
+    )
+    plan.save(tmp_path / "p.json")
+    assert Plan.load(tmp_path / "p.json").vehicles[0].altitude_frame == "amsl"
+    plain = plan_scenario(load_scenario(MISSIONS / "swarm_small.toml"))
+    assert "altitude_frame" not in plain.to_json()  # plans off a site are as before
+
+
 def _kml(features: list[dict]) -> str:
     marks = []
     for f in features:

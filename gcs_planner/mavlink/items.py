@@ -6,7 +6,10 @@ One vehicle's plan becomes, in order:
 
 Choices where MAVLink or the autopilots leave room (all documented here, nowhere else):
 - Frames: items with a position use GLOBAL_RELATIVE_ALT_INT (z = metres above home = ENU up about
-  the plan origin); commands without a position (DO_CHANGE_SPEED, NAV_DELAY, RTL) use
+  the plan origin), or MAV_FRAME_GLOBAL (z = ENU up + the origin's altitude AMSL) for a vehicle
+  plan whose ``altitude_frame`` is "amsl" (plans on a site: each vehicle's home is on its own
+  ground, so altitudes above home would shift by its height above the origin; NAV_LAND stays a
+  relative 0); commands without a position (DO_CHANGE_SPEED, NAV_DELAY, RTL) use
   MAV_FRAME_MISSION with x = y = 0, as QGroundControl and MAVSDK send them (PX4 rejects some
   of them in a global frame).
 - Home (ArduPilot profile only): seq 0 is a NAV_WAYPOINT at the plan origin in MAV_FRAME_GLOBAL
@@ -122,8 +125,11 @@ def plan_to_items(
     lat_e7, lon_e7 = deg_to_e7(lat).tolist(), deg_to_e7(lon).tolist()  # python ints
     fixed_wing = vp.vehicle_type == "fixed_wing"
 
+    amsl = vp.altitude_frame == "amsl"  # altitudes above sea level, not above each vehicle's home
+    frame, z0 = (mavlink.MAV_FRAME_GLOBAL, origin.alt_m) if amsl else (REL, 0.0)
+
     def at(i: int, command: int, z: float, p1=0.0, p2=0.0, p3=0.0, p4=0.0) -> MissionItem:
-        return MissionItem(0, REL, command, 0, 1, p1, p2, p3, p4, lat_e7[i], lon_e7[i], float(z))
+        return MissionItem(0, frame, command, 0, 1, p1, p2, p3, p4, lat_e7[i], lon_e7[i], float(z) + z0)
 
     items: list[MissionItem] = []
     if autopilot == "ardupilot":
@@ -168,8 +174,10 @@ def plan_to_items(
     if vp.final_action == "land":
         if fixed_wing:  # no DO_LAND_START: ArduPlane refuses to arm with one unless RTL_AUTOLAND is set
             items.append(_fixed_wing_land(vp, origin))
-        else:
-            items.append(at(last, mavlink.MAV_CMD_NAV_LAND, 0.0))
+        else:  # land where the ground is: a relative-frame 0 (autopilots ignore the altitude)
+            items.append(
+                MissionItem(0, REL, mavlink.MAV_CMD_NAV_LAND, 0, 1, x=lat_e7[last], y=lon_e7[last], z=0.0)
+            )
     elif vp.final_action == "rtl":
         items.append(MissionItem(0, NO_FRAME, mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH))
     else:

@@ -87,4 +87,8 @@ def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progres
     config = config_of(scenario)
     module = planner(scenario.planner_name)
     rng = np.random.default_rng(config.seed if seed is None else seed)
-    return module.plan(scenario, config, rng, progress)
+    plan = module.plan(scenario, config, rng, progress)
+    if scenario.site is not None:  # homes on their own ground: the missions give altitudes AMSL
+        for vp in plan.vehicles:
+            vp.altitude_frame = "amsl"
+    return plan
