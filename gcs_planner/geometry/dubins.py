@@ -484,6 +484,7 @@ def advance(poses: np.ndarray, kappa: np.ndarray, ds: np.ndarray) -> np.ndarray:
     turning = kappa != 0.0
     k = np.where(turning, kappa, 1.0)
     h_new = h + np.where(turning, kappa * ds, 0.0)
-    x_new = np.where(turning, x + (np.sin(h_new) - np.sin(h)) / k, x + ds * np.cos(h))
-    y_new = np.where(turning, y - (np.cos(h_new) - np.cos(h)) / k, y + ds * np.sin(h))
+    sin_h, cos_h = np.sin(h), np.cos(h)
+    x_new = np.where(turning, x + (np.sin(h_new) - sin_h) / k, x + ds * cos_h)
+    y_new = np.where(turning, y - (np.cos(h_new) - cos_h) / k, y + ds * sin_h)
     return np.column_stack([x_new, y_new, h_new])

@@ -191,6 +191,7 @@ class Decoded:
     cum: np.ndarray  # (P, W)
     starts: np.ndarray  # (P*(W-1), 3, 3) start pose of each Dubins segment
     kappa: np.ndarray  # (P*(W-1), 3) signed curvature of each segment
+    seg_end: np.ndarray  # (P*(W-1), 3) horizontal length from a leg's start to each segment's end
 
     @property
     def total(self) -> np.ndarray:
@@ -220,7 +221,7 @@ def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
     l3 = np.hypot(lh, d[..., 2])
     cum = np.concatenate([np.zeros((p, 1)), np.cumsum(l3, axis=1)], axis=1)
     starts, kappa = segment_starts(q0, word, seg, radii)
-    return Decoded(pts, word, seg, lh, l3, cum, starts, kappa)
+    return Decoded(pts, word, seg, lh, l3, cum, starts, kappa, np.cumsum(seg, axis=1))
 
 
 def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
@@ -228,7 +229,10 @@ def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
     p, k = s.shape
     n_leg = dec.lh.shape[1]
     s = np.clip(s, 0.0, dec.total[:, None])
-    leg = np.minimum(np.sum(s[:, :, None] > dec.cum[:, None, 1:-1], axis=2), n_leg - 1)
+    leg = np.zeros(s.shape, dtype=np.intp)  # legs ended before s, one junction at a time (a
+    for c in dec.cum[:, 1:-1].T:  # reduction over a short last axis is slow)
+        leg += s > c[:, None]
+    leg = np.minimum(leg, n_leg - 1)
     rows = np.arange(p)[:, None]
     l3 = dec.l3[rows, leg]
     f = np.where(l3 > 0, (s - dec.cum[rows, leg]) / np.where(l3 > 0, l3, 1.0), 0.0)
@@ -236,7 +240,7 @@ def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
     z = z0 + f * (dec.pts[rows, leg + 1, 2] - z0)
     flat = (rows * n_leg + leg).ravel()
     sh = (f * dec.lh[rows, leg]).ravel()
-    bounds = np.cumsum(dec.seg[flat], axis=1)
+    bounds = dec.seg_end[flat]
     sh = np.minimum(sh, bounds[:, 2])
     si = (sh > bounds[:, 0]).astype(int) + (sh > bounds[:, 1])
     seg_start = np.where(si == 0, 0.0, bounds[np.arange(len(flat)), np.maximum(si - 1, 0)])
