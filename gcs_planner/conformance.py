@@ -20,6 +20,9 @@ Choices:
   plan time) the vehicle's time of closest approach is taken, in order along the route, and
   compared with the route start plus the point's planned time (see ``schedule_errors_s``).
   Telemetry that does not show the route flown in order is a failure, never a pass.
+- On a site (gcs_planner.sites) the flown route (the cross-track window) is held to what the
+  plan checker proved on the plan: inside the area, out of every no-fly zone's polygon and band,
+  and ``terrain_clearance_m`` above the DEM (gcs_planner.sites.checks).
 - A NaN (no data, impossible positions) is never within a bound: every comparison fails on it.
 """
 
@@ -27,11 +30,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from gcs_planner.plan import Plan, land_point
 from gcs_planner.scenario import Cylinder, Hemisphere
+
+if TYPE_CHECKING:  # shapely is imported only for a site
+    from gcs_planner.sites.world import Site
 
 __all__ = [
     "MovingObstacle",
@@ -175,6 +182,20 @@ def _obstacle_clearance_m(positions: np.ndarray, cylinders, hemispheres) -> floa
     return clearance
 
 
+def _site_failures(site: Site, route: np.ndarray) -> list[str]:
+    """Where the flown route leaves the site's area, enters its no-fly zones or comes closer to
+    its terrain than the clearance, one phrase each."""
+    from gcs_planner.sites.checks import area_exit, terrain_shortfall, zone_entries
+
+    found = []
+    if (where := area_exit(site, route)) is not None:
+        found.append(f"left the site's area at ({where[0]:.0f}, {where[1]:.0f}) m")
+    found += [f"entered no-fly zone {name!r}" for name in zone_entries(site, route)]
+    if (short := terrain_shortfall(site, route, np.zeros(len(route) - 1, dtype=bool))) > 0:
+        found.append(f"flew {short:.1f} m under the terrain clearance ({site.clearance_m:g} m)")
+    return found
+
+
 def _min_separation_m(tracks: dict[int, Track], step_s: float) -> dict[int, float]:
     """Smallest distance from each vehicle to any other, over their common airborne time."""
     ids = list(tracks)
@@ -215,9 +236,11 @@ def conformance_report(
     step_s: float = 0.1,
     route_t0_s: Mapping[int, float] | None = None,
     max_schedule_error_s: float = MAX_SCHEDULE_ERROR_S,
+    site: Site | None = None,
 ) -> list[VehicleReport]:
     """Per-vehicle report; ``failures`` lists every bound broken (empty = passed). ``route_t0_s``:
-    sysid -> when its route's time 0 was, on the tracks' clock (None: no schedule is checked)."""
+    sysid -> when its route's time 0 was, on the tracks' clock (None: no schedule is checked);
+    ``site``: the scenario's site, whose area, zones and terrain clearance the route keeps."""
     airborne = {}
     for sysid, tr in tracks.items():
         up = tr.positions[:, 2] >= min_airborne_alt_m
@@ -254,6 +277,8 @@ def conformance_report(
             failures.append(f"separation {separation[vp.sysid]:.1f} m < {bound:.1f} m")
         if not clearance >= 0.0:
             failures.append(f"entered an obstacle by {-clearance:.1f} m")
+        if site is not None and len(xt) > 1:
+            failures += _site_failures(site, tr.positions[window])
         reports.append(
             VehicleReport(
                 vehicle_id=vp.vehicle_id,

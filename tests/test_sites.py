@@ -124,6 +124,29 @@ def test_the_checker_catches_each_site_hazard(swarm, points, finding, what):
 
 
 @pytest.mark.parametrize(
+    ("dz", "points", "failure"),
+    [
+        (0.0, [[0, -200, 60], [350, 90, 60], [300, -200, 60]], "entered no-fly zone 'school'"),
+        (-45.0, [[0, -200, 60], [300, -200, 60]], "under the terrain clearance"),  # flown 45 m low
+        (0.0, [[0, -200, 60], [100, -350, 60], [300, -200, 60]], "left the site's area"),
+    ],
+)
+def test_fly_conformance_holds_the_flown_route_to_the_site(swarm, dz, points, failure):
+    """The flown route (a track from the plan's first to its last point, ``dz`` lower) is checked
+    like the plan; the plan flown as planned passes."""
+    from gcs_planner.conformance import Track, conformance_report
+
+    plan = _one_path(swarm, [[0, -200, 60], [300, -200, 60]])  # a clean plan
+    flown = _one_path(swarm, points).vehicles[0]
+    track = Track(flown.path_times_s, flown.path + [0.0, 0.0, dz], mission_completed=True)
+    (report,) = conformance_report(plan, {1: track}, {}, max_cross_track_m=1e6, site=swarm.site)
+    assert any(failure in f for f in report.failures), report.failures
+    vp = plan.vehicles[0]
+    (clean,) = conformance_report(plan, {1: Track(vp.path_times_s, vp.path, True)}, {}, site=swarm.site)
+    assert clean.passed, clean.failures
+
+
+@pytest.mark.parametrize(
     "points",
     [
         [[600, -100, 60], [900, -10, 60]],  # over the substation's ceiling (+ the 20 m clearance)

@@ -198,6 +198,7 @@ class StaticPlan:
             max_cross_track_m=options.max_cross_track_m,
             route_t0_s=flight.route_t0 or None,
             max_schedule_error_s=options.max_schedule_error_s,
+            site=scenario.site,
         )
         for r in reports:
             upload = flight.uploads.get(r.sysid)

@@ -131,19 +131,7 @@ def plan_to_items(
     def at(i: int, command: int, z: float, p1=0.0, p2=0.0, p3=0.0, p4=0.0) -> MissionItem:
         return MissionItem(0, frame, command, 0, 1, p1, p2, p3, p4, lat_e7[i], lon_e7[i], float(z) + z0)
 
-    items: list[MissionItem] = []
-    if autopilot == "ardupilot":
-        home_lat, home_lon = deg_to_e7([origin.lat_deg, origin.lon_deg])
-        items.append(
-            MissionItem(
-                0,
-                mavlink.MAV_FRAME_GLOBAL,
-                mavlink.MAV_CMD_NAV_WAYPOINT,
-                x=int(home_lat),
-                y=int(home_lon),
-                z=float(origin.alt_m),
-            )
-        )
+    items: list[MissionItem] = [_home_item(origin)] if autopilot == "ardupilot" else []
     if vp.takeoff_delay_s > 0:
         items.append(
             MissionItem(
@@ -186,6 +174,19 @@ def plan_to_items(
     items = [_renumbered(item, i, current=int(i == 0)) for i, item in enumerate(items)]
     validate_items(items)
     return items
+
+
+def _home_item(origin: Origin) -> MissionItem:
+    """ArduPilot's seq 0: a NAV_WAYPOINT at the origin, AMSL (the module docstring)."""
+    home_lat, home_lon = deg_to_e7([origin.lat_deg, origin.lon_deg])
+    return MissionItem(
+        0,
+        mavlink.MAV_FRAME_GLOBAL,
+        mavlink.MAV_CMD_NAV_WAYPOINT,
+        x=int(home_lat),
+        y=int(home_lon),
+        z=float(origin.alt_m),
+    )
 
 
 def _fixed_wing_land(vp: VehiclePlan, origin: Origin) -> MissionItem:
