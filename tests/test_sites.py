@@ -251,7 +251,7 @@ def test_a_kml_site_plans_like_the_geojson_one(tmp_path):
 
 def _plane(lat, lon):
     """A tilted plane [m AMSL]: bilinear interpolation reproduces it exactly."""
-    return 400.0 + 3000.0 * (lat - 47.0) + 2000.0 * (lon - 8.0)
+    return 480.0 + 3000.0 * (lat - 47.39) + 2000.0 * (lon - 8.54)
 
 
 def test_hgt_tile_is_read_on_its_nodes(tmp_path):
@@ -265,6 +265,14 @@ def test_hgt_tile_is_read_on_its_nodes(tmp_path):
     q_lat, q_lon = np.array([47.3, 47.61, 47.05]), np.array([8.5, 8.02, 8.97])
     assert np.abs(dem.sample(q_lat, q_lon) - _plane(q_lat, q_lon)).max() < 1.0
     assert np.isnan(dem.sample(np.array([47.999, 46.9]), np.array([8.001, 8.5]))).all()  # void, outside
+    # as a site's DEM, without features: the terrain is the tile's ground above the origin
+    text = SWARM.read_text().replace('features = ["site_valley/valley.geojson"]\n', "")
+    (tmp_path / "s.toml").write_text(text.replace("site_valley/valley_dem.tif", "N47E008.hgt"))
+    scenario = load_scenario(tmp_path / "s.toml")
+    assert scenario.site.area is None and scenario.site.zones == () and scenario.cylinders == []
+    lat, lon, alt = scenario.origin.lat_deg, scenario.origin.lon_deg, scenario.origin.alt_m
+    assert float(scenario.site.ground(0.0, 0.0)) == pytest.approx(_plane(lat, lon) - alt, abs=1.0)
+    assert check_plan(plan_scenario(scenario), scenario).ok
 
 
 @pytest.mark.parametrize("pixel_is_point", [False, True])
