@@ -69,6 +69,7 @@ class Site:
     margin_m: float
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)  # x / y: the area's box
     cylinders: tuple[dict[str, Any], ...] = ()  # scenario Cylinder fields: zones and obstacles
+    inner_area: shapely.Polygon | None = None  # the area less the margin (prepared): planners' room
 
     def ground(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Ground height [m above the origin] at (x, y); 0 without a DEM."""
@@ -84,19 +85,10 @@ class Site:
         if self.terrain is not None:
             floor = self.terrain.elevation(pts[..., 0], pts[..., 1]) + self.clearance_m + self.margin_m
             depth = np.maximum(depth, floor - pts[..., 2])
-        if self.area is not None:
-            outside = ~shapely.contains_xy(self._inner_area, pts[..., 0], pts[..., 1])
+        if self.inner_area is not None:
+            outside = ~shapely.contains_xy(self.inner_area, pts[..., 0], pts[..., 1])
             depth = np.where(outside, np.maximum(depth, 1.0), depth)
         return depth
-
-    @property
-    def _inner_area(self) -> shapely.Polygon:
-        inner = self.__dict__.get("_inner")
-        if inner is None:
-            inner = self.area.buffer(-self.margin_m)
-            shapely.prepare(inner)
-            object.__setattr__(self, "_inner", inner)
-        return inner
 
 
 def read_site(
@@ -140,7 +132,13 @@ def read_site(
             raise InputError("[terrain] and site.dem both give the ground; give one of them")
         dem = read_dem(base_dir / cfg["dem"], "site.dem")
         terrain = _local_terrain(dem, origin, _site_box(ends, features, box, origin), spacing)
-    site = Site(area, (), terrain, clearance, margin, {k: v for k, v in box.items() if k in "xy"})
+    inner = None
+    if area is not None:
+        inner = area.buffer(-margin)
+        shapely.prepare(inner)
+    site = Site(
+        area, (), terrain, clearance, margin, {k: v for k, v in box.items() if k in "xy"}, inner_area=inner
+    )
     zones, cylinders = [], []
     for f, poly in polygons:
         if f.kind == "no_fly":
