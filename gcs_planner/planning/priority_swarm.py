@@ -648,12 +648,20 @@ def build_vehicle_plan(prob: VehicleProblem, x: np.ndarray, cfg: Config, terms: 
     )
 
 
-def build_plan(scenario, problems, obstacles, cfg, xs: dict, planner: str, metrics: dict) -> Plan:
-    """Plan from the chosen particle per UAV (cost terms against all higher-priority UAVs)."""
+def build_plan(
+    scenario, problems, obstacles, cfg, xs: dict, planner: str, metrics: dict, built: dict | None = None
+) -> Plan:
+    """Plan from the chosen particle per UAV (cost terms against all higher-priority UAVs).
+    ``built`` keeps each UAV's VehiclePlan for the next call while its path and delay stay."""
     vehicles = []
+    built = {} if built is None else built
     for prob in problems:
-        terms = CostModel(prob, obstacles, Traffic(cfg.dt_s), cfg).terms(xs[prob.index][None, :])
-        vehicles.append(build_vehicle_plan(prob, xs[prob.index], cfg, terms))
+        x = xs[prob.index]
+        key = (x.tobytes(), prob.delay_s)
+        if prob.index not in built or built[prob.index][0] != key:
+            terms = CostModel(prob, obstacles, Traffic(cfg.dt_s), cfg).terms(x[None, :])
+            built[prob.index] = (key, build_vehicle_plan(prob, x, cfg, terms))
+        vehicles.append(built[prob.index][1])
     return Plan(origin=scenario.origin, planner=planner, vehicles=vehicles, metrics=metrics)
 
 
@@ -664,6 +672,7 @@ def repair_and_check(
     rank = {i: n for n, i in enumerate(order)}
     repairs = []
     memo: dict[int, tuple[bytes, float, tuple[np.ndarray, np.ndarray]]] = {}
+    built: dict = {}
 
     def samples(prob: VehicleProblem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """timed_samples, kept per UAV until its path or delay changes (every repair needs them all)."""
@@ -673,7 +682,7 @@ def repair_and_check(
         return memo[prob.index][2]
 
     for attempt in range(cfg.repairs + 1):
-        plan_ = build_plan(scenario, problems, obstacles, cfg, xs, planner, metrics)
+        plan_ = build_plan(scenario, problems, obstacles, cfg, xs, planner, metrics, built)
         report = check_plan(plan_, scenario, step_s=cfg.dt_s, max_climb_rad=math.radians(cfg.max_climb_deg))
         if report.ok or attempt == cfg.repairs:
             break
