@@ -71,7 +71,7 @@ FIGURES: tuple[Figure, ...] = (
     Figure(
         "fly_swarm500",
         "500 vehicles flown by one fly over two MAVLink networks",
-        ("python benchmarks/fly_swarm500.py --speedup 1",),
+        ("python benchmarks/fly_swarm500.py --out {out}/fly500 --errors {out}/time_errors.json",),
         minutes=17,
     ),
     Figure(
@@ -240,6 +240,12 @@ FIGURES: tuple[Figure, ...] = (
         quick=("python benchmarks/deconflict_tables.py --seeds 1 --sizes 4 --scaled --out {out}",),
         markdown=False,
         minutes=10,
+    ),
+    Figure(
+        "deconflict_100uav",
+        "4-D deconfliction of 100 UAVs: planning time",
+        ("gcs-planner plan missions/deconflict_100uav_scaled.toml -o {out}/plan.json",),
+        minutes=0.5,
     ),
     Figure(
         "deconflict_peers",
