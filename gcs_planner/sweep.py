@@ -47,6 +47,7 @@ from msgspec import Meta
 
 from gcs_planner.config import Config, parse
 from gcs_planner.errors import UserError
+from gcs_planner.sweep_worker import prepare_worker
 from gcs_planner.validation import InputError, load_toml, read_text
 
 __all__ = ["ALLOW_USER_TASK_ENV", "STUDY_TASKS", "Study", "load_study", "marginals", "run_study", "summarise"]
@@ -256,7 +257,8 @@ def run_study(
         f = out.open("a", newline="")  # closed by the with below
     except OSError as exc:
         raise _cannot_write(out, exc) from None
-    with f, _executor(scheduler, workers) as submit:
+    allowed = study.task in STUDY_TASKS or user_tasks_allowed(allow_user_task)  # imported only then
+    with f, _executor(scheduler, workers, study.task if allowed else None) as submit:
         writer = csv.DictWriter(f, columns, extrasaction="ignore")
         if new_file:
             _append(f, writer.writeheader, out)
@@ -291,14 +293,17 @@ def _cannot_write(out: Path, exc: OSError) -> UserError:
 
 
 class _executor:
-    """``with _executor(scheduler, workers) as submit``: a process pool or a Dask client."""
+    """``with _executor(scheduler, workers, task) as submit``: a process pool or a Dask client;
+    ``task``: the study task pool workers import before their first run (None: none)."""
 
-    def __init__(self, scheduler: str | None, workers: int) -> None:
-        self.scheduler, self.workers = scheduler, workers
+    def __init__(self, scheduler: str | None, workers: int, task: str | None = None) -> None:
+        self.scheduler, self.workers, self.task = scheduler, workers, task
 
     def __enter__(self):
         if self.scheduler is None:
-            self.pool = ProcessPoolExecutor(self.workers, initializer=_die_with, initargs=(os.getpid(),))
+            self.pool = ProcessPoolExecutor(
+                self.workers, initializer=_start_worker, initargs=(os.getpid(), self.task)
+            )
             return self.pool.submit
         try:
             import dask
@@ -329,10 +334,17 @@ class _executor:
             self.cluster.close()
 
 
+def _start_worker(parent_pid: int, task: str | None) -> None:
+    """Pool worker initializer: tied to the sweep's life, one native thread, imports done
+    (sweep_worker.py) so that no run's CPU time carries them."""
+    _die_with(parent_pid)
+    prepare_worker(task)
+
+
 def _die_with(parent_pid: int) -> None:
-    """Pool worker initializer: end this worker when the sweep that started it ends, even by
-    SIGKILL (its atexit never runs, and an orphaned worker would plan on for ever). Linux:
-    PR_SET_PDEATHSIG; everywhere: a thread that checks the sweep's pid every second."""
+    """End this pool worker when the sweep that started it ends, even by SIGKILL (its atexit never
+    runs, and an orphaned worker would plan on for ever). Linux: PR_SET_PDEATHSIG; everywhere: a
+    thread that checks the sweep's pid every second."""
     if sys.platform.startswith("linux"):
         try:
             import ctypes
