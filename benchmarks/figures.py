@@ -111,8 +111,11 @@ FIGURES: tuple[Figure, ...] = (
     Figure(
         "upload_cpu",
         "Upload CPU per item and transfer time: ours against MAVSDK in one run",
-        ("python benchmarks/upload_cpu.py",),
-        quick=("python benchmarks/upload_cpu.py --sizes 100 --rounds 1 --reps 2",),
+        ("python benchmarks/upload_cpu.py", "python benchmarks/upload_hot_path.py"),
+        quick=(
+            "python benchmarks/upload_cpu.py --sizes 100 --rounds 1 --reps 2",
+            "python benchmarks/upload_hot_path.py --items 100 --runs 2",
+        ),
         minutes=3,
         needs=("mavsdk",),
     ),
@@ -178,6 +181,13 @@ FIGURES: tuple[Figure, ...] = (
             "python benchmarks/priority_swarm.py table {out}/bench_scale.json",
         ),
         minutes=4,
+    ),
+    Figure(
+        "sweep_scaling",
+        "Sweep scaling: runs / min and CPU per run at 1 and 2 workers",
+        ("python benchmarks/sweep_scaling.py studies/swarm_one_point.toml --workers 1 2",),
+        quick=("python benchmarks/sweep_scaling.py studies/swarm_one_point.toml --seeds 2 --workers 1",),
+        minutes=1,
     ),
     Figure(
         "priority_swarm_ablation",
