@@ -19,14 +19,14 @@ from pathlib import Path
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.mavlink.fleet import start_fleet, upload_fleet
-from gcs_planner.mavlink.items import plan_to_items
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.preflight import request_streams
+from gcs_planner.missions.items import plan_to_items
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import config_of, plan_scenario
 from gcs_planner.planning.threat_env import ThreatEnv, resample_path, validate_path
-from gcs_planner.scenario import load_scenario
 from sitl_mock.fleet import MockFleet
 
 ROOT = Path(__file__).resolve().parents[1]

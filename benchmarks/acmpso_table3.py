@@ -33,10 +33,10 @@ from pathlib import Path  # noqa: E402
 import msgspec  # noqa: E402
 import numpy as np  # noqa: E402
 
+from gcs_planner.analysis.sweep import load_study, run_study, runs  # noqa: E402
+from gcs_planner.commands.progress import counting_bar  # noqa: E402
 from gcs_planner.planning.acmpso import VARIANTS  # noqa: E402
 from gcs_planner.planning.acmpso_study import KINDS, TABLE_ORDER  # noqa: E402
-from gcs_planner.progress import counting_bar  # noqa: E402
-from gcs_planner.sweep import load_study, run_study, runs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDY = ROOT / "studies" / "acmpso_table3.toml"

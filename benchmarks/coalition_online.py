@@ -2,8 +2,8 @@
 
     python benchmarks/coalition_online.py --runs 2 [--speedup 5] [--targets T1]
 
-Each run flies all 32 UAVs with the contract net deciding in flight (coalition_hil.online_run):
-sitl_mock in lockstep with the run (gcs_planner.lockstep), or with --speedup in its own process
+Each run flies all 32 UAVs with the contract net deciding in flight (flight.coalition.online_run):
+sitl_mock in lockstep with the run (gcs_planner.core.lockstep), or with --speedup in its own process
 paced by the wall clock. Printed per run: strikes and assessments within 1 s / 10 deg, the largest
 time and angle errors, uploads, the CPU / wall time per formation in flight, the flight time
 (first to last position report), wall time and their ratio (times real time); then the first
@@ -16,11 +16,11 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from gcs_planner import lockstep
-from gcs_planner.coalition_hil import HilOptions
-from gcs_planner.coalition_hil.online_run import run_online
-from gcs_planner.coalition_hil.report import format_formations
-from gcs_planner.scenario import load_scenario
+from gcs_planner.core import lockstep
+from gcs_planner.flight.coalition import HilOptions
+from gcs_planner.flight.coalition.online_run import run_online
+from gcs_planner.flight.coalition.report import format_formations
+from gcs_planner.model.scenario import load_scenario
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"

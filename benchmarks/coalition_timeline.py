@@ -25,8 +25,8 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning.coalition import load_world, simulate
-from gcs_planner.scenario import load_scenario
 
 MISSION = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
 

@@ -25,11 +25,11 @@ from pathlib import Path
 import numpy as np
 from planner_peers import PEERS
 
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import config_of
 from gcs_planner.planning.deconflict4d import build_problem
 from gcs_planner.planning.deconflict4d.planner import Search, initial_tracks, joint_search, swarm_config
 from gcs_planner.planning.pso import minimize
-from gcs_planner.scenario import load_scenario
 
 MISSIONS = Path(__file__).resolve().parent.parent / "missions"
 

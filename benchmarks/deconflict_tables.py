@@ -28,10 +28,10 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from gcs_planner.analysis.sweep import load_study, run_study, summarise
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import config_of
 from gcs_planner.planning.deconflict4d import build_problem, planner
-from gcs_planner.scenario import load_scenario
-from gcs_planner.sweep import load_study, run_study, summarise
 
 PAPER_T1 = {4: 50, 5: 104, 6: 140, 7: 149, 8: 150, 9: 150, 10: 150}
 PAPER_T2 = {4: (1, 22), 5: (2, 89), 6: (3, 165), 7: (4, 256), 8: (5, 442), 9: (6, 587), 10: (8, 767)}

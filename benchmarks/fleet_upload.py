@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs_planner.fleet_ids import fleet_id
-from gcs_planner.geo import Origin
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.core.fleet_ids import fleet_id
+from gcs_planner.core.geo import Origin
+from gcs_planner.model.plan import Plan, VehiclePlan
 
 PER_NETWORK = 250  # sitl-mock's default --per-network
 ORIGIN = Origin(47.397742, 8.545594, 488.0)

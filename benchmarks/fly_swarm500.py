@@ -28,18 +28,18 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import gcs_planner.flight.static_plan as static_plan
-from gcs_planner import lockstep
-from gcs_planner.conformance import (
+from gcs_planner.core import lockstep
+from gcs_planner.flight import FlyOptions, fly, networks
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import plan_scenario
+from gcs_planner.safety.conformance import (
     SCHEDULE_STEP_S,
     Track,
     route_acceptance_m,
     route_window,
     schedule_errors_s,
 )
-from gcs_planner.flight import FlyOptions, fly, networks
-from gcs_planner.plan import Plan
-from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehicles
 

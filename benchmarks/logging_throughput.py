@@ -36,7 +36,7 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.geo import Origin, enu_to_geodetic  # noqa: E402
+from gcs_planner.core.geo import Origin, enu_to_geodetic  # noqa: E402
 from gcs_planner.telemetry import FlightLogger, read_flight  # noqa: E402
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
 
 OUT = Path(__file__).resolve().parents[1] / "missions" / "site_valley"
 ORIGIN = Origin(47.397742, 8.545594, 488.0)

@@ -13,12 +13,12 @@ import time
 
 import numpy as np
 
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.files import MissionFile
-from gcs_planner.mavlink.items import plan_to_items
-from gcs_planner.mavlink.planfile import dumps_plan, loads_plan
-from gcs_planner.mavlink.wpl import dumps_wpl, loads_wpl_items
-from gcs_planner.plan import VehiclePlan
+from gcs_planner.core.geo import Origin
+from gcs_planner.missions.files import MissionFile
+from gcs_planner.missions.items import plan_to_items
+from gcs_planner.missions.planfile import dumps_plan, loads_plan
+from gcs_planner.missions.wpl import dumps_wpl, loads_wpl_items
+from gcs_planner.model.plan import VehiclePlan
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
 

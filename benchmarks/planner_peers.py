@@ -25,6 +25,7 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import config_of
 from gcs_planner.planning.priority_swarm import (
     CostModel,
@@ -36,7 +37,6 @@ from gcs_planner.planning.priority_swarm import (
     timed_samples,
 )
 from gcs_planner.planning.priority_swarm import plan as plan_method
-from gcs_planner.scenario import load_scenario
 
 MISSIONS = Path(__file__).resolve().parent.parent / "missions"
 CONSTRICTION = {"c1": 1.49618, "c2": 1.49618, "w": 0.7298}  # Clerc & Kennedy 2002

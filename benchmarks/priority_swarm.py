@@ -26,12 +26,12 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
+from gcs_planner.analysis.sweep import load_study, run_study
+from gcs_planner.commands.progress import counting_bar
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import config_of
 from gcs_planner.planning.baselines import METHODS
 from gcs_planner.planning.priority_swarm import plan as plan_method
-from gcs_planner.progress import counting_bar
-from gcs_planner.scenario import load_scenario
-from gcs_planner.sweep import load_study, run_study
 
 MISSIONS = Path(__file__).resolve().parent.parent / "missions"
 STUDY = MISSIONS.parent / "studies" / "priority_swarm_compare.toml"

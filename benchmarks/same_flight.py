@@ -3,7 +3,7 @@ beside busy processes, compared row by row at full precision.
 
     python benchmarks/same_flight.py [--hogs 2] [--targets T1]
 
-Each flight runs in lockstep (gcs_planner.lockstep, docs/clock.md). The first of each pair flies
+Each flight runs in lockstep (gcs_planner.core.lockstep, docs/clock.md). The first of each pair flies
 on the machine as it is, the second beside ``--hogs`` processes spinning ``while True: pass``.
 Printed: per flight the wall time of each run and whether every conformance row (the demo) or
 task row and upload entry (the coalition; the planner's wall time per leg left out) is identical
@@ -19,12 +19,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from gcs_planner import lockstep
-from gcs_planner.coalition_hil import HilOptions
-from gcs_planner.coalition_hil.online_run import run_online
+from gcs_planner.core import lockstep
 from gcs_planner.flight import FlyOptions, fly
+from gcs_planner.flight.coalition import HilOptions
+from gcs_planner.flight.coalition.online_run import run_online
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import load_scenario
 from sitl_mock.plan_fleet import MockVehicles, MockVehiclesProcess
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"

@@ -81,11 +81,11 @@ def main() -> None:
         cpu = _import_cpu_s(module, args.runs)
         print(f"| {module} | {'not installed' if cpu is None else f'{cpu * 1e3:.1f}'} |")
 
-    from gcs_planner.geometry.separation import check_plan
+    from gcs_planner.model.sites.dem import read_dem
+    from gcs_planner.model.sites.geojson import read_geojson
+    from gcs_planner.model.sites.kml import read_kml
     from gcs_planner.planning import load_scenario, plan_scenario
-    from gcs_planner.sites.dem import read_dem
-    from gcs_planner.sites.geojson import read_geojson
-    from gcs_planner.sites.kml import read_kml
+    from gcs_planner.safety.separation import check_plan
 
     swarm = ROOT / "missions" / f"{SCENARIOS[0]}.toml"
     with tempfile.TemporaryDirectory() as tmp:

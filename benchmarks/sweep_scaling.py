@@ -33,7 +33,7 @@ import msgspec
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gcs_planner.sweep import load_study, run_study  # noqa: E402
+from gcs_planner.analysis.sweep import load_study, run_study  # noqa: E402
 
 
 def load_average() -> str:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import msgspec
 
-from gcs_planner.sweep import load_study, run_study
+from gcs_planner.analysis.sweep import load_study, run_study
 
 
 def main() -> None:

@@ -33,7 +33,7 @@ from gcs_planner.mavlink.fleet import upload_fleet  # noqa: E402
 from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
 from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
 from gcs_planner.mavlink.transfer import Timing  # noqa: E402
-from gcs_planner.mavlink.types import MissionItem  # noqa: E402
+from gcs_planner.wire.types import MissionItem  # noqa: E402
 from sitl_mock.faults import LinkFaults  # noqa: E402
 from sitl_mock.process import MockFleetProcess  # noqa: E402
 

@@ -14,7 +14,7 @@ import sys
 from importlib import import_module
 
 from gcs_planner import __version__
-from gcs_planner.errors import UserError, one_line
+from gcs_planner.core.errors import UserError, one_line
 
 # command -> its one-line help (the first line of its module's docstring, tested): `--help` lists
 # them without importing every command

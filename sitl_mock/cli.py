@@ -33,7 +33,7 @@ import sys
 import threading
 import time
 
-from gcs_planner.mavlink.signing import key_from_passphrase
+from gcs_planner.wire.signing import key_from_passphrase
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.flight import AIRFRAMES
@@ -150,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-# a line of `gcs-planner fly --homes` (gcs_planner/starts.py format_homes):
+# a line of `gcs-planner fly --homes` (gcs_planner/flight/starts.py format_homes):
 # "sysid N (ID): --home LAT,LON,ALT,HEADING  (MAV_SYSID N; ...) | PX4: ..."
 HOMES_LINE = re.compile(r"sysid\s+(?P<sysid>\d+)\s+\(.*\):\s+--home\s+(?P<home>\S+)(?:\s.*)?")
 HOMES_FORMAT = "'sysid N (ID): --home LAT,LON,ALT,HEADING', as `gcs-planner fly SCENARIO --homes` prints"

@@ -3,7 +3,7 @@
 The frame is the one a GCS compares ArduPilot / PX4 SITL worlds against: east/north are the WGS84
 azimuthal equidistant projection centred on the home (distance and azimuth from the home are the
 geodesic's), and up is altitude above the home (altitudes AMSL). The mock keeps its own copy
-rather than import the client's (gcs_planner.geo): a simulated autopilot must not share code with
+rather than import the client's (gcs_planner.core.geo): a simulated autopilot must not share code with
 the GCS it tests. That the two agree is checked by a test (tests/test_geodesy_crosscheck.py, to
 1 mm over 100 km at any latitude), not assumed.
 

@@ -1,6 +1,6 @@
 """The mock plane's own ArduPlane L1 waypoint guidance, written from ArduPilot's
 ``AP_L1_Control::update_waypoint`` (libraries/AP_L1_Control/AP_L1_Control.cpp) and not shared
-with the client's predictor (gcs_planner.l1_guidance), so that a wrong model on either side fails
+with the client's predictor (gcs_planner.flight.l1_guidance), so that a wrong model on either side fails
 the cross-check test instead of agreeing with itself.
 
 Like the source it works in the NE frame (x north, y east) with the controller's 2-D cross

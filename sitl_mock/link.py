@@ -10,13 +10,13 @@ Three transports (``TRANSPORTS``), each what a real autopilot offers:
   vehicles can share one GCS ``udpin`` port. Its GCS stays a peer across reboots.
 - ``tcp``: the vehicle listens on a TCP port and serves one GCS connection at a time (ArduPilot
   SITL's default ``tcp:5760`` on SERIAL0; a further connection is closed while one is served); a
-  byte stream, framed by gcs_planner/mavlink/framing.py's StreamFramer. Link faults act on whole
+  byte stream, framed by gcs_planner/wire/framing.py's StreamFramer. Link faults act on whole
   frames out and on the received chunks in (meant for UDP).
 Frames are MAVLink 2 with srcSystem = the vehicle's system id, srcComponent = 1.
 Outgoing and incoming datagrams each pass through their own `FaultyChannel`; a datagram lost
 on the way in teaches the vehicle nothing (not even the peer's address).
 
-Receiving: each datagram is framed on its own (gcs_planner/mavlink/framing.py; no bytes carried
+Receiving: each datagram is framed on its own (gcs_planner/wire/framing.py; no bytes carried
 to the next datagram), each frame decoded by one keyless pymavlink decoder. An address becomes a
 peer only once a frame from it decoded and, with signing on, verified: junk or forged frames from
 any number of ports cannot push the GCS out of the peer table. That is a choice, not a claim:
@@ -40,9 +40,9 @@ from collections.abc import Callable
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.mavlink.framing import StreamFramer, frames  # noqa: E402
-from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
-from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
+from gcs_planner.wire.framing import StreamFramer, frames  # noqa: E402
+from gcs_planner.wire.signing import LinkSigning  # noqa: E402
+from gcs_planner.wire.wire import attach_extensions  # noqa: E402
 from sitl_mock.faults import FaultyChannel, LinkFaults  # noqa: E402
 
 __all__ = ["MAX_PEERS", "TRANSPORTS", "VehicleLink"]

@@ -38,8 +38,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from gcs_planner.mavlink.enums import MissionState
-from gcs_planner.mavlink.types import MissionItem
+from gcs_planner.wire.enums import MissionState
+from gcs_planner.wire.types import MissionItem
 from sitl_mock.flight import Airframe, Arrival, Guidance
 from sitl_mock.geodesy import to_enu
 from sitl_mock.profiles import FlightRules

@@ -45,10 +45,10 @@ from enum import StrEnum
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.mavlink.dialect import has_position
-from gcs_planner.mavlink.enums import MissionResult, MissionState
-from gcs_planner.mavlink.types import GLOBAL_FRAMES, MissionItem, MissionType
-from gcs_planner.mavlink.wire import MissionAckMessage, MissionCountMessage, MissionCurrentMessage
+from gcs_planner.wire.dialect import has_position
+from gcs_planner.wire.enums import MissionResult, MissionState
+from gcs_planner.wire.types import GLOBAL_FRAMES, MissionItem, MissionType
+from gcs_planner.wire.wire import MissionAckMessage, MissionCountMessage, MissionCurrentMessage
 from sitl_mock.profiles import AutopilotProfile
 from sitl_mock.storage import Refused
 

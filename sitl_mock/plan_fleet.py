@@ -1,9 +1,9 @@
 """Mock fleets for a plan: one mock autopilot per VehiclePlan, homed and tuned for it.
 
-These are gcs_planner's vehicle sources (gcs_planner.vehicles.VehicleSource), registered as the
+These are gcs_planner's vehicle sources (gcs_planner.flight.vehicles.VehicleSource), registered as the
 ``gcs_planner.vehicle_sources`` entry points "mock" (MockVehicles, for ``fly``) and "mock-process"
 (MockVehiclesProcess, the coalition HIL run's planes). Without a ``speedup`` a fleet runs in the
-flight's own event loop in lockstep with it (gcs_planner.lockstep: one virtual clock, as fast as
+flight's own event loop in lockstep with it (gcs_planner.core.lockstep: one virtual clock, as fast as
 the CPU allows, the same flight however busy the machine); with one it is paced by the wall clock
 at that rate, in a thread (``fly``) or its own process (the coalition run, whose in-flight
 planning would otherwise share a core with 32 simulated vehicles), for a GCS on its own clock.
@@ -42,7 +42,7 @@ MAX_WALL_TELEMETRY_HZ = 40.0  # cap per vehicle [Hz of wall time] so the mock ke
 FLY_TAKEOFF_CLIMB_MPS = 2.0  # a fixed wing's take-off climb in `fly`: the rate its flight-time budget assumes
 HIL_TAKEOFF_CLIMB_MPS = 40.0  # coalition HIL: the take-off is not part of the measurement
 # fleet ids name a vehicle across MAVLink networks: fleet id = network x 256 + sysid (the interface
-# between the GCS and its vehicle sources, documented in gcs_planner/fleet_ids.py and
+# between the GCS and its vehicle sources, documented in gcs_planner/core/fleet_ids.py and
 # gcs_planner/mavlink/networks.py); on network 0 the fleet id is the system id
 NETWORK_SPAN = 256
 

@@ -12,7 +12,7 @@ import time
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from gcs_planner.mavlink.types import MissionItem  # noqa: E402
+from gcs_planner.wire.types import MissionItem  # noqa: E402
 
 __all__ = ["Probe"]
 

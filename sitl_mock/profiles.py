@@ -13,7 +13,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from gcs_planner.mavlink.enums import (
+from gcs_planner.wire.enums import (
     ARDUCOPTER_MODES,
     ARDUPLANE_MODES,
     PX4_MODES,
@@ -21,7 +21,7 @@ from gcs_planner.mavlink.enums import (
     CommandResult,
     MissionResult,
 )
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.wire.types import MissionItem, MissionType
 from sitl_mock import storage as stored
 
 __all__ = [

@@ -32,9 +32,9 @@ import math
 import struct
 from dataclasses import dataclass, field
 
-from gcs_planner.mavlink.dialect import has_position
-from gcs_planner.mavlink.enums import MissionResult
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.wire.dialect import has_position
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
 
 __all__ = ["ARDUCOPTER", "ARDUPLANE", "PX4", "Refused", "Storage", "refuses"]
 

@@ -36,11 +36,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from gcs_planner.mavlink.dialect import has_position
-from gcs_planner.mavlink.enums import CommandResult, MissionState, px4_custom_mode
-from gcs_planner.mavlink.signing import NO_KEY
-from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.mavlink.wire import MissionCurrentMessage
+from gcs_planner.wire.dialect import has_position
+from gcs_planner.wire.enums import CommandResult, MissionState, px4_custom_mode
+from gcs_planner.wire.signing import NO_KEY
+from gcs_planner.wire.types import MissionItem, MissionType
+from gcs_planner.wire.wire import MissionCurrentMessage
 from sitl_mock import telemetry
 from sitl_mock.faults import LinkFaults
 from sitl_mock.flight import AIRFRAMES, Airframe

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 import pytest
 
-from gcs_planner.mavlink.types import MissionItem
+from gcs_planner.wire.types import MissionItem
 
 MissionOf = Callable[..., list[MissionItem]]
 

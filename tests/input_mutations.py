@@ -167,8 +167,8 @@ _cache: dict[str, object] = {}
 def base_plan() -> dict:
     """plan.json (as a dict) of SCENARIO with the straight planner."""
     if "plan" not in _cache:
+        from gcs_planner.model.scenario import parse_scenario
         from gcs_planner.planning import plan_scenario
-        from gcs_planner.scenario import parse_scenario
 
         _cache["plan"] = plan_scenario(parse_scenario(copy.deepcopy(SCENARIO))).to_dict()
     return copy.deepcopy(_cache["plan"])
@@ -187,7 +187,7 @@ def base_tlog() -> bytes:
 def base_mcap(tmp: Path) -> bytes:
     """The MCAP that import-tlog writes for base_tlog() with base_plan() attached."""
     if "mcap" not in _cache:
-        from gcs_planner.plan import Plan
+        from gcs_planner.model.plan import Plan
         from gcs_planner.telemetry.tlog import import_tlog
 
         (tmp / "base.tlog").write_bytes(base_tlog())
@@ -399,9 +399,9 @@ def run_case(argv: list[str], folder: Path) -> Outcome:
 async def stub_fly(scenario, plan, options, vehicles, progress=None):
     """Stands in for gcs_planner.flight.fly: what the real one checks before it sends, then no flight."""
     from gcs_planner.flight import FlyResult
-    from gcs_planner.flight_ops import build_missions
+    from gcs_planner.flight.ops import build_missions
     from gcs_planner.mavlink.autopilots import quirks_named
-    from gcs_planner.mavlink.items import AUTOPILOTS
+    from gcs_planner.missions.items import AUTOPILOTS
 
     for conventions in AUTOPILOTS:
         build_missions(plan, {vp.sysid: quirks_named(conventions) for vp in plan.vehicles})

@@ -1,7 +1,7 @@
 """What a vehicle's refusal of a mission transfer looks like to the client."""
 
 from gcs_planner.mavlink import errors
-from gcs_planner.mavlink.enums import MissionResult
+from gcs_planner.wire.enums import MissionResult
 
 
 def refused(exc: BaseException | None, result: MissionResult) -> bool:

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs_planner.mavlink.items import plan_to_items
-from gcs_planner.plan import Plan
+from gcs_planner.missions.items import plan_to_items
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import ScenarioError, load_scenario, parse_scenario
 from gcs_planner.planning import config_of, plan_scenario
 from gcs_planner.planning.acmpso import (
     Config,
@@ -30,7 +31,6 @@ from gcs_planner.planning.threat_env import (
     terrain_from_config,
     validate_path,
 )
-from gcs_planner.scenario import ScenarioError, load_scenario, parse_scenario
 
 MISSION = Path(__file__).resolve().parents[1] / "missions" / "acmpso_paper.toml"
 # the paper's peaks in km: h, x_o, y_o, x_s, y_s

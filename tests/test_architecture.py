@@ -1,11 +1,13 @@
-"""The layering docs/architecture.md draws holds: imports go one way, and no function grows past 80 lines.
+"""The layers are the folders of gcs_planner/, and imports go down them: no cycle, no upward import.
 
 Every import in gcs_planner/ and sitl_mock/ is read from the source (function-level ones too), so
-a lazy import cannot hide a cycle."""
+a lazy import cannot hide a cycle. The layer order is docs/architecture.md's table.
+"""
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -13,17 +15,22 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("gcs_planner", "sitl_mock")
 MAX_FUNCTION_LINES = 80
-# the MAVLink core: message types, enums, wire structs, framing, signing, what autopilots store;
-# the GCS and the mock autopilot both build on it, and it builds on nothing else of the project
-MAVLINK_CORE = {f"gcs_planner.mavlink.{m}" for m in ("types", "enums", "wire", "dialect", "framing")} | {
-    f"gcs_planner.mavlink.{m}" for m in ("signing", "signing_streams")
-}
-# what the mock autopilot may use of gcs_planner: the MAVLink wire core, nothing else. It keeps its
-# own geodesy (sitl_mock/geodesy.py, checked against the client's by tests/test_geodesy_crosscheck.py),
-# fleet ids and plan reading (plan_fleet.py), starts (`sitl-mock --homes` reads `fly --homes`' lines)
-# and models of an autopilot (storage.py, l1.py): a simulated autopilot shares no code with the GCS
-# it tests beyond the wire format
-MOCK_MAY_USE = MAVLINK_CORE
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
+
+
+def _layers() -> list[str]:
+    """The folders of gcs_planner/, bottom layer first, as docs/architecture.md's layer table lists them."""
+    return re.findall(r"^\| \d+ \| `gcs_planner/(\w+)/` \|", ARCHITECTURE.read_text(), flags=re.M)
+
+
+LAYERS = _layers()
+# the root holds the version (imported by anything) and the CLI's entry point (imports anything)
+ROOT_MODULES = {"gcs_planner": -1, "gcs_planner.cli": len(LAYERS)}
+# the MAVLink wire core: what the GCS and the mock autopilot share. The mock keeps its own geodesy
+# (sitl_mock/geodesy.py, checked against the client's by tests/test_geodesy_crosscheck.py), fleet
+# ids and plan reading (plan_fleet.py) and models of an autopilot (storage.py, l1.py): a simulated
+# autopilot shares no code with the GCS it tests beyond the wire format
+WIRE = "gcs_planner.wire"
 
 
 def _modules() -> dict[str, Path]:
@@ -65,10 +72,21 @@ GRAPH = {name: _imports(name) for name in MODULES}
 MODULES_OF = {p: [m for m in MODULES if m.split(".")[0] == p] for p in PACKAGES}
 
 
-def _unit(name: str) -> str:
-    """A layer unit: a subpackage of gcs_planner, a top-level module of it, or sitl_mock."""
-    parts = name.split(".")
-    return parts[0] if parts[0] == "sitl_mock" or len(parts) == 1 else ".".join(parts[:2])
+def layer(module: str) -> int:
+    """The layer of a module of gcs_planner: its folder's place in LAYERS."""
+    if module in ROOT_MODULES:
+        return ROOT_MODULES[module]
+    return LAYERS.index(module.split(".")[1])
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[str]:
+    """``module -> dependency`` for every import of a higher layer."""
+    return sorted(
+        f"{m} -> {d}"
+        for m, deps in graph.items()
+        for d in deps
+        if m.startswith("gcs_planner") and d.startswith("gcs_planner") and layer(d) > layer(m)
+    )
 
 
 def _cycle(edges: dict[str, set[str]]) -> list[str] | None:
@@ -94,30 +112,42 @@ def _cycle(edges: dict[str, set[str]]) -> list[str] | None:
     return None
 
 
+def test_the_folders_are_the_layers_and_the_root_holds_only_the_version_and_the_cli():
+    folders = {p.name for p in (ROOT / "gcs_planner").iterdir() if (p / "__init__.py").is_file()}
+    assert len(LAYERS) == len(set(LAYERS)) and set(LAYERS) == folders, "docs/architecture.md's layer table"
+    assert {p.name for p in (ROOT / "gcs_planner").glob("*.py")} == {"__init__.py", "cli.py"}
+
+
+def test_imports_go_down_the_layers():
+    assert upward_imports(GRAPH) == []
+
+
+def test_no_import_cycle_between_modules():
+    assert _cycle(GRAPH) is None, _cycle(GRAPH)
+
+
+def test_the_checks_find_an_upward_import_and_a_cycle():
+    low, high = f"gcs_planner.{LAYERS[0]}.a", f"gcs_planner.{LAYERS[-1]}.b"
+    assert upward_imports({low: {high}, high: {low}}) == [f"{low} -> {high}"]
+    assert upward_imports({"gcs_planner": {"gcs_planner.cli"}}) == ["gcs_planner -> gcs_planner.cli"]
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
 def test_gcs_planner_never_imports_the_mock():
     offenders = sorted(m for m, deps in GRAPH.items() if m.startswith("gcs_planner") and any(
         d.startswith("sitl_mock") for d in deps))  # fmt: skip
-    assert offenders == [], "the flight code gets its vehicles from a VehicleSource (gcs_planner/vehicles.py)"
+    assert offenders == [], "the flight code gets its vehicles from a VehicleSource (flight/vehicles.py)"
 
 
-def test_the_mock_uses_only_the_mavlink_core_of_gcs_planner():
+def test_the_mock_uses_only_the_wire_core_of_gcs_planner():
     used = {d for m in MODULES_OF["sitl_mock"] for d in GRAPH[m]} - set(MODULES_OF["sitl_mock"])
-    assert used <= MOCK_MAY_USE, sorted(used - MOCK_MAY_USE)
+    assert used and all(d.startswith(WIRE + ".") for d in used), sorted(used)
 
 
-def test_the_mavlink_core_builds_on_nothing_else():
-    for module in MAVLINK_CORE:
-        assert GRAPH[module] <= MAVLINK_CORE, (module, sorted(GRAPH[module] - MAVLINK_CORE))
-
-
-def test_no_import_cycle_between_packages_or_layers():
-    packages = {p: {d.split(".")[0] for m, deps in GRAPH.items() if m.split(".")[0] == p for d in deps} - {p}
-                for p in PACKAGES}  # fmt: skip
-    assert _cycle(packages) is None
-    units: dict[str, set[str]] = {}
-    for module, deps in GRAPH.items():
-        units.setdefault(_unit(module), set()).update(_unit(d) for d in deps if _unit(d) != _unit(module))
-    assert _cycle(units) is None, _cycle(units)
+def test_the_wire_core_builds_on_nothing_else():
+    for module in (m for m in MODULES if m.startswith(WIRE)):
+        assert all(d.startswith(WIRE) for d in GRAPH[module]), (module, sorted(GRAPH[module]))
 
 
 # the steps of a flight: only the one flight runner (gcs_planner/flight/runner.py) takes them, so
@@ -145,11 +175,6 @@ def test_only_the_flight_runner_takes_the_steps_of_a_flight():
     stray = {m: sorted(steps - TAKERS.get(m, set())) for m, steps in taken.items()}
     assert {m: steps for m, steps in stray.items() if steps} == {}
     assert taken["gcs_planner.flight.runner"] == FLIGHT_STEPS  # the test looks where the steps are
-
-
-def test_the_cycle_finder_finds_cycles():
-    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
-    assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
 
 
 def _long_functions(path: Path) -> list[str]:

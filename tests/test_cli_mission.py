@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.geo import Origin
+from gcs_planner.core.geo import Origin
 from gcs_planner.mavlink import readback
-from gcs_planner.mavlink.files import in_file_frames, load_mission_file
-from gcs_planner.mavlink.items import deg_to_e7, plan_to_items
 from gcs_planner.mavlink.mission import compare_items
-from gcs_planner.mavlink.types import MissionItem
-from gcs_planner.mavlink.wpl import dumps_wpl
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.missions.files import in_file_frames, load_mission_file
+from gcs_planner.missions.items import deg_to_e7, plan_to_items
+from gcs_planner.missions.wpl import dumps_wpl
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.wire.types import MissionItem
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
 SCENARIO = """
@@ -270,7 +270,7 @@ def test_fleet_arguments_are_checked(tmp_path, capsys):
 
 def test_signed_vehicle_takes_an_upload_signed_from_the_environment(tmp_path, capsys, monkeypatch):
     sitl_mock = pytest.importorskip("sitl_mock")
-    from gcs_planner.mavlink.signing import key_from_passphrase
+    from gcs_planner.wire.signing import key_from_passphrase
 
     key = key_from_passphrase("field-day")
     with sitl_mock.MockFleet(count=1, profile="px4", home=ORIGIN, speedup=20.0, signing_key=key) as signed:

@@ -18,7 +18,7 @@ import pytest
 )
 def test_a_command_does_not_import_the_other_commands(argv):
     """Nor numpy or pyproj: a mission file read and sent needs neither (the plan.json reader loads them)."""
-    heavy = repr(("gcs_planner.planning", "gcs_planner.coalition_hil", "scipy", "rerun", "sitl_mock",
+    heavy = repr(("gcs_planner.planning", "gcs_planner.flight.coalition", "scipy", "rerun", "sitl_mock",
                   "numpy", "pyproj"))  # fmt: skip
     code = (
         f"import sys; from gcs_planner.cli import main; main({argv!r});"

@@ -11,19 +11,19 @@ import numpy as np
 import pytest
 
 import sitl_mock
-from gcs_planner import lockstep
 from gcs_planner.cli import main
-from gcs_planner.coalition_hil import HilOptions
-from gcs_planner.coalition_hil.live_legs import RUN_IN_S, TURN_FACTOR
-from gcs_planner.coalition_hil.online_run import OnlineRun
-from gcs_planner.coalition_hil.run import initial_plans, run_coalition_hil
 from gcs_planner.commands.fly_coalition import connected_fleet
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.plan import VehiclePlan
+from gcs_planner.core import lockstep
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.flight.coalition import HilOptions
+from gcs_planner.flight.coalition.live_legs import RUN_IN_S, TURN_FACTOR
+from gcs_planner.flight.coalition.online_run import OnlineRun
+from gcs_planner.flight.coalition.run import initial_plans, run_coalition_hil
+from gcs_planner.flight.starts import CLIMB_RUN_PER_M, check_starts, starts
+from gcs_planner.model.plan import VehiclePlan
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning.coalition import load_world, simulate
-from gcs_planner.scenario import load_scenario
-from gcs_planner.starts import CLIMB_RUN_PER_M, check_starts, starts
 from gcs_planner.telemetry import read_flight
 from sitl_mock.l1 import SITL_PLANE
 from sitl_mock.plan_fleet import MockVehiclesProcess

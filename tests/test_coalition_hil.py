@@ -7,11 +7,17 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs_planner import lockstep
-from gcs_planner.coalition_hil import HilOptions, live_state, measure_task, plan_live_leg, run_coalition_hil
-from gcs_planner.geo import enu_to_geodetic
+from gcs_planner.core import lockstep
+from gcs_planner.core.geo import enu_to_geodetic
+from gcs_planner.flight.coalition import (
+    HilOptions,
+    live_state,
+    measure_task,
+    plan_live_leg,
+    run_coalition_hil,
+)
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning.coalition import load_world, paths
-from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
@@ -83,7 +89,7 @@ def test_upload_end_is_stamped_at_the_first_report_after_the_upload():
     """The run's clock only moves when a position report arrives. An upload that starts and ends
     between two reports gets the next report's time as its end, so start < end by construction
     (96d891a had loosened the HIL test's order to <= after an upload fell within one report)."""
-    from gcs_planner.coalition_hil.run import next_report_after
+    from gcs_planner.flight.coalition.run import next_report_after
 
     reads = iter([12.3, 12.3, 12.3, 12.3, 12.4, 12.5])
     calls = []
@@ -104,10 +110,10 @@ def test_a_mission_starts_at_the_first_waypoint_that_is_ahead_in_time_and_in_fro
     has just flown past (behind it and near) is skipped: ArduPlane started towards a waypoint
     behind it turns back for it (Plane::set_next_WP), and a mock SITL plane circled one. A plane
     far off the path still starts at the due one (the replayed simulation legs)."""
-    from gcs_planner.coalition_hil.run import _first_ahead
-    from gcs_planner.geo import Origin
-    from gcs_planner.mavlink.items import plan_to_items
-    from gcs_planner.plan import VehiclePlan
+    from gcs_planner.core.geo import Origin
+    from gcs_planner.flight.coalition.run import _first_ahead
+    from gcs_planner.missions.items import plan_to_items
+    from gcs_planner.model.plan import VehiclePlan
 
     xs = np.arange(6) * 100.0  # east at 20 m/s: a waypoint every 5 s
     wps = np.column_stack([xs, np.zeros(6), np.full(6, 100.0)])
@@ -123,7 +129,7 @@ def test_a_mission_starts_at_the_first_waypoint_that_is_ahead_in_time_and_in_fro
 
 
 def test_t1_awards_are_flown_from_live_state_and_arrive_on_time_and_angle(tmp_path):
-    """In lockstep (gcs_planner.lockstep): the same flight however busy the machine."""
+    """In lockstep (gcs_planner.core.lockstep): the same flight however busy the machine."""
     scenario = load_scenario(SCENARIO)
     options = HilOptions(out_dir=tmp_path, targets=("T1",))
     result = lockstep.run(run_coalition_hil(scenario, options, MockVehiclesProcess), True)
@@ -189,7 +195,7 @@ def test_a_connected_vehicles_leg_ends_with_a_straight_run_in_when_it_can_still_
     """ArduPlane's L1 controller lags a turn that ends at the goal pose (a SITL strike came in 23.5
     deg off after an S-bend in its last 6 s): a connected vehicle's leg ends with RUN_IN_S straight
     into the goal pose; a leg the run-in would make late goes without it."""
-    from gcs_planner.coalition_hil.live_legs import RUN_IN_S
+    from gcs_planner.flight.coalition.live_legs import RUN_IN_S
 
     world = load_world(load_scenario(SCENARIO))
     award = {"uav": "U8", "target": "T1", "task": "strike", "t_s": 60.0, "time_s": 100.0, "angle_deg": 15.0}
@@ -222,7 +228,7 @@ def test_a_connected_vehicles_leg_ends_with_a_straight_run_in_when_it_can_still_
 def test_a_connected_planes_leg_turns_wider_when_it_still_arrives_on_time():
     """ArduPlane SITL overshot its turn onto the run-in line by 25-37 m on r_min arcs: a connected
     plane's leg turns at TURN_FACTOR x r_min while that still arrives on time, else at r_min."""
-    from gcs_planner.coalition_hil.live_legs import RUN_IN_S, TURN_FACTOR
+    from gcs_planner.flight.coalition.live_legs import RUN_IN_S, TURN_FACTOR
 
     world = load_world(load_scenario(SCENARIO))
     award = {"uav": "U8", "target": "T1", "task": "strike", "t_s": 60.0, "time_s": 100.0, "angle_deg": 15.0}

@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs_planner import lockstep
-from gcs_planner.coalition_hil import HilOptions
-from gcs_planner.coalition_hil.live_legs import LEG_SPEED_FACTOR, LiveState, goal_pose
-from gcs_planner.coalition_hil.online import OnlineContractNet, arc_covered
-from gcs_planner.coalition_hil.online_run import Fault, run_online
+from gcs_planner.core import lockstep
+from gcs_planner.flight.coalition import HilOptions
+from gcs_planner.flight.coalition.live_legs import LEG_SPEED_FACTOR, LiveState, goal_pose
+from gcs_planner.flight.coalition.online import OnlineContractNet, arc_covered
+from gcs_planner.flight.coalition.online_run import Fault, run_online
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning.coalition import load_world, paths, simulate
 from gcs_planner.planning.coalition.model import Threat
-from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehiclesProcess
 

@@ -10,11 +10,11 @@ import msgspec
 import numpy as np
 import pytest
 
-from gcs_planner.plan import Plan
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import plan_scenario
 from gcs_planner.planning.coalition import leg_vehicle_plan, load_world, paths, simulate
 from gcs_planner.planning.coalition.sim import CoalitionSim
-from gcs_planner.scenario import load_scenario
 
 MISSION = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"
 

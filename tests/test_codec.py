@@ -12,9 +12,9 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.mavlink import codec  # noqa: E402
 from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
-from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
+from gcs_planner.wire import codec  # noqa: E402
+from gcs_planner.wire.signing import LinkSigning  # noqa: E402
 
 _RANGES = {
     "uint8_t": (0, 2**8),

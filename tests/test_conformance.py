@@ -1,16 +1,16 @@
 import numpy as np
 import pytest
 
-from gcs_planner.conformance import (
+from gcs_planner.core.geo import Origin
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.scenario import Cylinder
+from gcs_planner.safety.conformance import (
     MovingObstacle,
     Track,
     conformance_report,
     format_report,
     point_to_polyline_m,
 )
-from gcs_planner.geo import Origin
-from gcs_planner.plan import Plan, VehiclePlan
-from gcs_planner.scenario import Cylinder
 
 
 def _vehicle(sysid, y, speed=10.0):
@@ -118,7 +118,7 @@ def test_nan_is_never_within_a_bound():
 def test_the_report_says_where_a_landing_touched_down_against_the_plan():
     """A fixed wing's land point is one 5-degree glide ahead of its last waypoint (an approach it can
     fly); the report measures the touchdown from it."""
-    from gcs_planner.plan import LAND_GLIDE_DEG, land_point
+    from gcs_planner.model.plan import LAND_GLIDE_DEG, land_point
 
     vp = _vehicle(1, 0.0)
     vp.vehicle_type = "fixed_wing"

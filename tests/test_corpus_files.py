@@ -20,21 +20,15 @@ from pathlib import Path
 
 import pytest
 
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.files import (
-    LIST_NAMES,
-    Loss,
-    MissionFile,
-    default_home_item,
-    load_mission_file,
-    save_mission_file,
-)
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient, compare_items
 from gcs_planner.mavlink.transfer import Timing
-from gcs_planner.mavlink.types import MissionType
-from gcs_planner.mavlink.validate import validate_items
+from gcs_planner.missions.files import load_mission_file, save_mission_file
+from gcs_planner.missions.mission_file import LIST_NAMES, Loss, MissionFile, default_home_item
+from gcs_planner.missions.validate import validate_items
+from gcs_planner.wire.types import MissionType
 
 CORPUS = Path(os.environ.get("GCS_PLANNER_CORPUS", Path(__file__).resolve().parents[2] / "shared" / "corpus"))
 pytestmark = pytest.mark.skipif(not (CORPUS / "MANIFEST.tsv").is_file(), reason=f"no corpus at {CORPUS}")

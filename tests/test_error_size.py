@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.errors import MAX_ERROR_CHARS
+from gcs_planner.core.errors import MAX_ERROR_CHARS
 
 MAX_LINE = len("gcs-planner import-log: error: ") + MAX_ERROR_CHARS
 
@@ -63,7 +63,7 @@ def _plan_file(path: Path, n: int) -> Path:
 def test_a_plan_with_more_items_than_mission_count_is_refused_before_they_are_built(
     tmp_path, capsys, monkeypatch
 ):
-    import gcs_planner.mavlink.planfile as planfile
+    import gcs_planner.missions.planfile as planfile
 
     built = []
     real = planfile._parse_simple
@@ -85,8 +85,8 @@ def test_a_rally_list_over_mission_count_is_refused(tmp_path, capsys):
 
 @pytest.mark.parametrize("kind", ["scenario", "plan.json", ".plan"])
 def test_a_file_over_the_size_limit_is_refused_before_it_is_read_whole(tmp_path, capsys, monkeypatch, kind):
-    import gcs_planner.mavlink.files as files
-    import gcs_planner.validation as validation
+    import gcs_planner.core.validation as validation
+    import gcs_planner.missions.files as files
 
     monkeypatch.setattr(validation, "MAX_INPUT_BYTES", 4096)
     monkeypatch.setattr(files, "MAX_INPUT_BYTES", 4096)
@@ -105,7 +105,7 @@ def test_a_file_over_the_size_limit_is_refused_before_it_is_read_whole(tmp_path,
 
 def test_an_endless_input_is_refused_at_the_limit(tmp_path, capsys, monkeypatch):
     """/dev/zero has no size to check first: reading stops one byte past the limit."""
-    import gcs_planner.validation as validation
+    import gcs_planner.core.validation as validation
 
     monkeypatch.setattr(validation, "MAX_INPUT_BYTES", 1 << 20)
     assert main(["plan", "/dev/zero", "-o", str(tmp_path / "p.json")]) == 2

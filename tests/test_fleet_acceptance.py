@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from gcs_planner.cli import main
+from gcs_planner.flight.starts import starts
 from gcs_planner.planning import load_scenario, plan_scenario
-from gcs_planner.starts import starts
 from gcs_planner.telemetry import read_flight
 
 sitl_mock = pytest.importorskip("sitl_mock")

@@ -13,8 +13,8 @@ import pytest
 from ports import free_port_run
 
 from gcs_planner.cli import main
+from gcs_planner.flight.starts import starts
 from gcs_planner.planning import load_scenario, plan_scenario
-from gcs_planner.starts import starts
 
 sitl_mock = pytest.importorskip("sitl_mock")
 

@@ -14,8 +14,8 @@ from ports import free_port_run
 
 from gcs_planner.cli import build_parser, main
 from gcs_planner.commands import upload
-from gcs_planner.geo import Origin
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.core.geo import Origin
+from gcs_planner.model.plan import Plan, VehiclePlan
 from sitl_mock.fleet import MockFleet
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.image import imread
 
-from gcs_planner.conformance import Track, conformance_report
-from gcs_planner.flight_report import write_flight_report
-from gcs_planner.geo import Origin
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.analysis.flight_report import write_flight_report
+from gcs_planner.core.geo import Origin
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.safety.conformance import Track, conformance_report
 
 FAILED_ROW = np.array([0xF8, 0xD0, 0xD0]) / 255
 
@@ -55,7 +55,7 @@ def fleet(count: int, off_route: set[int]) -> tuple[Plan, dict[int, Track]]:
 def test_the_report_names_every_vehicle_of_a_fleet_of_40_and_500(tmp_path):
     """Past TABLE_ROWS the table keeps the failing and the worst rows and one line names the rest:
     every vehicle appears in the table or in that line; the PNG is drawn at 500 too."""
-    from gcs_planner.flight_report import TABLE_ROWS, table_rows
+    from gcs_planner.analysis.flight_report import TABLE_ROWS, table_rows
 
     for count, off_route in ((40, {7, 33}), (500, {3, 250, 499})):
         plan, tracks = fleet(count, off_route)

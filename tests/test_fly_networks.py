@@ -16,15 +16,15 @@ from ports import free_port_run
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner import lockstep
-from gcs_planner.errors import UserError
+from gcs_planner.core import lockstep
+from gcs_planner.core.errors import UserError
 from gcs_planner.flight import FlyOptions, check_flight, end_summary, fly
+from gcs_planner.flight.vehicles import ConnectedVehicles
 from gcs_planner.mavlink.networks import open_networks
 from gcs_planner.mavlink.preflight import request_streams
+from gcs_planner.model.scenario import ScenarioError, load_scenario
 from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import ScenarioError, load_scenario
 from gcs_planner.telemetry import read_flight
-from gcs_planner.vehicles import ConnectedVehicles
 from sitl_mock.fleet import MockFleet
 from sitl_mock.plan_fleet import MockVehicles
 
@@ -218,8 +218,8 @@ def test_upload_names_vehicles_by_fleet_id_with_one_connect_per_network(tmp_path
     one line before anything is sent."""
     from gcs_planner.cli import main
     from gcs_planner.mavlink import readback
-    from gcs_planner.mavlink.items import plan_to_items
     from gcs_planner.mavlink.mission import compare_items
+    from gcs_planner.missions.items import plan_to_items
 
     scenario = load_scenario(_two_networks(tmp_path))
     plan = plan_scenario(scenario)

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
 
 ORIGINS = [
     Origin(47.397742, 8.545594, 488.0),

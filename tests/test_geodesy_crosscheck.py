@@ -1,4 +1,4 @@
-"""The client's geodesy (gcs_planner.geo) and the mock world's (sitl_mock.geodesy) are written
+"""The client's geodesy (gcs_planner.core.geo) and the mock world's (sitl_mock.geodesy) are written
 separately, so that the mock autopilot shares no code with the GCS beyond the wire format; this
 checks that they are the same frame: on 10,000 seeded random points about origins at latitudes
 -80..80 and any longitude, up to 100 km out and -100..5000 m up, each round trip and each cross
@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.geo import wrap_pi as client_wrap_pi
+from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.core.geo import wrap_pi as client_wrap_pi
 from sitl_mock.geodesy import Home, to_enu, to_geodetic, wrap_pi
 
 POINTS = 10_000

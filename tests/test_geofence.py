@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.geofence import breaches, overflown, vehicle_geofence
-from gcs_planner.mavlink.files import load_mission_file
+from gcs_planner.missions.files import load_mission_file
 from gcs_planner.planning import load_scenario, plan_scenario
+from gcs_planner.safety.geofence import breaches, overflown, vehicle_geofence
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from gcs_planner.geo import Origin
+from gcs_planner.core.geo import Origin
 from gcs_planner.geometry.dubins import shortest_path
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles, altitude_violation
-from gcs_planner.geometry.separation import Trajectory, check_plan, find_conflicts, turn_radii
-from gcs_planner.plan import Plan, VehiclePlan
-from gcs_planner.scenario import Cylinder, Hemisphere, Scenario, Vehicle
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.scenario import Cylinder, Hemisphere, Scenario, Vehicle
+from gcs_planner.safety.separation import Trajectory, check_plan, find_conflicts, turn_radii
 
 
 def _random_obstacles(rng, q=6):

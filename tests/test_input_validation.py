@@ -15,9 +15,9 @@ from input_mutations import SCENARIO, base_mcap, base_plan, base_tlog, toml_dump
 from gcs_planner.cli import main
 from gcs_planner.commands import fly as fly_command
 from gcs_planner.flight import runner as fly_module
-from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.mavlink.validate import MissionValidationError, validate_items
+from gcs_planner.missions.validate import MissionValidationError, validate_items
 from gcs_planner.telemetry import FlightLogger
+from gcs_planner.wire.types import MissionItem, MissionType
 
 
 def _scenario(tmp_path, edit=None, name="s.toml"):

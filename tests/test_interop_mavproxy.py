@@ -62,8 +62,8 @@ MissionItemProtocolModule = _mip.MissionItemProtocolModule
 from pymavlink import mavwp  # noqa: E402
 
 from gcs_planner.cli import main  # noqa: E402
-from gcs_planner.geo import Origin  # noqa: E402
-from gcs_planner.mavlink.types import MissionItem  # noqa: E402
+from gcs_planner.core.geo import Origin  # noqa: E402
+from gcs_planner.wire.types import MissionItem  # noqa: E402
 
 CORPUS = Path(os.environ.get("GCS_PLANNER_CORPUS", Path(__file__).resolve().parents[2] / "shared" / "corpus"))
 AUTOTEST = "ardupilot/Tools/autotest"
@@ -162,7 +162,7 @@ def case_file(case: Case, tmp_path: Path) -> Path:
 def exported_wpl(kind: str, tmp_path: Path) -> Path:
     import numpy as np
 
-    from gcs_planner.plan import Plan, VehiclePlan
+    from gcs_planner.model.plan import Plan, VehiclePlan
 
     n = 7
     wps = np.c_[
@@ -548,7 +548,7 @@ def test_a_command_mavproxys_dialect_lacks(tmp_path):
     we send the file's latitude / longitude as degE7 (a command our dialect lacks keeps
     MISSION_ITEM_INT's default meaning of x / y). Not against the mock: it refuses command ids its
     dialect lacks (MAV_MISSION_UNSUPPORTED)."""
-    from gcs_planner.mavlink.files import load_mission_file
+    from gcs_planner.missions.files import load_mission_file
 
     path = case_file(
         Case(

@@ -21,13 +21,13 @@ from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 from mavsdk.plugins.mission_raw import MissionRaw  # noqa: E402
 from mavsdk.plugins.mission_raw_server import MissionRawServer  # noqa: E402
 
-from gcs_planner.geo import Origin  # noqa: E402
-from gcs_planner.mavlink.files import in_file_frames, plan_mission_file  # noqa: E402
-from gcs_planner.mavlink.items import plan_to_items  # noqa: E402
-from gcs_planner.mavlink.planfile import dumps_plan  # noqa: E402
-from gcs_planner.mavlink.types import MissionItem  # noqa: E402
-from gcs_planner.mavlink.wpl import dumps_wpl  # noqa: E402
-from gcs_planner.plan import VehiclePlan  # noqa: E402
+from gcs_planner.core.geo import Origin  # noqa: E402
+from gcs_planner.missions.files import in_file_frames, plan_mission_file  # noqa: E402
+from gcs_planner.missions.items import plan_to_items  # noqa: E402
+from gcs_planner.missions.planfile import dumps_plan  # noqa: E402
+from gcs_planner.missions.wpl import dumps_wpl  # noqa: E402
+from gcs_planner.model.plan import VehiclePlan  # noqa: E402
+from gcs_planner.wire.types import MissionItem  # noqa: E402
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
 
@@ -173,9 +173,9 @@ def test_mavsdk_mission_raw_client_uploads_to_and_downloads_from_mock(mock_fleet
 def test_our_client_uploads_to_mavsdk_mission_raw_server(mavsdk_pair, mission_type):
     """MAVSDK's autopilot side receives exactly our items (mission, rally points) and returns them."""
     from gcs_planner.mavlink.autopilots import quirks_for
-    from gcs_planner.mavlink.items import rally_items
     from gcs_planner.mavlink.link import MavlinkLink
     from gcs_planner.mavlink.mission import MissionClient
+    from gcs_planner.missions.items import rally_items
 
     server, _ = mavsdk_pair
     if mission_type == 0:

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin, geodetic_to_enu
-from gcs_planner.mavlink.items import (
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin, geodetic_to_enu
+from gcs_planner.missions.items import (
     deg_to_e7,
     e7,
     half_away,
@@ -21,11 +21,11 @@ from gcs_planner.mavlink.items import (
     scenario_fence_items,
     scenario_rally_items,
 )
-from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.mavlink.validate import MissionValidationError, validate_items
-from gcs_planner.plan import VehiclePlan
+from gcs_planner.missions.validate import MissionValidationError, validate_items
+from gcs_planner.model.plan import VehiclePlan
+from gcs_planner.model.scenario import parse_scenario
 from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import parse_scenario
+from gcs_planner.wire.types import MissionItem, MissionType
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
 REL = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

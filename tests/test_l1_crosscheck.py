@@ -1,4 +1,4 @@
-"""The client's L1 predictor (gcs_planner.l1_guidance) and the mock's own L1 law (sitl_mock.l1) are
+"""The client's L1 predictor (gcs_planner.flight.l1_guidance) and the mock's own L1 law (sitl_mock.l1) are
 two implementations of ArduPlane's AP_L1_Control::update_waypoint: on many random planes, legs and
 winds they must demand the same turn, so a wrong model on either side fails here."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gcs_planner.l1_guidance import l1_turn_rate
+from gcs_planner.flight.l1_guidance import l1_turn_rate
 from sitl_mock.l1 import l1_lateral_accel
 
 NE = np.array([1, 0])  # ENU (x east, y north) -> NE

@@ -8,8 +8,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from gcs_planner.coalition_hil.live_legs import timed_leg
-from gcs_planner.l1_guidance import (
+from gcs_planner.flight.coalition.live_legs import timed_leg
+from gcs_planner.flight.l1_guidance import (
     ARDUPLANE_SITL,
     G_MPS2,
     SHAPE_AFTER_S,
@@ -19,7 +19,7 @@ from gcs_planner.l1_guidance import (
     shape_for_l1,
     shape_waypoints,
 )
-from gcs_planner.plan import VehiclePlan
+from gcs_planner.model.plan import VehiclePlan
 from sitl_mock.flight import AIRFRAMES, Arrival, Guidance, Kinematics
 from sitl_mock.l1 import L1Plane
 

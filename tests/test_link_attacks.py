@@ -19,11 +19,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from refusals import refused
 
 from gcs_planner.mavlink import errors
-from gcs_planner.mavlink.enums import MissionResult
-from gcs_planner.mavlink.framing import frames
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.signing import key_from_passphrase, setup_signing_message
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.framing import frames
+from gcs_planner.wire.signing import key_from_passphrase, setup_signing_message
 from sitl_mock.fleet import MockFleet
 
 KEY = key_from_passphrase("correct horse battery staple")

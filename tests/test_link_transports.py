@@ -14,11 +14,11 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.flight_ops import wait_for_vehicles  # noqa: E402
+from gcs_planner.flight.ops import wait_for_vehicles  # noqa: E402
 from gcs_planner.mavlink.link import MavlinkLink, is_autopilot_heartbeat, parse_url  # noqa: E402
 from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
-from gcs_planner.mavlink.types import MissionItem  # noqa: E402
 from gcs_planner.telemetry import FlightLogger, read_flight  # noqa: E402
+from gcs_planner.wire.types import MissionItem  # noqa: E402
 from sitl_mock.cli import build_parser  # noqa: E402
 from sitl_mock.fleet import MockFleet  # noqa: E402
 from sitl_mock.vehicle import DEFAULT_HOME, CurrentModeMessage  # noqa: E402

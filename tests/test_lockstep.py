@@ -1,4 +1,4 @@
-"""One clock (gcs_planner.lockstep): a flight against in-process mock vehicles is the same flight
+"""One clock (gcs_planner.core.lockstep): a flight against in-process mock vehicles is the same flight
 every time, however busy the machine, and a thread's work takes no flight time."""
 
 import asyncio
@@ -9,14 +9,14 @@ from pathlib import Path
 
 import pytest
 
-from gcs_planner import lockstep
-from gcs_planner.coalition_hil import HilOptions
-from gcs_planner.coalition_hil.run import run_coalition_hil
-from gcs_planner.conformance import format_report
+from gcs_planner.core import lockstep
 from gcs_planner.flight import FlyOptions, fly
+from gcs_planner.flight.coalition import HilOptions
+from gcs_planner.flight.coalition.run import run_coalition_hil
+from gcs_planner.flight.vehicles import ConnectedVehicles
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import load_scenario
-from gcs_planner.vehicles import ConnectedVehicles
+from gcs_planner.safety.conformance import format_report
 from sitl_mock.plan_fleet import MockVehicles, MockVehiclesProcess
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"

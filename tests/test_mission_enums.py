@@ -6,9 +6,9 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from refusals import refused
 
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 from gcs_planner.mavlink import errors
-from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, PX4_MODES, CommandResult, MissionResult, MissionState
+from gcs_planner.wire.enums import ARDUCOPTER_MODES, PX4_MODES, CommandResult, MissionResult, MissionState
 from sitl_mock.profiles import PROFILES
 
 

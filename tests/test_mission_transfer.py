@@ -16,7 +16,6 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from refusals import refused
 
 from gcs_planner.mavlink import errors
-from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.transfer import (
     COUNT_RETRIES,
     COUNT_RETRY_S,
@@ -27,8 +26,9 @@ from gcs_planner.mavlink.transfer import (
     Transfer,
     UploadTransfer,
 )
-from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.mavlink.wire import attach_extensions
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
+from gcs_planner.wire.wire import attach_extensions
 from sitl_mock.mission_server import Failure, MissionServer
 from sitl_mock.profiles import PROFILES
 

@@ -17,12 +17,12 @@ from refusals import refused
 
 from gcs_planner.mavlink import errors
 from gcs_planner.mavlink.command import CommandClient
-from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.fleet import start_fleet, upload_fleet
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.transfer import Timing
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
 from sitl_mock.faults import LinkFaults
 from sitl_mock.fleet import MockFleet
 from sitl_mock.mission_server import Failure

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.items import plan_to_items
+from gcs_planner.core.geo import Origin
 from gcs_planner.mavlink.statustext import TextAssembler
-from gcs_planner.mavlink.wpl import dumps_wpl
-from gcs_planner.plan import VehiclePlan
+from gcs_planner.missions.items import plan_to_items
+from gcs_planner.missions.wpl import dumps_wpl
+from gcs_planner.model.plan import VehiclePlan
 
 sitl_mock = pytest.importorskip("sitl_mock")
 

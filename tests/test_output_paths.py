@@ -11,7 +11,7 @@ from cli_checks import refused as _fails
 from input_mutations import SCENARIO, base_mcap, base_plan, base_tlog, toml_dumps
 
 from gcs_planner.cli import main
-from gcs_planner.validation import write_text_atomic
+from gcs_planner.core.validation import write_text_atomic
 
 
 @pytest.mark.parametrize("vid", ["../../x", "/abs/x", "..", ".hidden", "a\\b", "c:x"])

@@ -18,11 +18,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from pymavlink.mavparm import MAVParmDict
 
 from gcs_planner.cli import main
-from gcs_planner.errors import UserError
-from gcs_planner.lockstep import run
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.lockstep import run
 from gcs_planner.mavlink import params as client
-from gcs_planner.mavlink.param_files import ParamEntry, format_value, parse_params, read_param_file
 from gcs_planner.mavlink.params import REAL32, Param, download_params, float32
+from gcs_planner.missions.param_files import ParamEntry, format_value, parse_params, read_param_file
 
 sitl_mock = pytest.importorskip("sitl_mock")
 from sitl_mock.faults import LinkFaults  # noqa: E402
@@ -383,7 +383,7 @@ def test_params_starts_lean():
     """`params` imports neither the planners nor numpy, pyproj or the mock (as `upload`)."""
     heavy = (
         "gcs_planner.planning",
-        "gcs_planner.coalition_hil",
+        "gcs_planner.flight.coalition",
         "scipy",
         "rerun",
         "sitl_mock",

@@ -16,8 +16,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavwp  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.geo import Origin  # noqa: E402
-from gcs_planner.mavlink.files import (  # noqa: E402
+from gcs_planner.core.geo import Origin  # noqa: E402
+from gcs_planner.missions.files import (  # noqa: E402
     MissionFile,
     MissionFileError,
     in_file_frames,
@@ -25,12 +25,12 @@ from gcs_planner.mavlink.files import (  # noqa: E402
     plan_mission_file,
     save_mission_file,
 )
-from gcs_planner.mavlink.items import plan_to_items, scenario_fence_items, scenario_rally_items  # noqa: E402
-from gcs_planner.mavlink.planfile import dumps_plan, loads_plan, plan_losses  # noqa: E402
-from gcs_planner.mavlink.types import MissionItem, MissionType  # noqa: E402
-from gcs_planner.mavlink.wpl import dumps_wpl, loads_wpl, loads_wpl_items, wpl_losses  # noqa: E402
-from gcs_planner.plan import VehiclePlan  # noqa: E402
-from gcs_planner.scenario import parse_scenario  # noqa: E402
+from gcs_planner.missions.items import plan_to_items, scenario_fence_items, scenario_rally_items  # noqa: E402
+from gcs_planner.missions.planfile import dumps_plan, loads_plan, plan_losses  # noqa: E402
+from gcs_planner.missions.wpl import dumps_wpl, loads_wpl, loads_wpl_items, wpl_losses  # noqa: E402
+from gcs_planner.model.plan import VehiclePlan  # noqa: E402
+from gcs_planner.model.scenario import parse_scenario  # noqa: E402
+from gcs_planner.wire.types import MissionItem, MissionType  # noqa: E402
 
 ORIGIN = Origin(-33.8567844, 151.2152967, 12.5)  # southern/eastern hemisphere: negative latitudes
 SCENARIO = {

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 
 from gcs_planner import planning
-from gcs_planner.config import parse
-from gcs_planner.errors import UserError
-from gcs_planner.plan import Plan
+from gcs_planner.core.config import parse
+from gcs_planner.core.errors import UserError
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import PLANNERS, PlannerConfig, config_of, plan_scenario
-from gcs_planner.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "planners.md"

@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs_planner.config import parse
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+from gcs_planner.core.config import parse
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
 from gcs_planner.geometry.obstacles import HARD_PENALTY
-from gcs_planner.geometry.separation import check_plan
+from gcs_planner.model.scenario import Cylinder, Scenario, Vehicle, load_scenario
 from gcs_planner.planning import plan_scenario
 from gcs_planner.planning.priority_swarm import Config, CostModel, Traffic, prepare, timed_samples
-from gcs_planner.scenario import Cylinder, Scenario, Vehicle, load_scenario
+from gcs_planner.safety.separation import check_plan
 
 MISSIONS = Path(__file__).resolve().parent.parent / "missions"
 FAST = {"name": "priority_swarm", "waypoints": 3, "particles": 12, "iterations": 15, "rounds": 2}

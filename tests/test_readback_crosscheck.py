@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 
 from gcs_planner.mavlink import readback
-from gcs_planner.mavlink.dialect import has_position
-from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.errors import MissionError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient, compare_items
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.wire.dialect import has_position
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
 from sitl_mock import storage
 from sitl_mock.fleet import MockFleet
 

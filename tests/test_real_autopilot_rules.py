@@ -13,13 +13,14 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from test_cli_mission import SCENARIO
 
 import sitl_mock
-from gcs_planner import lockstep
 from gcs_planner.cli import main
-from gcs_planner.errors import UserError
+from gcs_planner.core import lockstep
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
 from gcs_planner.flight import FlyOptions, fly
-from gcs_planner.flight_limits import FlightLimits, check_limits, read_l1_params, read_limits
-from gcs_planner.flight_ops import vehicle_quirks
-from gcs_planner.geo import Origin
+from gcs_planner.flight.limits import FlightLimits, check_limits, read_l1_params, read_limits
+from gcs_planner.flight.ops import vehicle_quirks
+from gcs_planner.flight.starts import CLIMB_RUN_PER_M
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandError
 from gcs_planner.mavlink.link import MavlinkLink
@@ -27,10 +28,9 @@ from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.params import read_param
 from gcs_planner.mavlink.preflight import arm_when_ready, request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
-from gcs_planner.mavlink.wpl import loads_wpl
+from gcs_planner.missions.wpl import loads_wpl
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import load_scenario
-from gcs_planner.starts import CLIMB_RUN_PER_M
 from sitl_mock.flight import AIRFRAMES
 from sitl_mock.l1 import SITL_PLANE
 from sitl_mock.mission_server import Failure
@@ -229,8 +229,8 @@ def test_arduplane_reports_no_position_until_its_gps_is_found_and_the_tool_keeps
     """ArduPilot sends GLOBAL_POSITION_INT at (0, 0) before it has a position (the first 10 s on
     SITL) and no HOME_POSITION: the mock plays it; the flight's tracks, the live legs' telemetry and
     the home altitude skip those reports."""
-    from gcs_planner.coalition_hil.live_legs import Telemetry
-    from gcs_planner.flight_ops import TrackRecorder, boot_clock
+    from gcs_planner.flight.coalition.live_legs import Telemetry
+    from gcs_planner.flight.ops import TrackRecorder, boot_clock
 
     async def run():
         async with _fleet("ardupilot", "fixed_wing", speedup=2.0) as fleet:  # 5 s wall before the fix
@@ -299,7 +299,7 @@ def test_fly_homes_puts_a_plane_one_climb_run_behind_its_first_waypoint_and_a_co
 ):
     """A SITL plane's take-off climbs on its launch course (TAKEOFF mode): started at its first
     waypoint, one flew 70 m off its route turning back to it; a multirotor climbs straight up."""
-    from gcs_planner.geo import geodetic_to_enu
+    from gcs_planner.core.geo import geodetic_to_enu
 
     out = tmp_path / "out"
     assert main(["fly", str(MISSIONS / scenario), "--homes", "-o", str(out)]) == 0

@@ -11,11 +11,11 @@ from dataclasses import replace
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.files import MissionFile, load_mission_file, save_mission_file
-from gcs_planner.mavlink.planfile import dumps_plan, loads_plan, plan_losses
-from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.mavlink.wpl import dumps_mission_file, loads_wpl, wpl_losses
+from gcs_planner.core.geo import Origin
+from gcs_planner.missions.files import MissionFile, load_mission_file, save_mission_file
+from gcs_planner.missions.planfile import dumps_plan, loads_plan, plan_losses
+from gcs_planner.missions.wpl import dumps_mission_file, loads_wpl, wpl_losses
+from gcs_planner.wire.types import MissionItem, MissionType
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
 

@@ -12,10 +12,10 @@ import sys
 import pytest
 from cli_checks import refused as _fails
 
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.files import MissionFile, MissionFileError, load_mission_file, save_mission_file
-from gcs_planner.mavlink.types import MissionItem
-from gcs_planner.mavlink.validate import MissionValidationError, validate_items
+from gcs_planner.core.geo import Origin
+from gcs_planner.missions.files import MissionFile, MissionFileError, load_mission_file, save_mission_file
+from gcs_planner.missions.validate import MissionValidationError, validate_items
+from gcs_planner.wire.types import MissionItem
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
 HOME = "0\t1\t0\t16\t0\t0\t0\t0\t47.3977420\t8.5455940\t488.0\t1\n"

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from gcs_planner.geometry.obstacles import Obstacles
+from gcs_planner.model.scenario import Cylinder
 from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
-from gcs_planner.scenario import Cylinder
 
 LO, HI = np.array([0.0, -150.0, 20.0]), np.array([400.0, 150.0, 80.0])
 

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from gcs_planner import lockstep
+from gcs_planner.core import lockstep
 from gcs_planner.flight import FlyOptions, fly
+from gcs_planner.model.scenario import load_scenario
 from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import load_scenario
 from gcs_planner.telemetry import read_flight
 
 sitl_mock = pytest.importorskip("sitl_mock")
@@ -52,7 +52,7 @@ def test_a_forged_completion_from_the_vehicles_address_does_not_end_the_flight(t
     mission's end: the flight goes on and every route is flown in full, on time."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-    from gcs_planner.flight_ops import build_missions
+    from gcs_planner.flight.ops import build_missions
     from gcs_planner.mavlink.autopilots import quirks_named
 
     scenario = load_scenario(SCENARIO)
@@ -111,8 +111,8 @@ def test_impossible_positions_are_flagged_and_never_pass(tmp_path):
 def test_a_signal_mid_coalition_run_brings_the_planes_home_as_fly_does(tmp_path):
     """fly-coalition is the other front end of the one flight runner: a SIGTERM as its routes start
     sends every plane home and the run is reported, interrupted; its log carries the clock rate."""
-    from gcs_planner.coalition_hil import HilOptions
-    from gcs_planner.coalition_hil.run import run_coalition_hil
+    from gcs_planner.flight.coalition import HilOptions
+    from gcs_planner.flight.coalition.run import run_coalition_hil
     from sitl_mock.plan_fleet import MockVehiclesProcess
 
     scenario = load_scenario(SCENARIO.parent / "coalition_paper.toml")

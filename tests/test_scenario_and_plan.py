@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.plan import Plan
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import ScenarioError, load_scenario
 from gcs_planner.planning import plan_scenario
-from gcs_planner.scenario import ScenarioError, load_scenario
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 

@@ -11,8 +11,8 @@ from gcs_planner.cli import main
 from gcs_planner.mavlink import errors
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.signing import key_from_passphrase
 from gcs_planner.mavlink.transfer import Timing
+from gcs_planner.wire.signing import key_from_passphrase
 from sitl_mock.fleet import MockFleet
 
 KEY = key_from_passphrase("correct horse battery staple")

@@ -19,15 +19,15 @@ import tifffile
 from cli_checks import refused
 
 from gcs_planner.cli import main
-from gcs_planner.geo import geodetic_to_enu
-from gcs_planner.geofence import breaches, overflown, vehicle_geofence
-from gcs_planner.geometry.separation import check_plan
-from gcs_planner.mavlink.items import scenario_fence_items
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.core.geo import geodetic_to_enu
+from gcs_planner.missions.items import scenario_fence_items
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.sites.dem import read_dem
+from gcs_planner.model.sites.geojson import read_geojson
+from gcs_planner.model.sites.kml import read_kml
 from gcs_planner.planning import load_scenario, plan_scenario
-from gcs_planner.sites.dem import read_dem
-from gcs_planner.sites.geojson import read_geojson
-from gcs_planner.sites.kml import read_kml
+from gcs_planner.safety.geofence import breaches, overflown, vehicle_geofence
+from gcs_planner.safety.separation import check_plan
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 SWARM = MISSIONS / "site_valley_swarm.toml"
@@ -65,7 +65,7 @@ def test_the_site_becomes_the_local_world(swarm):
     dem = read_dem(SITE / "valley_dem.tif", "dem")
     rng = np.random.default_rng(1)
     x, y = rng.uniform(x0, x1, 200), rng.uniform(y0, y1, 200)
-    from gcs_planner.geo import enu_to_geodetic
+    from gcs_planner.core.geo import enu_to_geodetic
 
     lat, lon, _ = enu_to_geodetic(x, y, 0.0, swarm.origin)
     assert np.abs(site.ground(x, y) - (dem.sample(lat, lon) - 488.0)).max() < 0.5
@@ -134,7 +134,7 @@ def test_the_checker_catches_each_site_hazard(swarm, points, finding, what):
 def test_fly_conformance_holds_the_flown_route_to_the_site(swarm, dz, points, failure):
     """The flown route (a track from the plan's first to its last point, ``dz`` lower) is checked
     like the plan; the plan flown as planned passes."""
-    from gcs_planner.conformance import Track, conformance_report
+    from gcs_planner.safety.conformance import Track, conformance_report
 
     plan = _one_path(swarm, [[0, -200, 60], [300, -200, 60]])  # a clean plan
     flown = _one_path(swarm, points).vehicles[0]
@@ -185,7 +185,7 @@ def test_site_missions_give_altitudes_amsl(swarm, tmp_path):
     mission altitudes are AMSL (z + origin altitude), and plan.json keeps that."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-    from gcs_planner.mavlink.items import plan_to_items
+    from gcs_planner.missions.items import plan_to_items
 
     plan = plan_scenario(swarm)
     assert {vp.altitude_frame for vp in plan.vehicles} == {"amsl"}

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from child_process import child, group_alive
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, MissionState, px4_custom_mode
-from gcs_planner.mavlink.items import plan_to_items
-from gcs_planner.mavlink.types import MissionItem
-from gcs_planner.mavlink.wire import attach_extensions
-from gcs_planner.plan import VehiclePlan
+from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.missions.items import plan_to_items
+from gcs_planner.model.plan import VehiclePlan
+from gcs_planner.wire.enums import ARDUCOPTER_MODES, MissionState, px4_custom_mode
+from gcs_planner.wire.types import MissionItem
+from gcs_planner.wire.wire import attach_extensions
 from sitl_mock import DEFAULT_HOME, Failure, MockFleet
 from sitl_mock.probe import Probe
 
@@ -71,7 +71,7 @@ LOCKSTEP = {"speedup": 1.0, "tick_s": 0.05, "physics_dt_s": 0.05, "rate_hz": 10}
 def _listen(fleet_options: dict, window_s: float, rates: dict[int, float] | None = None) -> list:
     """What a GCS hears from one lockstep mock in ``window_s`` of loop time (after 0.5 s), having
     asked for ``rates`` (message id -> Hz), if any."""
-    from gcs_planner import lockstep
+    from gcs_planner.core import lockstep
     from gcs_planner.mavlink.link import MavlinkLink
     from gcs_planner.mavlink.preflight import request_streams
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.mavlink.files import MissionFileError
-from gcs_planner.mavlink.wpl import loads_wpl
+from gcs_planner.missions.files import MissionFileError
+from gcs_planner.missions.wpl import loads_wpl
 
 ROW = "1\t0\t3\t16\t0\t0\t0\t0\t47.39\t8.54\t20\t1\n"
 

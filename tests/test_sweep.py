@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from gcs_planner.analysis.sweep import load_study, marginals, metric, run_study, summarise
+from gcs_planner.analysis.sweep import runs as sweep_runs
 from gcs_planner.cli import main
-from gcs_planner.errors import UserError
-from gcs_planner.sweep import load_study, marginals, metric, run_study, summarise
-from gcs_planner.sweep import runs as sweep_runs
+from gcs_planner.core.errors import UserError
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 

@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from cli_checks import refused as _fails
 
+from gcs_planner.analysis.sweep import ALLOW_USER_TASK_ENV, load_study, run_study
 from gcs_planner.cli import main
-from gcs_planner.sweep import ALLOW_USER_TASK_ENV, load_study, run_study
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
@@ -96,7 +96,7 @@ def test_a_csv_that_is_not_utf8_is_one_line_and_untouched(tmp_path, capsys, enco
 
 WORKER = """
 import os, sys, time
-from gcs_planner.sweep import _executor
+from gcs_planner.analysis.sweep import _executor
 with _executor(None, 1) as submit:
     future = submit(os.getpid)
     print(future.result(), flush=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from gcs_planner.sweep import ALLOW_USER_TASK_ENV, load_study, run_study
+from gcs_planner.analysis.sweep import ALLOW_USER_TASK_ENV, load_study, run_study
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 PROBE = """import os, sys

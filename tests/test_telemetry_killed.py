@@ -21,7 +21,7 @@ WRITER = r"""
 import os, sys, time
 os.environ["MAVLINK20"] = "1"
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-from gcs_planner.geo import Origin
+from gcs_planner.core.geo import Origin
 from gcs_planner.telemetry import FlightLogger
 
 mav = {s: mavlink.MAVLink(None, srcSystem=s, srcComponent=1) for s in (1, 2)}

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from gcs_planner.geo import geodetic_to_enu
+from gcs_planner.core.geo import geodetic_to_enu
 from gcs_planner.telemetry import FlightLogger, read_flight
 
 UNGATED = {"arm_ready_s": 0.0, "streams_by_request": False}  # rules these tests are not about

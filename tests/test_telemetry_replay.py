@@ -12,7 +12,7 @@ import pytest
 from telemetry_frames import ORIGIN, SCENARIO_TEXT, flight_frames, make_plan
 
 from gcs_planner.cli import main
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 from gcs_planner.telemetry import FlightLogger, read_flight, replay_to_mavlink
 from gcs_planner.telemetry.replay import MAX_RATE_HZ, paced, parse_udp_url
 

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from gcs_planner.plan import VehiclePlan
-from gcs_planner.timekeeping import ScheduleKeeper
+from gcs_planner.flight.timekeeping import ScheduleKeeper
+from gcs_planner.model.plan import VehiclePlan
 
 
 def _route(speed=10.0):

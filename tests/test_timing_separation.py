@@ -6,14 +6,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gcs_planner.config import parse
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+from gcs_planner.core.config import parse
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
 from gcs_planner.geometry.timing import closest_under_timing
+from gcs_planner.model.scenario import Scenario, Vehicle
 from gcs_planner.planning import priority_swarm
 from gcs_planner.planning.deconflict4d.conflicts import pair_closest_approach
 from gcs_planner.planning.traffic import Traffic
-from gcs_planner.scenario import Scenario, Vehicle
 
 DT = 0.5
 SPEED = 12.0

@@ -12,9 +12,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from refusals import refused
 
 from gcs_planner.mavlink import errors
-from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.transfer import DownloadTransfer, Timing, UploadTransfer
-from gcs_planner.mavlink.wire import attach_extensions
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.wire import attach_extensions
 from sitl_mock.mission_server import Failure
 from tests.test_mission_transfer import Sim, kept, mission, preload, server
 

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 from gcs_planner.flight import FlyOptions, fly
+from gcs_planner.flight.vehicles import ConnectedVehicles, mock_vehicles
 from gcs_planner.planning import load_scenario, plan_scenario
-from gcs_planner.vehicles import ConnectedVehicles, mock_vehicles
 from sitl_mock.plan_fleet import MockVehicles, MockVehiclesProcess
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "straight_4uav.toml"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from gcs_planner.cli import main
-from gcs_planner.geo import Origin
+from gcs_planner.core.geo import Origin
 from gcs_planner.telemetry import read_flight
 
 

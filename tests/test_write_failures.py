@@ -13,7 +13,7 @@ import pytest
 from telemetry_frames import flight_frames
 
 from gcs_planner.cli import main
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 as_root = pytest.mark.skipif(os.geteuid() == 0, reason="root writes into a read-only folder")
@@ -107,8 +107,8 @@ def test_replay_rrd_on_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, mcap
 def _report(path: Path):
     from test_flight_report import plan_and_tracks
 
-    from gcs_planner.conformance import conformance_report
-    from gcs_planner.flight_report import write_flight_report
+    from gcs_planner.analysis.flight_report import write_flight_report
+    from gcs_planner.safety.conformance import conformance_report
 
     plan, tracks = plan_and_tracks(0.0)
     reports = conformance_report(plan, tracks, {1: 5.0, 2: 5.0}, [], [], max_cross_track_m=10.0)
@@ -203,8 +203,8 @@ def test_sweep_summary_on_a_full_disk_leaves_no_partial_file(tmp_path, capsys, m
 
 
 def test_sweep_plots_on_a_full_disk_leave_no_partial_png(tmp_path, monkeypatch):
-    from gcs_planner.sweep import load_study, run_study
-    from gcs_planner.sweep_plots import write_plots
+    from gcs_planner.analysis.sweep import load_study, run_study
+    from gcs_planner.analysis.sweep_plots import write_plots
 
     study, base = load_study(_study(tmp_path))
     out = tmp_path / "r.csv"

@@ -20,15 +20,15 @@ from collections.abc import AsyncIterator, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.errors import UserError
-from gcs_planner.fleet_ids import MAX_NETWORK, network_of, wire_sysid
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.fleet_ids import MAX_NETWORK, network_of, wire_sysid
+from gcs_planner.core.validation import number_flag
 from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink, check_signing
 from gcs_planner.mavlink.networks import NetworkLinks, open_networks
-from gcs_planner.mavlink.signing import key_from_passphrase
-from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.validation import number_flag
+from gcs_planner.wire.signing import key_from_passphrase
+from gcs_planner.wire.types import MissionItem, MissionType
 
 log = logging.getLogger(__name__)
 
@@ -112,7 +112,7 @@ def _sysid(text: str) -> int:
 
 
 def _fleet_id(text: str) -> int:
-    """A system id, or a fleet id ``network x 256 + sysid`` (gcs_planner/fleet_ids.py)."""
+    """A system id, or a fleet id ``network x 256 + sysid`` (gcs_planner/core/fleet_ids.py)."""
     try:
         value = int(text)
     except ValueError:

@@ -9,7 +9,7 @@ import socket
 import sys
 from urllib.parse import quote
 
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 
 __all__ = ["check_display", "free_ports", "live_recording"]
 

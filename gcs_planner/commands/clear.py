@@ -18,9 +18,9 @@ from gcs_planner.commands._mission_cli import (
     check_not_flying_mission,
     vehicle_link,
 )
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.types import MissionType
+from gcs_planner.wire.types import MissionType
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -13,10 +13,10 @@ from dataclasses import replace
 from pathlib import Path
 
 from gcs_planner.commands._mission_cli import MISSION_TYPES, print_losses
-from gcs_planner.errors import UserError
-from gcs_planner.mavlink.files import load_mission_file, save_mission_file
-from gcs_planner.mavlink.types import MissionType
-from gcs_planner.validation import output_file
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import output_file
+from gcs_planner.missions.files import load_mission_file, save_mission_file
+from gcs_planner.wire.types import MissionType
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

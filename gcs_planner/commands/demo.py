@@ -1,7 +1,7 @@
 """Run the bundled demo: plan missions/swarm_small.toml and fly it against mock vehicles.
 
 Five multirotors cross a field with three towers: priority-swarm planning, concurrent upload
-over MAVLink/UDP to five mock autopilots in lockstep with the tool (gcs_planner.lockstep: as fast
+over MAVLink/UDP to five mock autopilots in lockstep with the tool (gcs_planner.core.lockstep: as fast
 as the CPU allows, the same flight every time), MCAP + Rerun logs, and the conformance report.
 """
 
@@ -12,7 +12,7 @@ from pathlib import Path
 
 from gcs_planner.commands import fly as fly_command
 from gcs_planner.commands.fly import SPEEDUP
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 
 DEMO_SCENARIO = Path(__file__).resolve().parents[2] / "missions" / "swarm_small.toml"
 

@@ -20,11 +20,11 @@ from gcs_planner.commands._mission_cli import (
     print_losses,
     vehicle_link,
 )
-from gcs_planner.errors import UserError
-from gcs_planner.mavlink.files import MissionFile, in_file_frames, save_mission_file
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import output_file
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.types import MissionType
-from gcs_planner.validation import output_file
+from gcs_planner.missions.files import MissionFile, in_file_frames, save_mission_file
+from gcs_planner.wire.types import MissionType
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -1,7 +1,7 @@
 """Export plan.json as QGroundControl .plan or Mission Planner WPL files, one per vehicle.
 
 Each vehicle's plan becomes the mission items that `upload` would send (see
-gcs_planner.mavlink.items). With --scenario, the .plan files also carry the scenario's geofence
+gcs_planner.missions.items). With --scenario, the .plan files also carry the scenario's geofence
 (bounds, obstacles) and rally points. Prints one table row per file written.
 """
 
@@ -10,12 +10,12 @@ from __future__ import annotations
 import argparse
 
 from gcs_planner.commands._mission_cli import print_losses
-from gcs_planner.errors import UserError
-from gcs_planner.geofence import check_fence, overflown
-from gcs_planner.mavlink.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
-from gcs_planner.mavlink.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import atomic_write, file_stem, not_an_input, output_dir, unique
+from gcs_planner.missions.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
+from gcs_planner.missions.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
 from gcs_planner.planning import load_scenario
-from gcs_planner.validation import atomic_write, file_stem, not_an_input, output_dir, unique
+from gcs_planner.safety.geofence import check_fence, overflown
 
 SUFFIX = {"qgc": ".plan", "wpl": ".waypoints"}
 

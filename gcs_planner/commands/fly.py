@@ -17,19 +17,14 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from gcs_planner import lockstep
 from gcs_planner.commands import fly_coalition
 from gcs_planner.commands._viewer import check_display, live_recording
 from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
-from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, format_report
-from gcs_planner.errors import UserError
-from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_summary, fly, networks
-from gcs_planner.plan import Plan
-from gcs_planner.planning import load_scenario
-from gcs_planner.progress import plan_with_progress, progress_bar
-from gcs_planner.starts import format_homes, starts
-from gcs_planner.validation import (
+from gcs_planner.commands.progress import plan_with_progress, progress_bar
+from gcs_planner.core import lockstep
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import (
     MAX_DURATION_S,
     MAX_RADIUS_M,
     MAX_SPEED_MPS,
@@ -38,7 +33,12 @@ from gcs_planner.validation import (
     number_flag,
     output_dir,
 )
-from gcs_planner.vehicles import ConnectedVehicles, mock_vehicles
+from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_summary, fly, networks
+from gcs_planner.flight.starts import format_homes, starts
+from gcs_planner.flight.vehicles import ConnectedVehicles, mock_vehicles
+from gcs_planner.model.plan import Plan
+from gcs_planner.planning import load_scenario
+from gcs_planner.safety.conformance import MAX_SCHEDULE_ERROR_S, format_report
 
 WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid
 

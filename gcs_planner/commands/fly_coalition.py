@@ -3,11 +3,11 @@
 --connect URL flies real ArduPlanes or SITL instead (all, or the --connected sysids, the others
 mock ones on the same link); --homes prints where each connected vehicle should start.
 
-By default the contract net runs online (gcs_planner/coalition_hil/online_run.py): every UAV of
+By default the contract net runs online (gcs_planner/flight/coalition/online_run.py): every UAV of
 the scenario is a mock fixed wing, and who tenders, who bids and who wins which task, when and at
 which angle is decided in flight from the vehicles' telemetry; the event simulation is run too,
 as the reference its formations are printed beside. --offline takes every decision from the
-simulation instead and flies only the awarded UAVs (gcs_planner/coalition_hil/run.py). Either way
+simulation instead and flies only the awarded UAVs (gcs_planner/flight/coalition/run.py). Either way
 each award's leg is planned from the vehicle's live telemetry (--replay-legs, offline only,
 uploads the simulation's own legs, for comparison). Writes OUT/flight.mcap (tenders, bids, awards
 and uploads as events) and prints each strike's and assessment's flown arrival time and heading
@@ -22,19 +22,19 @@ import signal
 import sys
 from pathlib import Path
 
-from gcs_planner import lockstep
-from gcs_planner.coalition_hil import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
-from gcs_planner.coalition_hil.online_run import OnlineRun
-from gcs_planner.coalition_hil.report import format_formations
-from gcs_planner.coalition_hil.run import initial_plans
 from gcs_planner.commands.plan import SEED
-from gcs_planner.errors import UserError
+from gcs_planner.core import lockstep
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import MAX_DURATION_S, number_flag, output_dir, sysids_flag
 from gcs_planner.flight import end_summary
+from gcs_planner.flight.coalition import UPLOAD_SAFETY, HilOptions, format_strike_report, run_coalition_hil
+from gcs_planner.flight.coalition.online_run import OnlineRun
+from gcs_planner.flight.coalition.report import format_formations
+from gcs_planner.flight.coalition.run import initial_plans
+from gcs_planner.flight.starts import format_homes, starts
+from gcs_planner.flight.vehicles import ConnectedVehicles, MixedVehicles, mock_vehicles
 from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import load_world
-from gcs_planner.starts import format_homes, starts
-from gcs_planner.validation import MAX_DURATION_S, number_flag, output_dir, sysids_flag
-from gcs_planner.vehicles import ConnectedVehicles, MixedVehicles, mock_vehicles
 
 SPEEDUP = number_flag(0, 1000, lo_open=True)  # mock simulation speed-up
 

@@ -13,12 +13,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.files import load_plan_json
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
+from gcs_planner.core.validation import MAX_ALT_M, MIN_ALT_M, number, output_file, read_text
+from gcs_planner.missions.files import load_plan_json
 from gcs_planner.planning import load_scenario
 from gcs_planner.telemetry.log_import import import_log
-from gcs_planner.validation import MAX_ALT_M, MIN_ALT_M, number, output_file, read_text
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -18,7 +18,7 @@ Values compare as the vehicle holds them: a REAL32 as float32 (0.3, 0.300000 and
 0.300000011920928955 are one value), an integer exactly. A QGC file's rows for another component
 than --compid are skipped with a note. Integers travel bytewise for PX4 (as its HEARTBEAT says, or
 --autopilot px4) and cast to float for ArduPilot. Protocol and formats: gcs_planner/mavlink/params.py,
-gcs_planner/mavlink/param_files.py, docs/mavlink-protocol.md.
+gcs_planner/missions/param_files.py, docs/mavlink-protocol.md.
 """
 
 from __future__ import annotations
@@ -27,14 +27,9 @@ import argparse
 import asyncio
 
 from gcs_planner.commands._mission_cli import add_connection_arguments, vehicle_link
-from gcs_planner.errors import UserError
-from gcs_planner.mavlink.param_files import (
-    ParamEntry,
-    format_value,
-    is_qgc_name,
-    read_param_file,
-    write_param_file,
-)
+from gcs_planner.commands.progress import counting_bar, progress_bar
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import InputError, number_flag, output_file
 from gcs_planner.mavlink.params import (
     DOWNLOAD_TIMEOUT_S,
     INT_RANGES,
@@ -45,8 +40,13 @@ from gcs_planner.mavlink.params import (
     to_wire,
     uses_bytewise,
 )
-from gcs_planner.progress import counting_bar, progress_bar
-from gcs_planner.validation import InputError, number_flag, output_file
+from gcs_planner.missions.param_files import (
+    ParamEntry,
+    format_value,
+    is_qgc_name,
+    read_param_file,
+    write_param_file,
+)
 
 STACKS = {3: "ArduPilot", 12: "PX4"}  # HEARTBEAT.autopilot -> the name QGC writes as "Stack"
 

@@ -10,11 +10,11 @@ import argparse
 
 import numpy as np
 
-from gcs_planner.errors import UserError
+from gcs_planner.commands.progress import plan_with_progress
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import number_flag, output_file
+from gcs_planner.model.scenario import MAX_SEED
 from gcs_planner.planning import load_scenario
-from gcs_planner.progress import plan_with_progress
-from gcs_planner.scenario import MAX_SEED
-from gcs_planner.validation import number_flag, output_file
 
 SEED = number_flag(0, MAX_SEED, whole=True)
 

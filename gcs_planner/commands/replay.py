@@ -18,11 +18,11 @@ import argparse
 import time
 
 from gcs_planner.commands._viewer import check_display
-from gcs_planner.errors import UserError
-from gcs_planner.progress import progress_bar
+from gcs_planner.commands.progress import progress_bar
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import number_flag, output_file
 from gcs_planner.telemetry.reader import read_flight
 from gcs_planner.telemetry.replay import parse_udp_url, replay_to_mavlink, replay_to_rerun_live
-from gcs_planner.validation import number_flag, output_file
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 

@@ -18,9 +18,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from pymavlink.dialects.v20.ardupilotmega import MAVLINK_IFLAG_SIGNED
 
 from gcs_planner.commands._mission_cli import add_connection_arguments, vehicle_link
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.mavlink.signing import NO_KEY, key_from_passphrase, setup_signing_message
+from gcs_planner.wire.signing import NO_KEY, key_from_passphrase, setup_signing_message
 
 NEW_SIGNING_ENV = "GCS_PLANNER_NEW_SIGNING_PASSPHRASE"
 SETUP_ATTEMPTS = 3

@@ -16,14 +16,14 @@ import time
 
 from gcs_planner.commands._mission_cli import add_connection_arguments, autopilot_of, vehicle_link
 from gcs_planner.commands.upload import add_clear_absent_argument, prepare
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import MAX_DURATION_S, number_flag
 from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import MissionRejectedError
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.preflight import arm_when_ready
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
-from gcs_planner.validation import MAX_DURATION_S, number_flag
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

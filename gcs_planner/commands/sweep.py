@@ -7,15 +7,15 @@ import csv
 import io
 from pathlib import Path
 
-from gcs_planner.errors import UserError
-from gcs_planner.progress import counting_bar
-from gcs_planner.sweep import load_study, run_study, summarise
-from gcs_planner.sweep_plots import write_plots
-from gcs_planner.validation import not_an_input, output_file, write_text_atomic
+from gcs_planner.analysis.sweep import load_study, run_study, summarise
+from gcs_planner.analysis.sweep_plots import write_plots
+from gcs_planner.commands.progress import counting_bar
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.validation import not_an_input, output_file, write_text_atomic
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("study", type=Path, help="study TOML (see gcs_planner/sweep.py, studies/)")
+    p.add_argument("study", type=Path, help="study TOML (see gcs_planner/analysis/sweep.py, studies/)")
     p.add_argument("-o", "--out", default=None, help="results CSV, appended and resumed [out/<study>.csv]")
     p.add_argument("--workers", type=int, default=2, help="local worker processes [2]")
     p.add_argument("--scheduler", default=None, help="Dask scheduler tcp://HOST:PORT or 'local'")

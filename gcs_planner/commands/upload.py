@@ -33,25 +33,25 @@ from gcs_planner.commands._mission_cli import (
     fleet_link,
     vehicle_link,
 )
-from gcs_planner.errors import UserError
-from gcs_planner.fleet_ids import network_of
+from gcs_planner.commands.progress import progress_bar
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.fleet_ids import network_of
+from gcs_planner.core.validation import number_flag
 from gcs_planner.mavlink.errors import MissionRejectedError
-from gcs_planner.mavlink.files import (
+from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
+from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.missions.files import (
     MissionFile,
     load_plan_json,
     mission_input,
     plan_mission_file,
     select_vehicles,
 )
-from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
-from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.types import MissionItem, MissionType
-from gcs_planner.mavlink.validate import validate_items
-from gcs_planner.progress import progress_bar
-from gcs_planner.validation import number_flag
+from gcs_planner.missions.validate import validate_items
+from gcs_planner.wire.types import MissionItem, MissionType
 
 if TYPE_CHECKING:  # numpy-backed: loaded only with a plan.json
-    from gcs_planner.plan import VehiclePlan
+    from gcs_planner.model.plan import VehiclePlan
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -154,8 +154,8 @@ def read_input(
     source = source or UploadSource(args)
     mf = source.mission_file(autopilot, sysid)
     if source.scenario is not None:
-        from gcs_planner.geofence import check_fence
-        from gcs_planner.mavlink.items import scenario_fence_items, scenario_rally_items
+        from gcs_planner.missions.items import scenario_fence_items, scenario_rally_items
+        from gcs_planner.safety.geofence import check_fence
 
         vp = source.vehicle(sysid)  # plan.json: the fence its plan keeps to
         if vp is not None:

@@ -20,11 +20,11 @@ from pathlib import Path
 from gcs_planner.commands._mission_cli import open_link
 from gcs_planner.commands._viewer import check_display, live_recording
 from gcs_planner.commands.import_log import parse_origin
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
 from gcs_planner.mavlink.link import is_autopilot_heartbeat
 from gcs_planner.mavlink.preflight import request_streams
-from gcs_planner.mavlink.units import reports_no_fix
+from gcs_planner.wire.units import reports_no_fix
 
 FIRST_POSITION_TIMEOUT_S = 30.0
 

@@ -1,5 +1,5 @@
 """Flights: the one runner (runner.py) and the static plan it flies for ``fly`` (static_plan.py);
-the coalition's online task plan is the other strategy (gcs_planner.coalition_hil)."""
+the coalition's online task plan is the other strategy (gcs_planner.flight.coalition)."""
 
 from gcs_planner.flight.runner import (
     Flight,

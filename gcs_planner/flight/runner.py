@@ -3,12 +3,12 @@ its missions.
 
 A FlightStrategy says what is flown: a static plan's missions (``fly``, flight/static_plan.py) or
 an online task plan whose missions are uploaded in flight (the coalition contract net,
-coalition_hil). The runner does for both what every flight needs, in this order: open the link
+flight.coalition). The runner does for both what every flight needs, in this order: open the link
 and the log (MCAP, .tlog on request, live views), wait for the vehicles and learn their autopilots,
 request their streams, read and check their limits, the pre-flight gate (each connected vehicle at
 its planned start), upload the first missions, check connected vehicles' clocks, take off, start
 the routes on time; then the strategy flies until it is done; a failure, a signal or an unfinished
-flight ends safely (every airborne vehicle home, flight_ops / mavlink.actions.safe_end) and the
+flight ends safely (every airborne vehicle home, flight.ops / mavlink.actions.safe_end) and the
 strategy writes the report.
 
 Clocks: the tracks are timed by the vehicles' shared ``time_boot_ms`` when they are simulated (one
@@ -28,11 +28,12 @@ from typing import Protocol
 
 import numpy as np
 
-from gcs_planner.clock_check import MIN_SPAN_S, ClockRate
-from gcs_planner.errors import UserError
-from gcs_planner.fleet_ids import id_runs, network_of
-from gcs_planner.flight_limits import FlightLimits, check_limits, read_limits, read_ramps
-from gcs_planner.flight_ops import (
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.fleet_ids import id_runs, network_of
+from gcs_planner.core.lockstep import check_loop, now_s, unix_s
+from gcs_planner.flight.clock_check import MIN_SPAN_S, ClockRate
+from gcs_planner.flight.limits import FlightLimits, check_limits, read_limits, read_ramps
+from gcs_planner.flight.ops import (
     TrackRecorder,
     boot_clock,
     build_missions,
@@ -42,7 +43,9 @@ from gcs_planner.flight_ops import (
     vehicle_quirks,
     wait_for_vehicles,
 )
-from gcs_planner.lockstep import check_loop, now_s, unix_s
+from gcs_planner.flight.safe_signals import SafeEndSignals
+from gcs_planner.flight.starts import START_FIX_WAIT_S, check_starts, starts
+from gcs_planner.flight.vehicles import VehicleSource
 from gcs_planner.mavlink.actions import safe_end
 from gcs_planner.mavlink.autopilots import AutopilotQuirks
 from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
@@ -50,13 +53,10 @@ from gcs_planner.mavlink.link import FLEET_RCVBUF_BYTES, MavlinkLink
 from gcs_planner.mavlink.networks import open_networks
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
-from gcs_planner.plan import Plan
-from gcs_planner.safe_signals import SafeEndSignals
-from gcs_planner.scenario import Scenario
-from gcs_planner.starts import START_FIX_WAIT_S, check_starts, starts
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import Scenario
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.telemetry.mcap_log import tlog_network_path
-from gcs_planner.vehicles import VehicleSource
 
 __all__ = [
     "Flight",

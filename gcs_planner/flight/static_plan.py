@@ -3,19 +3,19 @@
 Mirrors the seed papers' HIL setup (planner -> datalink -> flight controller -> telemetry ->
 display): the plan's missions are uploaded to every vehicle concurrently, the fleet takes off and
 each route starts at its planned time, and the flown tracks are checked against the plan
-(gcs_planner.conformance: cross-track, separation, obstacles, manned traffic, schedule).
+(gcs_planner.safety.conformance: cross-track, separation, obstacles, manned traffic, schedule).
 
 Choices:
-- Two-phase start (gcs_planner.flight_ops), so that the plan's timing (and with it the planned
+- Two-phase start (gcs_planner.flight.ops), so that the plan's timing (and with it the planned
   separation) holds in the air: take off, then start each route at the common start plus its
   planned delay, less the time it loses accelerating (delayed take-off as a timed start; the
   mission's NAV_DELAY is then skipped). Fixed wings climb straight into their routes.
-- While the routes run, a ScheduleKeeper (gcs_planner.timekeeping) sends each vehicle ground
+- While the routes run, a ScheduleKeeper (gcs_planner.flight.timekeeping) sends each vehicle ground
   speed set-points (MAV_CMD_DO_CHANGE_SPEED) that hold it to the plan's timing; autopilots slow
   for corners and would otherwise fall behind the schedule the separation was planned on.
   ``keep_schedule=False`` flies the bare missions.
 - A mission is complete when the vehicle reports it (MISSION_CURRENT COMPLETE or the last item
-  reached) where its track shows it at the mission's end (flight_ops.wait_until_done).
+  reached) where its track shows it at the mission's end (flight.ops.wait_until_done).
 """
 
 from __future__ import annotations
@@ -24,19 +24,24 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gcs_planner.conformance import MAX_SCHEDULE_ERROR_S, MovingObstacle, VehicleReport, conformance_report
-from gcs_planner.errors import UserError
-from gcs_planner.fleet_ids import network_of, wire_sysid
+from gcs_planner.analysis.flight_report import write_flight_report
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.fleet_ids import network_of, wire_sysid
+from gcs_planner.flight.ops import accel_lead_s, build_missions, wait_until_done
 from gcs_planner.flight.runner import Flight, RunOptions, networks, run_flight
-from gcs_planner.flight_ops import accel_lead_s, build_missions, wait_until_done
-from gcs_planner.flight_report import write_flight_report
+from gcs_planner.flight.timekeeping import ScheduleKeeper
+from gcs_planner.flight.vehicles import VehicleSource
 from gcs_planner.mavlink.autopilots import quirks_named
 from gcs_planner.mavlink.fleet import VehicleResult
-from gcs_planner.mavlink.items import AUTOPILOTS
-from gcs_planner.plan import Plan
-from gcs_planner.scenario import Scenario
-from gcs_planner.timekeeping import ScheduleKeeper
-from gcs_planner.vehicles import VehicleSource
+from gcs_planner.missions.items import AUTOPILOTS
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import Scenario
+from gcs_planner.safety.conformance import (
+    MAX_SCHEDULE_ERROR_S,
+    MovingObstacle,
+    VehicleReport,
+    conformance_report,
+)
 
 __all__ = ["FlyOptions", "FlyResult", "StaticPlan", "check_flight", "fly", "manned_traffic"]
 
@@ -64,7 +69,7 @@ class FlyResult:
     tlog_paths: list[Path]  # one .tlog per MAVLink network (FlightLogger), empty without --tlog
     wall_time_s: float
     end_states: dict[int, str] = field(default_factory=dict)  # safe end: sysid -> what was done
-    report_path: Path | None = None  # the flight report PNG (flight_report.py)
+    report_path: Path | None = None  # the flight report PNG (analysis/flight_report.py)
     log_error: str | None = None  # the flight log could not be written (full disk); the report stands
     frames_received: int = 0  # MAVLink frames the link delivered (every one is handed to the log)
     interrupted: str | None = None  # the signal that ended the flight early (SIGINT, SIGTERM, SIGHUP)
@@ -155,7 +160,7 @@ class StaticPlan:
             flight.vehicles.set_drift(sysid, *drift)
 
     def leads(self, flight: Flight) -> tuple[float, dict[int, float]]:
-        """Each route starts early by its acceleration lead (flight_ops.accel_lead_s): a mock at its
+        """Each route starts early by its acceleration lead (flight.ops.accel_lead_s): a mock at its
         airframe's acceleration; a connected vehicle on the S-curve its own parameters give, after
         its autopilot's start latency (docs/real-autopilots.md). Route time 0 after the largest."""
         leads = {}

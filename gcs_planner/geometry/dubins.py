@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq, minimize_scalar
 
-from gcs_planner.geo import wrap_pi
+from gcs_planner.core.geo import wrap_pi
 
 __all__ = [
     "WORDS",

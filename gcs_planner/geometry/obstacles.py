@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs_planner.scenario import Cylinder, Hemisphere
+from gcs_planner.model.scenario import Cylinder, Hemisphere
 
 __all__ = ["HARD_PENALTY", "Obstacles", "altitude_violation"]
 

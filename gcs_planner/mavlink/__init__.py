@@ -1,1 +1,1 @@
-"""MAVLink adaptor: plans to mission items, the mission protocol client, links, plan files."""
+"""MAVLink services: links, transports, the mission, command and parameter protocols, fleets, autopilots."""

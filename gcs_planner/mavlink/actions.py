@@ -11,7 +11,7 @@ import logging
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 from gcs_planner.mavlink.autopilots import AutopilotQuirks, Takeoff
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import MavlinkError

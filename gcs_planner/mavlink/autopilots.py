@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from gcs_planner.mavlink.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot
-from gcs_planner.mavlink.units import SPEED_AIRSPEED, SPEED_GROUNDSPEED
+from gcs_planner.wire.enums import ARDUCOPTER_MODES, ARDUPLANE_MODES, PX4_MODES, Autopilot
+from gcs_planner.wire.units import SPEED_AIRSPEED, SPEED_GROUNDSPEED
 
 __all__ = [
     "ARDUCOPTER",

@@ -19,11 +19,11 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.errors import UserError
+from gcs_planner.core.errors import UserError
 from gcs_planner.mavlink.autopilots import quirks_for
-from gcs_planner.mavlink.enums import Autopilot, CommandResult
 from gcs_planner.mavlink.errors import CommandTimeoutError, command_error
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.wire.enums import Autopilot, CommandResult
 
 __all__ = ["COMMAND_RETRIES", "COMMAND_RETRY_S", "CommandClient", "mode_table"]
 

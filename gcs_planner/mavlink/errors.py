@@ -1,15 +1,15 @@
 """Typed errors of the MAVLink services: one MissionError carrying the vehicle's MAV_MISSION_RESULT,
 plus timeout, busy, protocol violations, read-back mismatch, duplicate system id and command failures.
 
-All subclass :class:`gcs_planner.errors.UserError` so the CLI prints them as one line.
+All subclass :class:`gcs_planner.core.errors.UserError` so the CLI prints them as one line.
 :func:`error_for_result` is the only place a MISSION_ACK becomes an exception; ``RESULT_TEXT``
 says what each result means (a test checks it covers the whole enum).
 """
 
 from __future__ import annotations
 
-from gcs_planner.errors import UserError
-from gcs_planner.mavlink.enums import CommandResult, MissionResult
+from gcs_planner.core.errors import UserError
+from gcs_planner.wire.enums import CommandResult, MissionResult
 
 __all__ = [
     "RESULT_TEXT",

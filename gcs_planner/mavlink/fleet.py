@@ -17,18 +17,18 @@ import asyncio
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
-from gcs_planner.errors import UserError
-from gcs_planner.lockstep import now_s
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.lockstep import now_s
 from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
-from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.errors import BusyError, MavlinkError, MissionError, MissionTimeoutError, VerifyError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.preflight import arm_when_ready
 from gcs_planner.mavlink.transfer import Timing
-from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
 
 __all__ = ["DEFAULT_WORKERS", "VehicleResult", "retryable", "start_fleet", "upload_fleet"]
 

@@ -62,14 +62,14 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.errors import UserError  # noqa: E402
-from gcs_planner.lockstep import LockstepLoop, now_s, unix_s  # noqa: E402
-from gcs_planner.mavlink import codec  # noqa: E402
+from gcs_planner.core.errors import UserError  # noqa: E402
+from gcs_planner.core.lockstep import LockstepLoop, now_s, unix_s  # noqa: E402
 from gcs_planner.mavlink.errors import DuplicateSysidError  # noqa: E402
 from gcs_planner.mavlink.serial_port import DEFAULT_BAUD  # noqa: E402
-from gcs_planner.mavlink.signing import LinkSigning  # noqa: E402
 from gcs_planner.mavlink.transports import UdpProtocol, open_serial, open_tcp  # noqa: E402
-from gcs_planner.mavlink.wire import attach_extensions  # noqa: E402
+from gcs_planner.wire import codec  # noqa: E402
+from gcs_planner.wire.signing import LinkSigning  # noqa: E402
+from gcs_planner.wire.wire import attach_extensions  # noqa: E402
 
 __all__ = [
     "DUPLICATE_WINDOW_S", "FLEET_RCVBUF_BYTES", "GCS_COMPID", "GCS_SYSID", "VEHICLE_TYPES", "MavlinkLink",

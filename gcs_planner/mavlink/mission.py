@@ -40,9 +40,8 @@ import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
-from gcs_planner.lockstep import now_s
+from gcs_planner.core.lockstep import now_s
 from gcs_planner.mavlink.autopilots import GENERIC, AutopilotQuirks, quirks_for
-from gcs_planner.mavlink.enums import CommandResult, MissionResult
 from gcs_planner.mavlink.errors import (
     BusyError,
     CommandError,
@@ -64,8 +63,9 @@ from gcs_planner.mavlink.transfer import (
     Transfer,
     UploadTransfer,
 )
-from gcs_planner.mavlink.types import MissionItem, MissionType
 from gcs_planner.mavlink.verdict import VerdictWatch
+from gcs_planner.wire.enums import CommandResult, MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
 
 __all__ = ["MissionClient", "UploadResult", "compare_items"]
 

@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.fleet_ids import fleet_id, network_of, wire_sysid
+from gcs_planner.core.fleet_ids import fleet_id, network_of, wire_sysid
 from gcs_planner.mavlink.link import Address, Callback, MavlinkLink, VehicleInfo, first_message
 
 __all__ = ["NetworkLinks", "open_networks"]

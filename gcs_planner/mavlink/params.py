@@ -12,7 +12,7 @@ The parameter protocol (https://mavlink.io/en/services/parameter.html) as implem
   20 such requests, GCS_Param.cpp ``param_requests(20)``). No answer at all to PARAM_REQUEST_LIST
   for ``QUIET_S``: it is sent again. The download fails (UserError naming the vehicle and how many
   are missing) when ``timeout_s`` passes without a new parameter. Deadlines read the loop's clock
-  (gcs_planner.lockstep.now_s).
+  (gcs_planner.core.lockstep.now_s).
 - Values: the 4 bytes of PARAM_VALUE.param_value are read from the frame itself. ArduPilot sends
   every type as a float (C cast, ``AP_Param::cast_to_float``); PX4 copies an integer's bytes into
   the float field (bytewise: ``MavlinkParametersManager::send_param``'s memcpy), as MAVProxy reads
@@ -38,8 +38,8 @@ from dataclasses import dataclass
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.errors import UserError
-from gcs_planner.lockstep import now_s
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.lockstep import now_s
 from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S
 from gcs_planner.mavlink.link import MavlinkLink
 

@@ -19,13 +19,13 @@ from collections.abc import Callable, Mapping
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.errors import UserError
-from gcs_planner.lockstep import now_s
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.lockstep import now_s
 from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S, CommandClient
-from gcs_planner.mavlink.enums import CommandResult
 from gcs_planner.mavlink.errors import CommandError, MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
+from gcs_planner.wire.enums import CommandResult
 
 __all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "request_streams"]
 

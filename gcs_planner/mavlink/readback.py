@@ -25,9 +25,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from gcs_planner.mavlink.dialect import has_position
-from gcs_planner.mavlink.enums import MissionResult
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.wire.dialect import has_position
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
 
 __all__ = ["ARDUCOPTER", "ARDUPLANE", "GENERIC", "PX4", "Model", "refusal", "wire"]
 

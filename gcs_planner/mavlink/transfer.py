@@ -78,7 +78,6 @@ from enum import Enum, auto
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.mavlink.enums import MissionResult
 from gcs_planner.mavlink.errors import (
     MissionError,
     MissionInputError,
@@ -87,7 +86,8 @@ from gcs_planner.mavlink.errors import (
     error_for_result,
     mission_type_name,
 )
-from gcs_planner.mavlink.types import MissionItem, MissionType
+from gcs_planner.wire.enums import MissionResult
+from gcs_planner.wire.types import MissionItem, MissionType
 
 __all__ = [
     "COUNT_RETRIES",

@@ -23,8 +23,8 @@ import logging
 import os
 from collections.abc import Callable
 
-from gcs_planner.mavlink.framing import StreamFramer, frames
 from gcs_planner.mavlink.serial_port import SerialPort
+from gcs_planner.wire.framing import StreamFramer, frames
 
 __all__ = ["TcpClient", "UdpProtocol", "open_serial", "open_tcp"]
 

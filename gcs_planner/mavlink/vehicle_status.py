@@ -21,10 +21,10 @@ from dataclasses import dataclass, field
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.mavlink.autopilots import mode_of
-from gcs_planner.mavlink.enums import MissionState
 from gcs_planner.mavlink.link import MavlinkLink, is_autopilot_heartbeat
 from gcs_planner.mavlink.statustext import TextAssembler
-from gcs_planner.mavlink.units import reports_no_fix
+from gcs_planner.wire.enums import MissionState
+from gcs_planner.wire.units import reports_no_fix
 
 __all__ = ["PREARM_BIT", "VehicleStatus", "VehicleTrack"]
 

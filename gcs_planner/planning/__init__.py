@@ -18,13 +18,13 @@ from typing import Protocol
 
 import numpy as np
 
-from gcs_planner.config import Config, Seed, parse
-from gcs_planner.errors import UserError
-from gcs_planner.heap import keep_heap_slack
-from gcs_planner.plan import Plan
-from gcs_planner.scenario import Scenario, ScenarioError
-from gcs_planner.scenario import load_scenario as read_scenario
-from gcs_planner.validation import InputError
+from gcs_planner.core.config import Config, Seed, parse
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.heap import keep_heap_slack
+from gcs_planner.core.validation import InputError
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import Scenario, ScenarioError
+from gcs_planner.model.scenario import load_scenario as read_scenario
 
 __all__ = ["PLANNERS", "Planner", "PlannerConfig", "Progress", "config_of", "load_scenario", "plan_scenario"]
 
@@ -83,7 +83,7 @@ def load_scenario(path: str | Path) -> Scenario:
 
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:
     """Run the scenario's planner with a seeded generator (seed defaults to the file's)."""
-    keep_heap_slack()  # the planners' numpy temporaries reuse freed pages (gcs_planner/heap.py)
+    keep_heap_slack()  # the planners' numpy temporaries reuse freed pages (gcs_planner/core/heap.py)
     config = config_of(scenario)
     module = planner(scenario.planner_name)
     rng = np.random.default_rng(config.seed if seed is None else seed)

@@ -56,13 +56,13 @@ import numpy as np
 from msgspec import Meta
 from scipy.interpolate import CubicSpline
 
-from gcs_planner.config import Count, Distance, NonNegative, Positive, PositiveDistance
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.core.config import Count, Distance, NonNegative, Positive, PositiveDistance
+from gcs_planner.core.validation import MAX_ALT_M
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.scenario import Scenario, ScenarioError, Vehicle
 from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.pso import CauchyMutation, PSOConfig, PSOResult, minimize
 from gcs_planner.planning.threat_env import ThreatEnv, ValidationReport, resample_path, validate_path
-from gcs_planner.scenario import Scenario, ScenarioError, Vehicle
-from gcs_planner.validation import MAX_ALT_M
 
 __all__ = [
     "ALGORITHMS",

@@ -25,7 +25,8 @@ from typing import Any
 import msgspec
 import numpy as np
 
-from gcs_planner.plan import Plan
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import Scenario, load_scenario
 from gcs_planner.planning import config_of
 from gcs_planner.planning.priority_swarm import (
     CostModel,
@@ -36,7 +37,6 @@ from gcs_planner.planning.priority_swarm import (
     timed_samples,
 )
 from gcs_planner.planning.pso import PSOConfig, minimize
-from gcs_planner.scenario import Scenario, load_scenario
 
 __all__ = ["METHODS", "compare_run", "differential_evolution", "grey_wolf", "plan_baseline"]
 

@@ -13,7 +13,7 @@ into account the priority of tasks"; the same method as PPSwarm, Drones 2024; do
 3. Restart rounds: infeasible UAVs are promoted to the front and the round repeats; a UAV whose
    previous path is still feasible against the new higher-priority set keeps it.
 4. The final Dubins paths are timed, checked by the independent checker
-   (gcs_planner.geometry.separation.check_plan, 0.5 s sampling); a UAV in conflict is re-planned
+   (gcs_planner.safety.separation.check_plan, 0.5 s sampling); a UAV in conflict is re-planned
    against everybody else, then delayed on the ground in ``delay_step_s`` steps; what still fails
    is reported infeasible in its VehiclePlan (``feasible=False`` + notes), never silently.
 
@@ -40,7 +40,7 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
   errors flown, docs/timing-separation.md), must exceed max(separation_i, separation_j) +
   ``separation_margin_m``, else HARD + shortfall. HARD =
   1e4 replaces the paper's infinity (violations still rank by size).
-- A ``[site]`` (gcs_planner.sites) adds a hard term at the same samples: below the DEM ground +
+- A ``[site]`` (gcs_planner.model.sites) adds a hard term at the same samples: below the DEM ground +
   terrain clearance + margin, or outside the site's area less the margin; the start and goal are
   lifted to that floor (a vertical column like the band's). No-fly zones and obstacles arrive as
   cylinders.
@@ -75,22 +75,22 @@ import numpy as np
 from msgspec import Meta
 from scipy.spatial import cKDTree
 
-from gcs_planner.config import Count, Distance, Fraction, NonNegative, PositiveDistance
-from gcs_planner.errors import UserError
-from gcs_planner.geo import wrap_pi
+from gcs_planner.core.config import Count, Distance, Fraction, NonNegative, PositiveDistance
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import wrap_pi
+from gcs_planner.core.validation import MAX_DURATION_S
 from gcs_planner.geometry.dubins import advance, segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
-from gcs_planner.geometry.separation import check_plan
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.scenario import Scenario, Vehicle
 from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.pso import PSOConfig, minimize
 from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
 from gcs_planner.planning.traffic import TIMING_ERROR_S, Traffic
-from gcs_planner.scenario import Scenario, Vehicle
-from gcs_planner.validation import MAX_DURATION_S
+from gcs_planner.safety.separation import check_plan
 
 if TYPE_CHECKING:  # shapely is imported only when a scenario has a [site]
-    from gcs_planner.sites.world import Site
+    from gcs_planner.model.sites.world import Site
 
 __all__ = ["NAME", "Config", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
 

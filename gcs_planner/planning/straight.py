@@ -11,10 +11,10 @@ from typing import Annotated
 import numpy as np
 from msgspec import Meta
 
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.core.validation import MAX_RADIUS_M, MAX_WAYPOINTS
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.scenario import Scenario, ScenarioError
 from gcs_planner.planning import PlannerConfig, Progress
-from gcs_planner.scenario import Scenario, ScenarioError
-from gcs_planner.validation import MAX_RADIUS_M, MAX_WAYPOINTS
 
 NAME = "straight"
 

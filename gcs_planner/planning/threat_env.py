@@ -7,14 +7,14 @@ the whole environment, e.g. to km for the paper's fitness). Arrays are vectorise
 
 Terrain sources behind one interface (``elevation(x, y)`` and ``scaled(factor)``):
 - :class:`PeaksTerrain`: the paper's eq. 1, Z = sum_i h_i exp(-((x - x_oi)/x_si)^2 - ((y - y_oi)/y_si)^2);
-- :class:`GridTerrain` (gcs_planner.terrain): a gridded elevation model, bilinear between cell
+- :class:`GridTerrain` (gcs_planner.model.terrain): a gridded elevation model, bilinear between cell
   centres (also what a ``[site]`` DEM becomes in local metres).
 
 Scenario sections: radars are ``[[obstacles.hemispheres]]``, obstacles ``[[obstacles.cylinders]]``
 (z_min_m..z_max_m, radius_m + buffer_m), terrain ``[terrain]`` with ``type = "peaks"`` and
 ``[[terrain.peaks]] h_m, x_m, y_m, sx_m, sy_m`` or ``type = "grid"``, ``file = "dem.npz"`` (keys
 ``elevation_m`` (ny, nx) and ``geotransform`` (6,), path relative to the scenario file); no
-``[terrain]`` means flat ground at z = 0. A scenario's ``[site]`` DEM (gcs_planner.sites) is used
+``[terrain]`` means flat ground at z = 0. A scenario's ``[site]`` DEM (gcs_planner.model.sites) is used
 in place of ``[terrain]``.
 
 Altitude repair (paper, sec. 2.1): a node lower than terrain + h_safe is lifted to exactly that
@@ -29,8 +29,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from gcs_planner.scenario import Scenario, ScenarioError
-from gcs_planner.terrain import GridTerrain
+from gcs_planner.model.scenario import Scenario, ScenarioError
+from gcs_planner.model.terrain import GridTerrain
 
 __all__ = [
     "FlatTerrain",

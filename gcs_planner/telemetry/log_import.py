@@ -23,10 +23,10 @@ import struct
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.units import reports_no_fix
-from gcs_planner.plan import Plan
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
+from gcs_planner.model.plan import Plan
+from gcs_planner.wire.units import reports_no_fix
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import DFReader  # noqa: E402

@@ -50,11 +50,10 @@ from typing import IO
 import numpy as np
 
 from gcs_planner import __version__
-from gcs_planner.fleet_ids import network_of
-from gcs_planner.geo import Origin, enu_to_geodetic
-from gcs_planner.lockstep import unix_s
-from gcs_planner.mavlink.units import reports_no_fix
-from gcs_planner.plan import Plan
+from gcs_planner.core.fleet_ids import network_of
+from gcs_planner.core.geo import Origin, enu_to_geodetic
+from gcs_planner.core.lockstep import unix_s
+from gcs_planner.model.plan import Plan
 from gcs_planner.telemetry.colors import vehicle_color
 from gcs_planner.telemetry.encode import json_encoder
 from gcs_planner.telemetry.mcap_writer import (
@@ -72,6 +71,7 @@ from gcs_planner.telemetry.schemas import (
     record_json_schema,
     schema_bytes,
 )
+from gcs_planner.wire.units import reports_no_fix
 
 __all__ = ["FlightLogger", "tlog_network_path"]
 

@@ -37,11 +37,11 @@ from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Metadata
 from mcap.stream_reader import StreamReader, breakup_chunk
 
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.units import no_fix
-from gcs_planner.plan import Plan
-from gcs_planner.validation import load_json
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
+from gcs_planner.core.validation import load_json
+from gcs_planner.model.plan import Plan
+from gcs_planner.wire.units import no_fix
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402

@@ -19,8 +19,8 @@ import socket
 import time
 from collections.abc import Callable, Iterator
 
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
 from gcs_planner.telemetry.reader import Flight, RawFrame
 
 os.environ.setdefault("MAVLINK20", "1")

@@ -50,13 +50,13 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from gcs_planner.geo import Origin, enu_to_geodetic, geodetic_to_enu
-from gcs_planner.mavlink.units import reports_no_fix
-from gcs_planner.plan import Plan
-from gcs_planner.scenario import Scenario, ScenarioError, parse_scenario
+from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
+from gcs_planner.core.validation import atomic_write
+from gcs_planner.model.plan import Plan
+from gcs_planner.model.scenario import Scenario, ScenarioError, parse_scenario
 from gcs_planner.telemetry.colors import vehicle_color
 from gcs_planner.telemetry.reader import Flight
-from gcs_planner.validation import atomic_write
+from gcs_planner.wire.units import reports_no_fix
 
 __all__ = [
     "FlightViews",

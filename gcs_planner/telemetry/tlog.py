@@ -18,11 +18,11 @@ import struct
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from gcs_planner.errors import UserError
-from gcs_planner.geo import Origin
-from gcs_planner.mavlink.units import reports_no_fix
-from gcs_planner.plan import Plan
+from gcs_planner.core.errors import UserError
+from gcs_planner.core.geo import Origin
+from gcs_planner.model.plan import Plan
 from gcs_planner.telemetry.reader import RawFrame
+from gcs_planner.wire.units import reports_no_fix
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402

@@ -18,12 +18,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.scenario import Scenario
 from gcs_planner.planning import Progress
 from gcs_planner.planning.coalition.model import CoalitionParams, UavSpec, World, load_world
 from gcs_planner.planning.coalition.sim import CoalitionSim, SimResult
 from gcs_planner.planning.coalition.track import Leg
-from gcs_planner.scenario import Scenario
 
 __all__ = [
     "NAME", "CoalitionParams", "Config", "SimResult", "World", "leg_vehicle_plan", "load_world", "plan",

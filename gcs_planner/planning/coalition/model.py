@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from msgspec import Meta
 
-from gcs_planner.config import (
+from gcs_planner.core.config import (
     Count,
     Distance,
     Duration,
@@ -37,9 +37,9 @@ from gcs_planner.config import (
     PositiveDistance,
     parse,
 )
+from gcs_planner.core.validation import MAX_DURATION_S, InputError, items_of, table
+from gcs_planner.model.scenario import Scenario, ScenarioError
 from gcs_planner.planning import PlannerConfig
-from gcs_planner.scenario import Scenario, ScenarioError
-from gcs_planner.validation import MAX_DURATION_S, InputError, items_of, table
 
 __all__ = ["CoalitionParams", "Target", "Threat", "UavSpec", "World", "load_world"]
 

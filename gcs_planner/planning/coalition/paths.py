@@ -66,7 +66,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gcs_planner.geo import wrap_pi
+from gcs_planner.core.geo import wrap_pi
 from gcs_planner.geometry.dubins import WORDS, DubinsPath, sample_batch, word_lengths
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.planning.coalition.track import Leg

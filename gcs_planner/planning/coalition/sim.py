@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gcs_planner.geo import wrap_pi
+from gcs_planner.core.geo import wrap_pi
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.aco import CoalitionProblem, coverable, make_solution, repair, solve_aco
 from gcs_planner.planning.coalition.baselines import GLOBAL_SCALE, solve_polynomial
@@ -162,7 +162,7 @@ class CoalitionSim:
     # ---- plumbing
     def pose(self, i: int, t_s) -> np.ndarray:
         """(len(t), 3) x, y, heading of UAV i at times t_s, from its planned track (the online
-        engine, coalition_hil.online, answers from live telemetry instead)."""
+        engine, flight.coalition.online, answers from live telemetry instead)."""
         return self.st[i].track.state_at(t_s)
 
     def positions(self, t_s: float) -> np.ndarray:

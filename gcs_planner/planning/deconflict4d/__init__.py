@@ -5,10 +5,10 @@ per vehicle type, manned aircraft tracks -> predicted no-fly zones), runs the st
 planner.py and returns a Plan whose vehicles carry the timed waypoints, per-leg speeds (for
 DO_CHANGE_SPEED), the take-off delay and the densely sampled flown path.
 
-On a ``[site]`` (gcs_planner.sites) the DEM is a flat floor under the UAVs (``_over_site``); the
+On a ``[site]`` (gcs_planner.model.sites) the DEM is a flat floor under the UAVs (``_over_site``); the
 planner does not route round static obstacles or no-fly zones, which the plan checker reports.
 
-Scenario keys (besides the common ones of gcs_planner.scenario):
+Scenario keys (besides the common ones of gcs_planner.model.scenario):
     [planner]      name = "deconflict_4d", seed, any Config field (planner.py), and
                    confidence (0.95), safety_m (manned safety distance, 5.0), min_mode_weight (0.01)
     [[vehicles]]   takeoff_s (planned take-off, 0), arrival_s (planned arrival at the goal; default
@@ -31,7 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from gcs_planner.plan import Plan, VehiclePlan
+from gcs_planner.model.plan import Plan, VehiclePlan
+from gcs_planner.model.scenario import Scenario, ScenarioError
 from gcs_planner.planning import Progress
 from gcs_planner.planning.deconflict4d.manned import (
     MannedTrack,
@@ -41,7 +42,6 @@ from gcs_planner.planning.deconflict4d.manned import (
 )
 from gcs_planner.planning.deconflict4d.planner import Config, Outcome, Problem, UavSpec, full_polyline, run
 from gcs_planner.planning.deconflict4d.trajectory import DYNAMICS
-from gcs_planner.scenario import Scenario, ScenarioError
 
 __all__ = ["NAME", "Config", "build_problem", "plan", "to_plan"]
 

@@ -40,7 +40,8 @@ from typing import Annotated
 import numpy as np
 from msgspec import Meta
 
-from gcs_planner.config import Count, Distance, Duration, Fraction, NonNegative
+from gcs_planner.core.config import Count, Distance, Duration, Fraction, NonNegative
+from gcs_planner.core.validation import MAX_DURATION_S
 from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.deconflict4d.conflicts import (
     candidate_pairs,
@@ -57,7 +58,6 @@ from gcs_planner.planning.deconflict4d.trajectory import (
     sample_path,
 )
 from gcs_planner.planning.pso import PSOConfig, minimize
-from gcs_planner.validation import MAX_DURATION_S
 
 __all__ = [
     "Config",

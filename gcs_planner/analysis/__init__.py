@@ -1,0 +1,1 @@
+"""Analysis of results: the flight report and parameter sweeps."""

@@ -1,0 +1,1 @@
+"""Plans as mission items, their validation, and the mission and parameter files of the field's tools."""

@@ -1,0 +1,1 @@
+"""The one safety checker of plans (separation, clearance, site) and of flown tracks, and the fence."""
