@@ -1,7 +1,7 @@
 """What the mock autopilot stores of an uploaded mission item, and what a download then returns.
 
 A second implementation, written from the autopilots' sources independently of the client's
-read-back model (gcs_planner/mavlink/readback.py), so that a test can check one against the other
+read-back model (gcs_planner/autopilots/readback.py), so that a test can check one against the other
 (tests/test_readback_crosscheck.py). Each autopilot is modelled in two steps as in its C code:
 ``_parse`` turns the MISSION_ITEM_INT into the record the autopilot keeps (typed fields: C integers,
 float32, double), ``_format`` turns the record back into the MISSION_ITEM_INT it sends.

@@ -398,9 +398,9 @@ def run_case(argv: list[str], folder: Path) -> Outcome:
 
 async def stub_fly(scenario, plan, options, vehicles, progress=None):
     """Stands in for gcs_planner.flight.fly: what the real one checks before it sends, then no flight."""
+    from gcs_planner.autopilots import quirks_named
     from gcs_planner.flight import FlyResult
     from gcs_planner.flight.ops import build_missions
-    from gcs_planner.mavlink.autopilots import quirks_named
     from gcs_planner.missions.items import AUTOPILOTS
 
     for conventions in AUTOPILOTS:

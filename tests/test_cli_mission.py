@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gcs_planner.autopilots import readback
 from gcs_planner.cli import main
 from gcs_planner.core.geo import Origin
-from gcs_planner.mavlink import readback
 from gcs_planner.mavlink.mission import compare_items
 from gcs_planner.missions.files import in_file_frames, load_mission_file
 from gcs_planner.missions.items import deg_to_e7, plan_to_items

@@ -216,8 +216,8 @@ def test_upload_names_vehicles_by_fleet_id_with_one_connect_per_network(tmp_path
     """`upload plan.json --sysid all` of a two-network plan: system id 1 on each network gets its
     own vehicle's mission (not the other's, not both merged); with one --connect it is refused in
     one line before anything is sent."""
+    from gcs_planner.autopilots import readback
     from gcs_planner.cli import main
-    from gcs_planner.mavlink import readback
     from gcs_planner.mavlink.mission import compare_items
     from gcs_planner.missions.items import plan_to_items
 

@@ -172,7 +172,7 @@ def test_mavsdk_mission_raw_client_uploads_to_and_downloads_from_mock(mock_fleet
 @pytest.mark.parametrize("mission_type", [0, 2])
 def test_our_client_uploads_to_mavsdk_mission_raw_server(mavsdk_pair, mission_type):
     """MAVSDK's autopilot side receives exactly our items (mission, rally points) and returns them."""
-    from gcs_planner.mavlink.autopilots import quirks_for
+    from gcs_planner.autopilots import quirks_for
     from gcs_planner.mavlink.link import MavlinkLink
     from gcs_planner.mavlink.mission import MissionClient
     from gcs_planner.missions.items import rally_items

@@ -1,4 +1,4 @@
-"""The client's read-back model (gcs_planner/mavlink/readback.py) and the mock autopilot's own
+"""The client's read-back model (gcs_planner/autopilots/readback.py) and the mock autopilot's own
 storage (sitl_mock/storage.py) are two implementations of the same autopilot sources: they must
 agree on every item, in float32 / C-integer arithmetic, and ``--verify`` must pass exactly on what
 the autopilot returns (ArduPilot's cm altitudes, PX4's float32 yaw) and never raise on extremes."""
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gcs_planner.mavlink import readback
+from gcs_planner.autopilots import readback
 from gcs_planner.mavlink.errors import MissionError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient, compare_items

@@ -52,8 +52,8 @@ def test_a_forged_completion_from_the_vehicles_address_does_not_end_the_flight(t
     mission's end: the flight goes on and every route is flown in full, on time."""
     from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+    from gcs_planner.autopilots import quirks_named
     from gcs_planner.flight.ops import build_missions
-    from gcs_planner.mavlink.autopilots import quirks_named
 
     scenario = load_scenario(SCENARIO)
     plan = plan_scenario(scenario)

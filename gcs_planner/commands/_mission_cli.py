@@ -4,9 +4,8 @@ Not a subcommand itself (it is not in gcs_planner.cli.COMMANDS).
 
 Signing: --signing-passphrase, or the environment variable GCS_PLANNER_SIGNING_PASSPHRASE.
 
-Autopilot conventions (home at seq 0 or not) follow the vehicle's HEARTBEAT.autopilot unless
---autopilot says otherwise: MAV_AUTOPILOT_ARDUPILOTMEGA -> "ardupilot", anything else -> "px4"
-(PX4 and generic MAVLink autopilots such as MAVSDK's server expect no home item).
+Autopilot conventions (home at seq 0 or not) are those of the vehicle's family, chosen from its
+HEARTBEAT (gcs_planner.autopilots), unless --autopilot says otherwise.
 """
 
 from __future__ import annotations
@@ -20,10 +19,10 @@ from collections.abc import AsyncIterator, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.autopilots import Conventions, mode_of, quirks_for
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.fleet_ids import MAX_NETWORK, network_of, wire_sysid
 from gcs_planner.core.validation import number_flag
-from gcs_planner.mavlink.autopilots import mode_of
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink, check_signing
 from gcs_planner.mavlink.networks import NetworkLinks, open_networks
@@ -88,7 +87,7 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
     )
     p.add_argument(
         "--autopilot",
-        choices=("auto", "ardupilot", "px4"),
+        choices=("auto", *Conventions),
         default="auto",
         help="mission conventions: auto = from the vehicle's HEARTBEAT [auto]",
     )
@@ -183,11 +182,10 @@ async def fleet_link(
         await link.close()
 
 
-def autopilot_of(heartbeat, choice: str) -> str:
-    """The item conventions to use for a vehicle (see module docstring)."""
-    if choice != "auto":
-        return choice
-    return "ardupilot" if heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA else "px4"
+def autopilot_of(autopilot: int | None, mav_type: int | None, choice: str) -> str:
+    """The item conventions for a vehicle whose HEARTBEAT says ``autopilot`` and ``mav_type``
+    (see module docstring)."""
+    return choice if choice != "auto" else quirks_for(autopilot, mav_type).conventions
 
 
 @contextlib.asynccontextmanager

@@ -11,6 +11,7 @@ import argparse
 import asyncio
 from pathlib import Path
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.commands._mission_cli import (
     MISSION_TYPES,
     add_connection_arguments,
@@ -51,13 +52,13 @@ async def _download(args: argparse.Namespace) -> int:
     if args.file:
         output_file(args.file, "FILE")  # before the vehicle is asked: a bad path costs no download
     async with vehicle_link(args) as (link, heartbeat):
-        autopilot = autopilot_of(heartbeat, args.autopilot)
+        autopilot = autopilot_of(heartbeat.autopilot, heartbeat.type, args.autopilot)
         client = MissionClient(link, args.sysid, args.compid)
         lists = {}
         for mission_type in types:
             lists[mission_type] = await client.download(mission_type=mission_type)
         home = None
-        if args.file and autopilot != "ardupilot":
+        if args.file and autopilot != Conventions.ARDUPILOT:
             home = await home_position(link, args.sysid, args.compid)  # ArduPilot's is item 0
     losses = []
     if args.file:  # written before anything is printed: a closed stdout (| head) must not lose it

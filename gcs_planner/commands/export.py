@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.commands._mission_cli import print_losses
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.validation import atomic_write, file_stem, not_an_input, output_dir, unique
@@ -25,7 +26,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--format", choices=sorted(SUFFIX), default="qgc", help="qgc (.plan JSON) or wpl [qgc]")
     p.add_argument("--vehicle", action="append", help="vehicle id to export (repeatable; default: all)")
     p.add_argument(
-        "--autopilot", choices=AUTOPILOTS, default="ardupilot", help="item conventions [ardupilot]"
+        "--autopilot", choices=AUTOPILOTS, default=Conventions.ARDUPILOT, help="item conventions [ardupilot]"
     )
     p.add_argument("--scenario", help="scenario file: add its fence and rally points (.plan only)")
     p.add_argument("-o", "--output-dir", default=".", help="directory for <vehicle><suffix> files [.]")

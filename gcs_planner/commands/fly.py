@@ -17,6 +17,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.commands import fly_coalition
 from gcs_planner.commands._viewer import check_display, live_recording
 from gcs_planner.commands.fly_coalition import SPEEDUP
@@ -64,7 +65,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         " fast as the CPU allows]; with --connect, the rate the connected vehicles' clocks run at"
         " [1: real vehicles; a SITL's or sitl-mock's --speedup]",
     )
-    p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
+    p.add_argument("--autopilot", choices=tuple(Conventions), default=Conventions.ARDUPILOT)
     p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
     p.add_argument("--seed", type=SEED, default=None, help="planner seed (default: the file's)")
     p.add_argument(

@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 
+from gcs_planner.autopilots import quirks_for, quirks_named
 from gcs_planner.commands._mission_cli import add_connection_arguments, vehicle_link
 from gcs_planner.commands.progress import counting_bar, progress_bar
 from gcs_planner.core.errors import UserError
@@ -38,7 +39,6 @@ from gcs_planner.mavlink.params import (
     float32,
     set_param,
     to_wire,
-    uses_bytewise,
 )
 from gcs_planner.missions.param_files import (
     ParamEntry,
@@ -47,8 +47,6 @@ from gcs_planner.missions.param_files import (
     read_param_file,
     write_param_file,
 )
-
-STACKS = {3: "ArduPilot", 12: "PX4"}  # HEARTBEAT.autopilot -> the name QGC writes as "Stack"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -104,7 +102,9 @@ def _file_entries(args: argparse.Namespace) -> list[ParamEntry]:
 
 
 def _bytewise(heartbeat, choice: str) -> bool:
-    return uses_bytewise(heartbeat.autopilot) if choice == "auto" else choice == "px4"
+    if choice == "auto":
+        return quirks_for(heartbeat.autopilot, heartbeat.type).params_bytewise
+    return quirks_named(choice).params_bytewise
 
 
 async def _vehicle_params(link, heartbeat, args: argparse.Namespace) -> tuple[dict[str, Param], bool]:
@@ -120,7 +120,7 @@ async def _vehicle_params(link, heartbeat, args: argparse.Namespace) -> tuple[di
 async def _get(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
         params, _ = await _vehicle_params(link, heartbeat, args)
-    stack = STACKS.get(heartbeat.autopilot, "")
+    stack = quirks_for(heartbeat.autopilot, heartbeat.type).stack
     write_param_file(args.output, params.values(), args.sysid, args.compid, stack)
     kind = "QGroundControl .params" if is_qgc_name(args.output) else "Mission Planner .param"
     print(f"vehicle {args.sysid}: {len(params)} parameters written to {args.output} ({kind})")

@@ -14,9 +14,9 @@ import argparse
 import asyncio
 import os
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from pymavlink.dialects.v20.ardupilotmega import MAVLINK_IFLAG_SIGNED
 
+from gcs_planner.autopilots import quirks_for
 from gcs_planner.commands._mission_cli import add_connection_arguments, vehicle_link
 from gcs_planner.core.errors import UserError
 from gcs_planner.mavlink.link import MavlinkLink
@@ -25,11 +25,6 @@ from gcs_planner.wire.signing import NO_KEY, key_from_passphrase, setup_signing_
 NEW_SIGNING_ENV = "GCS_PLANNER_NEW_SIGNING_PASSPHRASE"
 SETUP_ATTEMPTS = 3
 HEARTBEAT_WAIT_S = 2.5  # per attempt: autopilots send HEARTBEAT at 1 Hz
-# GCS_Signing.cpp accept_unsigned_callback: ArduPilot takes every unsigned frame on MAVLINK_COMM_0
-ARDUPILOT_SERIAL0 = (
-    "ArduPilot still accepts unsigned messages on its first serial port (SERIAL0, usually USB) by"
-    " design; signing protects its other links (telemetry radios, networks)"
-)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -62,8 +57,9 @@ async def _setup(args: argparse.Namespace, new_key: bytes) -> int:
             if await _heartbeat_with(link, args.sysid, signed=after is not None):
                 state = "signing off" if after is None else "signs with the new key"
                 print(f"vehicle {args.sysid}: {state} (HEARTBEAT checked; SETUP_SIGNING sent {attempt}x)")
-                if after is not None and heartbeat.autopilot == mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA:
-                    print(f"note: {ARDUPILOT_SERIAL0}")
+                note = quirks_for(heartbeat.autopilot, heartbeat.type).signing_note
+                if after is not None and note:
+                    print(f"note: {note}")
                 return 0
     raise UserError(
         f"vehicle {args.sysid} did not take the key: no HEARTBEAT {'signed with it' if after else 'unsigned'}"

@@ -14,11 +14,11 @@ import asyncio
 import sys
 import time
 
+from gcs_planner.autopilots import Conventions, quirks_for
 from gcs_planner.commands._mission_cli import add_connection_arguments, autopilot_of, vehicle_link
 from gcs_planner.commands.upload import add_clear_absent_argument, prepare
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.validation import MAX_DURATION_S, number_flag
-from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import MissionRejectedError
 from gcs_planner.mavlink.mission import MissionClient
@@ -46,13 +46,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.file:
-        prepare(args, args.autopilot if args.autopilot != "auto" else "px4", args.sysid)
+        prepare(args, args.autopilot if args.autopilot != "auto" else Conventions.PX4, args.sysid)
     return asyncio.run(_start(args))
 
 
 async def _start(args: argparse.Namespace) -> int:
     async with vehicle_link(args) as (link, heartbeat):
-        autopilot = autopilot_of(heartbeat, args.autopilot)
+        autopilot = autopilot_of(heartbeat.autopilot, heartbeat.type, args.autopilot)
         quirks = quirks_for(heartbeat.autopilot, heartbeat.type)
         status = VehicleStatus(link, [args.sysid])
         print(f"vehicle {args.sysid} ({autopilot})")

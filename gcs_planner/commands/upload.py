@@ -25,6 +25,7 @@ import asyncio
 import time
 from typing import TYPE_CHECKING
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.commands._mission_cli import (
     add_connection_arguments,
     add_force_argument,
@@ -196,8 +197,8 @@ def run(args: argparse.Namespace) -> int:
     source = UploadSource(args)  # FILE and --scenario read once, whatever the fleet
     sysids = target_sysids(args, source)
     for sysid in sysids:  # fail on bad input before touching the network
-        prepare(args, args.autopilot if args.autopilot != "auto" else "px4", sysid, source)
-    mf = read_input(args, "ardupilot", sysids[0], source)
+        prepare(args, args.autopilot if args.autopilot != "auto" else Conventions.PX4, sysid, source)
+    mf = read_input(args, Conventions.ARDUPILOT, sysids[0], source)
     for line in mf.notes + absent_lists(mf, args.clear_absent):
         print(f"note: {line}")
     if len(sysids) == 1 and network_of(sysids[0]) == 0:
@@ -213,7 +214,7 @@ def outcome_word(error: Exception | None) -> str:
 
 async def _upload_one(args: argparse.Namespace, source: UploadSource) -> int:
     async with vehicle_link(args) as (link, heartbeat):
-        autopilot = autopilot_of(heartbeat, args.autopilot)
+        autopilot = autopilot_of(heartbeat.autopilot, heartbeat.type, args.autopilot)
         lists = prepare(args, autopilot, args.sysid, source)
         check_not_flying_mission(link, args.sysid, args.force, "an upload")
         client = MissionClient(link, args.sysid, args.compid)
@@ -241,7 +242,9 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int], source: Uplo
         by_type: dict[MissionType, dict[int, list[MissionItem]]] = {}
         for sysid in sysids:
             check_not_flying_mission(link, sysid, args.force, "an upload")
-            autopilot = autopilot_of(link.vehicles[sysid], args.autopilot)
+            autopilot = autopilot_of(
+                link.vehicles[sysid].autopilot, link.vehicles[sysid].mav_type, args.autopilot
+            )
             for mission_type, items in prepare(args, autopilot, sysid, source):
                 by_type.setdefault(mission_type, {})[sysid] = items
         results = {}

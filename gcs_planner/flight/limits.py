@@ -15,8 +15,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from gcs_planner.autopilots import AutopilotQuirks
 from gcs_planner.core.errors import UserError
-from gcs_planner.mavlink.autopilots import AutopilotQuirks
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.params import read_param
 from gcs_planner.model.plan import VehiclePlan

@@ -20,13 +20,13 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from gcs_planner.autopilots import AutopilotQuirks, quirks_for
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import Origin, geodetic_to_enu
 from gcs_planner.core.lockstep import now_s
 from gcs_planner.flight.starts import CLIMB_RUN_PER_M
 from gcs_planner.flight.timekeeping import ScheduleKeeper
-from gcs_planner.mavlink.actions import TAKEOFF_MODE_LEVEL_OFF_M, change_speed, start_mission_at, take_off
-from gcs_planner.mavlink.autopilots import AutopilotQuirks, Takeoff, quirks_for
+from gcs_planner.mavlink.actions import change_speed, start_mission_at, take_off
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink, check_signing
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
@@ -177,10 +177,7 @@ async def take_off_all(
     gate = asyncio.Semaphore(workers)
     targets = {vp.sysid: float(vp.waypoints[0, 2]) for vp in plan.vehicles}
 
-    tolerance = {  # ArduPlane's TAKEOFF mode levels off TAKEOFF_MODE_LEVEL_OFF_M below its target
-        s: TAKEOFF_ALT_TOL_M + (TAKEOFF_MODE_LEVEL_OFF_M if q.takeoff is Takeoff.TAKEOFF_MODE else 0.0)
-        for s, q in quirks.items()
-    }
+    tolerance = {s: TAKEOFF_ALT_TOL_M + q.takeoff_level_off_m for s, q in quirks.items()}
 
     def late() -> list[int]:
         return [s for s, z in targets.items() if (status.tracks[s].rel_alt_m or -1e9) < z - tolerance[s]]

@@ -28,6 +28,7 @@ from typing import Protocol
 
 import numpy as np
 
+from gcs_planner.autopilots import AutopilotQuirks
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.fleet_ids import id_runs, network_of
 from gcs_planner.core.lockstep import check_loop, now_s, unix_s
@@ -47,7 +48,6 @@ from gcs_planner.flight.safe_signals import SafeEndSignals
 from gcs_planner.flight.starts import START_FIX_WAIT_S, check_starts, starts
 from gcs_planner.flight.vehicles import VehicleSource
 from gcs_planner.mavlink.actions import safe_end
-from gcs_planner.mavlink.autopilots import AutopilotQuirks
 from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
 from gcs_planner.mavlink.link import FLEET_RCVBUF_BYTES, MavlinkLink
 from gcs_planner.mavlink.networks import open_networks

@@ -25,13 +25,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from gcs_planner.analysis.flight_report import write_flight_report
+from gcs_planner.autopilots import quirks_named
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.fleet_ids import network_of, wire_sysid
 from gcs_planner.flight.ops import accel_lead_s, build_missions, wait_until_done
 from gcs_planner.flight.runner import Flight, RunOptions, networks, run_flight
 from gcs_planner.flight.timekeeping import ScheduleKeeper
 from gcs_planner.flight.vehicles import VehicleSource
-from gcs_planner.mavlink.autopilots import quirks_named
 from gcs_planner.mavlink.fleet import VehicleResult
 from gcs_planner.missions.items import AUTOPILOTS
 from gcs_planner.model.plan import Plan

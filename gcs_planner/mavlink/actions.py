@@ -1,7 +1,7 @@
 """Flight actions done the way each autopilot takes them: take-off, mission start, speed, safe end.
 
-Each function reads the vehicle's ``AutopilotQuirks`` (autopilots.py) instead of assuming one
-autopilot; fly.py and the coalition HIL call these, never the raw commands.
+Each function leaves what differs to the vehicle's autopilot family (gcs_planner.autopilots) instead
+of assuming one autopilot; the flight runner and its strategies call these, never the raw commands.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import logging
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.autopilots import AutopilotQuirks
 from gcs_planner.core.errors import UserError
-from gcs_planner.mavlink.autopilots import AutopilotQuirks, Takeoff
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink
@@ -22,15 +22,55 @@ from gcs_planner.mavlink.preflight import arm_when_ready
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 
 __all__ = [
-    "ON_GROUND_M", "TAKEOFF_MODE_LEVEL_OFF_M", "change_speed", "safe_end", "start_mission_at", "take_off",
+    "ON_GROUND_M", "change_speed", "safe_end", "start_mission_at", "take_off",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
 
 ON_GROUND_M = 1.0  # a vehicle this close to its home altitude counts as on the ground [m]
-TAKEOFF_ALT_PARAM = "TKOFF_ALT"  # ArduPlane: TAKEOFF mode's target altitude above home [m]
-TAKEOFF_DIST_PARAM = "TKOFF_DIST"  # ArduPlane: TAKEOFF mode ends this far from its start [m]
-TAKEOFF_MODE_LEVEL_OFF_M = 2.0  # ArduPlane's TAKEOFF mode is done this far below TKOFF_ALT [m]
+
+
+class _Port:
+    """One vehicle as an autopilot family's methods drive it (autopilots.VehiclePort)."""
+
+    def __init__(
+        self,
+        link: MavlinkLink,
+        status: VehicleStatus | None,
+        sysid: int,
+        arm_timeout_s: float,
+        time_scale: float,
+        waiting,
+    ) -> None:
+        self.link, self.status, self.sysid = link, status, sysid
+        self.command = CommandClient(link, sysid)
+        self.arm_timeout_s, self.time_scale, self.waiting = arm_timeout_s, time_scale, waiting
+
+    async def set_param(self, name: str, value: float) -> float:
+        return await set_param(self.link, self.sysid, name, value)
+
+    async def set_mode(self, mode: str) -> None:
+        await self.command.set_mode(mode)
+
+    async def arm_when_ready(self) -> None:
+        await arm_when_ready(
+            self.link, self.status, self.sysid, self.arm_timeout_s, self.time_scale, self.waiting
+        )
+
+    async def takeoff(self, param7: float) -> None:
+        await self.command.takeoff(param7)
+
+    def home_amsl_m(self) -> float:
+        home = self.status.tracks[self.sysid].home_amsl_m
+        if home is None:
+            raise UserError(f"vehicle {self.sysid}: no home altitude known yet (no GLOBAL_POSITION_INT)")
+        return home
+
+    async def mission_start(self, first: int, last: int) -> None:
+        await self.command.mission_start(first, last)
+
+    async def set_current(self, seq: int) -> None:
+        await MissionClient(self.link, self.sysid).set_current(seq)
 
 
 async def take_off(
@@ -45,44 +85,18 @@ async def take_off(
     climb_past_m: float = 0.0,
     takeoff_dist_m: float = 0.0,
 ) -> None:
-    """Arm (once the vehicle is ready) and climb to ``alt_m`` above home, as the autopilot takes it.
-    A TAKEOFF-mode plane gets TKOFF_ALT ``alt_m`` + ``climb_past_m`` and TKOFF_DIST
-    ``takeoff_dist_m``, so that it climbs straight along its launch heading until it is up
-    (ArduPlane's ModeTakeoff::update ends the straight climb 2 m below TKOFF_ALT or TKOFF_DIST from
-    its start, default 200 m, and climbs on circling: SITL planes began their routes 44-80 m off the
-    line; a coalition plane climbing to 300-500 m would circle most of its climb)."""
-    command = CommandClient(link, sysid)
-    if quirks.takeoff is Takeoff.TAKEOFF_MODE:
-        value = await set_param(link, sysid, TAKEOFF_ALT_PARAM, alt_m + climb_past_m)
-        log.info("vehicle %d: %s set to %.1f m for the take-off", sysid, TAKEOFF_ALT_PARAM, value)
-        if takeoff_dist_m > 0:
-            await set_param(link, sysid, TAKEOFF_DIST_PARAM, takeoff_dist_m)
-    if quirks.arm_mode is not None:
-        await command.set_mode(quirks.arm_mode)
-    await arm_when_ready(link, status, sysid, arm_timeout_s, time_scale, waiting)
-    if quirks.takeoff is Takeoff.TAKEOFF_MODE:
-        return  # ArduPlane's TAKEOFF mode climbs once armed
-    param7 = alt_m
-    if quirks.takeoff is Takeoff.COMMAND_AMSL:
-        home = status.tracks[sysid].home_amsl_m
-        if home is None:
-            raise UserError(f"vehicle {sysid}: no home altitude known yet (no GLOBAL_POSITION_INT)")
-        param7 = home + alt_m
-    await command.takeoff(param7)
+    """Arm (once the vehicle is ready) and climb to ``alt_m`` above home, as its family takes off.
+    A plane climbing in TAKEOFF mode goes ``climb_past_m`` higher and ``takeoff_dist_m`` far
+    before it may turn (autopilots/arduplane.py)."""
+    port = _Port(link, status, sysid, arm_timeout_s, time_scale, waiting)
+    await quirks.take_off(port, alt_m, climb_past_m, takeoff_dist_m)
 
 
 async def start_mission_at(
     link: MavlinkLink, sysid: int, quirks: AutopilotQuirks, first: int, last: int
 ) -> None:
-    """Run the mission from item ``first`` to ``last``: MISSION_START(first, last) where the
-    autopilot takes a range, else DO_SET_MISSION_CURRENT(first) and MISSION_START(0, 0) (ArduPilot
-    denies any other range and resumes at the current item)."""
-    command = CommandClient(link, sysid)
-    if quirks.start_with_range:
-        await command.mission_start(first, last)
-        return
-    await MissionClient(link, sysid).set_current(first)
-    await command.mission_start(0, 0)
+    """Run the mission from item ``first`` to ``last``, as the vehicle's family starts one."""
+    await quirks.start_mission(_Port(link, None, sysid, 0.0, 1.0, None), first, last)
 
 
 def change_speed(link: MavlinkLink, sysid: int, quirks: AutopilotQuirks, speed_mps: float) -> None:

@@ -19,11 +19,11 @@ import math
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.autopilots import quirks_for
 from gcs_planner.core.errors import UserError
-from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.errors import CommandTimeoutError, command_error
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.wire.enums import Autopilot, CommandResult
+from gcs_planner.wire.enums import CommandResult
 
 __all__ = ["COMMAND_RETRIES", "COMMAND_RETRY_S", "CommandClient", "mode_table"]
 
@@ -124,12 +124,8 @@ class CommandClient:
             known = ", ".join(table)
             raise UserError(f"mode {name!r} does not exist on vehicle {self.sysid}; known: {known}") from None
         flag = float(mavlink.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
-        if info.autopilot == Autopilot.PX4:
-            await self.command_long(
-                mavlink.MAV_CMD_DO_SET_MODE, flag, (custom >> 16) & 0xFF, (custom >> 24) & 0xFF
-            )
-        else:
-            await self.command_long(mavlink.MAV_CMD_DO_SET_MODE, flag, float(custom))
+        params = quirks_for(info.autopilot, info.mav_type).mode_command_params(custom)
+        await self.command_long(mavlink.MAV_CMD_DO_SET_MODE, flag, *params)
 
     async def mission_start(self, first_seq: int = 0, last_seq: int = 0) -> None:
         """MAV_CMD_MISSION_START (0, 0 = the whole mission)."""
@@ -141,7 +137,7 @@ class CommandClient:
 
     async def takeoff(self, alt_m: float) -> None:
         """MAV_CMD_NAV_TAKEOFF with param7 = ``alt_m``, which ArduCopter reads as metres above home and
-        PX4 as metres AMSL (autopilots.Takeoff); the vehicle must be armed, in a mode that allows it."""
+        PX4 as metres AMSL (autopilots/px4.py); the vehicle must be armed, in a mode that allows it."""
         if not math.isfinite(alt_m) or alt_m <= 0:
             raise UserError(f"takeoff altitude must be a positive number of metres, got {alt_m!r}")
         await self.command_long(mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, math.nan, math.nan, math.nan, alt_m)

@@ -17,9 +17,9 @@ import asyncio
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
+from gcs_planner.autopilots import quirks_for
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.lockstep import now_s
-from gcs_planner.mavlink.autopilots import quirks_for
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import BusyError, MavlinkError, MissionError, MissionTimeoutError, VerifyError
 from gcs_planner.mavlink.link import MavlinkLink

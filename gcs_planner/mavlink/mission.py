@@ -40,8 +40,8 @@ import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
+from gcs_planner.autopilots import GENERIC, AutopilotQuirks, quirks_for
 from gcs_planner.core.lockstep import now_s
-from gcs_planner.mavlink.autopilots import GENERIC, AutopilotQuirks, quirks_for
 from gcs_planner.mavlink.errors import (
     BusyError,
     CommandError,
@@ -406,7 +406,7 @@ def compare_items(
     for it (in its own float32 / integer arithmetic); every field of the item downloaded must then
     equal it exactly, both rounded to what the wire carries (params and z float32). A NaN sent or
     expected ("use the default") accepts any value. ``model``: a readback.Model (default GENERIC)."""
-    from gcs_planner.mavlink import readback  # numpy: loaded only when a list is compared
+    from gcs_planner.autopilots import readback  # numpy: loaded only when a list is compared
 
     model = readback.GENERIC if model is None else model
     home_only = skip_home and not sent and len(got) == 1  # ArduPilot keeps home after an empty upload

@@ -46,7 +46,7 @@ from gcs_planner.mavlink.link import MavlinkLink
 __all__ = [
     "DOWNLOAD_TIMEOUT_S", "INT_RANGES", "QUIET_S", "READ_BATCH", "REAL32", "TYPE_NAMES", "Param",
     "download_params", "fits_float32", "float32", "from_wire", "read_param", "set_param", "to_wire",
-    "type_name", "uses_bytewise",
+    "type_name",
 ]  # fmt: skip
 
 QUIET_S = 1.0  # no new PARAM_VALUE this long -> ask for the missing ones [s]
@@ -82,12 +82,6 @@ class Param:
     value: int | float
     param_type: int
     index: int = -1
-
-
-def uses_bytewise(autopilot: int) -> bool:
-    """Whether a vehicle whose HEARTBEAT says ``autopilot`` sends integers bytewise (PX4) rather
-    than cast to float (ArduPilot and the rest, as MAVProxy reads them)."""
-    return autopilot == mavlink.MAV_AUTOPILOT_PX4
 
 
 def type_name(param_type: int) -> str:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
-from gcs_planner.mavlink.autopilots import mode_of
+from gcs_planner.autopilots import mode_of
 from gcs_planner.mavlink.link import MavlinkLink, is_autopilot_heartbeat
 from gcs_planner.mavlink.statustext import TextAssembler
 from gcs_planner.wire.enums import MissionState

@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 
-from gcs_planner.mavlink.autopilots import AutopilotQuirks
+from gcs_planner.autopilots import AutopilotQuirks
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.statustext import TextAssembler
 

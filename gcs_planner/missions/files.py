@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.validation import MAX_INPUT_BYTES, write_text_atomic
 from gcs_planner.missions import legacy_files, planfile, wpl
@@ -50,7 +51,7 @@ __all__ = [
 ]
 
 
-def load_mission_file(path: str | Path, autopilot: str = "ardupilot") -> MissionFile:
+def load_mission_file(path: str | Path, autopilot: str = Conventions.ARDUPILOT) -> MissionFile:
     """Read a .plan / .mission (QGroundControl), a QGC WPL 110 file (.waypoints / .txt), or an
     older MAVProxy / Mission Planner fence or rally list (legacy_files), by content."""
     path = Path(path)
@@ -103,7 +104,9 @@ def _check_storable(mf: MissionFile, path: Path) -> None:
                     )
 
 
-def plan_mission_file(vehicle_plan: VehiclePlan, origin, autopilot: str = "ardupilot") -> MissionFile:
+def plan_mission_file(
+    vehicle_plan: VehiclePlan, origin, autopilot: str = Conventions.ARDUPILOT
+) -> MissionFile:
     """One vehicle of a Plan -> MissionFile (mission items from plan_to_items, home = plan origin)."""
     from gcs_planner.missions.items import plan_to_items
 
@@ -157,7 +160,10 @@ def select_vehicles(
 
 
 def mission_input(
-    path: str | Path, autopilot: str = "ardupilot", vehicle: str | None = None, sysid: int | None = None
+    path: str | Path,
+    autopilot: str = Conventions.ARDUPILOT,
+    vehicle: str | None = None,
+    sysid: int | None = None,
 ) -> MissionFile:
     """A .plan, a WPL file, or plan.json (+ vehicle id, else the vehicle with ``sysid``) -> MissionFile."""
     path = Path(path)

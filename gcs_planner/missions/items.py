@@ -57,6 +57,7 @@ from dataclasses import replace
 import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.core.geo import Origin, enu_to_geodetic
 from gcs_planner.missions.validate import MissionValidationError, validate_items
 from gcs_planner.model.plan import VehiclePlan, land_point
@@ -79,7 +80,7 @@ __all__ = [
     "validate_items",
 ]
 
-AUTOPILOTS = ("ardupilot", "px4")
+AUTOPILOTS = tuple(Conventions)
 FINAL_ACTIONS = ("land", "rtl", "loiter")
 MIN_TAKEOFF_ALT_M = 1.0
 FIXED_WING_TAKEOFF_PITCH_DEG = 15.0
@@ -102,7 +103,7 @@ def deg_to_e7(deg) -> np.ndarray:
 
 
 def plan_to_items(
-    vehicle_plan: VehiclePlan, origin: Origin, autopilot: str = "ardupilot"
+    vehicle_plan: VehiclePlan, origin: Origin, autopilot: str = Conventions.ARDUPILOT
 ) -> list[MissionItem]:
     """One vehicle's plan -> validated mission items (mission_type 0) for ``autopilot``."""
     vp = vehicle_plan
@@ -131,7 +132,7 @@ def plan_to_items(
     def at(i: int, command: int, z: float, p1=0.0, p2=0.0, p3=0.0, p4=0.0) -> MissionItem:
         return MissionItem(0, frame, command, 0, 1, p1, p2, p3, p4, lat_e7[i], lon_e7[i], float(z) + z0)
 
-    items: list[MissionItem] = [_home_item(origin)] if autopilot == "ardupilot" else []
+    items: list[MissionItem] = [_home_item(origin)] if autopilot == Conventions.ARDUPILOT else []
     if vp.takeoff_delay_s > 0:
         items.append(
             MissionItem(

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.core.errors import UserError
 from gcs_planner.wire.dialect import KNOWN_COMMANDS, has_position
 from gcs_planner.wire.types import MissionItem, MissionType
@@ -122,25 +123,29 @@ class MissionFile:
     lists: frozenset[MissionType] = frozenset(LIST_NAMES)
     notes: list[str] = field(default_factory=list)
 
-    def items(self, autopilot: str = "ardupilot") -> list[MissionItem]:
+    def items(self, autopilot: str = Conventions.ARDUPILOT) -> list[MissionItem]:
         """The mission to upload. ArduPilot: the home item at seq 0 (row 0 as written, at the
         planned home if there is one; ArduPilot replaces it with its own home). PX4: no home item,
         DO_JUMP targets one lower, positionless commands in MAV_FRAME_MISSION (PX4 refuses them
         in a global frame: mavlink_mission.cpp parse_mavlink_mission_item)."""
         body = [replace(item, current=0) for item in self.mission]
-        if autopilot == "ardupilot":
+        if autopilot == Conventions.ARDUPILOT:
             home = self.home_item or default_home_item()
             if self.home is not None:
                 lat, lon, alt = self.home
                 home = replace(home, x=e7(lat), y=e7(lon), z=float(alt))
             body.insert(0, home)
-        elif autopilot == "px4":
+        elif autopilot == Conventions.PX4:
             body = [_for_px4(item) for item in body]
         else:
-            raise MissionFileError(f"autopilot must be 'ardupilot' or 'px4', got {autopilot!r}")
+            raise MissionFileError(
+                f"autopilot must be one of {[str(c) for c in Conventions]}, got {autopilot!r}"
+            )
         return [replace(item, seq=i, current=int(i == 0)) for i, item in enumerate(body)]
 
-    def list_items(self, mission_type: MissionType, autopilot: str = "ardupilot") -> list[MissionItem]:
+    def list_items(
+        self, mission_type: MissionType, autopilot: str = Conventions.ARDUPILOT
+    ) -> list[MissionItem]:
         """The items of one list as uploaded (the mission via ``items``)."""
         if mission_type == MissionType.MISSION:
             return self.items(autopilot)
@@ -150,7 +155,7 @@ class MissionFile:
     def from_items(
         cls,
         items: list[MissionItem],
-        autopilot: str = "ardupilot",
+        autopilot: str = Conventions.ARDUPILOT,
         home: tuple[float, float, float] | None = None,
         fence: list[MissionItem] | None = None,
         rally: list[MissionItem] | None = None,
@@ -159,16 +164,18 @@ class MissionFile:
         """An uploadable list -> MissionFile: ArduPilot's seq 0 becomes the home (unless ``home``
         is given; a seq 0 at 0, 0 is no home), PX4's DO_JUMP targets one higher. Frames are kept."""
         mission = list(items)
-        if autopilot == "ardupilot" and mission:
+        if autopilot == Conventions.ARDUPILOT and mission:
             first, mission = mission[0], mission[1:]
             kwargs.setdefault("home_item", first)
             if home is None and (first.x, first.y) != (0, 0):
                 home = (first.x / 1e7, first.y / 1e7, float(first.z))
-        elif autopilot == "px4":
+        elif autopilot == Conventions.PX4:
             mission = [_jump_shifted(item, +1) for item in mission]
         mission = [replace(item, seq=i, current=0) for i, item in enumerate(mission)]
         firmware = (
-            mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA if autopilot == "ardupilot" else mavlink.MAV_AUTOPILOT_PX4
+            mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
+            if autopilot == Conventions.ARDUPILOT
+            else mavlink.MAV_AUTOPILOT_PX4
         )
         kwargs.setdefault("firmware_type", firmware)
         return cls(

@@ -29,6 +29,7 @@ from dataclasses import replace
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
+from gcs_planner.autopilots import Conventions
 from gcs_planner.missions.mission_file import (
     DO_JUMP,
     FENCE_COMMANDS,
@@ -124,9 +125,9 @@ def dumps_mission_file(mf: MissionFile) -> str:
     """MissionFile -> WPL text of its one list (``_wpl_list``): a mission with its home at row 0,
     a fence or rally list after its home row only if it was read with one (Mission Planner's)."""
     kind = _wpl_list(mf)
-    rows = mf.list_items(kind, "ardupilot")
+    rows = mf.list_items(kind, Conventions.ARDUPILOT)
     if kind != MissionType.MISSION and mf.home_item is not None:
-        rows = [mf.items("ardupilot")[0], *rows]
+        rows = [mf.items(Conventions.ARDUPILOT)[0], *rows]
     return dumps_wpl(rows, mf.comments)
 
 
@@ -231,7 +232,7 @@ def _item(seq: int, lineno: int, f: list[str], mission_type: MissionType, where:
     )
 
 
-def loads_wpl(text: str, autopilot: str = "ardupilot", where: str = "WPL file") -> MissionFile:
+def loads_wpl(text: str, autopilot: str = Conventions.ARDUPILOT, where: str = "WPL file") -> MissionFile:
     """WPL text -> MissionFile. Row 0 of a mission is the planned home whatever the autopilot, so
     a PX4 upload leaves it out; ``autopilot`` is kept for callers, it changes nothing. A
     ``QGC WPL 120`` file (QGC's older format) has no home row and DO_JUMP targets one lower."""
