@@ -167,8 +167,7 @@ _cache: dict[str, object] = {}
 def base_plan() -> dict:
     """plan.json (as a dict) of SCENARIO with the straight planner."""
     if "plan" not in _cache:
-        from gcs_planner.model.scenario import parse_scenario
-        from gcs_planner.planning import plan_scenario
+        from gcs_planner.planning import parse_scenario, plan_scenario
 
         _cache["plan"] = plan_scenario(parse_scenario(copy.deepcopy(SCENARIO))).to_dict()
     return copy.deepcopy(_cache["plan"])

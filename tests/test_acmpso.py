@@ -12,8 +12,8 @@ import pytest
 
 from gcs_planner.missions.items import plan_to_items
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import ScenarioError, load_scenario, parse_scenario
-from gcs_planner.planning import config_of, plan_scenario
+from gcs_planner.model.scenario import ScenarioError
+from gcs_planner.planning import config_of, load_scenario, parse_scenario, plan_scenario
 from gcs_planner.planning.acmpso import (
     Config,
     TrackProblem,

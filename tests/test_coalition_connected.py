@@ -22,7 +22,7 @@ from gcs_planner.flight.coalition.online_run import OnlineRun
 from gcs_planner.flight.coalition.run import initial_plans, run_coalition_hil
 from gcs_planner.flight.starts import CLIMB_RUN_PER_M, check_starts, starts
 from gcs_planner.model.plan import VehiclePlan
-from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import load_world, simulate
 from gcs_planner.telemetry import read_flight
 from sitl_mock.l1 import SITL_PLANE

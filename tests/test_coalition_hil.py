@@ -16,7 +16,7 @@ from gcs_planner.flight.coalition import (
     plan_live_leg,
     run_coalition_hil,
 )
-from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import load_world, paths
 from gcs_planner.telemetry import read_flight
 from sitl_mock.plan_fleet import MockVehiclesProcess

@@ -14,7 +14,7 @@ from gcs_planner.flight.coalition import HilOptions
 from gcs_planner.flight.coalition.live_legs import LEG_SPEED_FACTOR, LiveState, goal_pose
 from gcs_planner.flight.coalition.online import OnlineContractNet, arc_covered
 from gcs_planner.flight.coalition.online_run import Fault, run_online
-from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import load_world, paths, simulate
 from gcs_planner.planning.coalition.model import Threat
 from gcs_planner.telemetry import read_flight

@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import load_scenario, plan_scenario
 from gcs_planner.planning.coalition import leg_vehicle_plan, load_world, paths, simulate
 from gcs_planner.planning.coalition.sim import CoalitionSim
 

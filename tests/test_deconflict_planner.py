@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from gcs_planner.model.scenario import ScenarioError, parse_scenario
-from gcs_planner.planning import config_of, plan_scenario
+from gcs_planner.model.scenario import ScenarioError
+from gcs_planner.planning import config_of, parse_scenario, plan_scenario
 from gcs_planner.planning.deconflict4d.conflicts import closest_approach
 
 V_MAX, A_MAX, SEP = 5.0, 2.0, 1.0

@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import config_of, priority_swarm
+from gcs_planner.planning import config_of, load_scenario, priority_swarm
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "swarm_small.toml"
 

@@ -22,8 +22,8 @@ from gcs_planner.flight import FlyOptions, check_flight, end_summary, fly
 from gcs_planner.flight.vehicles import ConnectedVehicles
 from gcs_planner.mavlink.networks import open_networks
 from gcs_planner.mavlink.preflight import request_streams
-from gcs_planner.model.scenario import ScenarioError, load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.model.scenario import ScenarioError
+from gcs_planner.planning import load_scenario, plan_scenario
 from gcs_planner.telemetry import read_flight
 from sitl_mock.fleet import MockFleet
 from sitl_mock.plan_fleet import MockVehicles

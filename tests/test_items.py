@@ -23,8 +23,7 @@ from gcs_planner.missions.items import (
 )
 from gcs_planner.missions.validate import MissionValidationError, validate_items
 from gcs_planner.model.plan import VehiclePlan
-from gcs_planner.model.scenario import parse_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import parse_scenario, plan_scenario
 from gcs_planner.wire.types import MissionItem, MissionType
 
 ORIGIN = Origin(47.397742, 8.545594, 488.0)

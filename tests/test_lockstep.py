@@ -14,8 +14,7 @@ from gcs_planner.flight import FlyOptions, fly
 from gcs_planner.flight.coalition import HilOptions
 from gcs_planner.flight.coalition.run import run_coalition_hil
 from gcs_planner.flight.vehicles import ConnectedVehicles
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import load_scenario, plan_scenario
 from gcs_planner.safety.conformance import format_report
 from sitl_mock.plan_fleet import MockVehicles, MockVehiclesProcess
 

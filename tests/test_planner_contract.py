@@ -18,8 +18,18 @@ from gcs_planner import planning
 from gcs_planner.core.config import parse
 from gcs_planner.core.errors import UserError
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import PLANNERS, PlannerConfig, config_of, plan_scenario
+from gcs_planner.model.scenario import SECTIONS, VEHICLE_KEYS, ScenarioError
+from gcs_planner.planning import (
+    PLANNERS,
+    WORLD,
+    PlannerConfig,
+    Traits,
+    config_of,
+    ignored_tables,
+    load_scenario,
+    parse_scenario,
+    plan_scenario,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "planners.md"
@@ -113,6 +123,46 @@ def _stable(plan: Plan) -> dict:
         return [strip(v) for v in value] if isinstance(value, list) else value
 
     return strip(json.loads(plan.to_json()))
+
+
+@pytest.mark.usefixtures("with_example")
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_each_planner_declares_what_it_is_and_reads(name):
+    traits = planning.planner(name).TRAITS
+    assert isinstance(traits, Traits) and set(traits.reads) <= set(WORLD)
+    assert not set(traits.extensions.tables) & set(SECTIONS)  # its own tables, not the world's
+    assert not set(traits.extensions.vehicle_keys) & set(VEHICLE_KEYS)
+
+
+def _tables(mission: str) -> dict:
+    import tomllib
+
+    return tomllib.loads((ROOT / "missions" / f"{mission}.toml").read_text())
+
+
+def test_a_planners_own_tables_and_keys_are_known_only_with_that_planner():
+    coalition = _tables("coalition_paper")
+    assert parse_scenario(coalition).raw["coalition"]["targets"]  # the coalition planner's table
+    coalition["planner"] = {"name": "priority_swarm"}
+    with pytest.raises(ScenarioError, match="top level: unknown key 'coalition'"):
+        parse_scenario(coalition)
+    four_d = _tables("deconflict_10uav_manned")
+    del four_d["manned"]
+    assert parse_scenario(four_d).raw["vehicles"][0]["v_max_mps"] == 6.0  # the 4-D planner's dynamics
+    four_d["planner"] = {"name": "straight"}
+    with pytest.raises(ScenarioError, match=r"vehicles\[0\]: unknown key '(limit|v_max_mps)'"):
+        parse_scenario(four_d)
+
+
+def test_the_world_tables_a_planner_ignores_are_named():
+    manned = _tables("deconflict_10uav_manned")
+    assert ignored_tables(parse_scenario(manned)) == []  # the 4-D planner plans around [[manned]]
+    for v in manned["vehicles"]:
+        for key in planning.planner("deconflict_4d").TRAITS.extensions.vehicle_keys:
+            v.pop(key, None)
+    manned["planner"] = {"name": "priority_swarm"}
+    assert ignored_tables(parse_scenario(manned)) == ["manned"]  # the swarm does not avoid traffic
+    assert ignored_tables(load_scenario(ROOT / "missions" / "swarm40_cylinders.toml")) == []
 
 
 def test_an_unknown_planner_names_the_nearest():

@@ -13,8 +13,8 @@ from gcs_planner.core.config import parse
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import Origin
 from gcs_planner.geometry.obstacles import HARD_PENALTY
-from gcs_planner.model.scenario import Cylinder, Scenario, Vehicle, load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.model.scenario import Cylinder, Scenario, Vehicle
+from gcs_planner.planning import load_scenario, plan_scenario
 from gcs_planner.planning.priority_swarm import Config, CostModel, Traffic, prepare, timed_samples
 from gcs_planner.safety.separation import check_plan
 

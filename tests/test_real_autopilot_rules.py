@@ -29,8 +29,7 @@ from gcs_planner.mavlink.params import read_param
 from gcs_planner.mavlink.preflight import arm_when_ready, request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.missions.wpl import loads_wpl
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import load_scenario, plan_scenario
 from sitl_mock.flight import AIRFRAMES
 from sitl_mock.l1 import SITL_PLANE
 from sitl_mock.mission_server import Failure

@@ -11,8 +11,7 @@ import pytest
 
 from gcs_planner.core import lockstep
 from gcs_planner.flight import FlyOptions, fly
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import load_scenario, plan_scenario
 from gcs_planner.telemetry import read_flight
 
 sitl_mock = pytest.importorskip("sitl_mock")

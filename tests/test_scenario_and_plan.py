@@ -5,8 +5,8 @@ import pytest
 
 from gcs_planner.cli import main
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import ScenarioError, load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.model.scenario import ScenarioError
+from gcs_planner.planning import load_scenario, plan_scenario
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 

@@ -10,8 +10,7 @@ import pytest
 
 from gcs_planner.cli import main
 from gcs_planner.core.errors import UserError
-from gcs_planner.model.scenario import parse_scenario
-from gcs_planner.planning import load_scenario
+from gcs_planner.planning import load_scenario, parse_scenario
 
 BASE = {
     "origin": {"lat_deg": 47.4, "lon_deg": 8.5, "alt_m": 400.0},

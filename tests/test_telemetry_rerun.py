@@ -65,8 +65,7 @@ def test_lockstep_flight_records_clock_rate_1(tmp_path):
     """In lockstep the log's receive time already is flight time: rate 1, recorded."""
     from gcs_planner.core import lockstep
     from gcs_planner.flight import FlyOptions, fly
-    from gcs_planner.model.scenario import load_scenario
-    from gcs_planner.planning import plan_scenario
+    from gcs_planner.planning import load_scenario, plan_scenario
     from sitl_mock.plan_fleet import MockVehicles
 
     scenario = load_scenario(SCENARIO)

@@ -86,7 +86,7 @@ def test_nonsense_world_tables_are_one_line(tmp_path, capsys, edit, word):
 
 
 def test_valid_world_tables_pass(tmp_path):
-    from gcs_planner.model.scenario import parse_scenario
+    from gcs_planner.planning import parse_scenario
 
     data = copy.deepcopy(SCENARIO)
     data["manned"], data["terrain"] = [copy.deepcopy(MANNED)], copy.deepcopy(TERRAIN)

@@ -22,7 +22,7 @@ from gcs_planner.commands import fly_coalition
 from gcs_planner.commands._viewer import check_display, live_recording
 from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
-from gcs_planner.commands.progress import plan_with_progress, progress_bar
+from gcs_planner.commands.progress import plan_with_progress, progress_bar, say_ignored_tables
 from gcs_planner.core import lockstep
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.validation import (
@@ -38,7 +38,7 @@ from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_sum
 from gcs_planner.flight.starts import format_homes, starts
 from gcs_planner.flight.vehicles import ConnectedVehicles, mock_vehicles
 from gcs_planner.model.plan import Plan
-from gcs_planner.planning import load_scenario
+from gcs_planner.planning import load_scenario, planner
 from gcs_planner.safety.conformance import MAX_SCHEDULE_ERROR_S, format_report
 
 WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid
@@ -153,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
     if args.live:
         check_display("--live")
     scenario = load_scenario(args.scenario)
-    if scenario.planner.get("name") == "coalition":
+    if planner(scenario.planner_name).TRAITS.online:
         return _fly_coalition(args)
     plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
     if args.homes:
@@ -163,6 +163,7 @@ def run(args: argparse.Namespace) -> int:
     check_flight(plan)  # every mission, before anything is written or sent
     if args.connect and networks(plan) > 1:
         check_networks(plan, len(args.connect))
+    say_ignored_tables(scenario)
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

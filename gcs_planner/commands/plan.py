@@ -10,7 +10,7 @@ import argparse
 
 import numpy as np
 
-from gcs_planner.commands.progress import plan_with_progress
+from gcs_planner.commands.progress import plan_with_progress, say_ignored_tables
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.validation import number_flag, output_file
 from gcs_planner.model.scenario import MAX_SEED
@@ -33,6 +33,7 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     plan = plan_with_progress(scenario, args.seed)
     plan.save(args.output)
+    say_ignored_tables(scenario)
     if args.convergence:
         _plot_convergence(plan, args.convergence)
     print(f"{'vehicle':<10} {'sysid':>5} {'length_m':>10} {'time_s':>8}  feasible")

@@ -34,6 +34,16 @@ def counting_bar(desc: str, unit: str = "it") -> Iterator[Callable[[int, int], N
             bar.close()
 
 
+def say_ignored_tables(scenario) -> None:
+    """A note naming the world tables the scenario's planner does not plan with: its plan does not
+    avoid them (said once the input is checked, so that bad input still gets its one line)."""
+    from gcs_planner.planning import ignored_tables
+
+    if ignored := ignored_tables(scenario):
+        tables = ", ".join(f"[{t}]" for t in ignored)
+        print(f"note: planner {scenario.planner_name} does not plan with {tables}", file=sys.stderr)
+
+
 def plan_with_progress(scenario, seed: int | None = None):
     """plan_scenario with a progress bar fed by the planner's ``progress(fraction, message)``."""
     from gcs_planner.planning import plan_scenario

@@ -1,8 +1,10 @@
 """Scenario files (missions/*.toml): origin, vehicles, obstacles and the planner to run.
 
-A scenario is TOML. Common sections are parsed here into typed objects; planner-specific
-sections (targets, manned traffic, terrain peaks, ...) stay in ``Scenario.raw`` for the planner
-that reads them. Every error names the file, the field and the bad value.
+A scenario is TOML. Common sections are parsed here into typed objects; the world tables (manned
+traffic, terrain, the site) are checked here and stay in ``Scenario.raw`` for the planners that
+read them. A planner's own tables and [[vehicles]] keys are the planner's (``Extensions``: the
+planning layer says which, this module knows no planner). Every error names the file, the field
+and the bad value.
 
     name = "open field"
     [origin]            lat_deg, lon_deg, alt_m (AMSL)
@@ -24,6 +26,7 @@ that reads them. Every error names the file, the field and the bad value.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -56,7 +59,10 @@ from gcs_planner.core.validation import (
 if TYPE_CHECKING:  # shapely is imported only when a scenario has a [site]
     from gcs_planner.model.sites.world import Site
 
-__all__ = ["Cylinder", "Hemisphere", "Scenario", "ScenarioError", "Vehicle", "load_scenario"]
+__all__ = [
+    "Cylinder", "Extensions", "Hemisphere", "Scenario", "ScenarioError", "Vehicle", "load_scenario",
+    "parse_scenario",
+]  # fmt: skip
 
 VEHICLE_TYPES = ("multirotor", "fixed_wing")
 MAX_SEED = 2**63 - 1
@@ -130,55 +136,48 @@ class Scenario:
         raise KeyError(f"no vehicle {vehicle_id!r} in scenario {self.name!r}")
 
 
-# Top-level sections; [planner] is checked against its planner's config (gcs_planner.planning), the
-# planner-specific world tables ([coalition], [terrain], [[manned]]) by the planners that read them
-# from Scenario.raw.
-SECTIONS = (
-    "name",
-    "origin",
-    "planner",
-    "vehicles",
-    "obstacles",
-    "bounds",
-    "manned",
-    "coalition",
-    "terrain",
-    "site",
-)
-# the planner-specific world tables: table -> (its keys, {key: the keys of its rows})
-WORLD_TABLES: dict[str, tuple[tuple[str, ...], dict[str, tuple[str, ...]]]] = {
-    "coalition": (
-        ("targets", "threats"),
-        {
-            "targets": ("id", "approx", "position", "appear_s", "recon_s", "recon_angle_deg", "recon_uav")
-            + ("strike_timing", "strike_interval_s", "strike_angles_deg", "assess_angles_deg")
-            + ("assess_delay_s", "assess_duration_s", "reward", "decay_per_s"),
-            "threats": ("x", "y", "radius_m", "appear_s"),
-        },
-    ),
+# a table's schema: (its keys, {key: the keys of its rows})
+TableSchema = tuple[tuple[str, ...], dict[str, tuple[str, ...]]]
+# the world tables, which any planner may read ([planner] is checked against its planner's config
+# by gcs_planner.planning); [obstacles] and [[manned]] have their own readers below
+WORLD_TABLES: dict[str, TableSchema] = {
     "terrain": (("type", "peaks", "file"), {"peaks": ("h_m", "x_m", "y_m", "sx_m", "sy_m")}),
     "site": (("features", "dem", "terrain_clearance_m", "dem_spacing_m", "margin_m"), {}),
 }
+SECTIONS = ("name", "origin", "planner", "vehicles", "obstacles", "bounds", "manned", *WORLD_TABLES)
 MAX_MANNED = 10_000  # manned tracks in a scenario, and tracks in one mode's history
 MAX_MANNED_SAMPLES = 100_000  # samples of one manned track (observed_s / dt_s, track rows)
 MAX_START_BELOW_M = 100.0  # a start this far below the origin's ground is underground (a sign error)
 MANNED_KEYS = ("id", "dt_s", "track", "position_m", "velocity_mps", "observed_s", "modes")
 MANNED_MODE_KEYS = ("name", "history", "velocity_mps", "sigma_mps", "strength", "weight")
-# [[vehicles]] keys: the common ones, the 4-D planner's timing and dynamics (deconflict4d), the
-# coalition planner's (coalition/model.py)
-VEHICLE_KEYS = (
-    ("id", "sysid", "network", "type", "start", "goal", "speed_mps", "min_alt_m", "max_alt_m")
-    + ("turn_radius_m", "separation_m", "priority", "landing_mps", "waits_airborne", "takeoff_s", "arrival_s")
-    + ("v_max_mps", "a_max_mps2", "climb_mps", "takeoff_settle_s", "descent_mps", "min_turn_radius_m")
-    + ("max_time_error_s", "limit", "capabilities", "munitions", "heading_deg", "range_m")
-    + ("start_lla", "goal_lla")
+# [[vehicles]] keys every scenario may give (a planner may add its own: Extensions)
+VEHICLE_KEYS = ("id", "sysid", "network", "type", "start", "goal", "speed_mps", "min_alt_m", "max_alt_m") + (
+    "turn_radius_m",
+    "separation_m",
+    "priority",
+    "landing_mps",
+    "waits_airborne",
+    "start_lla",
+    "goal_lla",
 )
 
 
-def load_scenario(path: str | Path) -> Scenario:
+@dataclass(frozen=True)
+class Extensions:
+    """What a planner adds to a scenario: its own tables and [[vehicles]] keys."""
+
+    tables: dict[str, TableSchema] = field(default_factory=dict)
+    vehicle_keys: tuple[str, ...] = ()
+
+
+# planner name -> its Extensions (the planning layer's registry)
+ExtensionsOf = Callable[[str], Extensions]
+
+
+def load_scenario(path: str | Path, extensions_of: ExtensionsOf | None = None) -> Scenario:
     path = Path(path)
     data = load_toml(read_text(path, "scenario"), str(path))
-    scenario = parse_scenario(data, where=str(path))
+    scenario = parse_scenario(data, str(path), extensions_of)
     scenario.path = path
     if "site" in data:  # the map files are read only with the scenario's folder known
         try:
@@ -203,18 +202,24 @@ def _add_site(scenario: Scenario, base_dir: Path) -> None:
     scenario.site = site
 
 
-def parse_scenario(data: dict[str, Any], where: str = "scenario") -> Scenario:
-    """A scenario's TOML tables -> Scenario; every value is checked (gcs_planner.core.validation)."""
+def parse_scenario(
+    data: dict[str, Any], where: str = "scenario", extensions_of: ExtensionsOf | None = None
+) -> Scenario:
+    """A scenario's TOML tables -> Scenario; every value is checked (gcs_planner.core.validation).
+    ``extensions_of`` gives the tables and [[vehicles]] keys the scenario's planner adds (none: only
+    the common ones are known)."""
     try:
-        return _parse(table(data, "scenario"), where)
+        return _parse(table(data, "scenario"), where, extensions_of or (lambda name: Extensions()))
     except InputError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
 
 
-def _parse(data: dict[str, Any], where: str) -> Scenario:
+def _parse(data: dict[str, Any], where: str, extensions_of: ExtensionsOf) -> Scenario:
     if "acmpso" in data:
         raise InputError('the [acmpso] table\'s keys now belong in [planner] (name = "acmpso")')
-    known_keys(data, SECTIONS, "top level")
+    name = data["planner"].get("name") if isinstance(data.get("planner"), dict) else None
+    extensions = extensions_of(name) if isinstance(name, str) else Extensions()
+    known_keys(data, (*SECTIONS, *extensions.tables), "top level")
     origin = checked_origin(data.get("origin"), "[origin]")
     planner = dict(table(data.get("planner"), "[planner]"))
     if not isinstance(planner.get("name"), str):
@@ -224,7 +229,8 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
     rows = items_of(data.get("vehicles", []), "vehicles")
     if not rows:
         raise InputError("the scenario has no [[vehicles]]; at least one is needed")
-    vehicles = [_vehicle(v, f"vehicles[{i}]", origin) for i, v in enumerate(rows)]
+    keys = (*VEHICLE_KEYS, *extensions.vehicle_keys)
+    vehicles = [_vehicle(v, f"vehicles[{i}]", origin, keys) for i, v in enumerate(rows)]
     unique([v.id for v in vehicles], "vehicle id")
     unique([v.sysid for v in vehicles if v.sysid], "vehicle sysid")
     obstacles = known_keys(
@@ -247,7 +253,7 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
         if not lo < hi:
             raise InputError(f"bounds.{axis} must be [min, max] with min < max, got {rng!r}")
         bounds[axis] = (lo, hi)
-    _check_world_tables(data)
+    _check_world_tables(data, {**WORLD_TABLES, **extensions.tables})
     name = data.get("name", where)
     if not isinstance(name, str):
         raise InputError(f"name must be a string, got {name!r}")
@@ -263,9 +269,9 @@ def _parse(data: dict[str, Any], where: str) -> Scenario:
     )
 
 
-def _check_world_tables(data: dict[str, Any]) -> None:
-    """Unknown keys in the planner-specific tables (their values are the planners' to check)."""
-    for section, (keys, rows) in WORLD_TABLES.items():
+def _check_world_tables(data: dict[str, Any], tables: dict[str, TableSchema]) -> None:
+    """Unknown keys in the world and the planner's tables (their values are their readers' to check)."""
+    for section, (keys, rows) in tables.items():
         if section not in data:
             continue
         known_keys(table(data[section], f"[{section}]"), keys, f"[{section}]")
@@ -356,8 +362,8 @@ def _short(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _vehicle(d: dict[str, Any], where: str, origin: Origin) -> Vehicle:
-    known_keys(d, VEHICLE_KEYS, where)
+def _vehicle(d: dict[str, Any], where: str, origin: Origin, keys: tuple[str, ...]) -> Vehicle:
+    known_keys(d, keys, where)
     d = {**d, **_geodetic_ends(d, where, origin)}
     vtype = d.get("type", "multirotor")
     if vtype not in VEHICLE_TYPES:

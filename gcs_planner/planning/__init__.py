@@ -1,17 +1,18 @@
 """Planners behind one contract: a Scenario and the planner's typed config in, a Plan out.
 
 A planner is a module with ``NAME``, ``Config`` (a :class:`PlannerConfig` tagged with ``NAME``:
-every ``[planner]`` key it reads, with its bounds) and ``plan(scenario, config, rng, progress)
--> Plan``, where ``rng`` is a seeded numpy Generator (no global random state) and
-``progress(fraction, message)`` may be None. ``PLANNERS`` names the modules; the scenario's
-``[planner] name`` picks one, so methods are swapped in the file (docs/planners.md shows how to
-add one).
+every ``[planner]`` key it reads, with its bounds), ``TRAITS`` (:class:`Traits`: what it is and
+reads) and ``plan(scenario, config, rng, progress) -> Plan``, where ``rng`` is a seeded numpy
+Generator (no global random state) and ``progress(fraction, message)`` may be None. ``PLANNERS``
+names the modules; the scenario's ``[planner] name`` picks one, so methods are swapped in the file
+(docs/planners.md shows how to add one).
 """
 
 from __future__ import annotations
 
 import difflib
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from importlib import import_module
 from pathlib import Path
 from typing import Protocol
@@ -23,10 +24,14 @@ from gcs_planner.core.errors import UserError
 from gcs_planner.core.heap import keep_heap_slack
 from gcs_planner.core.validation import InputError
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import Scenario, ScenarioError
+from gcs_planner.model.scenario import Extensions, Scenario, ScenarioError
 from gcs_planner.model.scenario import load_scenario as read_scenario
+from gcs_planner.model.scenario import parse_scenario as parse_tables
 
-__all__ = ["PLANNERS", "Planner", "PlannerConfig", "Progress", "config_of", "load_scenario", "plan_scenario"]
+__all__ = [
+    "PLANNERS", "WORLD", "Planner", "PlannerConfig", "Progress", "Traits", "config_of", "ignored_tables",
+    "load_scenario", "parse_scenario", "plan_scenario", "planner",
+]  # fmt: skip
 
 Progress = Callable[[float, str], None]
 
@@ -46,11 +51,26 @@ class PlannerConfig(Config, tag_field="name"):
     seed: Seed = 0
 
 
+# the scenario's world, as tables a planner may read
+WORLD = ("obstacles", "bounds", "terrain", "manned", "site")
+
+
+@dataclass(frozen=True)
+class Traits:
+    """What a planner is, declared beside its Config."""
+
+    online: bool = False  # decides tasks in flight: flown by fly-coalition's online strategy
+    separation: bool = False  # its plans keep the vehicles apart in space and time by construction
+    reads: tuple[str, ...] = ()  # the world tables (WORLD) it plans with
+    extensions: Extensions = field(default_factory=Extensions)  # its own tables and [[vehicles]] keys
+
+
 class Planner(Protocol):
     """What a planner module provides."""
 
     NAME: str
     Config: type[PlannerConfig]
+    TRAITS: Traits
 
     def plan(
         self, scenario: Scenario, config: PlannerConfig, rng: np.random.Generator, progress: Progress | None
@@ -74,11 +94,30 @@ def config_of(scenario: Scenario) -> PlannerConfig:
         raise ScenarioError(f"{scenario.path or scenario.name}: {exc}") from None
 
 
+def _extensions_of(name: str) -> Extensions:
+    """The tables and [[vehicles]] keys planner ``name`` adds (none for a name not registered:
+    config_of says so)."""
+    return planner(name).TRAITS.extensions if name in PLANNERS else Extensions()
+
+
 def load_scenario(path: str | Path) -> Scenario:
-    """A scenario file whose ``[planner]`` table is also checked against its planner's config."""
-    scenario = read_scenario(path)
+    """A scenario file with its planner's own tables and keys, its ``[planner]`` table checked
+    against the planner's config."""
+    scenario = read_scenario(path, _extensions_of)
     config_of(scenario)
     return scenario
+
+
+def parse_scenario(data: dict, where: str = "scenario") -> Scenario:
+    """A scenario's TOML tables with its planner's own tables and keys (model.scenario.parse_scenario)."""
+    return parse_tables(data, where, _extensions_of)
+
+
+def ignored_tables(scenario: Scenario) -> list[str]:
+    """The world tables the scenario gives that its planner does not plan with (obstacles, manned
+    traffic, ...): the plan does not avoid them, which the user should hear before flying it."""
+    reads = planner(scenario.planner_name).TRAITS.reads
+    return [t for t in WORLD if scenario.raw.get(t) and t not in reads]
 
 
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:

@@ -60,11 +60,12 @@ from gcs_planner.core.config import Count, Distance, NonNegative, Positive, Posi
 from gcs_planner.core.validation import MAX_ALT_M
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Scenario, ScenarioError, Vehicle
-from gcs_planner.planning import PlannerConfig, Progress
+from gcs_planner.planning import PlannerConfig, Progress, Traits
 from gcs_planner.planning.pso import CauchyMutation, PSOConfig, PSOResult, minimize
 from gcs_planner.planning.threat_env import ThreatEnv, ValidationReport, resample_path, validate_path
 
 __all__ = [
+    "TRAITS",
     "ALGORITHMS",
     "NAME",
     "Config",
@@ -83,6 +84,7 @@ __all__ = [
 logger = logging.getLogger(__name__)
 MAX_LEG = 64  # longest mission leg, in dense samples (6.4 km at 100 m)
 NAME = "acmpso"
+TRAITS = Traits(reads=("obstacles", "bounds", "terrain", "site"))
 ALGORITHMS = ("acmpso", "lpso", "bpso")
 VARIANTS = ("literal", "tuned", "safe")
 # The safe fitness samples the flown polyline at most SAFETY_SPACING_M apart and keeps

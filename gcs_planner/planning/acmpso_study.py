@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.planning.acmpso import VARIANTS, Config, TrackProblem, problem_from_scenario, solve
 from gcs_planner.planning.threat_env import ThreatEnv, validate_path
 

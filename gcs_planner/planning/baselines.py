@@ -26,8 +26,8 @@ import msgspec
 import numpy as np
 
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import Scenario, load_scenario
-from gcs_planner.planning import config_of
+from gcs_planner.model.scenario import Scenario
+from gcs_planner.planning import config_of, load_scenario
 from gcs_planner.planning.priority_swarm import (
     CostModel,
     Traffic,

@@ -83,7 +83,7 @@ from gcs_planner.geometry.dubins import advance, segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Scenario, Vehicle
-from gcs_planner.planning import PlannerConfig, Progress
+from gcs_planner.planning import PlannerConfig, Progress, Traits
 from gcs_planner.planning.pso import PSOConfig, minimize
 from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
 from gcs_planner.planning.traffic import TIMING_ERROR_S, Traffic
@@ -92,12 +92,13 @@ from gcs_planner.safety.separation import check_plan
 if TYPE_CHECKING:  # shapely is imported only when a scenario has a [site]
     from gcs_planner.model.sites.world import Site
 
-__all__ = ["NAME", "Config", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
+__all__ = ["NAME", "TRAITS", "Config", "Traffic", "VehicleProblem", "build_plan", "plan", "prepare"]
 
 log = logging.getLogger(__name__)
 
 
 NAME = "priority_swarm"
+TRAITS = Traits(separation=True, reads=("obstacles", "bounds", "site"))
 
 
 class Config(PlannerConfig, tag=NAME):

@@ -14,9 +14,10 @@ from msgspec import Meta
 from gcs_planner.core.validation import MAX_RADIUS_M, MAX_WAYPOINTS
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Scenario, ScenarioError
-from gcs_planner.planning import PlannerConfig, Progress
+from gcs_planner.planning import PlannerConfig, Progress, Traits
 
 NAME = "straight"
+TRAITS = Traits()  # start to goal, nothing avoided
 
 
 class Config(PlannerConfig, tag=NAME):

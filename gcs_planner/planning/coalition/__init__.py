@@ -19,13 +19,14 @@ from dataclasses import replace
 import numpy as np
 
 from gcs_planner.model.plan import Plan, VehiclePlan
-from gcs_planner.model.scenario import Scenario
-from gcs_planner.planning import Progress
+from gcs_planner.model.scenario import Extensions, Scenario
+from gcs_planner.planning import Progress, Traits
 from gcs_planner.planning.coalition.model import CoalitionParams, UavSpec, World, load_world
 from gcs_planner.planning.coalition.sim import CoalitionSim, SimResult
 from gcs_planner.planning.coalition.track import Leg
 
 __all__ = [
+    "TRAITS",
     "NAME", "CoalitionParams", "Config", "SimResult", "World", "leg_vehicle_plan", "load_world", "plan",
     "simulate",
 ]  # fmt: skip
@@ -65,6 +66,24 @@ def leg_vehicle_plan(
 
 
 NAME = "coalition"
+# decides tasks in flight; its [coalition] table of targets and threats, its vehicles' capabilities
+TRAITS = Traits(
+    online=True,
+    extensions=Extensions(
+        tables={
+            "coalition": (
+                ("targets", "threats"),
+                {
+                    "targets": ("id", "approx", "position", "appear_s", "recon_s", "recon_angle_deg")
+                    + ("recon_uav", "strike_timing", "strike_interval_s", "strike_angles_deg")
+                    + ("assess_angles_deg", "assess_delay_s", "assess_duration_s", "reward", "decay_per_s"),
+                    "threats": ("x", "y", "radius_m", "appear_s"),
+                },
+            )
+        },
+        vehicle_keys=("capabilities", "munitions", "heading_deg", "range_m"),
+    ),
+)
 Config = CoalitionParams
 
 

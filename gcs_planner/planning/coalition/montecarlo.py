@@ -17,7 +17,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
-from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import simulate
 from gcs_planner.planning.coalition.model import UavSpec, World, load_world
 

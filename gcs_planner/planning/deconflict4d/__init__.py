@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from gcs_planner.model.plan import Plan, VehiclePlan
-from gcs_planner.model.scenario import Scenario, ScenarioError
-from gcs_planner.planning import Progress
+from gcs_planner.model.scenario import Extensions, Scenario, ScenarioError
+from gcs_planner.planning import Progress, Traits
 from gcs_planner.planning.deconflict4d.manned import (
     MannedTrack,
     predict_zones,
@@ -43,7 +43,7 @@ from gcs_planner.planning.deconflict4d.manned import (
 from gcs_planner.planning.deconflict4d.planner import Config, Outcome, Problem, UavSpec, full_polyline, run
 from gcs_planner.planning.deconflict4d.trajectory import DYNAMICS
 
-__all__ = ["NAME", "Config", "build_problem", "plan", "to_plan"]
+__all__ = ["NAME", "TRAITS", "Config", "build_problem", "plan", "to_plan"]
 
 NAME = "deconflict_4d"
 log = logging.getLogger(__name__)
@@ -56,6 +56,12 @@ _DYN_KEYS = (
     "min_turn_radius_m",
     "max_time_error_s",
     "limit",
+)
+# a vehicle's schedule (take-off and arrival times) and dynamics
+TRAITS = Traits(
+    separation=True,
+    reads=("obstacles", "bounds", "manned", "site"),
+    extensions=Extensions(vehicle_keys=("takeoff_s", "arrival_s", *_DYN_KEYS)),
 )
 
 
