@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from gcs_planner.geometry import dubins
-from gcs_planner.geometry.dubins import WORDS, DubinsPath, shortest_path_free_heading, word_lengths
+from gcs_planner.geometry.dubins import (
+    WORDS,
+    DubinsPath,
+    shortest_path_free_heading,
+    stretch_to_length,
+    word_lengths,
+)
 from gcs_planner.planning.coalition import paths
 from gcs_planner.planning.coalition.aco import CoalitionProblem, evaluate, make_solution, repair, solve_aco
 from gcs_planner.planning.coalition.baselines import solve_polynomial
@@ -36,6 +42,26 @@ def test_stretch_batch_hits_exact_length_and_entry_pose():
         assert abs(_wrap(end[2] - goal[2])) < 1e-5
         assert min(p.radii) >= 150.0 - 1e-9  # curvature limit kept (k >= 1)
     assert paths.stretch_batch(q0[:1], q1[:1], short[:1] - 5.0, 150.0)[0] is None
+
+
+def test_the_batched_stretch_is_the_reference_stretch_to_length():
+    """paths.stretch_batch is the planner's fast path; geometry/dubins.py's stretch_to_length is
+    the readable reference: with the same k_max, the same word, radii and length (or none)."""
+    rng = np.random.default_rng(5)
+    n = 30
+    q0 = np.column_stack([rng.uniform(0, 4000, (n, 2)), rng.uniform(-3, 3, n)])
+    q1 = paths.entry_poses((2500.0, 2500.0), np.radians(rng.uniform(0, 360, n)), 200.0)
+    extra = np.concatenate([rng.uniform(0.0, 2500.0, n - 5), rng.uniform(20_000.0, 60_000.0, 5)])  # loops
+    want = paths.shortest_lengths(q0, q1, 150.0) + extra
+    found = 0
+    for a, b, target, fast in zip(q0, q1, want, paths.stretch_batch(q0, q1, want, np.full(n, 150.0))):
+        reference = stretch_to_length(tuple(a), tuple(b), float(target), 150.0, k_max=paths.K_MAX)
+        assert (fast is None) == (reference is None)
+        if fast is not None:
+            found += 1
+            assert fast.word == reference.word and np.allclose(fast.radii, reference.radii, rtol=1e-6)
+            assert fast.length == pytest.approx(reference.length, abs=1e-3)
+    assert found >= n - 5
 
 
 def test_free_heading_lengths_match_library_search():

@@ -9,8 +9,9 @@ live here because the coalition planner calls them for every bidder and member i
 - ``stretch_batch``: paths of exact given lengths for many members at once (simultaneous /
   staggered arrival, ref [28]): both radii scale by one factor k >= 1 (scan of k, then batched
   bisection); when no k <= k_max reaches the length, whole loiter loops are added on the start
-  circle (loiter fallback), as in the library's ``stretch_to_length`` (not called: it costs ~0.5 s
-  per hard case here and the other fallbacks of ``timed_route`` cover them).
+  circle (loiter fallback). The result is the readable reference's, geometry/dubins.py
+  ``stretch_to_length`` with k_max = ``K_MAX`` (tests/test_coalition_paths_aco.py holds them equal),
+  which is not called here because it costs ~0.5 s per hard case.
 
 Geometry conventions (model.py): a strike entry pose is the stand-off point L^s from the target at
 the attack bearing, heading to the target; recon and assessment arcs start on their circle
