@@ -109,6 +109,7 @@ STOCK_PARAMS: dict[str, dict[str, tuple[float, int] | str]] = {
         "PTCH_LIM_MAX_DEG": (20.0, REAL32),  # [deg]
         "PTCH_LIM_MIN_DEG": (-25.0, REAL32),  # [deg]
         "FENCE_ENABLE": (0.0, INT8),
+        "FENCE_ALT_MAX": (100.0, REAL32),  # [m]
         "FS_SHORT_ACTN": (0.0, INT8),
         "FS_LONG_ACTN": (0.0, INT8),
         "BATT_CAPACITY": (3300.0, INT32),  # [mAh]
@@ -129,6 +130,7 @@ STOCK_PARAMS: dict[str, dict[str, tuple[float, int] | str]] = {
         "NAV_RCL_ACT": (2.0, INT32),  # RC loss: return
         "GF_ACTION": (2.0, INT32),  # geofence breach: hold
         "GF_MAX_HOR_DIST": (0.0, REAL32),  # [m], 0: off
+        "GF_MAX_VER_DIST": (0.0, REAL32),  # [m], 0: off
     },
 }
 

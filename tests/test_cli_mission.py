@@ -255,6 +255,26 @@ def test_fleet_upload_from_plan_json(fleet, tmp_path, capsys):
     assert capsys.readouterr().out.count("ACCEPTED") == 2
 
 
+def test_an_upload_with_a_scenario_sets_the_fence_ceiling_as_each_autopilot_keeps_it(fleet, tmp_path, capsys):
+    plan_path = make_plan(tmp_path, sysids=(1, 2))
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(SCENARIO + "z = [0.0, 60.0]\n")  # [bounds] z: the ceiling above home
+    connects = [a for s in (1, 2) for a in ("--connect", url(fleet, s))]
+    argv = ["upload", *connects, "--sysid", "1,2", "--force", str(plan_path), "--scenario", str(scenario)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "vehicle 1: fence ceiling FENCE_ALT_MAX = 60 m above home" in out  # ArduCopter (AC_Fence)
+    assert "vehicle 2: fence ceiling GF_MAX_VER_DIST = 60 m above home" in out  # PX4's geofence
+    ceilings = fleet.call(
+        lambda: (fleet.vehicle(1).params["FENCE_ALT_MAX"], fleet.vehicle(2).params["GF_MAX_VER_DIST"])
+    )
+    assert ceilings == (60.0, 60.0)
+    low = tmp_path / "low.toml"
+    low.write_text(SCENARIO + "z = [0.0, 22.0]\n")  # the plan climbs to 25 m
+    assert main([*argv[:-1], str(low)]) == 2
+    assert "climbs to 25.0 m above home, over the fence ceiling 22.0 m" in capsys.readouterr().err
+
+
 def test_fleet_arguments_are_checked(tmp_path, capsys):
     plan_path = make_plan(tmp_path)
     wpl = tmp_path / "m.waypoints"

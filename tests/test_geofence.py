@@ -3,6 +3,7 @@ breaches (a 2-D exclusion circle over a tower the plan overflies stopped the dem
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -38,6 +39,22 @@ def test_no_vehicle_breaches_its_own_fence_where_one_fence_for_all_did(demo):
                 np.hypot(vp.path[:, 0] - tower.x, vp.path[:, 1] - tower.y) < tower.radius_m + tower.buffer_m
             )
             assert inside.any() and vp.path[inside, 2].min() > tower.z_max_m, (vp.vehicle_id, name)
+
+
+def test_the_fence_ceiling_is_the_top_bound_above_home_and_a_climb_over_it_breaches(demo):
+    scenario, plan = demo
+    assert "z" not in scenario.bounds and vehicle_geofence(scenario, plan.vehicles[0]).ceiling_m is None
+    scenario = copy.deepcopy(scenario)
+    top = max(float(vp.path[:, 2].max()) for vp in plan.vehicles) + 1.0
+    scenario.bounds["z"] = (0.0, top)
+    for vp in plan.vehicles:
+        fence = vehicle_geofence(scenario, vp)
+        assert fence.ceiling_m == top and breaches(fence, vp) == []  # off a site, home = the origin's ground
+        high = copy.deepcopy(vp)
+        high.path[len(high.path) // 2, 2] = top + 5.0
+        assert breaches(fence, high) == [
+            f"climbs to {top + 5:.1f} m above home, over the fence ceiling {top:.1f} m"
+        ]
 
 
 def test_export_writes_each_vehicle_its_own_fence_and_refuses_a_plan_out_of_bounds(demo, tmp_path, capsys):

@@ -32,6 +32,7 @@ FAMILY = ArduCopter(
     land_mode="LAND",
     stack="ArduPilot",
     signing_note=SIGNING_NOTE,
+    fence_alt_param="FENCE_ALT_MAX",  # AC_Fence
     readback="ARDUCOPTER",
     stores_as_received=frozenset({0, 2}),  # MissionItemProtocol_Waypoints / _Rally replace_item
     ramp_params=("WP_ACC", "WP_JERK", 1.0),  # AC_WPNav (4.7+; WPNAV_ACCEL [cm/s^2] before)

@@ -47,6 +47,7 @@ FAMILY = ArduPlane(
     land_mode=None,
     stack="ArduPilot",
     signing_note=SIGNING_NOTE,
+    fence_alt_param="FENCE_ALT_MAX",  # AC_Fence
     readback="ARDUPLANE",
     stores_as_received=frozenset({0, 2}),  # MissionItemProtocol_Waypoints / _Rally replace_item
     # refuses a DO_CHANGE_SPEED airspeed outside [AIRSPEED_MIN, AIRSPEED_MAX] (commands_logic.cpp

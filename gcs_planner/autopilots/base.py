@@ -69,6 +69,7 @@ class AutopilotQuirks:
     params_bytewise: bool = False  # PARAM_VALUE integers sent bytewise, not cast to float (MAVProxy)
     stack: str = ""  # the name QGroundControl writes as a parameter file's "Stack"
     signing_note: str | None = None  # what signing leaves open on this autopilot, said after set-up
+    fence_alt_param: str | None = None  # the fence's ceiling [m above home] (a fence item cannot hold it)
     fallback: ClassVar[bool] = False  # asked after every other family (it matches any HEARTBEAT)
 
     def matches(self, autopilot: int | None, mav_type: int | None) -> bool:

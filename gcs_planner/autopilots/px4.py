@@ -49,4 +49,5 @@ FAMILY = Px4(
     ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO", 1.0),  # mc_pos_control / FlightTaskAuto
     params_bytewise=True,  # MAVLinkParameters: integers memcpy'd into param_value
     stack="PX4",
+    fence_alt_param="GF_MAX_VER_DIST",  # geofence: max vertical distance from home
 )

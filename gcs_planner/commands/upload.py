@@ -25,7 +25,7 @@ import asyncio
 import time
 from typing import TYPE_CHECKING
 
-from gcs_planner.autopilots import Conventions
+from gcs_planner.autopilots import AutopilotQuirks, Conventions, quirks_for
 from gcs_planner.commands._mission_cli import (
     add_connection_arguments,
     add_force_argument,
@@ -41,6 +41,7 @@ from gcs_planner.core.validation import number_flag
 from gcs_planner.mavlink.errors import MissionRejectedError
 from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
 from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.params import set_param
 from gcs_planner.missions.files import (
     MissionFile,
     load_plan_json,
@@ -139,6 +140,14 @@ class UploadSource:
         vehicle_ids = [self.args.vehicle] if self.args.vehicle else None  # select_vehicles words errors
         return select_vehicles(self.plan, vehicle_ids, sysid=None if vehicle_ids else sysid)[0]
 
+    def fence_ceiling(self, sysid: int) -> float | None:
+        """--scenario's fence ceiling for vehicle ``sysid`` [m above its home]; None without one."""
+        if self.scenario is None:
+            return None
+        from gcs_planner.safety.geofence import vehicle_geofence
+
+        return vehicle_geofence(self.scenario, self.vehicle(sysid)).ceiling_m
+
     def mission_file(self, autopilot: str, sysid: int) -> MissionFile:
         """FILE for vehicle ``sysid`` with ``autopilot``'s conventions."""
         vp = self.vehicle(sysid)
@@ -234,7 +243,21 @@ async def _upload_one(args: argparse.Namespace, source: UploadSource) -> int:
                 f"{name:<8} {len(items):>6} {'ACCEPTED':<10} {result.opaque_id:>10} {elapsed_s:>7.2f}"
                 f" {'yes' if result.verified else 'no'}"
             )
+        family = quirks_for(heartbeat.autopilot, heartbeat.type)
+        if line := await _set_ceiling(link, args.sysid, family, source):
+            print(line)
     return 0
+
+
+async def _set_ceiling(link, sysid: int, family: AutopilotQuirks, source: UploadSource) -> str | None:
+    """Set the fence's ceiling as the vehicle's autopilot keeps it (a fence item has no altitude);
+    the line that says so. Nothing without --scenario, a [bounds] z or such a parameter."""
+    ceiling = source.fence_ceiling(sysid)
+    name = family.fence_alt_param
+    if ceiling is None or name is None:
+        return None
+    value = await set_param(link, sysid, name, ceiling)
+    return f"vehicle {sysid}: fence ceiling {name} = {value:g} m above home"
 
 
 async def _upload_many(args: argparse.Namespace, sysids: list[int], source: UploadSource) -> int:
@@ -260,10 +283,15 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int], source: Uplo
                     compid=args.compid,
                     verify=args.verify,
                 )
+        uploaded = [s for s in sysids if all(per[s].ok for per in results.values())]
+        families = {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in uploaded}
+        ceilings = await asyncio.gather(*(_set_ceiling(link, s, families[s], source) for s in uploaded))
     print(
         f"{'sysid':>5} {'list':<8} {'items':>6} {'result':<10} {'tries':>5} {'opaque_id':>10} {'time_s':>7}"
     )
     failures = []
+    for line in filter(None, ceilings):
+        print(line)
     for sysid in sysids:
         for mission_type, per_vehicle in results.items():
             r = per_vehicle[sysid]

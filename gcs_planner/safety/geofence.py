@@ -1,13 +1,15 @@
 """The geofence a vehicle gets: what its own plan keeps out of, so that a fenced vehicle flying its
 plan never breaches.
 
-A MAVLink fence is 2-D (inclusion / exclusion polygons and circles; the altitude limit is a parameter),
-so an obstacle with a top cannot be fenced above it. A planner may fly over a tower (the demo's
-uav1 passes a 60 m tower at 64.8 m, 20 m from its axis): fenced for every vehicle at its footprint,
-that vehicle breached and returned home. Each vehicle's fence therefore holds the scenario's bounds
-and an exclusion circle for each obstacle whose footprint its path (route and land approach)
-stays out of; the obstacles it overflies are left out of its fence, said by
-``overflown``, and kept clear by the plan's own 3-D check (geometry/separation.py). ``breaches``
+A MAVLink fence is 2-D (inclusion / exclusion polygons and circles; the altitude limit is a
+parameter: ``ceiling_m``, the scenario's top bound above the vehicle's home, which upload sets as
+the autopilot's fence altitude parameter), so an obstacle with a top cannot be fenced above it.
+A planner may fly over a tower (the demo's uav1 passes a 60 m tower at 64.8 m, 20 m from its
+axis): fenced for every vehicle at its footprint, that vehicle breached and returned home. Each
+vehicle's fence therefore holds the scenario's bounds and an exclusion circle for each obstacle
+whose footprint its path (route and land approach) stays out of; the obstacles it overflies are
+left out of its fence, said by ``overflown``, and kept clear by the plan's own 3-D check
+(safety/separation.py). ``breaches``
 is the check that the fence and the plan agree: empty for a fence built here, and what export /
 upload refuse on for a fence built otherwise.
 
@@ -59,11 +61,14 @@ class ExclusionPolygon:
 @dataclass(frozen=True)
 class Geofence:
     """An inclusion polygon ((N, 2) ENU [m] vertices, counter-clockwise; None: none), exclusion
-    circles and exclusion polygons."""
+    circles and polygons, and the ceiling [m above the vehicle's home, at ``home_z_m`` above the
+    origin] (None: none)."""
 
     inclusion: np.ndarray | None
     exclusions: list[Exclusion] = field(default_factory=list)
     exclusion_polygons: list[ExclusionPolygon] = field(default_factory=list)
+    ceiling_m: float | None = None
+    home_z_m: float = 0.0
 
 
 def _obstacles(scenario: Scenario) -> list[Exclusion]:
@@ -104,11 +109,22 @@ def vehicle_geofence(scenario: Scenario, vp: VehiclePlan | None = None) -> Geofe
         inclusion = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])  # counter-clockwise
     circles = _obstacles(scenario)
     polygons = _zones(scenario)
+    home_z = _home_z(scenario, vp) if vp is not None else 0.0
+    ceiling = bounds["z"][1] - home_z if "z" in bounds else None
     if vp is not None:
         outline = flown_outline(vp)
         circles = [c for c in circles if _segment_distances(outline, c.x, c.y) > c.radius_m]
         polygons = [z for z in polygons if not _crosses(outline, z.vertices)]
-    return Geofence(inclusion, circles, polygons)
+    return Geofence(inclusion, circles, polygons, ceiling, home_z)
+
+
+def _home_z(scenario: Scenario, vp: VehiclePlan) -> float:
+    """The vehicle's home altitude [m above the origin]: the ground at its start (the origin's
+    ground off a site)."""
+    if scenario.site is None:
+        return 0.0
+    x, y = vp.path[0, :2]
+    return float(scenario.site.ground(np.array([x]), np.array([y]))[0])
 
 
 def _zones(scenario: Scenario) -> list[ExclusionPolygon]:
@@ -166,6 +182,8 @@ def breaches(fence: Geofence, vp: VehiclePlan) -> list[str]:
         for z in fence.exclusion_polygons
         if _crosses(outline, z.vertices)
     ]
+    if fence.ceiling_m is not None and (top := float(vp.path[:, 2].max()) - fence.home_z_m) > fence.ceiling_m:
+        found.append(f"climbs to {top:.1f} m above home, over the fence ceiling {fence.ceiling_m:.1f} m")
     return found
 
 
