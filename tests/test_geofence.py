@@ -90,3 +90,14 @@ def test_export_writes_each_vehicle_its_own_fence_and_refuses_a_plan_out_of_boun
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "leaves the inclusion fence" in err[0], err
     assert not (tmp_path / "o2").exists() or not any((tmp_path / "o2").iterdir())
+    assert "fence ceiling" not in printed  # no [bounds] z, no ceiling
+    capped = tmp_path / "capped.toml"
+    capped.write_text(text.replace("x = [-100.0, 600.0]", "x = [-100.0, 600.0]\nz = [0.0, 150.0]"))
+    assert (
+        main(["export", str(tmp_path / "plan.json"), "--scenario", str(capped), "-o", str(tmp_path / "o3")])
+        == 0
+    )
+    printed = capsys.readouterr().out
+    assert printed.count(
+        "fence ceiling 150 m above home: not in the file, the parameter FENCE_ALT_MAX"
+    ) == len(plan.vehicles)

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 import argparse
 
-from gcs_planner.autopilots import Conventions
+from gcs_planner.autopilots import Conventions, quirks_named
 from gcs_planner.commands._mission_cli import print_losses
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.validation import atomic_write, file_stem, not_an_input, output_dir, unique
 from gcs_planner.missions.files import load_plan_json, plan_mission_file, save_mission_file, select_vehicles
 from gcs_planner.missions.items import AUTOPILOTS, scenario_fence_items, scenario_rally_items
 from gcs_planner.planning import load_scenario
-from gcs_planner.safety.geofence import check_fence, overflown
+from gcs_planner.safety.geofence import check_fence, overflown, vehicle_geofence
 
 SUFFIX = {"qgc": ".plan", "wpl": ".waypoints"}
 
@@ -66,5 +66,9 @@ def run(args: argparse.Namespace) -> int:
             print(
                 f"  {vp.vehicle_id} flies over {', '.join(over)}: not in its fence (a MAVLink fence is 2-D)"
             )
+        if scenario is not None and (ceiling := vehicle_geofence(scenario, vp).ceiling_m) is not None:
+            param = quirks_named(args.autopilot, vp.vehicle_type == "fixed_wing").fence_alt_param
+            print(f"  {vp.vehicle_id} fence ceiling {ceiling:g} m above home: not in the file, the parameter"
+                  f" {param} (upload --scenario sets it)")  # fmt: skip
         print_losses(losses)
     return 0
