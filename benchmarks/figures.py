@@ -144,7 +144,7 @@ FIGURES: tuple[Figure, ...] = (
     ),
     Figure(
         "mcap_writers",
-        "MCAP writers: ours against the stock Python writer",
+        "MCAP writers: ours against the stock Python writer and foxglove-sdk's",
         ("python benchmarks/mcap_writers.py",),
         quick=("python benchmarks/mcap_writers.py --messages 20000 --repeat 1",),
         minutes=0.5,

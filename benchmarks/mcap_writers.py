@@ -1,5 +1,6 @@
-"""MCAP writers on the same messages, in one run: this project's ChunkedMcapWriter (now with message
-indexes) against the stock Python writer (mcap.writer.Writer), both zstd, chunks of ~1 MB.
+"""MCAP writers on the same messages, in one run: this project's ChunkedMcapWriter (with message
+indexes) against the stock Python writer (mcap.writer.Writer) and foxglove-sdk's (Rust, through
+foxglove.open_mcap; its compression on the calling thread), all zstd, chunks of ~1 MB.
 
     python benchmarks/mcap_writers.py [--messages 200000] [--channels 40] [--repeat 3]
 
@@ -18,6 +19,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import foxglove
+from foxglove.mcap import MCAPCompression, MCAPWriteOptions
 from mcap.writer import CompressionType, Writer
 
 from gcs_planner.telemetry.mcap_writer import ChunkedMcapWriter
@@ -54,6 +57,21 @@ def stock(rows, channels: int, path: Path) -> None:
         w.finish()
 
 
+def foxglove_sdk(rows, channels: int, path: Path) -> None:
+    context = foxglove.Context()
+    zstd = MCAPCompression.Zstd
+    options = MCAPWriteOptions(compression=zstd, chunk_size=CHUNK_BYTES, compression_threads=0)
+    writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=context, writer_options=options)
+    schema = foxglove.Schema(name="mavlink", encoding="", data=b"")
+    topics = [
+        foxglove.Channel(f"/mavlink/{c}/raw", schema=schema, message_encoding="mavlink", context=context)
+        for c in range(channels)
+    ]
+    for channel, t_ns, data in rows:
+        topics[channel - 1].log(data, log_time=t_ns)
+    writer.close()
+
+
 def best_cpu_s(write, rows, channels: int, repeat: int) -> float:
     times = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -73,13 +91,16 @@ def main() -> None:
     rows = messages(args.messages, args.channels)
     ours_s = best_cpu_s(ours, rows, args.channels, args.repeat)
     stock_s = best_cpu_s(stock, rows, args.channels, args.repeat)
+    sdk_s = best_cpu_s(foxglove_sdk, rows, args.channels, args.repeat)
     machine = platform.processor() or platform.machine()
     load = os.getloadavg()[0]
     print(f"machine: {machine}, {os.cpu_count()} cores, load {load:.1f}, {time.strftime('%Y-%m-%d')}\n")
     print("| writer | msg/s (CPU) |\n|---|---:|")
     print(f"| ChunkedMcapWriter (message indexes) | {args.messages / ours_s:,.0f} |")
     print(f"| mcap.writer.Writer (stock) | {args.messages / stock_s:,.0f} |")
+    print(f"| foxglove-sdk MCAPWriter | {args.messages / sdk_s:,.0f} |")
     print(f"| ratio ours / stock | {stock_s / ours_s:.2f}x |")
+    print(f"| ratio ours / foxglove-sdk | {sdk_s / ours_s:.2f}x |")
 
 
 if __name__ == "__main__":
