@@ -1,28 +1,27 @@
 """The autopilot families the tool flies, one module each, chosen from the HEARTBEAT.
 
 As in Skybrush server's autopilot registry, a vehicle's family comes from its HEARTBEAT fields
-(MAV_AUTOPILOT, MAV_TYPE): each family's ``matches`` is asked in ``FAMILIES`` order, the fallback
-last; a command-line flag only decides for a vehicle that has not said what it is. A family is a
-module here with ``FAMILY`` (base.py says what it holds) named in ``FAMILY_MODULES``;
+(MAV_AUTOPILOT, MAV_TYPE): each family's ``matches`` is asked in ``FAMILIES`` order, the generic
+one last; a command-line flag only decides for a vehicle that has not said what it is. A family is
+a module here with ``FAMILY`` (base.py says what it holds) and its place in ``FAMILIES``;
 docs/autopilots.md shows how to add one. What each autopilot stores of an item is readback.py.
 """
 
 from __future__ import annotations
 
-from importlib import import_module
-
+from gcs_planner.autopilots.arducopter import FAMILY as ARDUCOPTER
+from gcs_planner.autopilots.arduplane import FAMILY as ARDUPLANE
 from gcs_planner.autopilots.base import AutopilotQuirks, Conventions, VehiclePort
+from gcs_planner.autopilots.generic import FAMILY as GENERIC
+from gcs_planner.autopilots.px4 import FAMILY as PX4
 
 __all__ = [
     "ARDUCOPTER", "ARDUPLANE", "FAMILIES", "GENERIC", "PX4", "AutopilotQuirks", "Conventions", "VehiclePort",
     "mode_of", "quirks_for", "quirks_named",
 ]  # fmt: skip
 
-FAMILY_MODULES = ("arducopter", "arduplane", "px4", "generic")
-FAMILIES: tuple[AutopilotQuirks, ...] = tuple(
-    sorted((import_module(f"{__name__}.{m}").FAMILY for m in FAMILY_MODULES), key=lambda f: f.fallback)
-)
-ARDUCOPTER, ARDUPLANE, PX4, GENERIC = (import_module(f"{__name__}.{m}").FAMILY for m in FAMILY_MODULES)
+# asked in this order: a family that would also match another's HEARTBEAT comes before it
+FAMILIES: tuple[AutopilotQuirks, ...] = (ARDUCOPTER, ARDUPLANE, PX4, GENERIC)
 
 
 def quirks_for(autopilot: int | None, mav_type: int | None = None) -> AutopilotQuirks:

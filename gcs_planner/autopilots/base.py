@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import ClassVar, Protocol
+from typing import Protocol
 
 __all__ = ["AutopilotQuirks", "Conventions", "VehiclePort"]
 
@@ -70,7 +70,6 @@ class AutopilotQuirks:
     stack: str = ""  # the name QGroundControl writes as a parameter file's "Stack"
     signing_note: str | None = None  # what signing leaves open on this autopilot, said after set-up
     fence_alt_param: str | None = None  # the fence's ceiling [m above home] (a fence item cannot hold it)
-    fallback: ClassVar[bool] = False  # asked after every other family (it matches any HEARTBEAT)
 
     def matches(self, autopilot: int | None, mav_type: int | None) -> bool:
         """Whether a HEARTBEAT with these MAV_AUTOPILOT and MAV_TYPE fields is this family's."""

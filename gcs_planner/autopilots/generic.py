@@ -12,10 +12,8 @@ __all__ = ["FAMILY"]
 
 @dataclass(frozen=True)
 class Generic(AutopilotQuirks):
-    fallback = True
-
     def matches(self, autopilot: int | None, mav_type: int | None) -> bool:
-        return True
+        return True  # asked last (autopilots.FAMILIES)
 
 
 FAMILY = Generic(
