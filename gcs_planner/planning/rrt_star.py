@@ -57,14 +57,39 @@ def edges_valid(
     """True (...) where segments a -> b (..., 3) clear every obstacle's buffer + margin and stay in band."""
     ok = np.ones(np.shape(a)[:-1], dtype=bool)
     if len(obstacles.radius_m):
-        d = obstacles.cylinder_distances(a, b)
-        ok &= np.all(d > obstacles.radius_m + obstacles.buffer_m + margin_m, axis=-1)
+        ok &= _clear_of_cylinders(obstacles, a, b, margin_m)
     if len(obstacles.dome_radius_m):
         ok &= np.all(obstacles.dome_distances(a, b) > obstacles.dome_radius_m + margin_m, axis=-1)
     lo, hi = z_band
     for p in (a, b):
         ok &= (p[..., 2] >= lo - 1e-9) & (p[..., 2] <= hi + 1e-9)
     return ok
+
+
+def _clear_of_cylinders(obstacles: Obstacles, a: np.ndarray, b: np.ndarray, margin_m: float) -> np.ndarray:
+    """True (...) where segments a -> b clear every cylinder's radius + buffer + margin_m.
+
+    Only the (segment, cylinder) pairs whose axis lies within that clearance of the segment's xy
+    bounding box can fail; the exact distance is computed for those alone (most edges have none).
+    """
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    shape = a.shape[:-1]
+    a, b = a.reshape(-1, 3), b.reshape(-1, 3)
+    need = obstacles.radius_m + obstacles.buffer_m + margin_m
+    reach = need + 1e-6  # rounding of a point on the segment
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    cand = (
+        (obstacles.cx > lo[:, :1] - reach)
+        & (obstacles.cx < hi[:, :1] + reach)
+        & (obstacles.cy > lo[:, 1:2] - reach)
+        & (obstacles.cy < hi[:, 1:2] + reach)
+    )
+    edge, cyl = np.nonzero(cand)
+    ok = np.ones(len(a), dtype=bool)
+    if len(edge):
+        blocked = ~(obstacles.cylinder_distances_pairs(a[edge], b[edge], cyl) > need[cyl])
+        ok[edge[blocked]] = False
+    return ok.reshape(shape)
 
 
 def rrt_star(

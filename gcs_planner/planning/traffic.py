@@ -10,9 +10,12 @@ With ``timing_s`` > 0 the closest approach is the one under any relative schedul
 up to its displacement in that time), so a crossing keeps its separation when the vehicles fly
 it that far off their schedules (docs/timing-separation.md). ``timing_s = 0`` is the plain one.
 
-Neighbours are found in a spatial hash of (slice, x cell, y cell) -> a linked list of samples
-(``head`` per hashed cell, ``next_in_cell`` per sample): adding a UAV is a vectorised insertion
-(its samples lie in distinct slices), a query reads the cells around each sample, and the tree
+Neighbours are found in a spatial hash of (x cell, y cell, slice) -> a linked list of entries
+(``head`` per hashed cell, ``entry_next`` per entry): every sample is entered in each cell that
+the square of half-width ``cell_m / 2`` around it meets, so a query within that radius reads the
+one cell its own point lies in (one random read per query instead of four). The table is laid out
+cell-major (a cell's slices are adjacent), so the consecutive slices of one path read nearby
+memory. Adding a UAV is a vectorised insertion (its samples lie in distinct slices); the tree
 rebuilt after every planned UAV (quadratic in the fleet) is gone. At most the four nearest
 traffic samples within reach count per particle sample, nearest first, as a k = 4 nearest-
 neighbour query would return them.
@@ -30,30 +33,34 @@ __all__ = ["TIMING_ERROR_S", "Traffic"]
 # mock (docs/timing-separation.md), the default of the planners' ``timing_error_s``.
 TIMING_ERROR_S = 0.75
 
-_CELL_BITS = 6  # cells per axis and slice in the table: 64, aliased 64 cells apart (extra candidates)
-_CELLS = 1 << 2 * _CELL_BITS
+_CELL_BITS = 6  # cells per axis in the table: 64, aliased 64 cells apart (extra candidates)
+_BLOCKS = 1 << 2 * _CELL_BITS
 _NEAREST = 4  # traffic samples counted per particle sample
 _EMPTY = np.zeros(0, dtype=np.int64)
 
 
-def _key(slices: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
-    """Table index of a (slice, x cell, y cell): one block of cells per slice."""
+def _block(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+    """Table block of an (x cell, y cell)."""
     mask = (1 << _CELL_BITS) - 1
-    return (slices << _CELL_BITS | cy & mask) << _CELL_BITS | cx & mask
+    return (cy & mask) << _CELL_BITS | cx & mask
 
 
 class Traffic:
-    """Timed samples of already-planned UAVs on the shared time grid, hashed by slice and cell."""
+    """Timed samples of already-planned UAVs on the shared time grid, hashed by cell and slice."""
 
     def __init__(self, dt_s: float, cell_m: float = 40.0) -> None:
         self.dt_s, self.cell_m = dt_s, cell_m
+        self.reach_m = 0.5 * cell_m  # the half-width of the square each sample is entered for
         self.n = 0
         self.pos = np.zeros((0, 3))
         self.slice = _EMPTY
         self.sep = np.zeros(0)
         self.next = _EMPTY  # the same vehicle's sample at the next slice (-1 at its last)
-        self.next_in_cell = _EMPTY
-        self.head = np.zeros(0, dtype=np.int32)  # first sample per table cell; grows with the slices
+        self.n_entries = 0
+        self.entry_sample = _EMPTY  # the sample of each hash entry
+        self.entry_next = _EMPTY  # the next entry of the same table cell (-1 at its last)
+        self.slices = 0  # slices per block of the table
+        self.head = np.zeros(0, dtype=np.int32)  # first entry per (block, slice), block-major
         self.v_max = 0.0
         self.sep_max = 0.0
 
@@ -66,11 +73,29 @@ class Traffic:
             return
         new = max(2 * cap, self.n + extra, 1024)
         self.pos = np.concatenate([self.pos, np.zeros((new - cap, 3))])
-        self.slice, self.next, self.next_in_cell = (
-            np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)])
-            for a in (self.slice, self.next, self.next_in_cell)
+        self.slice, self.next = (
+            np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)]) for a in (self.slice, self.next)
         )
         self.sep = np.concatenate([self.sep, np.zeros(new - cap)])
+
+    def _grow_entries(self, extra: int) -> None:
+        cap = len(self.entry_sample)
+        if self.n_entries + extra <= cap:
+            return
+        new = max(2 * cap, self.n_entries + extra, 4096)
+        self.entry_sample, self.entry_next = (
+            np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)])
+            for a in (self.entry_sample, self.entry_next)
+        )
+
+    def _grow_slices(self, needed: int) -> None:
+        """Widen every block of the table to ``needed`` slices or more (a copy, rarely)."""
+        if needed <= self.slices:
+            return
+        wide = max(needed, 2 * self.slices, 256)
+        head = np.full((_BLOCKS, wide), -1, dtype=np.int32)
+        head[:, : self.slices] = self.head.reshape(_BLOCKS, self.slices)
+        self.head, self.slices = head.ravel(), wide
 
     def _cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         c = np.floor(xy / self.cell_m).astype(np.int64)
@@ -83,18 +108,27 @@ class Traffic:
         if not k:
             return
         self._grow(k)
-        if slices.max() >= len(self.head) // _CELLS:
-            extra = (int(slices.max()) + 1) * _CELLS - len(self.head)
-            self.head = np.concatenate([self.head, np.full(extra, -1, dtype=np.int32)])
+        self._grow_slices(int(slices.max()) + 1)
         idx = np.arange(self.n, self.n + k)
         self.pos[idx] = pos
         self.slice[idx] = slices
         self.sep[idx] = sep_m
         self.next[idx[:-1]] = idx[1:]
         self.next[idx[-1]] = -1
-        key = _key(slices, *self._cells(self.pos[idx, :2]))
-        self.next_in_cell[idx] = self.head[key]  # distinct slices, so distinct keys
-        self.head[key] = idx
+        lo_x, lo_y = self._cells(self.pos[idx, :2] - self.reach_m)
+        hi_x, hi_y = self._cells(self.pos[idx, :2] + self.reach_m)
+        for dx in (0, 1):  # the cells the sample's square meets: 1 or 2 per axis (cell = 2 reach)
+            for dy in (0, 1):
+                on = (lo_x + dx <= hi_x) & (lo_y + dy <= hi_y)
+                sample, sl = idx[on], slices[on]
+                key = _block(lo_x[on] + dx, lo_y[on] + dy) * self.slices + sl
+                m = len(sample)
+                self._grow_entries(m)
+                ent = np.arange(self.n_entries, self.n_entries + m)
+                self.entry_sample[ent] = sample
+                self.entry_next[ent] = self.head[key]  # distinct slices, so distinct keys
+                self.head[key] = ent
+                self.n_entries += m
         self.n += k
         self.v_max = max(self.v_max, speed)
         self.sep_max = max(self.sep_max, sep_m)
@@ -103,30 +137,43 @@ class Traffic:
         self, slices: np.ndarray, pos: np.ndarray, radius_m: float
     ) -> tuple[np.ndarray, np.ndarray]:
         """Pairs (query row, traffic sample) of the same slice closer than ``radius_m``: the
-        ``_NEAREST`` nearest per query, ordered by query then distance. slices (Q,), pos (Q, 3)."""
-        span = int(np.ceil(2.0 * radius_m / self.cell_m)) + 1  # cells per axis that [x - r, x + r] meets
-        cx, cy = self._cells(pos[:, :2] - radius_m)
-        off = np.arange(span)
-        ox, oy = (o.ravel() for o in np.meshgrid(off, off, indexing="ij"))
-        key = _key(slices[:, None], cx[:, None] + ox, cy[:, None] + oy).ravel()
-        inside = np.flatnonzero(key < len(self.head))  # no traffic after its last slice
-        cand = self.head[key[inside]].astype(np.int64)
-        q = inside // len(ox)
+        ``_NEAREST`` nearest per query, ordered by query then distance (then sample). slices (Q,),
+        pos (Q, 3)."""
+        extra = max(radius_m - self.reach_m, 0.0)  # beyond what a sample's entries cover
+        span = int(np.ceil(2.0 * extra / self.cell_m)) + 1 if extra > 0 else 1
+        cx, cy = self._cells(pos[:, :2] - extra)
+        inside = np.flatnonzero((slices >= 0) & (slices < self.slices))  # no traffic after its last slice
+        cx, cy, sl = cx[inside], cy[inside], slices[inside]
+        if span == 1:
+            q = inside
+            cand = self.head[_block(cx, cy) * self.slices + sl].astype(np.int64)
+        else:
+            off = np.arange(span)
+            ox, oy = (o.ravel() for o in np.meshgrid(off, off, indexing="ij"))
+            key = _block(cx[:, None] + ox, cy[:, None] + oy) * self.slices + sl[:, None]
+            cand = self.head[key.ravel()].astype(np.int64)
+            q = np.repeat(inside, len(ox))
         rows, samples = [], []
         while len(q):
             live = cand >= 0
             q, cand = q[live], cand[live]
             rows.append(q)
-            samples.append(cand)
-            cand = self.next_in_cell[cand]
+            samples.append(self.entry_sample[cand])
+            cand = self.entry_next[cand]
+        if not rows:
+            return _EMPTY, _EMPTY
         row, j = np.concatenate(rows), np.concatenate(samples)
         d2 = np.zeros(len(j))
         for axis in range(3):  # axis by axis: a reduction over a last axis of 3 is slow
             d2 += (self.pos[j, axis] - pos[row, axis]) ** 2
         near = d2 < radius_m**2
         row, j, d = row[near], j[near], d2[near]
-        order = np.lexsort((d, row))
+        order = np.lexsort((j, d, row))
         row, j = row[order], j[order]
+        if span > 1:  # a sample entered in several of the cells read
+            fresh = np.ones(len(row), dtype=bool)
+            fresh[1:] = (row[1:] != row[:-1]) | (j[1:] != j[:-1])
+            row, j = row[fresh], j[fresh]
         first = np.searchsorted(row, row)  # start of each query's run
         keep = np.arange(len(row)) - first < _NEAREST
         return row[keep], j[keep]
