@@ -78,7 +78,7 @@ from scipy.spatial import cKDTree
 from gcs_planner.config import Count, Distance, Fraction, NonNegative, PositiveDistance
 from gcs_planner.errors import UserError
 from gcs_planner.geo import wrap_pi
-from gcs_planner.geometry.dubins import advance, segment_starts, shortest_batch
+from gcs_planner.geometry.dubins import segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.geometry.separation import check_plan
 from gcs_planner.plan import Plan, VehiclePlan
@@ -197,6 +197,15 @@ class Decoded:
     def total(self) -> np.ndarray:
         return self.cum[:, -1]
 
+    @functools.cached_property
+    def segments(self) -> tuple[np.ndarray, ...]:
+        """Per segment (index leg * 3 + k), flat: start x, y, sin and cos of the start heading,
+        curvature; per leg: the three segment ends. Contiguous columns, gathered by sampling."""
+        st = self.starts.reshape(-1, 3)
+        h = st[:, 2]
+        ends = self.seg_end.T.copy()
+        return st[:, 0].copy(), st[:, 1].copy(), np.sin(h), np.cos(h), self.kappa.ravel(), *ends
+
 
 def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
     """Particles (P, D) -> polyline + Dubins legs with bisector headings."""
@@ -225,27 +234,48 @@ def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
 
 
 def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
-    """Positions (P, K, 3) at 3-D arc lengths s (P, K) [m] (clipped to each path)."""
+    """Positions (P, K, 3) at 3-D arc lengths s (P, K) [m] (clipped to each path).
+
+    Each sample's leg and Dubins segment are found by comparisons with the junctions, then its
+    position is integrated from the segment's start (dubins.advance's formulas; the sine and cosine
+    of a segment's start heading are computed once per segment, the end heading's only on arcs).
+    """
     p, k = s.shape
     n_leg = dec.lh.shape[1]
     s = np.clip(s, 0.0, dec.total[:, None])
     leg = np.zeros(s.shape, dtype=np.intp)  # legs ended before s, one junction at a time (a
     for c in dec.cum[:, 1:-1].T:  # reduction over a short last axis is slow)
         leg += s > c[:, None]
-    leg = np.minimum(leg, n_leg - 1)
+    np.minimum(leg, n_leg - 1, out=leg)
     rows = np.arange(p)[:, None]
-    l3 = dec.l3[rows, leg]
-    f = np.where(l3 > 0, (s - dec.cum[rows, leg]) / np.where(l3 > 0, l3, 1.0), 0.0)
-    z0 = dec.pts[rows, leg, 2]
-    z = z0 + f * (dec.pts[rows, leg + 1, 2] - z0)
-    flat = (rows * n_leg + leg).ravel()
-    sh = (f * dec.lh[rows, leg]).ravel()
-    bounds = dec.seg_end[flat]
-    sh = np.minimum(sh, bounds[:, 2])
-    si = (sh > bounds[:, 0]).astype(int) + (sh > bounds[:, 1])
-    seg_start = np.where(si == 0, 0.0, bounds[np.arange(len(flat)), np.maximum(si - 1, 0)])
-    xy = advance(dec.starts[flat, si], dec.kappa[flat, si], sh - seg_start)[:, :2]
-    return np.concatenate([xy.reshape(p, k, 2), z[..., None]], axis=2)
+    flat = leg + rows * n_leg  # leg index into (P, W-1) arrays
+    node = flat + rows  # its first waypoint's index into (P, W) arrays
+    l3 = dec.l3.ravel()[flat]
+    f = np.where(l3 > 0, (s - dec.cum.ravel()[node]) / np.where(l3 > 0, l3, 1.0), 0.0)
+    pz = np.ascontiguousarray(dec.pts[..., 2]).ravel()
+    z0 = pz[node]
+    out = np.empty((p, k, 3))
+    out[..., 2] = z0 + f * (pz[node + 1] - z0)
+    sh = (f * dec.lh.ravel()[flat]).ravel()
+    flat = flat.ravel()
+    x0, y0, sin0, cos0, kappa, e0, e1, e2 = dec.segments
+    e0, e1 = e0[flat], e1[flat]
+    np.minimum(sh, e2[flat], out=sh)
+    after0, after1 = sh > e0, sh > e1
+    seg = flat * 3 + after0 + after1
+    ds = sh - np.where(after0, np.where(after1, e1, e0), 0.0)
+    sin_h, cos_h = sin0[seg], cos0[seg]
+    x = x0[seg] + ds * cos_h  # straight segments
+    y = y0[seg] + ds * sin_h
+    arc = np.flatnonzero(kappa[seg] != 0.0)
+    if len(arc):
+        kap = kappa[seg[arc]]
+        h = dec.starts.reshape(-1, 3)[seg[arc], 2] + kap * ds[arc]
+        x[arc] = x0[seg[arc]] + (np.sin(h) - sin_h[arc]) / kap
+        y[arc] = y0[seg[arc]] - (np.cos(h) - cos_h[arc]) / kap
+    out[..., 0] = x.reshape(p, k)
+    out[..., 1] = y.reshape(p, k)
+    return out
 
 
 @dataclass(frozen=True)
