@@ -287,12 +287,16 @@ class _Raster:
     cell_m: float
     mask: np.ndarray  # (nx, ny) bool
 
-    def covers(self, xy: np.ndarray) -> np.ndarray:
-        c = np.floor((xy - self.lo) / self.cell_m).astype(np.int64)
-        inside = (c >= 0).all(axis=1) & (c[:, 0] < self.mask.shape[0]) & (c[:, 1] < self.mask.shape[1])
-        out = np.zeros(len(xy), dtype=bool)
-        out[inside] = self.mask[c[inside, 0], c[inside, 1]]
-        return out
+    @functools.cached_property
+    def _padded(self) -> np.ndarray:
+        """The mask with a border of empty cells, flat: clipped cell indices land there."""
+        return np.pad(self.mask, 1).ravel()
+
+    def covers(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        nx, ny = self.mask.shape
+        cx = np.clip(np.floor((x - self.lo[0]) / self.cell_m), -1, nx) + 1  # -1 and n: the border
+        cy = np.clip(np.floor((y - self.lo[1]) / self.cell_m), -1, ny) + 1
+        return np.take(self._padded, (cx * (ny + 2) + cy).astype(np.int64), mode="clip")  # NaN: 0, empty
 
 
 @functools.lru_cache(maxsize=16)
@@ -330,7 +334,7 @@ class CostModel:
         p, k, _ = mid.shape
         flat = mid.reshape(-1, 3)
         n_nb = min(4, len(self.obs.cx))
-        close = np.flatnonzero(self._near.covers(flat[:, :2]))  # the tree is asked about these only
+        close = np.flatnonzero(self._near.covers(flat[:, 0], flat[:, 1]))  # the tree is asked about these
         dxy, j = self._obs_tree.query(flat[close, :2], k=n_nb, distance_upper_bound=self._reach)
         dxy, j = dxy.reshape(len(close), n_nb), j.reshape(len(close), n_nb)
         row, col = np.nonzero(np.isfinite(dxy))

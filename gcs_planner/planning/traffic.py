@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gcs_planner.geometry.timing import closest_under_timing
+from gcs_planner.geometry.timing import closest_under_timing_t
 
 __all__ = ["TIMING_ERROR_S", "Traffic"]
 
@@ -52,7 +52,7 @@ class Traffic:
         self.dt_s, self.cell_m = dt_s, cell_m
         self.reach_m = 0.5 * cell_m  # the half-width of the square each sample is entered for
         self.n = 0
-        self.pos = np.zeros((0, 3))
+        self.xyz = np.zeros((3, 0))  # sample positions, component-first
         self.slice = _EMPTY
         self.sep = np.zeros(0)
         self.next = _EMPTY  # the same vehicle's sample at the next slice (-1 at its last)
@@ -72,7 +72,7 @@ class Traffic:
         if self.n + extra <= cap:
             return
         new = max(2 * cap, self.n + extra, 1024)
-        self.pos = np.concatenate([self.pos, np.zeros((new - cap, 3))])
+        self.xyz = np.concatenate([self.xyz, np.zeros((3, new - cap))], axis=1)
         self.slice, self.next = (
             np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)]) for a in (self.slice, self.next)
         )
@@ -110,13 +110,14 @@ class Traffic:
         self._grow(k)
         self._grow_slices(int(slices.max()) + 1)
         idx = np.arange(self.n, self.n + k)
-        self.pos[idx] = pos
+        pos = np.asarray(pos, dtype=float)
+        self.xyz[:, idx] = pos.T
         self.slice[idx] = slices
         self.sep[idx] = sep_m
         self.next[idx[:-1]] = idx[1:]
         self.next[idx[-1]] = -1
-        lo_x, lo_y = self._cells(self.pos[idx, :2] - self.reach_m)
-        hi_x, hi_y = self._cells(self.pos[idx, :2] + self.reach_m)
+        lo_x, lo_y = self._cells(pos[:, :2] - self.reach_m)
+        hi_x, hi_y = self._cells(pos[:, :2] + self.reach_m)
         for dx in (0, 1):  # the cells the sample's square meets: 1 or 2 per axis (cell = 2 reach)
             for dy in (0, 1):
                 on = (lo_x + dx <= hi_x) & (lo_y + dy <= hi_y)
@@ -165,7 +166,7 @@ class Traffic:
         row, j = np.concatenate(rows), np.concatenate(samples)
         d2 = np.zeros(len(j))
         for axis in range(3):  # axis by axis: a reduction over a last axis of 3 is slow
-            d2 += (self.pos[j, axis] - pos[row, axis]) ** 2
+            d2 += (self.xyz[axis][j] - pos[row, axis]) ** 2
         near = d2 < radius_m**2
         row, j, d = row[near], j[near], d2[near]
         order = np.lexsort((j, d, row))
@@ -199,28 +200,37 @@ class Traffic:
             return zero, zero.copy()
         v_max = max(self.v_max, 1e-6)
         radius = max(self.sep_max, sep_m) + margin_m + timing_s * v_max + 2.0 * v_max * self.dt_s
-        row, j = self.neighbours(np.tile(slices, p)[idx], pos.reshape(-1, 3)[idx], radius)
+        flat_pos = pos.reshape(-1, 3)
+        row, j = self.neighbours(np.tile(slices, p)[idx], flat_pos[idx], radius)
         if not len(row):
             return zero, zero.copy()
-        flat = idx[row]
-        part, ks = np.divmod(flat, k)
-        a0 = pos[part, ks]
-        b0 = self.pos[j]
+        # vectors component-first (3, pairs): a reduction over a last axis of 3 is slow
+        flat = idx[row]  # particle sample = particle * k + slice offset
+        part = flat // k
         nxt = self.next[j]
-        has_next = (ks + 1 < k) & valid[part, np.minimum(ks + 1, k - 1)] & (nxt >= 0)
-        a1 = np.where(has_next[:, None], pos[part, np.minimum(ks + 1, k - 1)], a0)
-        b1 = np.where(has_next[:, None], self.pos[np.where(nxt >= 0, nxt, j)], b0)
+        after = np.minimum(flat + 1, len(flat_pos) - 1)
+        has_next = (flat - part * k + 1 < k) & valid.ravel()[after] & (nxt >= 0)
+        a0 = flat_pos[flat].T
+        b0 = self.xyz[:, j]
+        a1 = np.where(has_next, flat_pos[after].T, a0)
+        b1 = np.where(has_next, self.xyz[:, np.where(nxt >= 0, nxt, j)], b0)
         d0 = b0 - a0
         dv = (b1 - a1) - d0
-        vv = np.sum(dv * dv, axis=1)
-        tau = np.clip(-np.sum(d0 * dv, axis=1) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
-        dmin = np.linalg.norm(d0 + tau[:, None] * dv, axis=1)
+        vv = _dot(dv, dv)
+        tau = np.clip(-_dot(d0, dv) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
+        closest = d0 + tau * dv
+        dmin = np.sqrt(_dot(closest, closest))
         need = np.maximum(self.sep[j], sep_m) + margin_m
         if timing_s > 0:  # under any relative schedule error up to timing_s (geometry/timing.py)
             w = (b1 - b0) * (timing_s / self.dt_s)
-            near = dmin - np.linalg.norm(w, axis=1) < need  # a shift by w moves it at most |w|
-            dmin[near] = closest_under_timing(d0[near], dv[near], w[near])
+            near = dmin - np.sqrt(_dot(w, w)) < need  # a shift by w moves it at most |w|
+            dmin[near] = closest_under_timing_t(d0[:, near], dv[:, near], w[:, near])
         short = np.maximum(0.0, need - dmin)
         depth = np.bincount(part, weights=short, minlength=p)
         count = np.bincount(part, weights=(short > 0).astype(float), minlength=p)
         return depth, count
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of (3, n) component-first vectors, summed x + y + z in order."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
