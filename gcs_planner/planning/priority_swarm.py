@@ -729,10 +729,13 @@ def repair_and_check(
             if attempt > 0:  # re-planning alone did not do it: wait on the ground as well
                 prob.delay_s += cfg.delay_step_s
             traffic = new_traffic(problems, cfg)
-            for other in problems:
-                if other.index != i:
-                    slices, pos = samples(other, xs[other.index])
-                    traffic.add(slices, pos, other.vehicle.separation_m, other.vehicle.speed_mps)
+            traffic.add_many(
+                [
+                    (*samples(other, xs[other.index]), other.vehicle.separation_m, other.vehicle.speed_mps)
+                    for other in problems
+                    if other.index != i
+                ]
+            )
             x0 = seed_swarm(prob, xs[i], None, cfg, rng)
             x, res, _ = optimise(prob, obstacles, traffic, cfg, rng, x0)
             if res.best_cost <= float(CostModel(prob, obstacles, traffic, cfg)(xs[i][None, :])[0]):

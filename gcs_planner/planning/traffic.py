@@ -11,7 +11,7 @@ up to its displacement in that time), so a crossing keeps its separation when th
 it that far off their schedules (docs/timing-separation.md). ``timing_s = 0`` is the plain one.
 
 Neighbours are found in a spatial hash of (x cell, y cell, slice) -> a linked list of entries
-(``head`` per hashed cell, ``entry_next`` per entry): every sample is entered in each cell that
+(``head`` per hashed cell, a next entry per entry): every sample is entered in each cell that
 the square of half-width ``cell_m / 2`` around it meets, so a query within that radius reads the
 one cell its own point lies in (one random read per query instead of four). The table is laid out
 cell-major (a cell's slices are adjacent), so the consecutive slices of one path read nearby
@@ -57,8 +57,9 @@ class Traffic:
         self.sep = np.zeros(0)
         self.next = _EMPTY  # the same vehicle's sample at the next slice (-1 at its last)
         self.n_entries = 0
-        self.entry_sample = _EMPTY  # the sample of each hash entry
-        self.entry_next = _EMPTY  # the next entry of the same table cell (-1 at its last)
+        # per hash entry: its sample << 32 | the next entry of the same table cell (-1 at its last),
+        # so that following a chain reads one place per step
+        self.entries = _EMPTY
         self.slices = 0  # slices per block of the table
         self.head = np.zeros(0, dtype=np.int32)  # first entry per (block, slice), block-major
         self.v_max = 0.0
@@ -79,14 +80,11 @@ class Traffic:
         self.sep = np.concatenate([self.sep, np.zeros(new - cap)])
 
     def _grow_entries(self, extra: int) -> None:
-        cap = len(self.entry_sample)
+        cap = len(self.entries)
         if self.n_entries + extra <= cap:
             return
         new = max(2 * cap, self.n_entries + extra, 4096)
-        self.entry_sample, self.entry_next = (
-            np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)])
-            for a in (self.entry_sample, self.entry_next)
-        )
+        self.entries = np.concatenate([self.entries, np.full(new - cap, -1, dtype=np.int64)])
 
     def _grow_slices(self, needed: int) -> None:
         """Widen every block of the table to ``needed`` slices or more (a copy, rarely)."""
@@ -103,36 +101,52 @@ class Traffic:
 
     def add(self, slices: np.ndarray, pos: np.ndarray, sep_m: float, speed: float) -> None:
         """Add one UAV's samples at grid slices (K,) (each slice once) -> positions (K, 3)."""
-        slices = np.asarray(slices, dtype=np.int64)
-        k = len(slices)
-        if not k:
+        self.add_many([(slices, pos, sep_m, speed)])
+
+    def add_many(self, uavs: list[tuple[np.ndarray, np.ndarray, float, float]]) -> None:
+        """Add UAVs (slices (K,), positions (K, 3), separation, speed) in one insertion; the same
+        samples, in the same order, as ``add`` one by one."""
+        uavs = [(np.asarray(sl, dtype=np.int64), pos, sep, v) for sl, pos, sep, v in uavs]
+        uavs = [u for u in uavs if len(u[0])]
+        if not uavs:
             return
+        sizes = np.array([len(u[0]) for u in uavs])
+        k = int(sizes.sum())
+        slices = np.concatenate([u[0] for u in uavs])
+        pos = np.concatenate([np.asarray(u[1], dtype=float).reshape(-1, 3) for u in uavs])
         self._grow(k)
         self._grow_slices(int(slices.max()) + 1)
         idx = np.arange(self.n, self.n + k)
-        pos = np.asarray(pos, dtype=float)
         self.xyz[:, idx] = pos.T
         self.slice[idx] = slices
-        self.sep[idx] = sep_m
-        self.next[idx[:-1]] = idx[1:]
-        self.next[idx[-1]] = -1
+        self.sep[idx] = np.repeat([u[2] for u in uavs], sizes)
+        self.next[idx] = idx + 1
+        self.next[self.n + np.cumsum(sizes) - 1] = -1  # each UAV's last sample
         lo_x, lo_y = self._cells(pos[:, :2] - self.reach_m)
         hi_x, hi_y = self._cells(pos[:, :2] + self.reach_m)
+        keys, samples = [], []
         for dx in (0, 1):  # the cells the sample's square meets: 1 or 2 per axis (cell = 2 reach)
             for dy in (0, 1):
                 on = (lo_x + dx <= hi_x) & (lo_y + dy <= hi_y)
-                sample, sl = idx[on], slices[on]
-                key = _block(lo_x[on] + dx, lo_y[on] + dy) * self.slices + sl
-                m = len(sample)
-                self._grow_entries(m)
-                ent = np.arange(self.n_entries, self.n_entries + m)
-                self.entry_sample[ent] = sample
-                self.entry_next[ent] = self.head[key]  # distinct slices, so distinct keys
-                self.head[key] = ent
-                self.n_entries += m
+                keys.append(_block(lo_x[on] + dx, lo_y[on] + dy) * self.slices + slices[on])
+                samples.append(idx[on])
+        key, sample = np.concatenate(keys), np.concatenate(samples)
+        m = len(key)
+        self._grow_entries(m)
+        order = np.argsort(key, kind="stable")  # entries of one table cell in a run, oldest first
+        key, ent = key[order], np.arange(self.n_entries, self.n_entries + m)
+        first = np.ones(m, dtype=bool)
+        first[1:] = key[1:] != key[:-1]
+        nxt = np.empty(m, dtype=np.int64)  # each entry links to the one before it in its cell
+        nxt[first] = self.head[key[first]]
+        nxt[~first] = ent[:-1][~first[1:]]
+        self.entries[ent] = sample[order] << 32 | nxt & 0xFFFFFFFF
+        last = np.append(first[1:], True)
+        self.head[key[last]] = ent[last]
+        self.n_entries += m
         self.n += k
-        self.v_max = max(self.v_max, speed)
-        self.sep_max = max(self.sep_max, sep_m)
+        self.v_max = max(self.v_max, *(u[3] for u in uavs))
+        self.sep_max = max(self.sep_max, *(u[2] for u in uavs))
 
     def neighbours(
         self, slices: np.ndarray, pos: np.ndarray, radius_m: float
@@ -147,29 +161,30 @@ class Traffic:
         cx, cy, sl = cx[inside], cy[inside], slices[inside]
         if span == 1:
             q = inside
-            cand = self.head[_block(cx, cy) * self.slices + sl].astype(np.int64)
+            cand = self.head[_block(cx, cy) * self.slices + sl]
         else:
             off = np.arange(span)
             ox, oy = (o.ravel() for o in np.meshgrid(off, off, indexing="ij"))
             key = _block(cx[:, None] + ox, cy[:, None] + oy) * self.slices + sl[:, None]
-            cand = self.head[key.ravel()].astype(np.int64)
+            cand = self.head[key.ravel()]
             q = np.repeat(inside, len(ox))
         rows, samples = [], []
         while len(q):
             live = cand >= 0
             q, cand = q[live], cand[live]
             rows.append(q)
-            samples.append(self.entry_sample[cand])
-            cand = self.entry_next[cand]
+            entry = np.take(self.entries, cand)
+            samples.append(entry >> 32)
+            cand = entry << 32 >> 32
         if not rows:
             return _EMPTY, _EMPTY
         row, j = np.concatenate(rows), np.concatenate(samples)
-        d2 = np.zeros(len(j))
-        for axis in range(3):  # axis by axis: a reduction over a last axis of 3 is slow
-            d2 += (self.xyz[axis][j] - pos[row, axis]) ** 2
+        x, y, z = self.xyz
+        d2 = (np.take(x, j) - pos[row, 0]) ** 2 + (np.take(y, j) - pos[row, 1]) ** 2
+        d2 += (np.take(z, j) - pos[row, 2]) ** 2
         near = d2 < radius_m**2
-        row, j, d = row[near], j[near], d2[near]
-        order = np.lexsort((j, d, row))
+        row, j, d2 = row[near], j[near], d2[near]
+        order = np.lexsort((j, d2, row))
         row, j = row[order], j[order]
         if span > 1:  # a sample entered in several of the cells read
             fresh = np.ones(len(row), dtype=bool)
