@@ -81,6 +81,7 @@ from gcs_planner.geo import wrap_pi
 from gcs_planner.geometry.dubins import segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.geometry.separation import check_plan
+from gcs_planner.heap import keep_heap_slack
 from gcs_planner.plan import Plan, VehiclePlan
 from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.pso import PSOConfig, minimize
@@ -784,6 +785,7 @@ def plan(
     scenario: Scenario, config: Config, rng: np.random.Generator, progress: Progress | None = None
 ) -> Plan:
     """Priority swarm planner: see the module docstring."""
+    keep_heap_slack()  # its numpy temporaries reuse freed pages, also when called as a library
     t_start = time.perf_counter()
     tally = [0]
     token = EVALUATIONS.set(tally)

@@ -154,6 +154,15 @@ class Traffic:
         """Pairs (query row, traffic sample) of the same slice closer than ``radius_m``: the
         ``_NEAREST`` nearest per query, ordered by query then distance (then sample). slices (Q,),
         pos (Q, 3)."""
+        row, j, d2 = self._near_pairs(slices, pos, radius_m)
+        order = np.lexsort((j, d2, row))
+        return row[order], j[order]
+
+    def _near_pairs(
+        self, slices: np.ndarray, pos: np.ndarray, radius_m: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``neighbours``' pairs and squared distances, in no particular order: only a query with
+        more than ``_NEAREST`` pairs needs its pairs sorted."""
         extra = max(radius_m - self.reach_m, 0.0)  # beyond what a sample's entries cover
         span = int(np.ceil(2.0 * extra / self.cell_m)) + 1 if extra > 0 else 1
         cx, cy = self._cells(pos[:, :2] - extra)
@@ -177,7 +186,7 @@ class Traffic:
             samples.append(entry >> 32)
             cand = entry << 32 >> 32
         if not rows:
-            return _EMPTY, _EMPTY
+            return _EMPTY, _EMPTY, np.zeros(0)
         row, j = np.concatenate(rows), np.concatenate(samples)
         x, y, z = self.xyz
         q = np.take(pos, row, axis=0)
@@ -185,15 +194,22 @@ class Traffic:
         d2 += (np.take(z, j) - q[:, 2]) ** 2
         near = d2 < radius_m**2
         row, j, d2 = row[near], j[near], d2[near]
-        order = np.lexsort((j, d2, row))
-        row, j = row[order], j[order]
-        if span > 1:  # a sample entered in several of the cells read
+        if span > 1:  # a sample entered in several of the cells read: sort, drop the repeats
+            order = np.lexsort((j, d2, row))
+            row, j, d2 = row[order], j[order], d2[order]
             fresh = np.ones(len(row), dtype=bool)
             fresh[1:] = (row[1:] != row[:-1]) | (j[1:] != j[:-1])
-            row, j = row[fresh], j[fresh]
-        first = np.searchsorted(row, row)  # start of each query's run
-        keep = np.arange(len(row)) - first < _NEAREST
-        return row[keep], j[keep]
+            row, j, d2 = row[fresh], j[fresh], d2[fresh]
+        crowded = np.flatnonzero(np.bincount(row, minlength=len(pos))[row] > _NEAREST)
+        if not len(crowded):
+            return row, j, d2
+        order = crowded[
+            np.lexsort((j[crowded], d2[crowded], row[crowded]))
+        ]  # the crowded queries, nearest first
+        ranked = row[order]
+        keep = np.ones(len(row), dtype=bool)
+        keep[order[np.arange(len(order)) - np.searchsorted(ranked, ranked) >= _NEAREST]] = False
+        return row[keep], j[keep], d2[keep]
 
     def violations(
         self,
@@ -218,7 +234,7 @@ class Traffic:
         radius = max(self.sep_max, sep_m) + margin_m + timing_s * v_max + 2.0 * v_max * self.dt_s
         flat_pos = pos.reshape(-1, 3)
         # np.take: several times faster than fancy indexing for rows of a 2-D array
-        row, j = self.neighbours(np.tile(slices, p)[idx], np.take(flat_pos, idx, axis=0), radius)
+        row, j, d2 = self._near_pairs(np.tile(slices, p)[idx], np.take(flat_pos, idx, axis=0), radius)
         if not len(row):
             return zero, zero.copy()
         # vectors component-first (3, pairs): a reduction over a last axis of 3 is slow
@@ -243,8 +259,12 @@ class Traffic:
             near = dmin - np.sqrt(_dot(w, w)) < need  # a shift by w moves it at most |w|
             dmin[near] = closest_under_timing_t(d0[:, near], dv[:, near], w[:, near])
         short = np.maximum(0.0, need - dmin)
-        depth = np.bincount(part, weights=short, minlength=p)
-        count = np.bincount(part, weights=(short > 0).astype(float), minlength=p)
+        # summed per particle in the nearest-first order of neighbours(); a pair short of nothing
+        # adds 0 to its sum, so only the others need that order
+        hit = np.flatnonzero(short != 0.0)
+        hit = hit[np.lexsort((j[hit], d2[hit], row[hit]))]
+        depth = np.bincount(part[hit], weights=short[hit], minlength=p)
+        count = np.bincount(part[hit], weights=(short[hit] > 0).astype(float), minlength=p)
         return depth, count
 
 
