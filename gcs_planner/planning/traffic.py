@@ -13,12 +13,11 @@ it that far off their schedules (docs/timing-separation.md). ``timing_s = 0`` is
 Neighbours are found in a spatial hash of (x cell, y cell, slice) -> a linked list of entries
 (``head`` per hashed cell, a next entry per entry): every sample is entered in each cell that
 the square of half-width ``cell_m / 2`` around it meets, so a query within that radius reads the
-one cell its own point lies in (one random read per query instead of four). The table is laid out
-cell-major (a cell's slices are adjacent), so the consecutive slices of one path read nearby
-memory. Adding a UAV is a vectorised insertion (its samples lie in distinct slices); the tree
-rebuilt after every planned UAV (quadratic in the fleet) is gone. At most the four nearest
+one cell its own point lies in (one random read per query). The table is laid out cell-major (a
+cell's slices are adjacent), so the consecutive slices of one path read nearby memory. Adding
+UAVs is one vectorised insertion, with no rebuild of what is there. At most the four nearest
 traffic samples within reach count per particle sample, nearest first, as a k = 4 nearest-
-neighbour query would return them.
+neighbour query would return them; the pairs are sorted only where a query has more than four.
 """
 
 from __future__ import annotations
