@@ -63,21 +63,11 @@ class Obstacles:
         """Horizontal axis distance [m] (..., Q) of segments a -> b (..., 3) within each altitude band."""
         a = np.asarray(a, dtype=float)[..., None, :]
         b = np.asarray(b, dtype=float)[..., None, :]
-        d = b - a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            flat = np.abs(d[..., 2]) < 1e-12
-            t1 = (self.z_min_m - a[..., 2]) / d[..., 2]
-            t2 = (self.z_max_m - a[..., 2]) / d[..., 2]
-            lo = np.where(flat, 0.0, np.maximum(0.0, np.minimum(t1, t2)))
-            hi = np.where(flat, 1.0, np.minimum(1.0, np.maximum(t1, t2)))
-            inside_flat = (a[..., 2] >= self.z_min_m) & (a[..., 2] <= self.z_max_m)
-            empty = np.where(flat, ~inside_flat, lo > hi)
-            dxy2 = d[..., 0] ** 2 + d[..., 1] ** 2
-            t = ((self.cx - a[..., 0]) * d[..., 0] + (self.cy - a[..., 1]) * d[..., 1]) / dxy2
-            t = np.where(dxy2 > 1e-18, t, 0.0)
-        t = np.clip(t, lo, np.maximum(lo, hi))
-        dist = np.hypot(a[..., 0] + t * d[..., 0] - self.cx, a[..., 1] + t * d[..., 1] - self.cy)
-        return np.where(empty, np.inf, dist)
+        return _axis_distance(a, b - a, self.cx, self.cy, self.z_min_m, self.z_max_m)
+
+    def cylinder_distances_pairs(self, a: np.ndarray, b: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """``cylinder_distances`` for chosen pairs only: segments a -> b (n, 3) against cylinders j (n,)."""
+        return _axis_distance(a, b - a, self.cx[j], self.cy[j], self.z_min_m[j], self.z_max_m[j])
 
     def dome_distances(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """3-D distance [m] (..., H) from each dome centre to segments a -> b (..., 3)."""
@@ -123,6 +113,25 @@ class Obstacles:
         """True (...) where a point (..., 3) is within margin_m of an obstacle (buffers excluded)."""
         p = np.asarray(points, dtype=float)
         return self.clearance(p, p) < margin_m
+
+
+def _axis_distance(a, d, cx, cy, z_min, z_max) -> np.ndarray:
+    """Horizontal distance from axes (cx, cy) to the part of segments a -> a + d in [z_min, z_max];
+    inf where no part is in the band. Every argument broadcasts against the others (..., 3) / (...)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        flat = np.abs(d[..., 2]) < 1e-12
+        t1 = (z_min - a[..., 2]) / d[..., 2]
+        t2 = (z_max - a[..., 2]) / d[..., 2]
+        lo = np.where(flat, 0.0, np.maximum(0.0, np.minimum(t1, t2)))
+        hi = np.where(flat, 1.0, np.minimum(1.0, np.maximum(t1, t2)))
+        inside_flat = (a[..., 2] >= z_min) & (a[..., 2] <= z_max)
+        empty = np.where(flat, ~inside_flat, lo > hi)
+        dxy2 = d[..., 0] ** 2 + d[..., 1] ** 2
+        t = ((cx - a[..., 0]) * d[..., 0] + (cy - a[..., 1]) * d[..., 1]) / dxy2
+        t = np.where(dxy2 > 1e-18, t, 0.0)
+    t = np.clip(t, lo, np.maximum(lo, hi))
+    dist = np.hypot(a[..., 0] + t * d[..., 0] - cx, a[..., 1] + t * d[..., 1] - cy)
+    return np.where(empty, np.inf, dist)
 
 
 def altitude_violation(z_m: np.ndarray, min_alt_m: float, max_alt_m: float) -> np.ndarray:

@@ -16,18 +16,24 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["closest_under_timing"]
+__all__ = ["closest_under_timing", "closest_under_timing_t"]
 
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.sum(a * b, axis=-1)
+    """Dot products of vectors stored component-first, (3, ...) -> (...), summed x + y + z in order
+    (a reduction over a last axis of 3 is several times slower than three products)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _norm(a: np.ndarray) -> np.ndarray:
+    return np.sqrt(_dot(a, a))
 
 
 def _segment(p: np.ndarray, q: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """Distance from the origin to p + q s, s in [lo, hi]; vectors (..., 3)."""
+    """Distance from the origin to p + q s, s in [lo, hi]; vectors component-first (3, ...)."""
     qq = _dot(q, q)
     s = np.clip(-_dot(p, q) / np.where(qq > 0, qq, 1.0), lo, hi)
-    return np.linalg.norm(p + s[..., None] * q, axis=-1)
+    return _norm(p + s * q)
 
 
 def closest_under_timing(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -36,13 +42,14 @@ def closest_under_timing(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.nda
     The minimum of a convex function over the box is its stationary point where that lies inside,
     else on one of the four edges.
     """
-    edges = np.minimum.reduce(
-        [
-            _segment(d0 - w, u, 0.0, 1.0),
-            _segment(d0 + w, u, 0.0, 1.0),
-            _segment(d0, w, -1.0, 1.0),
-            _segment(d0 + u, w, -1.0, 1.0),
-        ]
+    return closest_under_timing_t(np.moveaxis(d0, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(w, -1, 0))
+
+
+def closest_under_timing_t(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``closest_under_timing`` of vectors stored component-first, (3, ...) -> (...)."""
+    edges = np.minimum(
+        np.minimum(_segment(d0 - w, u, 0.0, 1.0), _segment(d0 + w, u, 0.0, 1.0)),
+        np.minimum(_segment(d0, w, -1.0, 1.0), _segment(d0 + u, w, -1.0, 1.0)),
     )
     uu, ww, uw, du, dw = _dot(u, u), _dot(w, w), _dot(u, w), _dot(d0, u), _dot(d0, w)
     det = uu * ww - uw * uw
@@ -51,5 +58,5 @@ def closest_under_timing(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.nda
     s = (-du * ww + dw * uw) / safe
     e = (-dw * uu + du * uw) / safe
     inside = ok & (s >= 0.0) & (s <= 1.0) & (e >= -1.0) & (e <= 1.0)
-    interior = np.linalg.norm(d0 + s[..., None] * u + e[..., None] * w, axis=-1)
+    interior = _norm(d0 + s * u + e * w)
     return np.where(inside, np.minimum(interior, edges), edges)

@@ -78,8 +78,9 @@ from scipy.spatial import cKDTree
 from gcs_planner.core.config import Count, Distance, Fraction, NonNegative, PositiveDistance
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import wrap_pi
+from gcs_planner.core.heap import keep_heap_slack
 from gcs_planner.core.validation import MAX_DURATION_S
-from gcs_planner.geometry.dubins import advance, segment_starts, shortest_batch
+from gcs_planner.geometry.dubins import segment_starts, shortest_batch
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Scenario, Vehicle
@@ -198,6 +199,15 @@ class Decoded:
     def total(self) -> np.ndarray:
         return self.cum[:, -1]
 
+    @functools.cached_property
+    def segments(self) -> tuple[np.ndarray, ...]:
+        """Per segment (index leg * 3 + k), flat: start x, y, heading, its sine and cosine,
+        curvature; per leg: the three segment ends. Contiguous columns, gathered by sampling."""
+        st = self.starts.reshape(-1, 3)
+        h = st[:, 2].copy()
+        ends = self.seg_end.T.copy()
+        return st[:, 0].copy(), st[:, 1].copy(), h, np.sin(h), np.cos(h), self.kappa.ravel(), *ends
+
 
 def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
     """Particles (P, D) -> polyline + Dubins legs with bisector headings."""
@@ -226,27 +236,50 @@ def decode(prob: VehicleProblem, x: np.ndarray) -> Decoded:
 
 
 def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
-    """Positions (P, K, 3) at 3-D arc lengths s (P, K) [m] (clipped to each path)."""
+    """Positions (P, K, 3) at 3-D arc lengths s (P, K) [m] (clipped to each path).
+
+    Each sample's leg and Dubins segment are found by comparisons with the junctions, then its
+    position is integrated from the segment's start (dubins.advance's formulas; the sine and cosine
+    of a segment's start heading are computed once per segment, the end heading's only on arcs).
+    """
     p, k = s.shape
     n_leg = dec.lh.shape[1]
     s = np.clip(s, 0.0, dec.total[:, None])
     leg = np.zeros(s.shape, dtype=np.intp)  # legs ended before s, one junction at a time (a
     for c in dec.cum[:, 1:-1].T:  # reduction over a short last axis is slow)
         leg += s > c[:, None]
-    leg = np.minimum(leg, n_leg - 1)
+    np.minimum(leg, n_leg - 1, out=leg)
     rows = np.arange(p)[:, None]
-    l3 = dec.l3[rows, leg]
-    f = np.where(l3 > 0, (s - dec.cum[rows, leg]) / np.where(l3 > 0, l3, 1.0), 0.0)
-    z0 = dec.pts[rows, leg, 2]
-    z = z0 + f * (dec.pts[rows, leg + 1, 2] - z0)
-    flat = (rows * n_leg + leg).ravel()
-    sh = (f * dec.lh[rows, leg]).ravel()
-    bounds = dec.seg_end[flat]
-    sh = np.minimum(sh, bounds[:, 2])
-    si = (sh > bounds[:, 0]).astype(int) + (sh > bounds[:, 1])
-    seg_start = np.where(si == 0, 0.0, bounds[np.arange(len(flat)), np.maximum(si - 1, 0)])
-    xy = advance(dec.starts[flat, si], dec.kappa[flat, si], sh - seg_start)[:, :2]
-    return np.concatenate([xy.reshape(p, k, 2), z[..., None]], axis=2)
+    flat = leg + rows * n_leg  # leg index into (P, W-1) arrays
+    node = flat + rows  # its first waypoint's index into (P, W) arrays
+    take = np.take  # faster than fancy indexing on these sizes
+    l3 = take(dec.l3, flat)
+    f = np.where(l3 > 0, (s - take(dec.cum, node)) / np.where(l3 > 0, l3, 1.0), 0.0)
+    pz = dec.pts[..., 2]
+    z0 = take(pz, node)
+    out = np.empty((p, k, 3))
+    out[..., 2] = z0 + f * (take(pz, node + 1) - z0)
+    sh = (f * take(dec.lh, flat)).ravel()
+    flat = flat.ravel()
+    x0, y0, h0, sin0, cos0, kappa, e0, e1, e2 = dec.segments
+    e0, e1 = take(e0, flat), take(e1, flat)
+    np.minimum(sh, take(e2, flat), out=sh)
+    after0, after1 = sh > e0, sh > e1
+    seg = flat * 3 + after0 + after1
+    ds = sh - np.where(after0, np.where(after1, e1, e0), 0.0)
+    sin_h, cos_h = take(sin0, seg), take(cos0, seg)
+    x = take(x0, seg) + ds * cos_h  # straight segments
+    y = take(y0, seg) + ds * sin_h
+    arc = np.flatnonzero(take(kappa, seg) != 0.0)
+    if len(arc):
+        on = take(seg, arc)
+        kap = take(kappa, on)
+        h = take(h0, on) + kap * take(ds, arc)
+        x[arc] = take(x0, on) + (np.sin(h) - take(sin_h, arc)) / kap
+        y[arc] = take(y0, on) - (np.cos(h) - take(cos_h, arc)) / kap
+    out[..., 0] = x.reshape(p, k)
+    out[..., 1] = y.reshape(p, k)
+    return out
 
 
 @dataclass(frozen=True)
@@ -258,12 +291,16 @@ class _Raster:
     cell_m: float
     mask: np.ndarray  # (nx, ny) bool
 
-    def covers(self, xy: np.ndarray) -> np.ndarray:
-        c = np.floor((xy - self.lo) / self.cell_m).astype(np.int64)
-        inside = (c >= 0).all(axis=1) & (c[:, 0] < self.mask.shape[0]) & (c[:, 1] < self.mask.shape[1])
-        out = np.zeros(len(xy), dtype=bool)
-        out[inside] = self.mask[c[inside, 0], c[inside, 1]]
-        return out
+    @functools.cached_property
+    def _padded(self) -> np.ndarray:
+        """The mask with a border of empty cells, flat: clipped cell indices land there."""
+        return np.pad(self.mask, 1).ravel()
+
+    def covers(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        nx, ny = self.mask.shape
+        cx = np.clip(np.floor((x - self.lo[0]) / self.cell_m), -1, nx) + 1  # -1 and n: the border
+        cy = np.clip(np.floor((y - self.lo[1]) / self.cell_m), -1, ny) + 1
+        return np.take(self._padded, (cx * (ny + 2) + cy).astype(np.int64), mode="clip")  # NaN: 0, empty
 
 
 @functools.lru_cache(maxsize=16)
@@ -301,15 +338,16 @@ class CostModel:
         p, k, _ = mid.shape
         flat = mid.reshape(-1, 3)
         n_nb = min(4, len(self.obs.cx))
-        close = np.flatnonzero(self._near.covers(flat[:, :2]))  # the tree is asked about these only
-        dxy, j = self._obs_tree.query(flat[close, :2], k=n_nb, distance_upper_bound=self._reach)
+        close = np.flatnonzero(self._near.covers(flat[:, 0], flat[:, 1]))  # the tree is asked about these
+        near = np.take(flat, close, axis=0)
+        dxy, j = self._obs_tree.query(near[:, :2], k=n_nb, distance_upper_bound=self._reach)
         dxy, j = dxy.reshape(len(close), n_nb), j.reshape(len(close), n_nb)
         row, col = np.nonzero(np.isfinite(dxy))
         if not len(row):
             return np.zeros(p), np.zeros(p)
         jj, d = j[row, col], dxy[row, col]
+        z = near[row, 2]
         row = close[row]
-        z = flat[row, 2]
         band = (z >= self.obs.z_min_m[jj]) & (z <= self.obs.z_max_m[jj])
         r = self.obs.radius_m[jj] + self.cfg.obstacle_margin_m
         buf = self.obs.buffer_m[jj]
@@ -326,10 +364,11 @@ class CostModel:
         k0 = math.ceil(t0 / dt - 1e-9)
         k1 = math.ceil((t0 + float(dec.total.max()) / v) / dt + 1e-9)
         slices = np.arange(k0, k1 + 1)
-        s = v * (slices * dt - t0)[None, :]
-        s = np.broadcast_to(s, (len(dec.total), len(slices)))
-        valid = s <= dec.total[:, None] + 1e-9
-        s = np.concatenate([np.zeros((len(dec.total), 1)), s, dec.total[:, None]], axis=1)
+        s = np.empty((len(dec.total), len(slices) + 2))  # C order: what follows is row-wise
+        s[:, 0] = 0.0
+        s[:, 1:-1] = v * (slices * dt - t0)
+        s[:, -1] = dec.total
+        valid = s[:, 1:-1] <= dec.total[:, None] + 1e-9
         pos = positions_at_length(dec, s)
         return slices, pos, valid, s
 
@@ -696,10 +735,13 @@ def repair_and_check(
             if attempt > 0:  # re-planning alone did not do it: wait on the ground as well
                 prob.delay_s += cfg.delay_step_s
             traffic = new_traffic(problems, cfg)
-            for other in problems:
-                if other.index != i:
-                    slices, pos = samples(other, xs[other.index])
-                    traffic.add(slices, pos, other.vehicle.separation_m, other.vehicle.speed_mps)
+            traffic.add_many(
+                [
+                    (*samples(other, xs[other.index]), other.vehicle.separation_m, other.vehicle.speed_mps)
+                    for other in problems
+                    if other.index != i
+                ]
+            )
             x0 = seed_swarm(prob, xs[i], None, cfg, rng)
             x, res, _ = optimise(prob, obstacles, traffic, cfg, rng, x0)
             if res.best_cost <= float(CostModel(prob, obstacles, traffic, cfg)(xs[i][None, :])[0]):
@@ -744,6 +786,7 @@ def plan(
     scenario: Scenario, config: Config, rng: np.random.Generator, progress: Progress | None = None
 ) -> Plan:
     """Priority swarm planner: see the module docstring."""
+    keep_heap_slack()  # its numpy temporaries reuse freed pages, also when called as a library
     t_start = time.perf_counter()
     tally = [0]
     token = EVALUATIONS.set(tally)

@@ -55,16 +55,76 @@ def edges_valid(
     obstacles: Obstacles, a: np.ndarray, b: np.ndarray, z_band: tuple[float, float], margin_m: float
 ) -> np.ndarray:
     """True (...) where segments a -> b (..., 3) clear every obstacle's buffer + margin and stay in band."""
-    ok = np.ones(np.shape(a)[:-1], dtype=bool)
-    if len(obstacles.radius_m):
-        d = obstacles.cylinder_distances(a, b)
-        ok &= np.all(d > obstacles.radius_m + obstacles.buffer_m + margin_m, axis=-1)
-    if len(obstacles.dome_radius_m):
-        ok &= np.all(obstacles.dome_distances(a, b) > obstacles.dome_radius_m + margin_m, axis=-1)
-    lo, hi = z_band
-    for p in (a, b):
-        ok &= (p[..., 2] >= lo - 1e-9) & (p[..., 2] <= hi + 1e-9)
-    return ok
+    return _EdgeCheck(obstacles, z_band, margin_m)(a, b)
+
+
+class _EdgeCheck:
+    """``edges_valid`` for one set of obstacles, band and margin, with what every check shares
+    computed once (RRT* asks about one edge at a time, so per-call work is what counts).
+
+    Only the (segment, cylinder) pairs whose axis lies within the clearance of the segment's xy
+    bounding box can fail; the exact distance is computed for those alone (most edges have none).
+    """
+
+    def __init__(self, obstacles: Obstacles, z_band: tuple[float, float], margin_m: float) -> None:
+        self.obs, self.margin_m = obstacles, margin_m
+        self.z_lo, self.z_hi = z_band[0] - 1e-9, z_band[1] + 1e-9
+        self.need = obstacles.radius_m + obstacles.buffer_m + margin_m
+        reach = self.need + 1e-6  # rounding of a point on the segment
+        self.x_above, self.x_below = obstacles.cx + reach, obstacles.cx - reach
+        self.y_above, self.y_below = obstacles.cy + reach, obstacles.cy - reach
+
+    def __call__(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        if a.ndim == 1 and b.ndim == 1 and not len(self.obs.dome_radius_m):
+            return self._one(a, b)
+        ok = np.ones(np.broadcast_shapes(a.shape, b.shape)[:-1], dtype=bool)
+        if len(self.obs.radius_m):
+            ok &= self._clear_of_cylinders(a, b)
+        if len(self.obs.dome_radius_m):
+            ok &= np.all(self.obs.dome_distances(a, b) > self.obs.dome_radius_m + self.margin_m, axis=-1)
+        for p in (a, b):
+            ok &= (p[..., 2] >= self.z_lo) & (p[..., 2] <= self.z_hi)
+        return ok
+
+    def _one(self, a: np.ndarray, b: np.ndarray) -> np.bool_:
+        """One segment, no domes: the band first, then the cylinders near its bounding box."""
+        ax, ay, az = a.tolist()
+        bx, by, bz = b.tolist()
+        if not (self.z_lo <= az <= self.z_hi and self.z_lo <= bz <= self.z_hi):
+            return np.False_
+        if not len(self.need):
+            return np.True_
+        cand = np.flatnonzero(
+            (self.x_above > min(ax, bx))
+            & (self.x_below < max(ax, bx))
+            & (self.y_above > min(ay, by))
+            & (self.y_below < max(ay, by))
+        )
+        if not len(cand):
+            return np.True_
+        m = len(cand)
+        d = self.obs.cylinder_distances_pairs(np.broadcast_to(a, (m, 3)), np.broadcast_to(b, (m, 3)), cand)
+        return np.bool_(np.all(d > self.need[cand]))
+
+    def _clear_of_cylinders(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """True (...) where segments a -> b clear every cylinder's radius + buffer + margin."""
+        a, b = np.broadcast_arrays(a, b)
+        shape = a.shape[:-1]
+        a, b = a.reshape(-1, 3), b.reshape(-1, 3)
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        cand = (
+            (self.x_above > lo[:, :1])
+            & (self.x_below < hi[:, :1])
+            & (self.y_above > lo[:, 1:2])
+            & (self.y_below < hi[:, 1:2])
+        )
+        edge, cyl = np.nonzero(cand)
+        ok = np.ones(len(a), dtype=bool)
+        if len(edge):
+            blocked = ~(self.obs.cylinder_distances_pairs(a[edge], b[edge], cyl) > self.need[cyl])
+            ok[edge[blocked]] = False
+        return ok.reshape(shape)
 
 
 def rrt_star(
@@ -80,8 +140,7 @@ def rrt_star(
     start, goal = np.asarray(start, float), np.asarray(goal, float)
     band = (float(box_lo[2]), float(box_hi[2]))
 
-    def valid(a, b):
-        return edges_valid(obstacles, a, b, band, cfg.margin_m)
+    valid = _EdgeCheck(obstacles, band, cfg.margin_m)
 
     if valid(start, goal):
         return RRTResult(np.vstack([start, goal]), float(np.linalg.norm(goal - start)), 0, 2)

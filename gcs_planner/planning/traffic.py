@@ -10,19 +10,21 @@ With ``timing_s`` > 0 the closest approach is the one under any relative schedul
 up to its displacement in that time), so a crossing keeps its separation when the vehicles fly
 it that far off their schedules (docs/timing-separation.md). ``timing_s = 0`` is the plain one.
 
-Neighbours are found in a spatial hash of (slice, x cell, y cell) -> a linked list of samples
-(``head`` per hashed cell, ``next_in_cell`` per sample): adding a UAV is a vectorised insertion
-(its samples lie in distinct slices), a query reads the cells around each sample, and the tree
-rebuilt after every planned UAV (quadratic in the fleet) is gone. At most the four nearest
+Neighbours are found in a spatial hash of (x cell, y cell, slice) -> a linked list of entries
+(``head`` per hashed cell, a next entry per entry): every sample is entered in each cell that
+the square of half-width ``cell_m / 2`` around it meets, so a query within that radius reads the
+one cell its own point lies in (one random read per query). The table is laid out cell-major (a
+cell's slices are adjacent), so the consecutive slices of one path read nearby memory. Adding
+UAVs is one vectorised insertion, with no rebuild of what is there. At most the four nearest
 traffic samples within reach count per particle sample, nearest first, as a k = 4 nearest-
-neighbour query would return them.
+neighbour query would return them; the pairs are sorted only where a query has more than four.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from gcs_planner.geometry.timing import closest_under_timing
+from gcs_planner.geometry.timing import closest_under_timing_t
 
 __all__ = ["TIMING_ERROR_S", "Traffic"]
 
@@ -30,30 +32,35 @@ __all__ = ["TIMING_ERROR_S", "Traffic"]
 # mock (docs/timing-separation.md), the default of the planners' ``timing_error_s``.
 TIMING_ERROR_S = 0.75
 
-_CELL_BITS = 6  # cells per axis and slice in the table: 64, aliased 64 cells apart (extra candidates)
-_CELLS = 1 << 2 * _CELL_BITS
+_CELL_BITS = 6  # cells per axis in the table: 64, aliased 64 cells apart (extra candidates)
+_BLOCKS = 1 << 2 * _CELL_BITS
 _NEAREST = 4  # traffic samples counted per particle sample
 _EMPTY = np.zeros(0, dtype=np.int64)
 
 
-def _key(slices: np.ndarray, cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
-    """Table index of a (slice, x cell, y cell): one block of cells per slice."""
+def _block(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
+    """Table block of an (x cell, y cell)."""
     mask = (1 << _CELL_BITS) - 1
-    return (slices << _CELL_BITS | cy & mask) << _CELL_BITS | cx & mask
+    return (cy & mask) << _CELL_BITS | cx & mask
 
 
 class Traffic:
-    """Timed samples of already-planned UAVs on the shared time grid, hashed by slice and cell."""
+    """Timed samples of already-planned UAVs on the shared time grid, hashed by cell and slice."""
 
     def __init__(self, dt_s: float, cell_m: float = 40.0) -> None:
         self.dt_s, self.cell_m = dt_s, cell_m
+        self.reach_m = 0.5 * cell_m  # the half-width of the square each sample is entered for
         self.n = 0
-        self.pos = np.zeros((0, 3))
+        self.xyz = np.zeros((3, 0))  # sample positions, component-first
         self.slice = _EMPTY
         self.sep = np.zeros(0)
         self.next = _EMPTY  # the same vehicle's sample at the next slice (-1 at its last)
-        self.next_in_cell = _EMPTY
-        self.head = np.zeros(0, dtype=np.int32)  # first sample per table cell; grows with the slices
+        self.n_entries = 0
+        # per hash entry: its sample << 32 | the next entry of the same table cell (-1 at its last),
+        # so that following a chain reads one place per step
+        self.entries = _EMPTY
+        self.slices = 0  # slices per block of the table
+        self.head = np.zeros(0, dtype=np.int32)  # first entry per (block, slice), block-major
         self.v_max = 0.0
         self.sep_max = 0.0
 
@@ -65,12 +72,27 @@ class Traffic:
         if self.n + extra <= cap:
             return
         new = max(2 * cap, self.n + extra, 1024)
-        self.pos = np.concatenate([self.pos, np.zeros((new - cap, 3))])
-        self.slice, self.next, self.next_in_cell = (
-            np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)])
-            for a in (self.slice, self.next, self.next_in_cell)
+        self.xyz = np.concatenate([self.xyz, np.zeros((3, new - cap))], axis=1)
+        self.slice, self.next = (
+            np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)]) for a in (self.slice, self.next)
         )
         self.sep = np.concatenate([self.sep, np.zeros(new - cap)])
+
+    def _grow_entries(self, extra: int) -> None:
+        cap = len(self.entries)
+        if self.n_entries + extra <= cap:
+            return
+        new = max(2 * cap, self.n_entries + extra, 4096)
+        self.entries = np.concatenate([self.entries, np.full(new - cap, -1, dtype=np.int64)])
+
+    def _grow_slices(self, needed: int) -> None:
+        """Widen every block of the table to ``needed`` slices or more (a copy, rarely)."""
+        if needed <= self.slices:
+            return
+        wide = max(needed, 2 * self.slices, 256)
+        head = np.full((_BLOCKS, wide), -1, dtype=np.int32)
+        head[:, : self.slices] = self.head.reshape(_BLOCKS, self.slices)
+        self.head, self.slices = head.ravel(), wide
 
     def _cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         c = np.floor(xy / self.cell_m).astype(np.int64)
@@ -78,58 +100,115 @@ class Traffic:
 
     def add(self, slices: np.ndarray, pos: np.ndarray, sep_m: float, speed: float) -> None:
         """Add one UAV's samples at grid slices (K,) (each slice once) -> positions (K, 3)."""
-        slices = np.asarray(slices, dtype=np.int64)
-        k = len(slices)
-        if not k:
+        self.add_many([(slices, pos, sep_m, speed)])
+
+    def add_many(self, uavs: list[tuple[np.ndarray, np.ndarray, float, float]]) -> None:
+        """Add UAVs (slices (K,), positions (K, 3), separation, speed) in one insertion; the same
+        samples, in the same order, as ``add`` one by one."""
+        uavs = [(np.asarray(sl, dtype=np.int64), pos, sep, v) for sl, pos, sep, v in uavs]
+        uavs = [u for u in uavs if len(u[0])]
+        if not uavs:
             return
+        sizes = np.array([len(u[0]) for u in uavs])
+        k = int(sizes.sum())
+        slices = np.concatenate([u[0] for u in uavs])
+        pos = np.concatenate([np.asarray(u[1], dtype=float).reshape(-1, 3) for u in uavs])
         self._grow(k)
-        if slices.max() >= len(self.head) // _CELLS:
-            extra = (int(slices.max()) + 1) * _CELLS - len(self.head)
-            self.head = np.concatenate([self.head, np.full(extra, -1, dtype=np.int32)])
+        self._grow_slices(int(slices.max()) + 1)
         idx = np.arange(self.n, self.n + k)
-        self.pos[idx] = pos
+        self.xyz[:, idx] = pos.T
         self.slice[idx] = slices
-        self.sep[idx] = sep_m
-        self.next[idx[:-1]] = idx[1:]
-        self.next[idx[-1]] = -1
-        key = _key(slices, *self._cells(self.pos[idx, :2]))
-        self.next_in_cell[idx] = self.head[key]  # distinct slices, so distinct keys
-        self.head[key] = idx
+        self.sep[idx] = np.repeat([u[2] for u in uavs], sizes)
+        self.next[idx] = idx + 1
+        self.next[self.n + np.cumsum(sizes) - 1] = -1  # each UAV's last sample
+        lo_x, lo_y = self._cells(pos[:, :2] - self.reach_m)
+        hi_x, hi_y = self._cells(pos[:, :2] + self.reach_m)
+        keys, samples = [], []
+        for dx in (0, 1):  # the cells the sample's square meets: 1 or 2 per axis (cell = 2 reach)
+            for dy in (0, 1):
+                on = (lo_x + dx <= hi_x) & (lo_y + dy <= hi_y)
+                keys.append(_block(lo_x[on] + dx, lo_y[on] + dy) * self.slices + slices[on])
+                samples.append(idx[on])
+        key, sample = np.concatenate(keys), np.concatenate(samples)
+        m = len(key)
+        self._grow_entries(m)
+        order = np.argsort(key, kind="stable")  # entries of one table cell in a run, oldest first
+        key, ent = key[order], np.arange(self.n_entries, self.n_entries + m)
+        first = np.ones(m, dtype=bool)
+        first[1:] = key[1:] != key[:-1]
+        nxt = np.empty(m, dtype=np.int64)  # each entry links to the one before it in its cell
+        nxt[first] = self.head[key[first]]
+        nxt[~first] = ent[:-1][~first[1:]]
+        self.entries[ent] = sample[order] << 32 | nxt & 0xFFFFFFFF
+        last = np.append(first[1:], True)
+        self.head[key[last]] = ent[last]
+        self.n_entries += m
         self.n += k
-        self.v_max = max(self.v_max, speed)
-        self.sep_max = max(self.sep_max, sep_m)
+        self.v_max = max(self.v_max, *(u[3] for u in uavs))
+        self.sep_max = max(self.sep_max, *(u[2] for u in uavs))
 
     def neighbours(
         self, slices: np.ndarray, pos: np.ndarray, radius_m: float
     ) -> tuple[np.ndarray, np.ndarray]:
         """Pairs (query row, traffic sample) of the same slice closer than ``radius_m``: the
-        ``_NEAREST`` nearest per query, ordered by query then distance. slices (Q,), pos (Q, 3)."""
-        span = int(np.ceil(2.0 * radius_m / self.cell_m)) + 1  # cells per axis that [x - r, x + r] meets
-        cx, cy = self._cells(pos[:, :2] - radius_m)
-        off = np.arange(span)
-        ox, oy = (o.ravel() for o in np.meshgrid(off, off, indexing="ij"))
-        key = _key(slices[:, None], cx[:, None] + ox, cy[:, None] + oy).ravel()
-        inside = np.flatnonzero(key < len(self.head))  # no traffic after its last slice
-        cand = self.head[key[inside]].astype(np.int64)
-        q = inside // len(ox)
+        ``_NEAREST`` nearest per query, ordered by query then distance (then sample). slices (Q,),
+        pos (Q, 3)."""
+        row, j, d2 = self._near_pairs(slices, pos, radius_m)
+        order = np.lexsort((j, d2, row))
+        return row[order], j[order]
+
+    def _near_pairs(
+        self, slices: np.ndarray, pos: np.ndarray, radius_m: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``neighbours``' pairs and squared distances, in no particular order: only a query with
+        more than ``_NEAREST`` pairs needs its pairs sorted."""
+        extra = max(radius_m - self.reach_m, 0.0)  # beyond what a sample's entries cover
+        span = int(np.ceil(2.0 * extra / self.cell_m)) + 1 if extra > 0 else 1
+        cx, cy = self._cells(pos[:, :2] - extra)
+        inside = np.flatnonzero((slices >= 0) & (slices < self.slices))  # no traffic after its last slice
+        cx, cy, sl = cx[inside], cy[inside], slices[inside]
+        if span == 1:
+            q = inside
+            cand = self.head[_block(cx, cy) * self.slices + sl]
+        else:
+            off = np.arange(span)
+            ox, oy = (o.ravel() for o in np.meshgrid(off, off, indexing="ij"))
+            key = _block(cx[:, None] + ox, cy[:, None] + oy) * self.slices + sl[:, None]
+            cand = self.head[key.ravel()]
+            q = np.repeat(inside, len(ox))
         rows, samples = [], []
         while len(q):
             live = cand >= 0
             q, cand = q[live], cand[live]
             rows.append(q)
-            samples.append(cand)
-            cand = self.next_in_cell[cand]
+            entry = np.take(self.entries, cand)
+            samples.append(entry >> 32)
+            cand = entry << 32 >> 32
+        if not rows:
+            return _EMPTY, _EMPTY, np.zeros(0)
         row, j = np.concatenate(rows), np.concatenate(samples)
-        d2 = np.zeros(len(j))
-        for axis in range(3):  # axis by axis: a reduction over a last axis of 3 is slow
-            d2 += (self.pos[j, axis] - pos[row, axis]) ** 2
+        x, y, z = self.xyz
+        q = np.take(pos, row, axis=0)
+        d2 = (np.take(x, j) - q[:, 0]) ** 2 + (np.take(y, j) - q[:, 1]) ** 2
+        d2 += (np.take(z, j) - q[:, 2]) ** 2
         near = d2 < radius_m**2
-        row, j, d = row[near], j[near], d2[near]
-        order = np.lexsort((d, row))
-        row, j = row[order], j[order]
-        first = np.searchsorted(row, row)  # start of each query's run
-        keep = np.arange(len(row)) - first < _NEAREST
-        return row[keep], j[keep]
+        row, j, d2 = row[near], j[near], d2[near]
+        if span > 1:  # a sample entered in several of the cells read: sort, drop the repeats
+            order = np.lexsort((j, d2, row))
+            row, j, d2 = row[order], j[order], d2[order]
+            fresh = np.ones(len(row), dtype=bool)
+            fresh[1:] = (row[1:] != row[:-1]) | (j[1:] != j[:-1])
+            row, j, d2 = row[fresh], j[fresh], d2[fresh]
+        crowded = np.flatnonzero(np.bincount(row, minlength=len(pos))[row] > _NEAREST)
+        if not len(crowded):
+            return row, j, d2
+        order = crowded[
+            np.lexsort((j[crowded], d2[crowded], row[crowded]))
+        ]  # the crowded queries, nearest first
+        ranked = row[order]
+        keep = np.ones(len(row), dtype=bool)
+        keep[order[np.arange(len(order)) - np.searchsorted(ranked, ranked) >= _NEAREST]] = False
+        return row[keep], j[keep], d2[keep]
 
     def violations(
         self,
@@ -152,28 +231,42 @@ class Traffic:
             return zero, zero.copy()
         v_max = max(self.v_max, 1e-6)
         radius = max(self.sep_max, sep_m) + margin_m + timing_s * v_max + 2.0 * v_max * self.dt_s
-        row, j = self.neighbours(np.tile(slices, p)[idx], pos.reshape(-1, 3)[idx], radius)
+        flat_pos = pos.reshape(-1, 3)
+        # np.take: several times faster than fancy indexing for rows of a 2-D array
+        row, j, d2 = self._near_pairs(np.tile(slices, p)[idx], np.take(flat_pos, idx, axis=0), radius)
         if not len(row):
             return zero, zero.copy()
-        flat = idx[row]
-        part, ks = np.divmod(flat, k)
-        a0 = pos[part, ks]
-        b0 = self.pos[j]
+        # vectors component-first (3, pairs): a reduction over a last axis of 3 is slow
+        flat = idx[row]  # particle sample = particle * k + slice offset
+        part = flat // k
         nxt = self.next[j]
-        has_next = (ks + 1 < k) & valid[part, np.minimum(ks + 1, k - 1)] & (nxt >= 0)
-        a1 = np.where(has_next[:, None], pos[part, np.minimum(ks + 1, k - 1)], a0)
-        b1 = np.where(has_next[:, None], self.pos[np.where(nxt >= 0, nxt, j)], b0)
+        after = np.minimum(flat + 1, len(flat_pos) - 1)
+        has_next = (flat - part * k + 1 < k) & valid.ravel()[after] & (nxt >= 0)
+        a0 = np.take(flat_pos, flat, axis=0).T
+        b0 = np.take(self.xyz, j, axis=1)
+        a1 = np.where(has_next, np.take(flat_pos, after, axis=0).T, a0)
+        b1 = np.where(has_next, np.take(self.xyz, np.where(nxt >= 0, nxt, j), axis=1), b0)
         d0 = b0 - a0
         dv = (b1 - a1) - d0
-        vv = np.sum(dv * dv, axis=1)
-        tau = np.clip(-np.sum(d0 * dv, axis=1) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
-        dmin = np.linalg.norm(d0 + tau[:, None] * dv, axis=1)
+        vv = _dot(dv, dv)
+        tau = np.clip(-_dot(d0, dv) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
+        closest = d0 + tau * dv
+        dmin = np.sqrt(_dot(closest, closest))
         need = np.maximum(self.sep[j], sep_m) + margin_m
         if timing_s > 0:  # under any relative schedule error up to timing_s (geometry/timing.py)
             w = (b1 - b0) * (timing_s / self.dt_s)
-            near = dmin - np.linalg.norm(w, axis=1) < need  # a shift by w moves it at most |w|
-            dmin[near] = closest_under_timing(d0[near], dv[near], w[near])
+            near = dmin - np.sqrt(_dot(w, w)) < need  # a shift by w moves it at most |w|
+            dmin[near] = closest_under_timing_t(d0[:, near], dv[:, near], w[:, near])
         short = np.maximum(0.0, need - dmin)
-        depth = np.bincount(part, weights=short, minlength=p)
-        count = np.bincount(part, weights=(short > 0).astype(float), minlength=p)
+        # summed per particle in the nearest-first order of neighbours(); a pair short of nothing
+        # adds 0 to its sum, so only the others need that order
+        hit = np.flatnonzero(short != 0.0)
+        hit = hit[np.lexsort((j[hit], d2[hit], row[hit]))]
+        depth = np.bincount(part[hit], weights=short[hit], minlength=p)
+        count = np.bincount(part[hit], weights=(short[hit] > 0).astype(float), minlength=p)
         return depth, count
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of (3, n) component-first vectors, summed x + y + z in order."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]

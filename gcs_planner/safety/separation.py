@@ -129,7 +129,11 @@ def find_conflicts(trajs: list[Trajectory], step_s: float = MAX_STEP_S) -> list[
     # every take-off and landing time is a slice boundary, so a vehicle flies all of a slice or none
     ends = [tr.t0 for tr in trajs] + [tr.t_end for tr in trajs]
     times = np.union1d(np.append(np.arange(t0, t1, step_s), t1), ends)
-    pos = np.stack([tr.position_at(times) for tr in trajs], axis=1)  # (T, V, 3)
+    pos = np.full((len(times), len(trajs), 3), np.nan)  # (T, V, 3): NaN where a vehicle is not flying
+    for v, tr in enumerate(trajs):  # interpolated over its flight only (Trajectory.position_at)
+        w = slice(np.searchsorted(times, tr.t0, "left"), np.searchsorted(times, tr.t_end, "right"))
+        for c in range(3):
+            pos[w, v, c] = np.interp(times[w], tr.times_s, tr.positions_m[:, c])
     sep = np.array([tr.separation_m for tr in trajs])
     vmax = max(tr.max_speed_mps for tr in trajs)
     radius = sep.max() + 2.0 * vmax * step_s + 1e-9
@@ -299,8 +303,9 @@ def _densify(p: np.ndarray, flag: np.ndarray, spacing_m: float) -> tuple[np.ndar
     """Insert points so no segment is longer than spacing_m in xy; inserted points inherit both ends' flag."""
     seg = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1)  # horizontal: the turn test is planar
     n = np.maximum(1, np.ceil(seg / (1.01 * spacing_m)).astype(int))
-    frac = np.concatenate([np.arange(k) / k for k in n])
     idx = np.repeat(np.arange(len(seg)), n)
+    first = np.cumsum(n) - n  # each segment's first inserted point
+    frac = (np.arange(len(idx)) - first[idx]).astype(float) / n[idx]  # k / n_seg, k = 0 .. n_seg - 1
     pts = p[idx] + frac[:, None] * (p[idx + 1] - p[idx])
     flags = np.where(frac == 0, flag[idx], flag[idx] & flag[idx + 1])
     return np.vstack([pts, p[-1:]]), np.append(flags, flag[-1])
