@@ -6,6 +6,12 @@ every ``[planner]`` key it reads, with its bounds) and ``plan(scenario, config, 
 ``progress(fraction, message)`` may be None. ``PLANNERS`` names the modules; the scenario's
 ``[planner] name`` picks one, so methods are swapped in the file (docs/planners.md shows how to
 add one).
+
+``plan_scenario`` runs every plan through the one safety checker
+(gcs_planner.geometry.separation.certify): ``VehiclePlan.feasible`` is its verdict, never the
+planner's. A planner may define ``check_options(scenario, config) -> dict``, the checker's
+keyword arguments for its plans (e.g. its sample step, climb limit, ``kinematics=False`` where its
+vehicle model is its own); the checks of obstacles, separation, altitude band and site always run.
 """
 
 from __future__ import annotations
@@ -20,13 +26,17 @@ import numpy as np
 
 from gcs_planner.config import Config, Seed, parse
 from gcs_planner.errors import UserError
+from gcs_planner.geometry.separation import certify
 from gcs_planner.heap import keep_heap_slack
 from gcs_planner.plan import Plan
 from gcs_planner.scenario import Scenario, ScenarioError
 from gcs_planner.scenario import load_scenario as read_scenario
 from gcs_planner.validation import InputError
 
-__all__ = ["PLANNERS", "Planner", "PlannerConfig", "Progress", "config_of", "load_scenario", "plan_scenario"]
+__all__ = [
+    "PLANNERS", "Planner", "PlannerConfig", "Progress", "check_options", "config_of", "load_scenario",
+    "plan_scenario",
+]  # fmt: skip
 
 Progress = Callable[[float, str], None]
 
@@ -81,13 +91,21 @@ def load_scenario(path: str | Path) -> Scenario:
     return scenario
 
 
+def check_options(scenario: Scenario, config: PlannerConfig) -> dict:
+    """The one checker's keyword arguments for the scenario's planner (its ``check_options``)."""
+    declared = getattr(planner(scenario.planner_name), "check_options", None)
+    return declared(scenario, config) if declared else {}
+
+
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:
-    """Run the scenario's planner with a seeded generator (seed defaults to the file's)."""
+    """Run the scenario's planner with a seeded generator (seed defaults to the file's) and give
+    its plan the one checker's verdict (``certify``)."""
     keep_heap_slack()  # the planners' numpy temporaries reuse freed pages (gcs_planner/heap.py)
     config = config_of(scenario)
     module = planner(scenario.planner_name)
     rng = np.random.default_rng(config.seed if seed is None else seed)
     plan = module.plan(scenario, config, rng, progress)
+    certify(plan, scenario, **check_options(scenario, config))
     if scenario.site is not None:  # homes on their own ground: the missions give altitudes AMSL
         for vp in plan.vehicles:
             vp.altitude_frame = "amsl"
