@@ -408,12 +408,14 @@ async def stub_fly(scenario, plan, options, vehicles, progress=None):
 
 
 def problems(outcome: Outcome) -> list[str]:
-    """What the fuzz forbids: an exit code other than 0 / 2, an uncaught exception, more than one
-    stderr line on exit 2, a file left behind on exit 2."""
+    """What the fuzz forbids: an exit code other than 0 / 2 (or 1 from `plan` that wrote a plan the
+    plan checker found infeasible), an uncaught exception, more than one stderr line on exit 2, a
+    file left behind on exit 2."""
     out = []
+    infeasible = outcome.argv[0] == "plan" and outcome.code == 1 and "out/plan.json" in outcome.new_files
     if outcome.exception:
         out.append("traceback: " + outcome.exception.strip().splitlines()[-1])
-    elif outcome.code not in (0, 2):
+    elif outcome.code not in (0, 2) and not infeasible:
         out.append(f"exit code {outcome.code}")
     if outcome.code == 2:
         lines = [line for line in outcome.stderr.splitlines() if line.strip()]

@@ -96,6 +96,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help=f"bound on each vehicle's along-track time error [{MAX_SCHEDULE_ERROR_S:g} s]",
     )
     p.add_argument(
+        "--allow-infeasible",
+        action="store_true",
+        help="fly a plan the plan checker reports infeasible (refused otherwise)",
+    )
+    p.add_argument(
         "--drift",
         action="append",
         default=[],
@@ -148,6 +153,19 @@ def _drift(values: list[str], sysids: list[int]) -> dict[int, tuple[float, float
     return out
 
 
+def check_feasible(plan: Plan, allow: bool) -> None:
+    """Refuse (UserError) a plan the plan checker found infeasible, naming the first finding;
+    with ``allow`` print a warning and go on."""
+    bad = [v for v in plan.vehicles if not v.feasible]
+    if not bad:
+        return
+    found = next((n[7:] for n in bad[0].notes if n.startswith("check: ")), "see its notes")
+    what = f"the plan is infeasible for {[v.vehicle_id for v in bad]} ({bad[0].vehicle_id}: {found})"
+    if not allow:
+        raise UserError(f"{what}; --allow-infeasible flies it anyway")
+    print(f"warning: {what}; flying anyway (--allow-infeasible)")
+
+
 def run(args: argparse.Namespace) -> int:
     out = output_dir(args.out, "-o")
     if args.live:
@@ -161,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     drift = _drift(args.drift, [v.sysid for v in plan.vehicles])
     check_flight(plan)  # every mission, before anything is written or sent
+    check_feasible(plan, args.allow_infeasible)
     if args.connect and networks(plan) > 1:
         check_networks(plan, len(args.connect))
     say_ignored_tables(scenario)
@@ -169,9 +188,6 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise UserError(f"-o {str(out)!r}: cannot make the folder: {exc.strerror or exc}") from None
     plan.save(out / "plan.json")
-    if not plan.feasible:
-        bad = [v.vehicle_id for v in plan.vehicles if not v.feasible]
-        print(f"warning: the planner reports infeasible paths for {bad}; flying anyway")
     if args.connect:
         rate = 1.0 if args.speedup is None else args.speedup  # real vehicles: 1; SITL: its --speedup
         vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1, speedup=rate)

@@ -1,7 +1,8 @@
 """Plan a scenario file and write plan.json.
 
 Runs the planner named in the scenario's [planner] table with its seed (or --seed) and prints a
-per-vehicle table: path length, planned time, feasibility.
+per-vehicle table: path length, planned time, feasibility (the plan checker's verdict), then
+each finding of an infeasible vehicle; exits 1 when any vehicle is infeasible.
 """
 
 from __future__ import annotations
@@ -40,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
     for v in plan.vehicles:
         length = float(np.linalg.norm(np.diff(v.path, axis=0), axis=1).sum())
         print(f"{v.vehicle_id:<10} {v.sysid:>5} {length:>10.1f} {v.path_times_s[-1]:>8.1f}  {v.feasible}")
+    for v in plan.vehicles:
+        for note in (n for n in v.notes if n.startswith("check: ")):
+            print(f"{v.vehicle_id}: {note}")
     print(f"wrote {args.output} ({len(plan.vehicles)} vehicles, planner {plan.planner})")
     return 0 if plan.feasible else 1
 

@@ -32,7 +32,8 @@ class VehiclePlan:
     takeoff_delay_s: hold on the ground this long after the fleet start (delayed take-off).
     final_action: "land", "rtl" or "loiter" after the last waypoint.
     acceptance_radius_m: waypoint acceptance radius given to the autopilot.
-    cost: named cost terms of the planner; feasible: the independent checker's verdict.
+    cost: named cost terms of the planner; feasible: the one plan checker's verdict, set by
+    plan_scenario (gcs_planner.safety.separation.certify), whose findings are ``check:`` notes.
     altitude_frame: how the mission gives altitudes: "relative" to home (home at the origin's
     altitude: the default), or "amsl" (z + the origin's altitude), for plans over a site's terrain,
     where each vehicle's home is on its own ground (gcs_planner.missions.items).

@@ -6,6 +6,12 @@ reads) and ``plan(scenario, config, rng, progress) -> Plan``, where ``rng`` is a
 Generator (no global random state) and ``progress(fraction, message)`` may be None. ``PLANNERS``
 names the modules; the scenario's ``[planner] name`` picks one, so methods are swapped in the file
 (docs/planners.md shows how to add one).
+
+``plan_scenario`` runs every plan through the one safety checker
+(gcs_planner.safety.separation.certify): ``VehiclePlan.feasible`` is its verdict, never the
+planner's. A planner may define ``check_options(scenario, config) -> dict``, the checker's
+keyword arguments for its plans (e.g. its sample step, climb limit, ``kinematics=False`` where its
+vehicle model is its own); the checks of obstacles, separation, altitude band and site always run.
 """
 
 from __future__ import annotations
@@ -27,10 +33,11 @@ from gcs_planner.model.plan import Plan
 from gcs_planner.model.scenario import Extensions, Scenario, ScenarioError
 from gcs_planner.model.scenario import load_scenario as read_scenario
 from gcs_planner.model.scenario import parse_scenario as parse_tables
+from gcs_planner.safety.separation import certify
 
 __all__ = [
-    "PLANNERS", "WORLD", "Planner", "PlannerConfig", "Progress", "Traits", "config_of", "ignored_tables",
-    "load_scenario", "parse_scenario", "plan_scenario", "planner",
+    "PLANNERS", "WORLD", "Planner", "PlannerConfig", "Progress", "Traits", "check_options", "config_of",
+    "ignored_tables", "load_scenario", "parse_scenario", "plan_scenario", "planner",
 ]  # fmt: skip
 
 Progress = Callable[[float, str], None]
@@ -120,13 +127,21 @@ def ignored_tables(scenario: Scenario) -> list[str]:
     return [t for t in WORLD if scenario.raw.get(t) and t not in reads]
 
 
+def check_options(scenario: Scenario, config: PlannerConfig) -> dict:
+    """The one checker's keyword arguments for the scenario's planner (its ``check_options``)."""
+    declared = getattr(planner(scenario.planner_name), "check_options", None)
+    return declared(scenario, config) if declared else {}
+
+
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:
-    """Run the scenario's planner with a seeded generator (seed defaults to the file's)."""
+    """Run the scenario's planner with a seeded generator (seed defaults to the file's) and give
+    its plan the one checker's verdict (``certify``)."""
     keep_heap_slack()  # the planners' numpy temporaries reuse freed pages (gcs_planner/core/heap.py)
     config = config_of(scenario)
     module = planner(scenario.planner_name)
     rng = np.random.default_rng(config.seed if seed is None else seed)
     plan = module.plan(scenario, config, rng, progress)
+    certify(plan, scenario, **check_options(scenario, config))
     if scenario.site is not None:  # homes on their own ground: the missions give altitudes AMSL
         for vp in plan.vehicles:
             vp.altitude_frame = "amsl"

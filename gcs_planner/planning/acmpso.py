@@ -518,6 +518,19 @@ def _longest_leg(
     return int(js[np.argmin(ok) - 1] if not ok.all() else js[-1])
 
 
+def check_options(scenario: Scenario, config: Config) -> dict:
+    """The one checker holds ACMPSO's plans to its climb limit, its safe height over the
+    scenario's terrain and its cylinders' buffers as keep-out (as its own validation does); not to
+    a turn radius: its plans are waypoint polylines whose corners the autopilot rounds."""
+    env = ThreatEnv.from_scenario(scenario, config.h_safe_m)
+    return {
+        "max_climb_rad": math.radians(config.max_climb_deg),
+        "floor": env.floor,
+        "hard_buffers": True,
+        "kinematics": False,
+    }
+
+
 def plan(
     scenario: Scenario, params: Config, rng: np.random.Generator, progress: Progress | None = None
 ) -> Plan:

@@ -782,6 +782,12 @@ def _loser(problems, a: int, b: int, t_s: float, rank: dict[int, int]) -> int:
     return max(a, b, key=lambda i: rank[i])
 
 
+def check_options(scenario: Scenario, config: Config) -> dict:
+    """The one checker samples at the planner's step and holds it to its climb limit."""
+    del scenario
+    return {"step_s": config.dt_s, "max_climb_rad": math.radians(config.max_climb_deg)}
+
+
 def plan(
     scenario: Scenario, config: Config, rng: np.random.Generator, progress: Progress | None = None
 ) -> Plan:

@@ -9,9 +9,10 @@ Choices:
   within ``acceptance_m`` of the first planned point to the last sample within ``acceptance_m``
   of the final planned point (take-off climb and landing are not part of the planned path).
   ``acceptance_m`` defaults to the plan's waypoint acceptance radius + 1 m.
-- Separation is checked on a common time grid (``step_s``, default 0.1 s) after linear
-  interpolation of each airborne track; exact to the distance flown in one step.
-- Obstacle clearance is the distance outside the obstacle's surface (cylinder radius without its
+- Separation and obstacle clearance use the plan checker's geometry (gcs_planner.geometry): each
+  airborne track's closest approach to any other is solved exactly for linear motion between
+  samples on slices of ``step_s`` (default 0.1 s), and the clearance is ``Obstacles.clearance``
+  of each flown sample: the distance outside the obstacle's surface (cylinder radius without its
   planning buffer, hemisphere radius); negative means inside.
 - Manned traffic (MovingObstacle) is checked at every flown sample against its true,
   constant-velocity track; the bound is its own ``min_distance_m``.
@@ -34,8 +35,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gcs_planner.geometry.obstacles import Obstacles
 from gcs_planner.model.plan import Plan, land_point
 from gcs_planner.model.scenario import Cylinder, Hemisphere
+from gcs_planner.safety.separation import Trajectory, closest_approach_m
 
 if TYPE_CHECKING:  # shapely is imported only for a site
     from gcs_planner.model.sites.world import Site
@@ -170,16 +173,8 @@ def schedule_errors_s(track: Track, vp, route_t0_s: float, near_m: float) -> np.
 
 
 def _obstacle_clearance_m(positions: np.ndarray, cylinders, hemispheres) -> float:
-    clearance = np.inf
-    for c in cylinders:
-        inside_band = (positions[:, 2] >= c.z_min_m) & (positions[:, 2] <= c.z_max_m)
-        if inside_band.any():
-            d = np.hypot(positions[inside_band, 0] - c.x, positions[inside_band, 1] - c.y) - c.radius_m
-            clearance = min(clearance, float(d.min()))
-    for h in hemispheres:
-        d = np.linalg.norm(positions - np.array([h.x, h.y, h.z]), axis=1) - h.radius_m
-        clearance = min(clearance, float(d.min()))
-    return clearance
+    """The flown samples' smallest clearance [m] from any obstacle surface (< 0: inside)."""
+    return float(Obstacles.from_scenario(cylinders, hemispheres).clearance(positions, positions).min())
 
 
 def _site_failures(site: Site, route: np.ndarray) -> list[str]:
@@ -198,29 +193,8 @@ def _site_failures(site: Site, route: np.ndarray) -> list[str]:
 
 def _min_separation_m(tracks: dict[int, Track], step_s: float) -> dict[int, float]:
     """Smallest distance from each vehicle to any other, over their common airborne time."""
-    ids = list(tracks)
-    result = {i: np.inf for i in ids}
-    if len(ids) < 2:
-        return result
-    t0 = min(float(tr.times_s[0]) for tr in tracks.values())
-    t1 = max(float(tr.times_s[-1]) for tr in tracks.values())
-    grid = np.arange(t0, t1 + step_s, step_s)
-    pos = np.full((len(ids), len(grid), 3), np.nan)
-    for k, i in enumerate(ids):
-        tr = tracks[i]
-        live = (grid >= tr.times_s[0]) & (grid <= tr.times_s[-1])
-        for axis in range(3):
-            pos[k, live, axis] = np.interp(grid[live], tr.times_s, tr.positions[:, axis])
-    for k in range(len(ids)):
-        d = np.linalg.norm(pos[k + 1 :] - pos[k], axis=2)
-        if d.size == 0 or np.all(np.isnan(d)):
-            continue
-        others = np.nanmin(d, axis=1)
-        result[ids[k]] = min(result[ids[k]], float(np.nanmin(others)))
-        for j, dmin in zip(ids[k + 1 :], others, strict=True):
-            if np.isfinite(dmin):
-                result[j] = min(result[j], float(dmin))
-    return result
+    trajs = [Trajectory(str(i), tr.times_s, tr.positions) for i, tr in tracks.items()]
+    return {i: float(d) for i, d in zip(tracks, closest_approach_m(trajs, step_s), strict=True)}
 
 
 def conformance_report(

@@ -18,12 +18,18 @@ slice interval is solved analytically. Between samples of the *plan* the true pa
 chord; a 0.5 s sample step at 20 m/s on a 20 m radius arc has a chord error of 0.6 m, which the
 planner covers with its separation margin.
 
-``check_plan`` is the independent checker used by tests and by the planners' final re-check:
-obstacle clearance (segments between path samples, buffers reported but not fatal), separation,
+``check_plan`` is the one safety checker (like OMPL's StateValidityChecker): ``plan_scenario``
+runs every planner's plan through ``certify``, so ``VehiclePlan.feasible`` is its verdict and its
+findings are the vehicle's notes; conformance measures flown tracks with the same functions.
+It checks obstacle clearance (segments between path samples, buffers reported but not fatal), separation,
 turn radius (circumradius of consecutive xy samples after inserting points so no segment exceeds
 R/4: arcs sampled at <= R/4 are measured exactly, a polyline corner shows as a tiny radius),
 climb angle, speed along the timed path and the altitude band. Vertical
 take-off/landing columns directly above the start/goal are exempt from the band and climb limits.
+A planner whose vehicle model is its own (``kinematics=False``) is not held to the turn radius and
+speed; ``floor`` adds a planner's ground (terrain + its safe height) and
+``hard_buffers`` makes cylinder buffers keep-out zones (a planner's ``check_options``,
+gcs_planner.planning).
 On a scenario with a ``[site]`` it also proves every path stays in the site's area, out of its
 no-fly zones (their exact polygons and altitude bands) and above the DEM by the terrain clearance
 (gcs_planner.model.sites.checks).
@@ -32,6 +38,7 @@ no-fly zones (their exact polygons and altitude bands) and above the DEM by the 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,7 +52,9 @@ __all__ = [
     "CheckReport",
     "Conflict",
     "Trajectory",
+    "certify",
     "check_plan",
+    "closest_approach_m",
     "find_conflicts",
     "positions_at",
     "turn_radii",
@@ -118,31 +127,33 @@ def positions_at(trajs: list[Trajectory], t_s: float) -> np.ndarray:
     return np.vstack([tr.position_at(np.array([t_s])) for tr in trajs])
 
 
-def find_conflicts(trajs: list[Trajectory], step_s: float = MAX_STEP_S) -> list[Conflict]:
-    """Worst conflict per vehicle pair (closest approach < max of the two separations)."""
+def _slice_approaches(trajs: list[Trajectory], step_s: float, radius_m: float | None):
+    """Per time slice (<= step_s, every take-off and landing a boundary), the closest approach of
+    each pair of vehicles flying all of it, solved exactly for their linear motion over the slice:
+    yields (i, j, t, dist) arrays. ``radius_m`` prunes pairs farther apart at the slice start
+    (cKDTree); None keeps every pair."""
     if step_s > MAX_STEP_S:
         raise ValueError(f"step_s must be <= {MAX_STEP_S} s, got {step_s}")
     if len(trajs) < 2:
-        return []
+        return
     t0 = min(tr.t0 for tr in trajs)
     t1 = max(tr.t_end for tr in trajs)
-    # every take-off and landing time is a slice boundary, so a vehicle flies all of a slice or none
     ends = [tr.t0 for tr in trajs] + [tr.t_end for tr in trajs]
     times = np.union1d(np.append(np.arange(t0, t1, step_s), t1), ends)
+    # every take-off and landing time is a slice boundary, so a vehicle flies all of a slice or none
     pos = np.full((len(times), len(trajs), 3), np.nan)  # (T, V, 3): NaN where a vehicle is not flying
     for v, tr in enumerate(trajs):  # interpolated over its flight only (Trajectory.position_at)
         w = slice(np.searchsorted(times, tr.t0, "left"), np.searchsorted(times, tr.t_end, "right"))
         for c in range(3):
             pos[w, v, c] = np.interp(times[w], tr.times_s, tr.positions_m[:, c])
-    sep = np.array([tr.separation_m for tr in trajs])
-    vmax = max(tr.max_speed_mps for tr in trajs)
-    radius = sep.max() + 2.0 * vmax * step_s + 1e-9
-    worst: dict[tuple[int, int], Conflict] = {}
     for k in range(len(times) - 1):
         flying = np.flatnonzero(~np.isnan(pos[k, :, 0]) & ~np.isnan(pos[k + 1, :, 0]))
         if len(flying) < 2:
             continue
-        pairs = cKDTree(pos[k, flying]).query_pairs(radius, output_type="ndarray")
+        if radius_m is None:
+            pairs = np.column_stack(np.triu_indices(len(flying), 1))
+        else:
+            pairs = cKDTree(pos[k, flying]).query_pairs(radius_m, output_type="ndarray")
         if not len(pairs):
             continue
         i, j = flying[pairs[:, 0]], flying[pairs[:, 1]]
@@ -150,14 +161,34 @@ def find_conflicts(trajs: list[Trajectory], step_s: float = MAX_STEP_S) -> list[
         dv = (pos[k + 1, j] - pos[k + 1, i]) - d0
         vv = np.sum(dv * dv, axis=1)
         tau = np.clip(-np.sum(d0 * dv, axis=1) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
-        dist = np.linalg.norm(d0 + tau[:, None] * dv, axis=1)
+        yield i, j, times[k] + tau * (times[k + 1] - times[k]), np.linalg.norm(d0 + tau[:, None] * dv, axis=1)
+
+
+def find_conflicts(trajs: list[Trajectory], step_s: float = MAX_STEP_S) -> list[Conflict]:
+    """Worst conflict per vehicle pair (closest approach < max of the two separations)."""
+    if len(trajs) < 2:
+        return []
+    sep = np.array([tr.separation_m for tr in trajs])
+    vmax = max(tr.max_speed_mps for tr in trajs)
+    radius = sep.max() + 2.0 * vmax * step_s + 1e-9  # nothing farther can close the gap in a slice
+    worst: dict[tuple[int, int], Conflict] = {}
+    for i, j, t, dist in _slice_approaches(trajs, step_s, radius):
         need = np.maximum(sep[i], sep[j])
         for m in np.flatnonzero(dist < need):
             key = (int(i[m]), int(j[m]))
             if key not in worst or dist[m] < worst[key].distance_m:
-                t = times[k] + tau[m] * (times[k + 1] - times[k])
-                worst[key] = Conflict(key[0], key[1], float(t), float(dist[m]), float(need[m]))
+                worst[key] = Conflict(key[0], key[1], float(t[m]), float(dist[m]), float(need[m]))
     return sorted(worst.values(), key=lambda c: (c.i, c.j))
+
+
+def closest_approach_m(trajs: list[Trajectory], step_s: float = MAX_STEP_S) -> np.ndarray:
+    """Each vehicle's closest approach [m] (V,) to any other over their common flying time (inf
+    when it never flies beside another): the same slices and exact solution as find_conflicts."""
+    out = np.full(len(trajs), np.inf)
+    for i, j, _, dist in _slice_approaches(trajs, step_s, None):
+        np.minimum.at(out, i, dist)
+        np.minimum.at(out, j, dist)
+    return out
 
 
 def turn_radii(xy: np.ndarray) -> np.ndarray:
@@ -185,11 +216,13 @@ class CheckReport:
     timing: dict[str, float] = field(default_factory=dict)  # vehicle -> worst speed excess [m/s]
     outside_area: dict[str, tuple[float, float]] = field(default_factory=dict)  # site: where it leaves
     no_fly: dict[str, list[str]] = field(default_factory=dict)  # site: the zones it enters
-    terrain: dict[str, float] = field(default_factory=dict)  # site: worst clearance shortfall [m]
+    terrain: dict[str, float] = field(default_factory=dict)  # site or planner floor: worst shortfall [m]
+    hard_buffers: bool = False  # buffer intrusions are violations (a planner's keep-out buffers)
 
     def bad_vehicles(self) -> set[str]:
         bad = set(self.collisions) | set(self.turn_radius) | set(self.altitude) | set(self.climb)
         bad |= set(self.timing) | set(self.outside_area) | set(self.no_fly) | set(self.terrain)
+        bad |= set(self.buffer_intrusions) if self.hard_buffers else set()
         for a, b, *_ in self.conflicts:
             bad |= {a, b}
         return bad
@@ -204,6 +237,7 @@ class CheckReport:
         parts = []
         for name in (
             "collisions",
+            *(["buffer_intrusions"] if self.hard_buffers else []),
             "turn_radius",
             "altitude",
             "climb",
@@ -218,6 +252,43 @@ class CheckReport:
             parts.append(f"separation conflicts: {[(a, b, round(t, 1)) for a, b, t, *_ in self.conflicts]}")
         return "; ".join(parts)
 
+    def findings(self, vehicle_id: str) -> list[str]:
+        """What the checker found wrong with one vehicle, one phrase each (empty: it passed)."""
+        v = vehicle_id
+        out = [f"enters an obstacle by {-self.collisions[v]:.1f} m"] if v in self.collisions else []
+        if self.hard_buffers and v in self.buffer_intrusions:
+            out.append(f"enters an obstacle's buffer by {-self.buffer_intrusions[v]:.1f} m")
+        out += [
+            f"separation {d:.1f} m < {need:.1f} m from {b if a == v else a} at {t:.1f} s"
+            for a, b, t, d, need in self.conflicts
+            if v in (a, b)
+        ]
+        phrases = {
+            "turn_radius": "turns at radius {:.1f} m, under its limit",
+            "altitude": "leaves its altitude band by {:.1f} m",
+            "climb": "climbs at {:.3f} rad, over the limit",
+            "timing": "exceeds its speed by {:.1f} m/s (or times do not increase)",
+            "terrain": "{:.1f} m under its terrain clearance",
+        }
+        out += [
+            text.format(getattr(self, name)[v]) for name, text in phrases.items() if v in getattr(self, name)
+        ]
+        if v in self.outside_area:
+            out.append("leaves the site's area at ({:.0f}, {:.0f}) m".format(*self.outside_area[v]))
+        out += [f"enters no-fly zone {zone!r}" for zone in self.no_fly.get(v, [])]
+        return out
+
+
+def certify(plan: Plan, scenario: Scenario, **options) -> CheckReport:
+    """Run the one checker on ``plan`` and make its verdict the plan's: each vehicle's ``feasible``
+    is whether it passed, and each finding is a "check: ..." note. ``options``: check_plan's."""
+    report = check_plan(plan, scenario, **options)
+    for vp in plan.vehicles:
+        found = report.findings(vp.vehicle_id)
+        vp.feasible = not found
+        vp.notes = [n for n in vp.notes if not n.startswith("check: ")] + [f"check: {f}" for f in found]
+    return report
+
 
 def check_plan(
     plan: Plan,
@@ -226,12 +297,20 @@ def check_plan(
     max_climb_rad: float = math.radians(30.0),
     radius_tol: float = 0.01,
     speed_tol: float = 0.05,
+    kinematics: bool = True,
+    floor: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+    hard_buffers: bool = False,
 ) -> CheckReport:
-    """Check every vehicle's timed path (at <= step_s sampling) against the scenario's limits."""
+    """Check every vehicle's timed path (at <= step_s sampling) against the scenario's limits.
+
+    kinematics: also hold each path to the scenario vehicle's turn radius and speed (False for a
+    planner whose vehicle model is its own); floor(x, y): the lowest altitude allowed there;
+    hard_buffers: a cylinder's buffer is keep-out, not only priced.
+    """
     # a site's no-fly zones are checked as their polygons, not as the planners' cylinders round them
     cylinders = [c for c in scenario.cylinders if not c.zone]
     obstacles = Obstacles.from_scenario(cylinders, scenario.hemispheres)
-    report = CheckReport()
+    report = CheckReport(hard_buffers=hard_buffers)
     trajs = []
     for vp in plan.vehicles:
         veh = scenario.vehicle(vp.vehicle_id)
@@ -250,33 +329,45 @@ def check_plan(
         exempt = np.ones(len(p), dtype=bool)  # samples touched only by take-off/landing column segments
         exempt[:-1] &= seg_col
         exempt[1:] &= seg_col
-        # near-duplicate xy samples (< 1 cm apart) make the circumradius ill-conditioned: drop them
-        distinct = np.concatenate([np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1) > 0.01, [True]])
-        if veh.turn_radius_m > 0:  # 0: a multirotor that may turn on the spot
-            dense, dense_exempt = _densify(p[distinct], exempt[distinct], 0.25 * veh.turn_radius_m)
-            radii = turn_radii(dense[:, :2])
-            radii = radii[~(dense_exempt[:-2] | dense_exempt[1:-1] | dense_exempt[2:])]
-            if radii.size and radii.min() < veh.turn_radius_m * (1 - radius_tol):
-                report.turn_radius[vp.vehicle_id] = float(radii.min())
+        if floor is not None:
+            short = float((floor(p[:, 0], p[:, 1]) - p[:, 2]).max(initial=0.0))
+            if short > 1e-6:
+                report.terrain[vp.vehicle_id] = max(short, report.terrain.get(vp.vehicle_id, 0.0))
+        dxy = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1)
+        climb = np.arctan2(np.abs(np.diff(p[:, 2])), dxy)[~seg_col]
+        if climb.size and climb.max() > max_climb_rad + 1e-6:
+            report.climb[vp.vehicle_id] = float(climb.max())
+        if kinematics:
+            _check_kinematics(report, vp, veh, traj, exempt, radius_tol=radius_tol, speed_tol=speed_tol)
         excess = altitude_violation(p[~exempt, 2], veh.min_alt_m, veh.max_alt_m)
         if excess.size and excess.max() > 1e-6:
             report.altitude[vp.vehicle_id] = float(excess.max())
         if scenario.site is not None:
             _check_site(report, scenario.site, vp.vehicle_id, p, seg_col)
-        dxy = np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1)
-        dz = np.abs(np.diff(p[:, 2]))
-        climb = np.arctan2(dz, dxy)[~seg_col]
-        if climb.size and climb.max() > max_climb_rad + 1e-6:
-            report.climb[vp.vehicle_id] = float(climb.max())
-        dt = np.diff(traj.times_s)
-        speed = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.where(dt > 0, dt, np.nan)
-        if np.any(dt <= 0) or np.nanmax(speed, initial=0.0) > veh.speed_mps * (1 + speed_tol):
-            report.timing[vp.vehicle_id] = float(np.nanmax(speed, initial=np.inf) - veh.speed_mps)
     for c in find_conflicts(trajs, step_s):
         report.conflicts.append(
             (trajs[c.i].vehicle_id, trajs[c.j].vehicle_id, c.t_s, c.distance_m, c.required_m)
         )
     return report
+
+
+def _check_kinematics(
+    report: CheckReport, vp, veh, traj: Trajectory, exempt: np.ndarray, *, radius_tol: float, speed_tol: float
+) -> None:
+    """Turn radius and speed of one vehicle's path against its scenario limits."""
+    p = traj.positions_m
+    # near-duplicate xy samples (< 1 cm apart) make the circumradius ill-conditioned: drop them
+    distinct = np.concatenate([np.linalg.norm(np.diff(p[:, :2], axis=0), axis=1) > 0.01, [True]])
+    if veh.turn_radius_m > 0:  # 0: a multirotor that may turn on the spot
+        dense, dense_exempt = _densify(p[distinct], exempt[distinct], 0.25 * veh.turn_radius_m)
+        radii = turn_radii(dense[:, :2])
+        radii = radii[~(dense_exempt[:-2] | dense_exempt[1:-1] | dense_exempt[2:])]
+        if radii.size and radii.min() < veh.turn_radius_m * (1 - radius_tol):
+            report.turn_radius[vp.vehicle_id] = float(radii.min())
+    dt = np.diff(traj.times_s)
+    speed = np.linalg.norm(np.diff(p, axis=0), axis=1) / np.where(dt > 0, dt, np.nan)
+    if np.any(dt <= 0) or np.nanmax(speed, initial=0.0) > veh.speed_mps * (1 + speed_tol):
+        report.timing[vp.vehicle_id] = float(np.nanmax(speed, initial=np.inf) - veh.speed_mps)
 
 
 def _check_site(report: CheckReport, site, vehicle_id: str, p: np.ndarray, columns: np.ndarray) -> None:

@@ -14,6 +14,7 @@ the swarm flies.
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 
 import numpy as np
@@ -85,6 +86,13 @@ TRAITS = Traits(
     ),
 )
 Config = CoalitionParams
+
+
+def check_options(scenario: Scenario, config: Config) -> dict:
+    """The one checker skips the scenario vehicles' turn radius, speed and climb angle: the planes
+    follow the event simulation's own flight model. Obstacles, separation, band and site hold."""
+    del scenario, config
+    return {"kinematics": False, "max_climb_rad": math.pi / 2}
 
 
 def plan(

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from typing import Any
 
 import numpy as np
@@ -63,6 +64,14 @@ TRAITS = Traits(
     reads=("obstacles", "bounds", "manned", "site"),
     extensions=Extensions(vehicle_keys=("takeoff_s", "arrival_s", *_DYN_KEYS)),
 )
+
+
+def check_options(scenario: Scenario, config: Config) -> dict:
+    """The one checker skips the scenario vehicles' turn radius, speed and climb angle: the 4-D
+    planner's own dynamics (v_max, a_max, climb rates) hold its paths. Obstacles, separation,
+    band and site hold."""
+    del scenario, config
+    return {"kinematics": False, "max_climb_rad": math.pi / 2}
 
 
 def plan(

@@ -1,0 +1,186 @@
+"""The one safety checker: every planner's plan goes through it in plan_scenario, its verdict is
+``VehiclePlan.feasible`` and its findings are the vehicles' ``check:`` notes; every bundled
+scenario's plan passes it; conformance measures flown tracks with the same geometry; ``fly``
+refuses an infeasible plan unless told."""
+
+from __future__ import annotations
+
+import copy
+import logging
+import os
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gcs_planner.cli import main
+from gcs_planner.commands.fly import check_feasible
+from gcs_planner.model.scenario import Cylinder, parse_scenario
+from gcs_planner.planning import load_scenario as load_checked
+from gcs_planner.planning import plan_scenario, planner
+from gcs_planner.safety.conformance import Track, conformance_report
+from gcs_planner.safety.separation import Trajectory, closest_approach_m
+
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
+# planner keys that make a bundled scenario quick to plan (the plan still has to pass)
+QUICK = {
+    "priority_swarm": {"particles": 8, "iterations": 12, "rounds": 1, "rrt_iterations": 150},
+    "acmpso": {"particles": 20, "iterations": 25},
+    "deconflict_4d": {"iterations": 20},
+}
+# the obstacle mazes need about the default budget to come out clean (~8 s each on one core)
+MAZE = {"particles": 12, "iterations": 20, "rounds": 2}
+ALL = os.environ.get("GCS_PLANNER_ALL_SCENARIOS") == "1"
+SKIP = {"swarm500": "500 vehicles take minutes to plan at any budget"}
+if not ALL:
+    SKIP |= dict.fromkeys(
+        ("swarm40_passages", "swarm40_urban"), "a maze needs ~8 s to plan clean: GCS_PLANNER_ALL_SCENARIOS=1"
+    )
+# the coalition simulation keeps no separation: synchronised strikes bring planes together over a
+# target, and its planes fly above the scenario vehicles' default band (120 m)
+KNOWN_INFEASIBLE = {
+    "coalition_paper": "strikes converge over targets; planes at 300 m over a 120 m band",
+    "coalition_sitl": "strikes converge over targets",
+}
+
+
+def _raw(name: str) -> dict:
+    return tomllib.loads((MISSIONS / f"{name}.toml").read_text())
+
+
+def _scenario(raw: dict, name: str):
+    scenario = parse_scenario(raw, name)
+    scenario.path = MISSIONS / f"{name}.toml"  # relative world files ([site], [terrain]) resolve
+    return scenario
+
+
+def _check_notes(vp) -> list[str]:
+    return [n for n in vp.notes if n.startswith("check: ")]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(p.stem for p in MISSIONS.glob("*.toml")))
+def test_every_bundled_scenario_plan_passes_the_one_checker(name):
+    if name in SKIP:
+        pytest.skip(SKIP[name])
+    scenario = load_checked(MISSIONS / f"{name}.toml")
+    scenario.planner.update(
+        MAZE if name in ("swarm40_passages", "swarm40_urban") else QUICK.get(scenario.planner_name, {})
+    )
+    if scenario.planner_name == "coalition":
+        scenario.planner["t_end_s"] = 90.0  # the first targets' phases
+    plan = plan_scenario(scenario)
+    bad = {v.vehicle_id: _check_notes(v) for v in plan.vehicles if not v.feasible}
+    if name in KNOWN_INFEASIBLE:
+        assert bad and all(bad.values()), f"{name} now passes: remove it from KNOWN_INFEASIBLE"
+        return
+    assert plan.feasible, bad
+    assert not any(_check_notes(v) for v in plan.vehicles)
+
+
+def test_straight_through_a_tower_is_infeasible():
+    """straight always called its plan feasible; a tower on its line now shows."""
+    raw = _raw("straight_4uav")
+    raw["obstacles"] = {"cylinders": [{"x": 150.0, "y": 0.0, "radius_m": 10.0, "z_max_m": 100.0}]}
+    plan = plan_scenario(_scenario(raw, "straight_4uav"))
+    assert not plan.vehicle("uav1").feasible
+    assert any("enters an obstacle" in n for n in _check_notes(plan.vehicle("uav1")))
+    assert all(plan.vehicle(v).feasible for v in ("uav2", "uav3", "uav4"))
+
+
+def test_deconflict_4d_through_a_tower_is_infeasible(caplog):
+    """The 4-D planner ignores static obstacles and called a conflict-free plan feasible."""
+    raw = _raw("deconflict_4uav")
+    raw["obstacles"] = {"cylinders": [{"x": 0.0, "y": 0.0, "radius_m": 2.0, "z_max_m": 50.0}]}
+    with caplog.at_level(logging.WARNING):
+        plan = plan_scenario(_scenario(raw, "deconflict_4uav"))
+    assert plan.metrics["conflict_free"]  # what the planner itself saw
+    bad = [v for v in plan.vehicles if not v.feasible]
+    assert bad and all(any("enters an obstacle" in n for n in _check_notes(v)) for v in bad)
+
+
+def test_acmpso_vehicles_on_one_track_are_infeasible():
+    """ACMPSO plans each vehicle alone against the threats: two on one track conflict."""
+    raw = _raw("acmpso_paper")
+    raw["planner"].update(QUICK["acmpso"])
+    twin = copy.deepcopy(raw["vehicles"][0])
+    twin.update(id="twin", sysid=2)
+    raw["vehicles"].append(twin)
+    plan = plan_scenario(_scenario(raw, "acmpso_paper"))
+    assert not plan.feasible
+    for vp in plan.vehicles:
+        assert any(n.startswith("check: separation") for n in _check_notes(vp)), vp.notes
+
+
+def test_coalition_plan_is_held_to_the_band_and_separation():
+    """The coalition's own flag only asked whether each leg was clear of threats."""
+    scenario = load_checked(MISSIONS / "coalition_paper.toml")
+    scenario.planner["t_end_s"] = 90.0
+    plan = plan_scenario(scenario)
+    assert not plan.feasible
+    assert all(any("altitude band" in n for n in _check_notes(v)) for v in plan.vehicles)
+
+
+def test_priority_swarm_flag_is_the_checkers_not_the_planners(monkeypatch):
+    """A plan the planner called feasible is judged again: two vehicles made to meet are not."""
+    module = planner("priority_swarm")
+    own = module.plan
+
+    def meeting(scenario, config, rng, progress):
+        plan = own(scenario, config, rng, progress)
+        a, b = plan.vehicles[0], plan.vehicles[1]
+        assert a.feasible and b.feasible  # the planner's own verdict
+        b.path, b.path_times_s = a.path + [0.5, 0.0, 0.0], a.path_times_s.copy()
+        return plan
+
+    monkeypatch.setattr(module, "plan", meeting)
+    plan = plan_scenario(load_checked(MISSIONS / "swarm_small.toml"))
+    a, b = plan.vehicles[0], plan.vehicles[1]
+    assert not a.feasible and not b.feasible
+    assert any(f"from {b.vehicle_id}" in n for n in _check_notes(a))
+
+
+def test_conformance_separation_is_the_checkers_closest_approach():
+    """Two crossing passes whose closest approach, sqrt(2 x 2.5^2 + 3^2) m, falls between telemetry
+    samples: conformance reports the exact value the checker's solution gives."""
+    t = np.arange(0.0, 10.01, 1.0)
+    east = np.column_stack([10.0 * t - 50.0, np.zeros_like(t), np.full_like(t, 20.0)])
+    north = np.column_stack([np.zeros_like(t), 10.0 * t - 55.0, np.full_like(t, 23.0)])
+    tracks = {1: Track(t, east, True), 2: Track(t, north, True)}
+    expected = closest_approach_m([Trajectory("1", t, east), Trajectory("2", t, north)], 0.1)
+    assert expected == pytest.approx([np.sqrt(21.5)] * 2, abs=1e-9)
+    plan = plan_scenario(load_checked(MISSIONS / "straight_4uav.toml"))
+    plan.vehicles = plan.vehicles[:2]
+    plan.vehicles[0].sysid, plan.vehicles[1].sysid = 1, 2
+    reports = conformance_report(plan, tracks, {1: 5.0, 2: 5.0}, [Cylinder(0.0, 0.0, 1.0, 100.0)])
+    assert [r.min_separation_m for r in reports] == pytest.approx(list(expected))
+    assert all("separation 4.6 m < 5.0 m" in r.failures for r in reports)
+    assert reports[0].min_obstacle_clearance_m == pytest.approx(-1.0)  # flies over the axis
+
+
+def test_fly_refuses_an_infeasible_plan_unless_told(tmp_path, capsys):
+    raw_path = tmp_path / "tower.toml"
+    text = (MISSIONS / "straight_4uav.toml").read_text()
+    raw_path.write_text(
+        text + "\n[[obstacles.cylinders]]\nx = 150.0\ny = 0.0\nradius_m = 10.0\nz_max_m = 100.0\n"
+    )
+    assert main(["plan", str(raw_path), "-o", str(tmp_path / "plan.json")]) == 1
+    assert "uav1: check: enters an obstacle by" in capsys.readouterr().out
+    out = tmp_path / "out"
+    assert main(["fly", str(raw_path), "--plan", str(tmp_path / "plan.json"), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "infeasible for ['uav1']" in err and "--allow-infeasible" in err
+    assert "enters an obstacle" in err and not out.exists()
+
+
+def test_allow_infeasible_warns_and_goes_on(capsys):
+    raw = _raw("straight_4uav")
+    raw["obstacles"] = {"cylinders": [{"x": 150.0, "y": 0.0, "radius_m": 10.0, "z_max_m": 100.0}]}
+    plan = plan_scenario(_scenario(raw, "straight_4uav"))
+    check_feasible(plan, allow=True)
+    assert "flying anyway (--allow-infeasible)" in capsys.readouterr().out
+    check_feasible(
+        plan_scenario(load_checked(MISSIONS / "straight_4uav.toml")), allow=False
+    )  # feasible: quiet
+    assert capsys.readouterr().out == ""
