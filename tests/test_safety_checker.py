@@ -16,9 +16,9 @@ import pytest
 
 from gcs_planner.cli import main
 from gcs_planner.commands.fly import check_feasible
-from gcs_planner.model.scenario import Cylinder, parse_scenario
+from gcs_planner.model.scenario import Cylinder
 from gcs_planner.planning import load_scenario as load_checked
-from gcs_planner.planning import plan_scenario, planner
+from gcs_planner.planning import parse_scenario, plan_scenario, planner
 from gcs_planner.safety.conformance import Track, conformance_report
 from gcs_planner.safety.separation import Trajectory, closest_approach_m
 
@@ -37,12 +37,6 @@ if not ALL:
     SKIP |= dict.fromkeys(
         ("swarm40_passages", "swarm40_urban"), "a maze needs ~8 s to plan clean: GCS_PLANNER_ALL_SCENARIOS=1"
     )
-# the coalition simulation keeps no separation: synchronised strikes bring planes together over a
-# target, and its planes fly above the scenario vehicles' default band (120 m)
-KNOWN_INFEASIBLE = {
-    "coalition_paper": "strikes converge over targets; planes at 300 m over a 120 m band",
-    "coalition_sitl": "strikes converge over targets",
-}
 
 
 def _raw(name: str) -> dict:
@@ -72,9 +66,6 @@ def test_every_bundled_scenario_plan_passes_the_one_checker(name):
         scenario.planner["t_end_s"] = 90.0  # the first targets' phases
     plan = plan_scenario(scenario)
     bad = {v.vehicle_id: _check_notes(v) for v in plan.vehicles if not v.feasible}
-    if name in KNOWN_INFEASIBLE:
-        assert bad and all(bad.values()), f"{name} now passes: remove it from KNOWN_INFEASIBLE"
-        return
     assert plan.feasible, bad
     assert not any(_check_notes(v) for v in plan.vehicles)
 
@@ -114,12 +105,19 @@ def test_acmpso_vehicles_on_one_track_are_infeasible():
 
 
 def test_coalition_plan_is_held_to_the_band_and_separation():
-    """The coalition's own flag only asked whether each leg was clear of threats."""
-    scenario = load_checked(MISSIONS / "coalition_paper.toml")
-    scenario.planner["t_end_s"] = 90.0
-    plan = plan_scenario(scenario)
-    assert not plan.feasible
-    assert all(any("altitude band" in n for n in _check_notes(v)) for v in plan.vehicles)
+    """The coalition's own flag only asked whether each leg was clear of threats: with the paper's
+    type layers alone (every plane of a type at one altitude, the default 120 m band), planes of a
+    type pass under the separation and every plane flies over its band."""
+    raw = _raw("coalition_sitl")
+    raw["planner"]["t_end_s"] = 300.0
+    for v in raw["vehicles"]:
+        v["start"][2] = v["goal"][2] = 120.0 + 60.0 * (v["capabilities"] == "S")
+        del v["max_alt_m"]
+    plan = plan_scenario(_scenario(raw, "coalition_sitl"))
+    notes = [n for v in plan.vehicles for n in _check_notes(v)]
+    assert any("separation" in n for n in notes)
+    strikers = {r["id"] for r in raw["vehicles"] if r["capabilities"] == "S"}
+    assert all(any("altitude band" in n for n in _check_notes(plan.vehicle(v))) for v in strikers)
 
 
 def test_priority_swarm_flag_is_the_checkers_not_the_planners(monkeypatch):
