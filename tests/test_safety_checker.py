@@ -182,3 +182,24 @@ def test_allow_infeasible_warns_and_goes_on(capsys):
         plan_scenario(load_checked(MISSIONS / "straight_4uav.toml")), allow=False
     )  # feasible: quiet
     assert capsys.readouterr().out == ""
+
+
+def test_fly_rechecks_a_plan_file_against_its_scenario(tmp_path, capsys):
+    """A plan file's feasible flags are whatever wrote it: a plan made before a tower was added,
+    or edited by hand, is checked again against the scenario it is flown in."""
+    plan_path = tmp_path / "plan.json"
+    assert main(["plan", str(MISSIONS / "straight_4uav.toml"), "-o", str(plan_path)]) == 0
+    tower = tmp_path / "tower.toml"
+    tower.write_text(
+        (MISSIONS / "straight_4uav.toml").read_text()
+        + "\n[[obstacles.cylinders]]\nx = 150.0\ny = 0.0\nradius_m = 10.0\nz_max_m = 100.0\n"
+    )
+    capsys.readouterr()
+    out = tmp_path / "out"
+    assert main(["fly", str(tower), "--plan", str(plan_path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "infeasible for ['uav1']" in err and "enters an obstacle" in err and not out.exists()
+    other = MISSIONS / "acmpso_paper.toml"  # its vehicles are not the plan's
+    assert main(["fly", str(other), "--plan", str(plan_path), "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "are not in scenario" in err and not out.exists()

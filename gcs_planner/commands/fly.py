@@ -38,7 +38,8 @@ from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_sum
 from gcs_planner.flight.starts import format_homes, starts
 from gcs_planner.flight.vehicles import ConnectedVehicles, mock_vehicles
 from gcs_planner.model.plan import Plan
-from gcs_planner.planning import load_scenario, planner
+from gcs_planner.model.scenario import Scenario
+from gcs_planner.planning import certify_plan, load_scenario, planner
 from gcs_planner.safety.conformance import MAX_SCHEDULE_ERROR_S, format_report
 
 WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid
@@ -153,6 +154,17 @@ def _drift(values: list[str], sysids: list[int]) -> dict[int, tuple[float, float
     return out
 
 
+def _plan_file(path: str, scenario: Scenario) -> Plan:
+    """A plan file re-checked against the scenario it is flown in (its flags are the file's): its
+    obstacles, separation, band and site; the planner held its kinematics when it made it."""
+    plan = Plan.load(path)
+    known = {v.id for v in scenario.vehicles}
+    if missing := [vp.vehicle_id for vp in plan.vehicles if vp.vehicle_id not in known]:
+        raise UserError(f"--plan {path!r}: vehicles {missing} are not in scenario {scenario.name!r}")
+    certify_plan(plan, scenario, kinematics=False)
+    return plan
+
+
 def check_feasible(plan: Plan, allow: bool) -> None:
     """Refuse (UserError) a plan the plan checker found infeasible, naming the first finding;
     with ``allow`` print a warning and go on."""
@@ -173,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     if planner(scenario.planner_name).TRAITS.online:
         return _fly_coalition(args)
-    plan = Plan.load(args.plan) if args.plan else plan_with_progress(scenario, args.seed)
+    plan = _plan_file(args.plan, scenario) if args.plan else plan_with_progress(scenario, args.seed)
     if args.homes:
         print(format_homes(starts(plan.vehicles, plan.origin), None))
         return 0

@@ -36,8 +36,8 @@ from gcs_planner.model.scenario import parse_scenario as parse_tables
 from gcs_planner.safety.separation import certify
 
 __all__ = [
-    "PLANNERS", "WORLD", "Planner", "PlannerConfig", "Progress", "Traits", "check_options", "config_of",
-    "ignored_tables", "load_scenario", "parse_scenario", "plan_scenario", "planner",
+    "PLANNERS", "WORLD", "Planner", "PlannerConfig", "Progress", "Traits", "certify_plan", "check_options",
+    "config_of", "ignored_tables", "load_scenario", "parse_scenario", "plan_scenario", "planner",
 ]  # fmt: skip
 
 Progress = Callable[[float, str], None]
@@ -133,6 +133,15 @@ def check_options(scenario: Scenario, config: PlannerConfig) -> dict:
     return declared(scenario, config) if declared else {}
 
 
+def certify_plan(plan: Plan, scenario: Scenario, kinematics: bool = True) -> None:
+    """Give ``plan`` the one checker's verdict for ``scenario`` with its planner's options: the last
+    step of plan_scenario, and what ``fly`` does to a plan file, whose flags are whatever wrote it.
+    ``kinematics=False`` leaves out the turn radius and speed: a plan file holds 0.1 mm / 0.1 ms
+    (Plan.to_dict), which on samples centimetres apart moves a measured radius by 10 %."""
+    options = check_options(scenario, config_of(scenario))
+    certify(plan, scenario, **options | ({} if kinematics else {"kinematics": False}))
+
+
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:
     """Run the scenario's planner with a seeded generator (seed defaults to the file's) and give
     its plan the one checker's verdict (``certify``)."""
@@ -141,7 +150,7 @@ def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progres
     module = planner(scenario.planner_name)
     rng = np.random.default_rng(config.seed if seed is None else seed)
     plan = module.plan(scenario, config, rng, progress)
-    certify(plan, scenario, **check_options(scenario, config))
+    certify_plan(plan, scenario)
     if scenario.site is not None:  # homes on their own ground: the missions give altitudes AMSL
         for vp in plan.vehicles:
             vp.altitude_frame = "amsl"
