@@ -96,18 +96,20 @@ class Obstacles:
 
         Buffers are not part of the surface: they are soft keep-out bands priced by ``threat``.
         """
-        out = np.full(np.shape(a)[:-1], np.inf)
-        if len(self.radius_m):
-            out = np.minimum(out, (self.cylinder_distances(a, b) - self.radius_m).min(axis=-1))
-        if len(self.dome_radius_m):
-            out = np.minimum(out, (self.dome_distances(a, b) - self.dome_radius_m).min(axis=-1))
-        return out
+        return self.clearances(a, b)[0]
 
-    def buffer_clearance(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """Smallest distance [m] (...) from segments to any cylinder's buffer edge (< 0 = inside buffer)."""
-        if not len(self.radius_m):
-            return np.full(np.shape(a)[:-1], np.inf)
-        return (self.cylinder_distances(a, b) - self.radius_m - self.buffer_m).min(axis=-1)
+    def clearances(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``clearance`` and the smallest distance [m] (...) to any cylinder's buffer edge (< 0 =
+        inside a buffer), from one computation of the axis distances."""
+        surface = np.full(np.shape(a)[:-1], np.inf)
+        buffer = surface
+        if len(self.radius_m):
+            gap = self.cylinder_distances(a, b) - self.radius_m
+            surface = gap.min(axis=-1)
+            buffer = (gap - self.buffer_m).min(axis=-1)
+        if len(self.dome_radius_m):
+            surface = np.minimum(surface, (self.dome_distances(a, b) - self.dome_radius_m).min(axis=-1))
+        return surface, buffer
 
     def contains(self, points: np.ndarray, margin_m: float = 0.0) -> np.ndarray:
         """True (...) where a point (..., 3) is within margin_m of an obstacle (buffers excluded)."""

@@ -319,10 +319,9 @@ def check_plan(
         trajs.append(_resample(flown, step_s))
         p = traj.positions_m
         a, b = p[:-1], p[1:]
-        clear = obstacles.clearance(a, b)
+        clear, buf = obstacles.clearances(a, b)
         if clear.size and clear.min() < 0:
             report.collisions[vp.vehicle_id] = float(clear.min())
-        buf = obstacles.buffer_clearance(a, b)
         if buf.size and buf.min() < 0:
             report.buffer_intrusions[vp.vehicle_id] = float(buf.min())
         seg_col = _column_segments(p, veh.start, veh.goal)
