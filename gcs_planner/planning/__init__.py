@@ -136,8 +136,8 @@ def check_options(scenario: Scenario, config: PlannerConfig) -> dict:
 def certify_plan(plan: Plan, scenario: Scenario, kinematics: bool = True) -> None:
     """Give ``plan`` the one checker's verdict for ``scenario`` with its planner's options: the last
     step of plan_scenario, and what ``fly`` does to a plan file, whose flags are whatever wrote it.
-    ``kinematics=False`` leaves out the turn radius and speed: a plan file holds 0.1 mm / 0.1 ms
-    (Plan.to_dict), which on samples centimetres apart moves a measured radius by 10 %."""
+    ``kinematics=False`` leaves out the turn radius and speed, which a plan file's rounding blurs
+    (docs/architecture.md, "The one safety checker")."""
     options = check_options(scenario, config_of(scenario))
     certify(plan, scenario, **options | ({} if kinematics else {"kinematics": False}))
 
