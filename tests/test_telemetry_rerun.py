@@ -199,3 +199,17 @@ def test_serve_web_chooses_free_ports_and_prints_the_url(monkeypatch, capsys):
     assert grpc_port != web_port and not {grpc_port, web_port} & {0, 9090, 9876}
     out = capsys.readouterr().out
     assert f"http://localhost:{web_port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc_port}%2Fproxy" in out
+
+
+@pytest.mark.parametrize(
+    "name", sorted(p.stem for p in (Path(__file__).resolve().parents[1] / "missions").glob("*.toml"))
+)
+def test_every_bundled_scenario_attachment_is_drawn(name, caplog):
+    """A log's scenario attachment is parsed with its planner's own tables (a coalition's targets,
+    4-D traffic): replaying a coalition or 4-D flight draws its world, not a warning."""
+    from gcs_planner.telemetry.rerun_views import scenario_from_text
+
+    text = (Path(__file__).resolve().parents[1] / "missions" / f"{name}.toml").read_text()
+    scenario = scenario_from_text(text)
+    assert scenario is not None and scenario.vehicles, caplog.text
+    assert "not drawn" not in caplog.text

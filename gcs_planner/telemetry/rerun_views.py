@@ -53,7 +53,8 @@ import rerun.blueprint as rrb
 from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.core.validation import atomic_write
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import Scenario, ScenarioError, parse_scenario
+from gcs_planner.model.scenario import Scenario, ScenarioError
+from gcs_planner.planning import parse_scenario
 from gcs_planner.telemetry.colors import vehicle_color
 from gcs_planner.telemetry.reader import Flight
 from gcs_planner.wire.units import reports_no_fix
@@ -429,7 +430,9 @@ def _hemisphere_mesh(center, radius_m: float, n: int = 16) -> tuple[np.ndarray, 
 
 
 def scenario_from_text(text: str | None) -> Scenario | None:
-    """Parse a scenario attachment for drawing; None (with a warning) if absent or invalid."""
+    """Parse a scenario attachment for drawing, with its planner's own tables (a coalition's
+    targets, the 4-D planner's traffic); None (with a warning) if absent or invalid. A ``[site]``'s
+    map files are not in the log, so its zones are not drawn from it."""
     if not text:
         return None
     try:
