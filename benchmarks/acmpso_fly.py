@@ -24,8 +24,7 @@ from gcs_planner.mavlink.fleet import start_fleet, upload_fleet
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.preflight import request_streams
 from gcs_planner.missions.items import plan_to_items
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import config_of, plan_scenario
+from gcs_planner.planning import config_of, load_scenario, plan_scenario
 from gcs_planner.planning.threat_env import ThreatEnv, resample_path, validate_path
 from sitl_mock.fleet import MockFleet
 

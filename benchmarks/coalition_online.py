@@ -20,7 +20,7 @@ from gcs_planner.core import lockstep
 from gcs_planner.flight.coalition import HilOptions
 from gcs_planner.flight.coalition.online_run import run_online
 from gcs_planner.flight.coalition.report import format_formations
-from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from sitl_mock.plan_fleet import MockVehiclesProcess
 
 SCENARIO = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"

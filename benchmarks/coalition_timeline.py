@@ -25,7 +25,7 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from gcs_planner.model.scenario import load_scenario
+from gcs_planner.planning import load_scenario
 from gcs_planner.planning.coalition import load_world, simulate
 
 MISSION = Path(__file__).resolve().parents[1] / "missions" / "coalition_paper.toml"

@@ -25,8 +25,7 @@ from pathlib import Path
 import numpy as np
 from planner_peers import PEERS
 
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import config_of
+from gcs_planner.planning import config_of, load_scenario
 from gcs_planner.planning.deconflict4d import build_problem
 from gcs_planner.planning.deconflict4d.planner import Search, initial_tracks, joint_search, swarm_config
 from gcs_planner.planning.pso import minimize

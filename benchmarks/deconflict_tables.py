@@ -29,8 +29,7 @@ import msgspec
 import numpy as np
 
 from gcs_planner.analysis.sweep import load_study, run_study, summarise
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import config_of
+from gcs_planner.planning import config_of, load_scenario
 from gcs_planner.planning.deconflict4d import build_problem, planner
 
 PAPER_T1 = {4: 50, 5: 104, 6: 140, 7: 149, 8: 150, 9: 150, 10: 150}

@@ -31,8 +31,7 @@ import gcs_planner.flight.static_plan as static_plan
 from gcs_planner.core import lockstep
 from gcs_planner.flight import FlyOptions, fly, networks
 from gcs_planner.model.plan import Plan
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import load_scenario, plan_scenario
 from gcs_planner.safety.conformance import (
     SCHEDULE_STEP_S,
     Track,

@@ -25,8 +25,7 @@ from pathlib import Path
 import msgspec
 import numpy as np
 
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import config_of
+from gcs_planner.planning import config_of, load_scenario
 from gcs_planner.planning.priority_swarm import (
     CostModel,
     Traffic,

@@ -28,8 +28,7 @@ import numpy as np
 
 from gcs_planner.analysis.sweep import load_study, run_study
 from gcs_planner.commands.progress import counting_bar
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import config_of
+from gcs_planner.planning import config_of, load_scenario
 from gcs_planner.planning.baselines import METHODS
 from gcs_planner.planning.priority_swarm import plan as plan_method
 

@@ -23,8 +23,7 @@ from gcs_planner.core import lockstep
 from gcs_planner.flight import FlyOptions, fly
 from gcs_planner.flight.coalition import HilOptions
 from gcs_planner.flight.coalition.online_run import run_online
-from gcs_planner.model.scenario import load_scenario
-from gcs_planner.planning import plan_scenario
+from gcs_planner.planning import load_scenario, plan_scenario
 from sitl_mock.plan_fleet import MockVehicles, MockVehiclesProcess
 
 MISSIONS = Path(__file__).resolve().parents[1] / "missions"

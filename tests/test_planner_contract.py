@@ -170,3 +170,18 @@ def test_an_unknown_planner_names_the_nearest():
     scenario.planner["name"] = "priority_swarn"
     with pytest.raises(UserError, match="did you mean 'priority_swarm'"):
         config_of(scenario)
+
+
+def test_scenarios_are_read_through_the_planner_registry():
+    """model.scenario knows no planner: a scenario read with it alone refuses a coalition's
+    [coalition] table and 4-D [[vehicles]] keys. Every reader outside the planning layer goes
+    through gcs_planner.planning (a replay once drew no coalition world, benchmarks crashed)."""
+    root = Path(__file__).resolve().parents[1]
+    direct = re.compile(r"from gcs_planner\.model\.scenario import [^\n]*\b(load_scenario|parse_scenario)\b")
+    offenders = [
+        str(p.relative_to(root))
+        for folder in ("gcs_planner", "benchmarks", "sitl_mock")
+        for p in (root / folder).rglob("*.py")
+        if direct.search(p.read_text()) and p != root / "gcs_planner" / "planning" / "__init__.py"
+    ]
+    assert not offenders
