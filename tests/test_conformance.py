@@ -10,6 +10,7 @@ from gcs_planner.safety.conformance import (
     conformance_report,
     format_report,
     point_to_polyline_m,
+    schedule_errors_s,
 )
 
 
@@ -96,6 +97,25 @@ def test_the_schedule_is_bounded_in_time_as_well_as_space(stretch, passed, words
     assert all(words in f for f in r.failures if "schedule" in f)
     assert r.schedule_error_s == pytest.approx(20.0 * (stretch - 1.0), abs=0.4)  # + acceptance radius
     assert "late_s" in format_report([r])
+
+
+def test_a_route_that_loops_back_near_a_point_is_timed_at_the_pass_due_then():
+    """East through (50, 0), a 14 m loop that stays near it, and east through it again: flown
+    0.5 s late, the first pass 1 m off the line and the second exactly on it. Every point is
+    0.5 s late; taking the nearest sample of the whole stretch timed the first pass at the second."""
+    arc = np.linspace(-np.pi / 2, np.pi / 2, 9)
+    back = np.linspace(np.pi / 2, 3 * np.pi / 2, 9)
+    xy = np.vstack([[[0.0, 0.0], [60.0, 0.0]], np.c_[60 + 4 * np.cos(arc), 4 + 4 * np.sin(arc)],
+                    [[40.0, 8.0]], np.c_[40 + 4 * np.cos(back), 4 + 4 * np.sin(back)], [[100.0, 0.0]]])  # fmt: skip
+    path = np.c_[xy, np.full(len(xy), 20.0)]
+    t = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1) / 10.0)])
+    vp = VehiclePlan("uav1", 1, path, t, np.full(len(t), 10.0), path, t)
+    flown_t = np.arange(0.0, t[-1], 0.05)
+    pos = np.stack([np.interp(flown_t, t, path[:, k]) for k in range(3)], axis=1)
+    pos[flown_t < t[1], 1] += 1.0  # the first pass along y = 0, 1 m to the side
+    errors = schedule_errors_s(Track(100.5 + flown_t, pos), vp, 100.0, near_m=18.0)
+    assert np.isfinite(errors).all()
+    np.testing.assert_allclose(errors, 0.5, atol=0.06)
 
 
 def test_a_completion_without_the_route_flown_never_passes():

@@ -144,6 +144,7 @@ def route_window(track: Track, planned: np.ndarray, acceptance_m: float) -> slic
 
 
 SCHEDULE_STEP_S = 1.0  # planned time between the path points the schedule is checked at [s]
+PASS_TOLERANCE_M = 3.0  # samples this much farther than a stretch's closest still belong to a pass
 MAX_SCHEDULE_ERROR_S = 3.0  # default bound on the along-track time error [s] (docs/real-autopilots.md)
 
 
@@ -152,23 +153,31 @@ def schedule_errors_s(track: Track, vp, route_t0_s: float, near_m: float) -> np.
     time to the last one's (+ = late) [s]; a plan's climb and descent, flown at the vehicle's own
     pace before and after its route, are not timed.
 
-    Each point's flown time is that of the track's closest sample within ``near_m`` of it, in the
-    first stretch of samples that comes that near after the previous point's match (so a route
-    that passes a place twice is matched in order); a point never come near is NaN.
+    Each point's flown time is that of a pass of the track near it, searched in the first stretch
+    of samples within ``near_m`` after the previous point's match (so a route that passes a place
+    twice is matched in order). A stretch can hold two passes where the route loops inside
+    ``near_m`` of the point; its passes are the runs of samples within ``PASS_TOLERANCE_M`` of the
+    stretch's closest, and the one nearest in time to the schedule (the planned time plus the
+    previous point's error) is taken, at its closest sample. A point never come near is NaN.
     """
     times = np.arange(vp.times_s[0], vp.times_s[-1] + 1e-9, SCHEDULE_STEP_S)
     points = np.stack([np.interp(times, vp.path_times_s, vp.path[:, k]) for k in range(3)], axis=1)
     errors = np.full(len(times), np.nan)
-    i = 0
+    i, last_error = 0, 0.0
     for k, (point, planned_s) in enumerate(zip(points, times)):
         d = np.linalg.norm(track.positions[i:] - point, axis=1)
         near = np.flatnonzero(d <= near_m)
         if not len(near):
             continue
         leave = np.flatnonzero(d[near[0] :] > near_m)
-        stretch = slice(near[0], near[0] + (int(leave[0]) if len(leave) else len(d) - near[0]))
-        i += stretch.start + int(np.argmin(d[stretch]))
-        errors[k] = track.times_s[i] - (route_t0_s + planned_s)
+        stretch = d[near[0] : near[0] + (int(leave[0]) if len(leave) else len(d) - near[0])]
+        close = stretch <= stretch.min() + PASS_TOLERANCE_M
+        starts = np.flatnonzero(close & ~np.concatenate([[False], close[:-1]]))
+        ends = np.flatnonzero(close & ~np.concatenate([close[1:], [False]])) + 1
+        passes = [a + int(np.argmin(stretch[a:b])) for a, b in zip(starts, ends, strict=True)]
+        due_s = route_t0_s + planned_s + last_error
+        i += int(near[0] + min(passes, key=lambda j: abs(track.times_s[i + near[0] + j] - due_s)))
+        errors[k] = last_error = track.times_s[i] - (route_t0_s + planned_s)
     return errors
 
 
