@@ -10,10 +10,15 @@ planning would otherwise share a core with 32 simulated vehicles), for a GCS on 
 
 Each airframe is tuned to its planned vehicle as one would set SITL parameters (``airframe_for``):
 the plan's speed and turn radius need a lateral acceleration of v^2 / R and its steepest legs a
-climb and sink rate of v x slope; a multirotor gets at least that acceleration, a fixed wing at
-least that bank, both those vertical rates, all with headroom (CATCH_UP_FACTOR) for the schedule
-keeper to catch up. A fixed wing's home is its take-off climb run south of its first waypoint
-(the mock climbs heading north), so it reaches the waypoint at its altitude and flies on.
+climb and sink rate of v x slope; a fixed wing gets at least that bank, both those vertical rates
+and a top speed with headroom (CATCH_UP_FACTOR) for the schedule keeper to catch up. A multirotor
+gets the acceleration of its turns flown at that catch-up speed, (CATCH_UP_FACTOR v)^2 / R (WP_ACC /
+MPC_ACC_HOR set for the plan): that limit also sets its corner speed (sitl_mock.flight), and with
+v^2 / R alone it could neither hold the planned speed through a Dubins arc's waypoint samples nor
+catch up there (docs/timing-separation.md). A fixed wing's bank stays at the plan's: its L1 turns
+are fitted to ArduPlane SITL's (sitl_mock.l1). A fixed wing's home is its take-off climb run south
+of its first waypoint (the mock climbs heading north), so it reaches the waypoint at its altitude
+and flies on.
 """
 
 from __future__ import annotations
@@ -93,9 +98,10 @@ def airframe_for(vp: PlannedVehicle) -> Airframe:
     )
     if vp.turn_radius_m <= 0:
         return frame
-    lateral_mps2 = speed**2 / vp.turn_radius_m
     if vp.vehicle_type == "fixed_wing":
+        lateral_mps2 = speed**2 / vp.turn_radius_m
         return replace(frame, max_bank_rad=max(base.max_bank_rad, float(np.arctan(lateral_mps2 / G_MPS2))))
+    lateral_mps2 = (CATCH_UP_FACTOR * speed) ** 2 / vp.turn_radius_m  # the turns at catch-up speed
     return replace(frame, accel_mps2=max(base.accel_mps2, lateral_mps2))
 
 
