@@ -138,6 +138,7 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=Path("out/fly500"))
     p.add_argument("--vehicles", type=int, default=500)
     p.add_argument("--errors", type=Path, help="write each vehicle's time errors [s] here (JSON)")
+    p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot", help="mock profile")
     args = p.parse_args()
     scenario = load_scenario(SCENARIO)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -146,7 +147,7 @@ def main() -> None:
     plan_s = time.monotonic() - t_plan
     plan.save(args.out / "plan.json")
     plan.vehicles = plan.vehicles[: args.vehicles]
-    vehicles = MockVehicles(plan.vehicles, plan.origin, speedup=args.speedup)
+    vehicles = MockVehicles(plan.vehicles, plan.origin, speedup=args.speedup, autopilot=args.autopilot)
     seen = _Tracks()
     options = FlyOptions(out_dir=args.out, rrd=False)
     cpu0, t0 = time.process_time(), time.monotonic()
@@ -170,6 +171,7 @@ def main() -> None:
         ("fly wall [s]", f"{wall_s:.1f}"),
         ("telemetry logged over [s, wall]", f"{log_s:.1f}"),
         ("clock", "lockstep" if args.speedup is None else f"paced, speed-up {args.speedup:g}"),
+        ("mock autopilot", args.autopilot),
         ("mock lag events", vehicles.lag_events),
         ("planning wall [s]", f"{plan_s:.1f}" if not args.plan else "(saved plan)"),
     ]
