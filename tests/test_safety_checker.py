@@ -203,3 +203,37 @@ def test_fly_rechecks_a_plan_file_against_its_scenario(tmp_path, capsys):
     assert main(["fly", str(other), "--plan", str(plan_path), "-o", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "are not in scenario" in err and not out.exists()
+
+
+def test_a_landing_stops_at_its_goal_before_it_descends():
+    """A landing vehicle's route ends at full speed; it stops at its goal before it descends,
+    R / (2 v) later than the constant-speed plan (braking at its turns' v^2 / R). 'over' crosses
+    1.3 m from the goal 6 s after 'lander' arrived: 5.4 m above a descent that began on arrival,
+    4.7 m above the one flown after the stop (swarm500's uav32 and uav131 met so, 4.5-4.7 m)."""
+    from gcs_planner.core.geo import Origin
+    from gcs_planner.model.plan import Plan, VehiclePlan
+    from gcs_planner.model.scenario import Scenario, Vehicle
+    from gcs_planner.safety.separation import check_plan
+
+    kw = dict(type="multirotor", speed_mps=12.0, turn_radius_m=20.0, min_alt_m=20.0, max_alt_m=60.0)
+    lander = Vehicle(
+        id="lander", sysid=1, start=(-120.0, 0.0, 40.0), goal=(0.0, 0.0, 40.0), landing_mps=1.0, **kw
+    )
+    over = Vehicle(id="over", sysid=2, start=(-120.0, 1.3, 39.3), goal=(120.0, 1.3, 39.3), **kw)
+    assert lander.landing_stop_s == pytest.approx(20.0 / 24.0) and over.landing_stop_s == 0.0
+
+    def straight(v, t0):
+        wp = np.array([v.start, v.goal], dtype=float)
+        t = t0 + np.array([0.0, np.linalg.norm(wp[1] - wp[0]) / v.speed_mps])
+        return VehiclePlan(v.id, v.sysid, wp, t, [12.0, 12.0], wp, t, turn_radius_m=20.0)
+
+    plan = Plan(Origin(47.4, 8.5, 488.0), "landing", [straight(lander, 0.0), straight(over, 6.0)])
+    scenario = Scenario(name="landing", origin=plan.origin, planner={}, vehicles=[lander, over])
+    gaps = {}
+    for stop_s in (0.0, lander.landing_stop_s):
+        trajs = [Trajectory.from_plan(plan.vehicles[0], 5.0, 1.0, landing_stop_s=stop_s),
+                 Trajectory.from_plan(plan.vehicles[1], 5.0)]  # fmt: skip
+        gaps[stop_s] = float(closest_approach_m(trajs, 0.05).min())
+    assert gaps[0.0] > 5.0 > gaps[lander.landing_stop_s]
+    report = check_plan(plan, scenario, kinematics=False)
+    assert [c[:2] for c in report.conflicts] == [("lander", "over")], report.summary()

@@ -88,6 +88,16 @@ class Vehicle:
     landing_mps: float = 0.0  # descent rate of the landing at the goal (0: gone on arrival)
     waits_airborne: bool = False  # waits for its take-off delay hovering at its start
 
+    @property
+    def landing_stop_s(self) -> float:
+        """Time [s] a landing vehicle hovers at its goal before it descends: its route ends at
+        ``speed_mps`` and it stops there first, braking at no less than its turns' acceleration
+        v^2 / R, which arrives v / (2a) = R / (2v) later than the constant-speed plan (0 without
+        a landing or a turn radius)."""
+        if self.landing_mps <= 0 or self.turn_radius_m <= 0 or self.speed_mps <= 0:
+            return 0.0
+        return self.turn_radius_m / (2.0 * self.speed_mps)
+
 
 @dataclass(frozen=True)
 class Cylinder:

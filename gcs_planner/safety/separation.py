@@ -6,8 +6,9 @@ VehiclePlan documents). A vehicle occupies the airspace only while it
 flies, from its first to its last sample time: before take-off it is on the ground at its start,
 after arrival it has landed (a choice: the scenario's goals are landing spots, not hover points).
 A scenario entry may say how ``fly`` flies the vehicle instead (``Trajectory.from_plan``): with
-``landing_mps`` a vehicle whose mission ends with a landing occupies the column above its goal
-while it descends at that rate; with ``waits_airborne`` it hovers at its start from route time 0
+``landing_mps`` a vehicle whose mission ends with a landing hovers at its goal for its
+``landing_stop_s`` (the stop before a landing) and then occupies the column above its goal while it
+descends at that rate; with ``waits_airborne`` it hovers at its start from route time 0
 until its delayed departure.
 
 Separation check (``find_conflicts``), exact for the piecewise-linear motion sampled every
@@ -96,18 +97,26 @@ class Trajectory:
 
     @classmethod
     def from_plan(
-        cls, vp, separation_m: float = 0.0, landing_mps: float = 0.0, waits_airborne: bool = False
+        cls,
+        vp,
+        separation_m: float = 0.0,
+        landing_mps: float = 0.0,
+        waits_airborne: bool = False,
+        landing_stop_s: float = 0.0,
     ) -> Trajectory:
         """Trajectory of a VehiclePlan (path_times_s are seconds from the mission start, delay
-        included), with its final landing descended at landing_mps (> 0) when it lands, and with
-        waits_airborne its wait for a delayed departure hovered at its start."""
+        included), with its final landing descended at landing_mps (> 0) when it lands, after
+        hovering landing_stop_s at its goal, and with waits_airborne its wait for a delayed
+        departure hovered at its start."""
         times = np.asarray(vp.path_times_s, dtype=float)
         path = np.asarray(vp.path, dtype=float)
         if waits_airborne and times[0] > 0:
             times, path = np.insert(times, 0, 0.0), np.vstack([path[:1], path])
         if landing_mps > 0 and vp.final_action == "land" and path[-1, 2] > 0:
-            times = np.append(times, times[-1] + path[-1, 2] / landing_mps)
-            path = np.vstack([path, [path[-1, 0], path[-1, 1], 0.0]])
+            goal = path[-1]
+            stop = [times[-1] + landing_stop_s] if landing_stop_s > 0 else []
+            times = np.concatenate([times, stop, [times[-1] + landing_stop_s + goal[2] / landing_mps]])
+            path = np.vstack([path, np.repeat(goal[None], len(stop), axis=0), [goal[0], goal[1], 0.0]])
         return cls(vp.vehicle_id, times, path, separation_m)
 
 
@@ -315,7 +324,9 @@ def check_plan(
     for vp in plan.vehicles:
         veh = scenario.vehicle(vp.vehicle_id)
         traj = Trajectory.from_plan(vp, veh.separation_m)
-        flown = Trajectory.from_plan(vp, veh.separation_m, veh.landing_mps, veh.waits_airborne)
+        flown = Trajectory.from_plan(
+            vp, veh.separation_m, veh.landing_mps, veh.waits_airborne, veh.landing_stop_s
+        )
         trajs.append(_resample(flown, step_s))
         p = traj.positions_m
         a, b = p[:-1], p[1:]
