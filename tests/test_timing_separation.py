@@ -166,27 +166,3 @@ def test_the_4d_pair_check_sees_the_time_error():
 def test_timing_error_is_a_checked_planner_key():
     with pytest.raises(UserError, match=r"planner.timing_error_s must be a number >= 0.0, got -1.0"):
         parse(priority_swarm.Config, {"name": "priority_swarm", "timing_error_s": -1.0}, "planner")
-
-
-def test_a_vehicle_landing_under_a_route_plans_its_descent_clear_of_the_traffic():
-    """'lander' lands 5.5 m beside the route of 'east' (passing at t = 25 s, 50 m up), from 50 m at
-    1 m/s. Flown straight it descends 6.6 m from 'east': clear of the 5 m separation the checker
-    holds, inside the planner's 2 m margin. The descent is timed by the lander's own path, so
-    its cost holds it to separation + margin as it does the path."""
-    from gcs_planner.safety.separation import Trajectory
-
-    base = dict(type="multirotor", speed_mps=SPEED, turn_radius_m=20.0, min_alt_m=40.0, max_alt_m=60.0,
-                separation_m=5.0, landing_mps=1.0)  # fmt: skip
-    vehicles = [
-        Vehicle(id="east", sysid=1, start=(-300.0, 0.0, 50.0), goal=(300.0, 0.0, 50.0), priority=2.0, **base),
-        Vehicle(id="lander", sysid=2, start=(0.0, -250.0, 50.0), goal=(0.0, 5.5, 50.0), **base),
-    ]
-    scenario = Scenario(name="lander", origin=Origin(47.4, 8.5, 488.0), planner={}, vehicles=vehicles)
-    table = {"name": "priority_swarm", "waypoints": 3, "particles": 16, "iterations": 25, "rounds": 1,
-             "rrt_iterations": 60, "timing_error_s": 0.0}  # fmt: skip
-    cfg = parse(priority_swarm.Config, table, "planner")
-    plan = priority_swarm.plan(scenario, cfg, np.random.default_rng(0))
-    east, lander = (Trajectory.from_plan(vp, 5.0, 1.0) for vp in plan.vehicles)
-    t = np.arange(0.0, min(east.t_end, lander.t_end), 0.01)
-    gap = np.linalg.norm(east.position_at(t) - lander.position_at(t), axis=1)
-    assert float(np.nanmin(gap)) >= 5.0 + cfg.separation_margin_m - 0.1

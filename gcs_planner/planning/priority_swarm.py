@@ -35,8 +35,7 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
   outside. F4 (eqs. 9-11) = a1 sum(turn angles) + a2 sum(|climb-angle changes|) of the polyline,
   each divided by pi (W - 2); climb angle above ``max_climb_deg`` = HARD + excess. F5 (eqs. 12-13):
   on the shared 0.5 s time grid a spatial hash per slice (planning/traffic.py) finds
-  higher-priority samples near each particle sample (its final descent at ``landing_mps`` included,
-  timed by the particle's path length); the closest approach of the two linear
+  higher-priority samples near each particle sample; the closest approach of the two linear
   motions over the slice, under any relative schedule error up to ``timing_error_s`` (the time
   errors flown, docs/timing-separation.md), must exceed max(separation_i, separation_j) +
   ``separation_margin_m``, else HARD + shortfall. HARD =
@@ -373,26 +372,6 @@ class CostModel:
         pos = positions_at_length(dec, s)
         return slices, pos, valid, s
 
-    def landing_column(self, dec: Decoded) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Each particle's final descent above its goal at ``landing_mps`` on the time grid, as
-        ``timed_samples`` enters it in the traffic: slices (K,), pos (P, K, 3), valid (P, K); None
-        when the vehicle does not land. Its timing follows the path's length, so the cost holds it
-        to the same margin as the path (the one checker holds only the bare separation)."""
-        v = self.prob.vehicle
-        goal = np.asarray(v.goal, dtype=float)
-        if not (v.landing_mps > 0 and goal[2] > 0):
-            return None
-        dt = self.cfg.dt_s
-        t_land = self.prob.t_offset + dec.total / v.speed_mps + abs(goal[2] - self.prob.goal[2]) / v.speed_mps
-        t_down = goal[2] / v.landing_mps
-        slices = np.arange(math.ceil(t_land.min() / dt - 1e-9), math.floor((t_land.max() + t_down) / dt) + 1)
-        since = slices * dt - t_land[:, None]
-        valid = (since >= 0.0) & (since <= t_down + 1e-9)
-        pos = np.empty((len(t_land), len(slices), 3))
-        pos[..., :2] = goal[:2]
-        pos[..., 2] = goal[2] - np.clip(since, 0.0, t_down) * v.landing_mps
-        return slices, pos, valid
-
     def terms(self, x: np.ndarray) -> dict[str, np.ndarray]:
         cfg, prob, veh = self.cfg, self.prob, self.prob.vehicle
         dec = decode(prob, np.atleast_2d(x))
@@ -437,12 +416,6 @@ class CostModel:
         depth, count = self.traffic.violations(
             slices, pos[:, 1:-1], valid, veh.separation_m, cfg.separation_margin_m, cfg.timing_error_s
         )
-        landing = self.landing_column(dec)
-        if landing is not None:
-            more_depth, more_count = self.traffic.violations(
-                *landing, veh.separation_m, cfg.separation_margin_m, cfg.timing_error_s
-            )
-            depth, count = depth + more_depth, count + more_count
         f5 = count * HARD_PENALTY + depth
         total = cfg.b1 * f1 + cfg.b2 * soft + cfg.b3 * f3 + cfg.b4 * f4 + hard + f5
         return {"F1": f1, "F2": soft, "F3": f3, "F4": f4, "F5": f5, "hard": hard, "total": total}
