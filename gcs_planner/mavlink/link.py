@@ -18,6 +18,12 @@ Choices:
   pymavlink decoder. Frames carry a sequence number that advances per frame sent.
 - Frames are dispatched synchronously in ``datagram_received``: a transfer's reply goes out in the
   same callback that received the request (no task hop, no sleep) - the hot path of an upload.
+  What the subscribers send while one datagram's (or stream read's) frames are dispatched leaves
+  when they all were, in one datagram per address (up to MAX_DATAGRAM_BYTES, frames in order), as
+  ArduPilot's and PX4's UDP drivers send what their buffer holds: a vehicle that answers several
+  items with one datagram of requests gets the next items in one datagram, one system call and one
+  wake-up for all of them. Autopilots and routers parse a UDP datagram as a byte stream, so several
+  frames in one are read as if they came one by one.
 - Routing: every peer address belongs to the endpoint it was heard on (addresses are
   endpoint-qualified, transports.py, so two endpoints never collide). A message with
   ``target_system`` goes out of the endpoint and address that system was last heard from;
@@ -57,6 +63,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from operator import methodcaller
+from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")
 
@@ -82,6 +89,7 @@ log = logging.getLogger(__name__)
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
 DUPLICATE_WINDOW_S = 5.0  # two addresses heard within this time with one sysid = duplicate [s]
+MAX_DATAGRAM_BYTES = 1400  # frames sent together stay within one Ethernet MTU
 FLEET_RCVBUF_BYTES = 4 << 20  # a fleet link's socket receive buffer (Linux caps it at net.core.rmem_max)
 HEARTBEAT_PERIOD_S = 1.0
 _NOT_AUTOPILOT = mavlink.MAV_AUTOPILOT_INVALID  # HEARTBEAT of a camera, gimbal, companion or GCS
@@ -218,6 +226,8 @@ class MavlinkLink:
         self.frames_sent = 0
         self.frames_dropped = 0  # undecodable, bad CRC, or (signing) unsigned / badly signed
         self.unverified: dict[int, int] = {}  # header sysid -> signed frames dropped (not our key)
+        # frames held while a datagram's frames are dispatched: (transport, address, frame)
+        self._corked: list[tuple[Any, Address, bytes]] | None = None
         self._now_s: Callable[[], float] = now_s  # the clocks; open() binds them to its loop
         self._unix_s: Callable[[], float] = unix_s
 
@@ -327,15 +337,41 @@ class MavlinkLink:
         info = self.vehicles.get(target) if target else None
         if info is None:
             for transport, addr in self._peers.values():
-                transport.sendto(raw, addr)
+                self._sendto(transport, raw, addr)
         else:
             if len(info.addresses) > 1:  # fast path: one address can never be ambiguous
                 live = info.live_addresses(self._now_s())
                 if len(live) > 1:
                     raise DuplicateSysidError(target, live)
             transport, addr = self._peers[info.address]
-            transport.sendto(raw, addr)
+            self._sendto(transport, raw, addr)
         self.frames_sent += 1
+
+    def _sendto(self, transport, raw: bytes, addr: Address) -> None:
+        """Send ``raw`` now, or hold it while a datagram's frames are dispatched (module docstring)."""
+        if self._corked is None:
+            transport.sendto(raw, addr)
+        else:
+            self._corked.append((transport, addr, raw))
+
+    @staticmethod
+    def _uncork(corked: list[tuple[Any, Address, bytes]]) -> None:
+        """Send the held frames: to each address in order, as few datagrams as MAX_DATAGRAM_BYTES allows."""
+        if len(corked) == 1:
+            transport, addr, raw = corked[0]
+            transport.sendto(raw, addr)
+            return
+        by_peer: dict[tuple[Any, Address], list[bytes]] = {}
+        for transport, addr, raw in corked:
+            by_peer.setdefault((transport, addr), []).append(raw)
+        for (transport, addr), frames in by_peer.items():
+            start, size = 0, 0
+            for k, raw in enumerate(frames):
+                if size + len(raw) > MAX_DATAGRAM_BYTES and k > start:
+                    transport.sendto(b"".join(frames[start:k]), addr)
+                    start, size = k, 0
+                size += len(raw)
+            transport.sendto(b"".join(frames[start:]), addr)
 
     def check_target(self, sysid: int) -> None:
         """Raise DuplicateSysidError if ``sysid`` answers from more than one address."""
@@ -390,33 +426,42 @@ class MavlinkLink:
         now = self._now_s()
         signing = self.signing
         verifying = signing.key is not None
-        for frame in found:
-            msg = self._decode(frame, addr)
-            if msg is None:
-                self.frames_dropped += 1
-                continue
-            accepted = signing.accept(frame)
-            if frame[0] == 0xFD and frame[2] & _SIGNED and not (accepted and verifying):
-                self.unverified[frame[5]] = self.unverified.get(frame[5], 0) + 1  # a key we lack
-            if not accepted:
-                self.frames_dropped += 1
-                continue
-            msg._signed = verifying  # verified above
-            if addr not in self._peers:  # udpin: answer whoever talks to us (once a frame verified)
-                self._peers[addr] = (transport, raw_addr)
-            sysid = msg.get_srcSystem()
-            self._note_source(msg, sysid, addr, now)
-            attach_extensions(msg, frame)
-            self.frames_received += 1
-            # the vehicle's own subscribers (transfers) first: their replies leave before logging
-            own = self._by_sysid.get(sysid)  # lists are replaced, never changed: safe to iterate
-            for callback in own + self._subscribers if own else self._subscribers:
-                try:
-                    callback(msg, frame, t_s)
-                except UserError as exc:  # said once more, in one line, by the operation it ends
-                    log.debug("MAVLink subscriber %r: %s", callback, exc)
-                except Exception:
-                    log.exception("MAVLink subscriber %r failed", callback)
+        outer = self._corked is None  # (a transport that delivers within sendto nests this call)
+        if outer:
+            self._corked = []
+        try:
+            for frame in found:
+                msg = self._decode(frame, addr)
+                if msg is None:
+                    self.frames_dropped += 1
+                    continue
+                accepted = signing.accept(frame)
+                if frame[0] == 0xFD and frame[2] & _SIGNED and not (accepted and verifying):
+                    self.unverified[frame[5]] = self.unverified.get(frame[5], 0) + 1  # a key we lack
+                if not accepted:
+                    self.frames_dropped += 1
+                    continue
+                msg._signed = verifying  # verified above
+                if addr not in self._peers:  # udpin: answer whoever talks to us (once a frame verified)
+                    self._peers[addr] = (transport, raw_addr)
+                sysid = msg.get_srcSystem()
+                self._note_source(msg, sysid, addr, now)
+                attach_extensions(msg, frame)
+                self.frames_received += 1
+                # the vehicle's own subscribers (transfers) first: their replies leave before logging
+                own = self._by_sysid.get(sysid)  # lists are replaced, never changed: safe to iterate
+                for callback in own + self._subscribers if own else self._subscribers:
+                    try:
+                        callback(msg, frame, t_s)
+                    except UserError as exc:  # said once more, in one line, by the operation it ends
+                        log.debug("MAVLink subscriber %r: %s", callback, exc)
+                    except Exception:
+                        log.exception("MAVLink subscriber %r failed", callback)
+        finally:
+            if outer:
+                corked, self._corked = self._corked, None
+                if corked:
+                    self._uncork(corked)
 
     def _decode(self, frame: bytes, addr: Address) -> mavlink.MAVLink_message | None:
         """The message of one whole frame; None when its CRC, length or flags are bad."""
