@@ -14,16 +14,25 @@ Choices (where the spec leaves room):
   ago is a duplicate (link duplication, reordering, or the request for an item already in flight)
   and is ignored instead of answered again: this is what keeps slow links from flooding (PX4
   #11078). Genuine re-requests come after the vehicle's retry time (>= 250 ms), so they pass.
-- Items in flight (``Timing.window``, default 2): the first request for item r also sends the items
+- Items in flight (``Timing.window``, default 8): the first request for item r also sends the items
   up to r + window - 1 not sent yet, so the vehicle's next item is already on its way when it asks.
-  That moves ``window`` items per round trip instead of one, and on a fast link the GCS and the
-  vehicle work at the same time instead of taking turns. It rests on the behaviour push-ahead
-  relies on (below): both autopilots store the item they wait for and drop or refuse the others; on
-  an in-order link items arrive in order, so nothing is refused. The final-ACK phase starts once
-  the vehicle asked for the last item (or a push sent it). ``Timing(push_ahead=False, window=1)``
-  is the spec-literal client.
+  That moves ``window`` items per round trip instead of one. The first window leaves in one
+  datagram (link.py sends what one datagram's requests are answered with together); a vehicle
+  that answers a datagram of items with one datagram of requests (both autopilots' UDP drivers
+  send what their buffer holds) gets the next ``window`` items in one, so on a fast link each side
+  wakes once per window, not once per item (8 items: 400 bytes). It rests on the behaviour
+  push-ahead relies on (below): both autopilots store the item they wait for and drop or refuse
+  the others; on an in-order link items arrive in order, so nothing is refused. The cost is on a
+  lossy link: a lost item makes the vehicle drop the rest of the window (ArduPilot answers each
+  with INVALID_SEQUENCE), resent by the push (fake-time runs of 30 items on ArduPilot: faster than
+  a window of 2 at 5 % loss each way, 1.5x slower at 20 % loss with 2 ms delay). The final-ACK phase
+  starts once the vehicle asked for the last item (or a push sent it).
+  ``Timing(push_ahead=False, window=1)`` is the spec-literal client.
 - Only the last item is resent on our own timer, until MISSION_ACK (lost final ACK, devguide #171);
-  its timeout adapts to the measured round trip (4 x smoothed RTT within 0.3..1.5 s).
+  its timeout adapts to the measured round trip (4 x smoothed RTT within 0.3..1.5 s). Where a push
+  sent the last item before the vehicle asked for it, the vehicle may still wait for an earlier one
+  (lost again): the timer then resends the window from the highest item it asked for, so the
+  final-item retries never run out on a vehicle that is mid-upload and report its ACK as lost.
 - Loss recovery ahead of the vehicle's timer ("push-ahead"): when the next request is overdue
   (1.5 x smoothed RTT within 0.05..0.5 s; requests normally come every RTT / window) the client
   resends the highest requested item r and the rest of its window, and pushes one item more
@@ -143,7 +152,7 @@ class Timing:
     push_timeout_min_s: float = 0.05
     push_timeout_max_s: float = 0.5
     push_rtts: float = 1.5  # a request this many smoothed RTTs overdue starts a push
-    window: int = 2  # items in flight during an upload: 1 = answer each request only (the spec)
+    window: int = 8  # items in flight during an upload: 1 = answer each request only (the spec)
     deadline_base_s: float = DEADLINE_BASE_S
     deadline_per_item_s: float = DEADLINE_PER_ITEM_S
     restart_window_s: float = RESTART_WINDOW_S
@@ -533,12 +542,14 @@ class UploadTransfer(Transfer):
                 )
                 return [self._ack(MissionResult.OPERATION_CANCELLED)]  # in case it still waits for it
             self._retries += 1
-            last = len(self.items) - 1
-            self._sent_at[last] = now_s
+            last, r = len(self.items) - 1, self._requested
+            resent = range(r, min(r + self.timing.window, last + 1)) if r < last else (last,)
+            for k in resent:
+                self._sent_at[k] = now_s
             self.deadline_s = now_s + self._adaptive(
                 self.timing.ack_timeout_min_s, self.timing.ack_timeout_max_s
             )
-            return [self._item(last)]
+            return [self._item(k) for k in resent]
         idle = now_s - self._last_request_s
         if (
             idle < self.timing.inactivity_timeout_s
