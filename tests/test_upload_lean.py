@@ -1,6 +1,9 @@
 """The lean upload path (issue 36): what the link sends while it dispatches one datagram leaves in
 one datagram per address, frames in order, split at MAX_DATAGRAM_BYTES; a vehicle that asks for
-several items in one datagram gets them in one, and pymavlink reads them back one by one."""
+several items in one datagram gets them in one. Requests are taken undecoded (MavlinkLink.take)
+and answered with payloads packed once: the frames are pymavlink's, byte for byte, signed ones
+verify with pymavlink, and the transfer answers them as it answers the messages, with the same
+checks (another mission type, target or source is ignored)."""
 
 from __future__ import annotations
 
@@ -8,13 +11,17 @@ import asyncio
 import os
 import socket
 
+import pytest
+
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.mavlink.link import MAX_DATAGRAM_BYTES, MavlinkLink  # noqa: E402
+from gcs_planner.mavlink.link import MAX_DATAGRAM_BYTES, MavlinkLink, VehicleInfo  # noqa: E402
 from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
-from gcs_planner.mavlink.transfer import Timing  # noqa: E402
-from gcs_planner.wire.types import MissionItem  # noqa: E402
+from gcs_planner.mavlink.transfer import Timing, UploadTransfer  # noqa: E402
+from gcs_planner.mavlink.transports import UdpProtocol  # noqa: E402
+from gcs_planner.wire.signing import LinkSigning  # noqa: E402
+from gcs_planner.wire.types import MissionItem, MissionType  # noqa: E402
 
 PX4_QUAD = mavlink.MAVLink_heartbeat_message(2, 12, 0, 0, 3, 3)
 
@@ -26,10 +33,18 @@ def mission(n: int) -> list[MissionItem]:
     ]
 
 
-def messages(datagram: bytes) -> list[mavlink.MAVLink_message]:
-    """Every frame of one datagram, as pymavlink parses it (a byte stream)."""
+KEY = b"s" * 32
+
+
+def messages(datagram: bytes, key: bytes | None = None) -> list[mavlink.MAVLink_message]:
+    """Every frame of one datagram, as pymavlink parses it (a byte stream); with ``key`` each must
+    carry a good signature (pymavlink raises on a bad one and counts the good ones)."""
     parser = mavlink.MAVLink(None)
-    return parser.parse_buffer(datagram) or []
+    if key is not None:
+        parser.signing.secret_key = key
+    got = parser.parse_buffer(datagram) or []
+    assert key is None or parser.signing.goodsig_count == len(got) > 0
+    return got
 
 
 class Recorder:
@@ -57,24 +72,38 @@ def test_uncork_keeps_each_address_in_order_and_splits_at_the_mtu():
     assert b"".join(d for d, _ in a.datagrams) == b"".join(frames[:10] + frames[11:])
 
 
-def test_requests_in_one_datagram_are_answered_with_the_items_in_one_datagram():
+@pytest.mark.parametrize("key", [None, KEY])
+def test_requests_in_one_datagram_are_answered_with_the_items_in_one_datagram(key):
     """A PX4-like peer on a raw socket: the first request gets the window (2 items) in one
-    datagram; two requests in one datagram get the two next items in one datagram, in order."""
+    datagram; two requests in one datagram get the two next items in one datagram, in order; the
+    frames are what pymavlink packs for the same items and sequence numbers (signed: they verify)."""
 
     async def main():
         loop = asyncio.get_running_loop()
-        link = await MavlinkLink.open("udpin:127.0.0.1:0", heartbeat_period_s=0)
+        link = await MavlinkLink.open("udpin:127.0.0.1:0", heartbeat_period_s=0, signing_key=key)
         vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         vehicle.bind(("127.0.0.1", 0))
         vehicle.setblocking(False)
         mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        if key is not None:
+            LinkSigning(mav, key)
+            mav.signing.timestamp = link.signing.clock.current()
 
         def send(*msgs) -> None:
             vehicle.sendto(b"".join(m.pack(mav) for m in msgs), link.local_address)
 
         async def receive() -> list:
             data, _ = await asyncio.wait_for(loop.sock_recvfrom(vehicle, 2048), 5)
-            return messages(data)
+            got = messages(data, key)
+            if key is None:  # the same bytes as pymavlink's pack of the same item and seq
+                gcs = mavlink.MAVLink(None, srcSystem=255, srcComponent=190)
+                for m in got:
+                    gcs.seq = m.get_seq()
+                    assert m.pack(gcs) == bytes(m.get_msgbuf())
+                    if m.get_type() == "MISSION_ITEM_INT":
+                        want = mavlink.MAVLink_mission_item_int_message(1, 1, *items[m.seq].fields())
+                        assert want.pack(gcs) == bytes(m.get_msgbuf())
+            return got
 
         def request(seq: int):
             return mavlink.MAVLink_mission_request_int_message(255, 190, seq, 0)
@@ -83,7 +112,6 @@ def test_requests_in_one_datagram_are_answered_with_the_items_in_one_datagram():
             send(PX4_QUAD)
             while 1 not in link.vehicles:
                 await asyncio.sleep(0.01)
-            items = mission(4)
             upload = asyncio.ensure_future(
                 MissionClient(link, 1, timing=Timing(window=2, verdict_s=0)).upload(items)
             )
@@ -103,4 +131,62 @@ def test_requests_in_one_datagram_are_answered_with_the_items_in_one_datagram():
             vehicle.close()
             await link.close()
 
+    items = mission(4)
     asyncio.run(main())
+
+
+def test_a_request_answered_from_its_fields_is_answered_as_the_message():
+    """UploadTransfer.on_request (the raw path) and on_message: the same items for the same
+    requests, the same state; a request for another mission type, to another GCS or from another
+    component gets nothing on either path."""
+    by_msg, by_fields = (UploadTransfer(1, mission(20), timing=Timing(window=4)) for _ in range(2))
+    by_msg.start(0.0)
+    by_fields.start(0.0)
+    ignored = [
+        (5, 255, 190, MissionType.FENCE, 1),
+        (5, 254, 190, 0, 1),
+        (5, 255, 191, 0, 1),
+        (5, 255, 190, 0, 2),
+    ]
+    asks = [(0, 255, 190, 0, 1), (1, 0, 0, 0, 1), *ignored, (3, 255, 190, 0, 1), (3, 255, 190, 0, 1)]
+    asks += [(k, 255, 190, 0, 1) for k in range(4, 20)]
+    for t, (seq, system, component, mission_type, source) in enumerate(asks):
+        now = 0.01 * t
+        msg = mavlink.MAVLink_mission_request_int_message(system, component, seq, mission_type)
+        msg._header.srcSystem, msg._header.srcComponent = 1, source
+        sent = [m.seq for m in by_msg.on_message(msg, now)]
+        assert by_fields.on_request(seq, (1, source), (system, component), mission_type, now) == sent
+        assert (seq, system, component, mission_type, source) not in ignored or sent == []
+    assert by_msg.stats == by_fields.stats and by_msg.phase == by_fields.phase
+    assert by_msg.deadline_s == by_fields.deadline_s and by_msg.stats.sent["MISSION_ITEM_INT"] == 20
+
+
+@pytest.mark.parametrize("key", [None, KEY])
+def test_taken_frames_skip_their_owner_reach_the_other_subscribers_and_are_checked(key):
+    """take(): the frame callback gets the request undecoded, the subscriber it replaces nothing,
+    another subscriber the decoded message; a bad CRC or (signing) a bad signature is dropped."""
+    link = MavlinkLink(signing_key=key)
+    link.vehicles[1] = VehicleInfo(1, ("127.0.0.1", 14550))
+    protocol = UdpProtocol(link._on_frames)
+    protocol.transport = Recorder()  # type: ignore[assignment]
+    taken, owned, other = [], [], []
+    link.subscribe(lambda m, raw, t: owned.append(m), 1)
+    owner = link._by_sysid[1][0]
+    link.subscribe(lambda m, raw, t: other.append(m.seq), 1)
+    release = link.take(1, [mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_INT], lambda f, t: taken.append(f), owner)
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    if key is not None:
+        LinkSigning(mav, key)
+        mav.signing.timestamp = link.signing.clock.current()
+    frame = mavlink.MAVLink_mission_request_int_message(255, 190, 3, 0).pack(mav)
+    protocol.datagram_received(frame, ("127.0.0.1", 14550))
+    assert (taken, owned, other) == ([frame], [], [3])
+    bad = bytearray(mavlink.MAVLink_mission_request_int_message(255, 190, 4, 0).pack(mav))
+    bad[-1] ^= 0xFF  # the last byte: the CRC's, or (signed) the signature's
+    protocol.datagram_received(bytes(bad), ("127.0.0.1", 14550))
+    assert (len(taken), other, link.frames_dropped) == (1, [3], 1)
+    release()
+    protocol.datagram_received(
+        mavlink.MAVLink_mission_request_int_message(255, 190, 5, 0).pack(mav), ("127.0.0.1", 14550)
+    )
+    assert (len(taken), [m.seq for m in owned], other) == (1, [5], [3, 5])

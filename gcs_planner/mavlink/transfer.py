@@ -395,6 +395,22 @@ class UploadTransfer(Transfer):
         self._clamp()
         return out
 
+    def on_request(
+        self, seq: int, source: tuple[int, int], target: tuple[int, int], mission_type: int, now_s: float
+    ) -> list[int]:
+        """A MISSION_REQUEST(_INT) given by its fields, for a caller that reads them from the frame
+        without a message (mission.py): the indexes of the items to answer with, MISSION_ITEM_INT of
+        ``items[k]`` each - what ``on_message`` answers the same request with, with the same checks."""
+        if self.done or source != (self.sysid, self.compid) or mission_type != self.mission_type:
+            return []
+        if target[0] not in (0, self.gcs[0]) or target[1] not in (0, self.gcs[1]):
+            return []  # another GCS with our sysid: its requests are not ours
+        due = self._on_request(seq, now_s)
+        if due:
+            self.stats.sent["MISSION_ITEM_INT"] = self.stats.sent.get("MISSION_ITEM_INT", 0) + len(due)
+        self._clamp()
+        return due
+
     def _clamp(self) -> None:
         if not self.done and self.deadline_s is not None:
             self.deadline_s = min(self.deadline_s, self._give_up_s)
@@ -411,21 +427,25 @@ class UploadTransfer(Transfer):
     def _handle(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
         if msg.get_type() == "MISSION_ACK":
             return self._on_ack(msg)
-        i = msg.seq - self.first
+        return [self._item(k) for k in self._on_request(msg.seq, now_s)]
+
+    def _on_request(self, seq: int, now_s: float) -> list[int]:
+        """The vehicle asked for item ``seq``: the indexes of the items to send."""
+        i = seq - self.first
         if not 0 <= i < len(self.items):
-            log.warning("vehicle %d requested item %d, not in this upload: ignored", self.sysid, msg.seq)
+            log.warning("vehicle %d requested item %d, not in this upload: ignored", self.sysid, seq)
             return []
         if self.phase is Phase.COUNT and i != 0:
             return []  # a session starts at its first item: this request answers someone else's COUNT
         first_s = self._first_request_s[i]
         if i < self._requested and now_s - first_s > max(self.timing.restart_window_s, 4 * self._srtt_s):
             what = mission_type_name(self.mission_type)
-            msg = (
-                f"vehicle {self.sysid} went back to item {msg.seq} after asking for item"
+            text = (
+                f"vehicle {self.sysid} went back to item {seq} after asking for item"
                 f" {self._requested + self.first}: another GCS with our ids ({self.gcs[0]}/{self.gcs[1]})"
                 f" restarted the {what} upload; give each GCS its own --gcs-sysid / --gcs-compid"
             )
-            self._finish(MissionProtocolError(msg, sysid=self.sysid, mission_type=self.mission_type))
+            self._finish(MissionProtocolError(text, sysid=self.sysid, mission_type=self.mission_type))
             return []  # not ours any more: feed nothing into the other GCS's session
         if math.isnan(first_s):
             self._first_request_s[i] = now_s
@@ -451,8 +471,8 @@ class UploadTransfer(Transfer):
             self.stats.duplicates_ignored += 1
         return self._send(due, now_s)
 
-    def _send(self, sent: list[int], now_s: float) -> list[mavlink.MAVLink_message]:
-        """Items ``sent`` (ascending), then the timer of the phase that follows.
+    def _send(self, sent: list[int], now_s: float) -> list[int]:
+        """Items ``sent`` (ascending; returned), then the timer of the phase that follows.
 
         The final-ACK phase starts once the vehicle asked for the last item or a push sent it: a
         last item merely sent ahead in the window may still wait for a lost earlier one, which is
@@ -476,7 +496,7 @@ class UploadTransfer(Transfer):
                     self.timing.push_timeout_min_s, self.timing.push_timeout_max_s, self.timing.push_rtts
                 )
                 self.deadline_s = min(self.deadline_s, now_s + push_s * 2**self._pushes)
-        return [self._item(k) for k in sent]
+        return sent
 
     def _on_ack(self, msg: mavlink.MAVLink_message) -> list[mavlink.MAVLink_message]:
         result = msg.type
@@ -559,7 +579,7 @@ class UploadTransfer(Transfer):
             self._pushes += 1
             r = self._requested  # resend it and what followed it (dropped), and push ``pushes`` more
             end = min(r + self.timing.window + self._pushes, len(self.items))
-            return self._send(list(range(r, end)), now_s)
+            return [self._item(k) for k in self._send(list(range(r, end)), now_s)]
         if idle < self.timing.inactivity_timeout_s:  # pushes spent: wait for the vehicle
             self.deadline_s = self._last_request_s + self.timing.inactivity_timeout_s
             return []
