@@ -22,8 +22,9 @@ Choices:
   when they all were, in one datagram per address (up to MAX_DATAGRAM_BYTES, frames in order), as
   ArduPilot's and PX4's UDP drivers send what their buffer holds: a vehicle that answers several
   items with one datagram of requests gets the next items in one datagram, one system call and one
-  wake-up for all of them. Autopilots and routers parse a UDP datagram as a byte stream, so several
-  frames in one are read as if they came one by one.
+  wake-up for all of them (``corked()``: mission.py sends a push's window the same way).
+  Autopilots and routers parse a UDP datagram as a byte stream, so several frames in one are read
+  as if they came one by one.
 - Routing: every peer address belongs to the endpoint it was heard on (addresses are
   endpoint-qualified, transports.py, so two endpoints never collide). A message with
   ``target_system`` goes out of the endpoint and address that system was last heard from;
@@ -65,7 +66,7 @@ import logging
 import os
 import socket
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass, field
 from operator import methodcaller
 from typing import Any
@@ -376,6 +377,21 @@ class MavlinkLink:
             self._sendto(transport, raw, addr)
         self.frames_sent += 1
 
+    @contextlib.contextmanager
+    def corked(self) -> Iterator[None]:
+        """What is sent inside the block leaves at its end, in one datagram per address (module
+        docstring); inside another, the outermost one sends."""
+        if self._corked is not None:
+            yield
+            return
+        self._corked = []
+        try:
+            yield
+        finally:
+            corked, self._corked = self._corked, None
+            if corked:
+                self._uncork(corked)
+
     def _sendto(self, transport, raw: bytes, addr: Address) -> None:
         """Send ``raw`` now, or hold it while a datagram's frames are dispatched (module docstring)."""
         if self._corked is None:
@@ -475,17 +491,9 @@ class MavlinkLink:
             self.frames_dropped += junk
         t_s = self._unix_s()
         now = self._now_s()
-        outer = self._corked is None  # (a transport that delivers within sendto nests this call)
-        if outer:
-            self._corked = []
-        try:
+        with self.corked():
             for frame in found:
                 self._on_frame(frame, addr, transport, raw_addr, t_s, now)
-        finally:
-            if outer:
-                corked, self._corked = self._corked, None
-                if corked:
-                    self._uncork(corked)
 
     def _on_frame(
         self, frame: bytes, addr: Address, transport, raw_addr: Address, t_s: float, now: float

@@ -316,8 +316,9 @@ class MissionClient:
                     wakeup = loop.create_future()
                     await asyncio.wait([wakeup], timeout=delay)
                     continue
-                for out in transfer.on_timeout(loop.time()):
-                    send(out)
+                with self.link.corked():  # a push's window leaves in one datagram, as answers do
+                    for out in transfer.on_timeout(loop.time()):
+                        send(out)
         except asyncio.CancelledError:
             for out in transfer.cancel(loop.time()):
                 send(out)
