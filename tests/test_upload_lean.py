@@ -18,8 +18,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from gcs_planner.mavlink.link import MAX_DATAGRAM_BYTES, MavlinkLink, VehicleInfo  # noqa: E402
 from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
+from gcs_planner.mavlink.networks import NetworkLinks  # noqa: E402
 from gcs_planner.mavlink.transfer import Timing, UploadTransfer  # noqa: E402
 from gcs_planner.mavlink.transports import UdpProtocol  # noqa: E402
+from gcs_planner.wire import codec  # noqa: E402
 from gcs_planner.wire.signing import LinkSigning  # noqa: E402
 from gcs_planner.wire.types import MissionItem, MissionType  # noqa: E402
 
@@ -55,6 +57,9 @@ class Recorder:
 
     def sendto(self, data: bytes, addr: tuple) -> None:
         self.datagrams.append((data, addr))
+
+    def is_closing(self) -> bool:
+        return False
 
 
 def test_uncork_keeps_each_address_in_order_and_splits_at_the_mtu():
@@ -198,3 +203,35 @@ def test_taken_frames_skip_their_owner_reach_the_other_subscribers_and_are_check
         mavlink.MAVLink_mission_request_int_message(255, 190, 5, 0).pack(mav), ("127.0.0.1", 14550)
     )
     assert (len(taken), [m.seq for m in owned], other) == (1, [5], [3, 5])
+
+
+def test_networks_take_and_send_payloads_in_fleet_ids():
+    """NetworkLinks: a take on fleet id 257 (network 1, system 1) replaces its owner's subscription
+    there, other subscribers get the message in fleet ids; send_payload goes out on network 1."""
+    links = [MavlinkLink(), MavlinkLink()]
+    fleet = NetworkLinks(links)
+    vehicle = ("127.0.0.1", 14551)
+    wire = Recorder()
+    links[1]._add_endpoint(wire)
+    links[1]._udp = wire
+    links[1].add_peer(vehicle)
+    links[1].vehicles[1] = VehicleInfo(1, vehicle)
+    taken, owned, other = [], [], []
+
+    def owner(msg, raw, t_s):
+        owned.append(msg)
+
+    fleet.subscribe(owner, 257)
+    fleet.subscribe(lambda m, raw, t: other.append(m.get_srcSystem()), 257)
+    fleet.take(257, [mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_INT], lambda f, t: taken.append(f), owner)
+    frame = mavlink.MAVLink_mission_request_int_message(255, 190, 0, 0).pack(
+        mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    )
+    links[1]._on_frames([frame], 0, vehicle, wire, vehicle)
+    assert (taken, owned, other) == ([frame], [], [257])
+    item = codec.packer(mavlink.MAVLink_mission_item_int_message)
+    with fleet.corked():
+        fleet.send_payload(257, item, item.pack(1, 1, *mission(1)[0].fields()))
+    ((datagram, to),) = wire.datagrams
+    (sent,) = messages(datagram)
+    assert to == vehicle and (sent.get_type(), sent.target_system, sent.seq) == ("MISSION_ITEM_INT", 1, 0)

@@ -49,6 +49,7 @@ from dataclasses import dataclass, field, replace
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.autopilots import GENERIC, AutopilotQuirks, quirks_for
+from gcs_planner.core.fleet_ids import wire_sysid
 from gcs_planner.core.lockstep import now_s
 from gcs_planner.mavlink.errors import (
     BusyError,
@@ -336,11 +337,13 @@ class MissionClient:
         loop = asyncio.get_running_loop()
         send_payload = self.link.send_payload
         target = transfer.sysid
-        payloads = [_ITEM_INT.pack(target, transfer.compid, *item.fields()) for item in transfer.items]
+        wire = wire_sysid(target)  # its system id on its own network (a fleet id past network 0)
+        payloads = [_ITEM_INT.pack(wire, transfer.compid, *item.fields()) for item in transfer.items]
 
         def on_request(frame: bytes, t_s: float) -> None:
             seq, target_system, target_component, mission_type = codec.fields(frame, _REQUEST_FIELDS)
-            source, to = (frame[5], frame[6]), (target_system, target_component)
+            source = (target, frame[6])  # the link takes the frames of the target's system only
+            to = (target_system, target_component)
             for k in transfer.on_request(seq, source, to, mission_type, loop.time()):
                 send_payload(target, _ITEM_INT, payloads[k])
             rearm()
