@@ -125,7 +125,9 @@ def test_requests_in_one_datagram_are_answered_with_the_items_in_one_datagram(ke
             )
             (count,) = await receive()
             assert count.get_type() == "MISSION_COUNT" and count.count == 4
-            send(request(0))
+            fence = mavlink.MAVLink_mission_request_int_message(255, 190, 3, MissionType.FENCE)
+            other_gcs = mavlink.MAVLink_mission_request_int_message(254, 190, 3, 0)
+            send(request(0), fence, other_gcs)  # not ours: answered, they would add item 3
             got = await receive()
             assert [(m.get_type(), m.seq) for m in got] == [("MISSION_ITEM_INT", 0), ("MISSION_ITEM_INT", 1)]
             if lost:
