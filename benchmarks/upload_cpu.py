@@ -9,10 +9,12 @@ uploads missions of every size to it over UDP loopback. Per upload it records:
   mock_cpu  CPU time of the mock's process, the other half of every round trip.
 Ours runs with ``Timing(verdict_s=0)``: the transfer only, without the second a PX4 vehicle is
 listened to after its ACK for a refusal (verdict.py), which MAVSDK does not do and which costs no
-CPU. Each round gives each client a fresh mock and rotates the client order, so drifting machine
-load hits both alike; medians over rounds x reps uploads. The markdown goes to stdout (and --out).
+CPU; ``--window`` sets its Timing.window (default: the client's). Each round gives each client a
+fresh mock and rotates the client order, so drifting machine load hits both alike; medians over
+rounds x reps uploads. The markdown goes to stdout (and --out).
 
-    .venv/bin/python benchmarks/upload_cpu.py [--sizes 100 500] [--rounds 3] [--reps 5] [--out FILE]
+    .venv/bin/python benchmarks/upload_cpu.py [--sizes 100 500] [--rounds 3] [--reps 5] [--window N]
+        [--out FILE]
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import argparse
 import asyncio
 import contextlib
 import datetime
+import functools
 import os
 import platform
 import statistics
@@ -94,11 +97,13 @@ async def measured_async(meter: CpuMeter, upload) -> Sample:
     return wall, c1 - c0, m1 - m0
 
 
-def ours(address, meter: CpuMeter, sizes: list[int], reps: int) -> dict[int, list[Sample]]:
+def ours(
+    address, meter: CpuMeter, sizes: list[int], reps: int, window: int = Timing.window
+) -> dict[int, list[Sample]]:
     async def main() -> dict[int, list[Sample]]:
         link = await MavlinkLink.open(f"udpout:{address[0]}:{address[1]}")
         await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 30)
-        client = MissionClient(link, 1, timing=Timing(verdict_s=0))
+        client = MissionClient(link, 1, timing=Timing(verdict_s=0, window=window))
         await client.upload(items(10, 99))  # warm-up: first-call costs (caches, imports)
         out = {}
         for n in sizes:
@@ -145,14 +150,17 @@ def mavsdk(address, meter: CpuMeter, sizes: list[int], reps: int) -> dict[int, l
 CLIENTS = {"ours": ours, "mavsdk": mavsdk}
 
 
-def run(sizes: list[int], rounds: int, reps: int, profile: str) -> dict[str, dict[int, list[Sample]]]:
+def run(
+    sizes: list[int], rounds: int, reps: int, profile: str, window: int = Timing.window
+) -> dict[str, dict[int, list[Sample]]]:
+    clients = {**CLIENTS, "ours": functools.partial(ours, window=window)}
     samples: dict[str, dict[int, list[Sample]]] = {c: {n: [] for n in sizes} for c in CLIENTS}
     for r in range(rounds):
         names = list(CLIENTS)[r % 2 :] + list(CLIENTS)[: r % 2]
         for name in names:
             with Mock(1, profile) as mock:
                 meter = CpuMeter(mock._proc.pid)
-                for n, runs in CLIENTS[name](mock.addresses[0], meter, sizes, reps).items():
+                for n, runs in clients[name](mock.addresses[0], meter, sizes, reps).items():
                     samples[name][n] += runs
     return samples
 
@@ -186,10 +194,11 @@ def main() -> None:
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--reps", type=int, default=5)
     p.add_argument("--profile", choices=("px4", "ardupilot"), default="px4")
+    p.add_argument("--window", type=int, default=Timing.window, help="our items in flight (Timing.window)")
     p.add_argument("--out", type=Path, help="also write the markdown here")
     args = p.parse_args()
     before = uptime()
-    samples = run(args.sizes, args.rounds, args.reps, args.profile)
+    samples = run(args.sizes, args.rounds, args.reps, args.profile, args.window)
     text = "\n".join(
         [
             f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}."
@@ -197,6 +206,7 @@ def main() -> None:
             f"Load (`uptime`) before: {before}",
             f"Load (`uptime`) after: {uptime()}",
             f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}` (profile {args.profile},"
+            f" our window {args.window},"
             f" medians of {args.rounds} rounds x {args.reps} uploads)",
             "",
             table(samples),

@@ -2,8 +2,9 @@
 
 A MavlinkLink with a fake transport hears one PX4 HEARTBEAT, a MissionClient starts an upload of
 N items, and the script feeds the link the vehicle's N MISSION_REQUEST_INT frames and its
-MISSION_ACK the way a UDP socket would (UdpProtocol.datagram_received). It times only that
-(framing, decode, routing, the transfer's state machine, encode; no event loop, no system
+MISSION_ACK the way a UDP socket would (UdpProtocol.datagram_received), one frame a datagram.
+It times only that (framing, the CRC and id checks, routing, the transfer's state machine,
+framing the packed item; requests are taken undecoded, mission.py; no event loop, no system
 calls), so the figure is the client's own Python per item, free of the mock and of the kernel.
 Best of --runs uploads after three warm-ups.
 

@@ -15,6 +15,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
 from gcs_planner.wire import codec  # noqa: E402
 from gcs_planner.wire.signing import LinkSigning  # noqa: E402
+from gcs_planner.wire.signing_streams import signature_fields  # noqa: E402
 
 _RANGES = {
     "uint8_t": (0, 2**8),
@@ -73,6 +74,52 @@ def test_every_covered_message_encodes_and_decodes_as_pymavlink_does(zeros):
             bytes(want.get_msgbuf()),
             bytes(want.get_payload()),
         )
+
+
+@pytest.mark.parametrize("zeros", [False, True])
+def test_a_payload_packed_once_frames_as_pymavlink_packs_the_message(zeros):
+    """packer + frame (the upload's path without message objects) = pymavlink's pack, byte for byte;
+    signed with LinkSigning.sign = pymavlink's signed pack at the same timestamp; intact and
+    fields read them back."""
+    rng = np.random.default_rng(2)
+    theirs = mavlink.MAVLink(None, srcSystem=42, srcComponent=7)
+    signed = mavlink.MAVLink(None, srcSystem=42, srcComponent=7)
+    signing = LinkSigning(mavlink.MAVLink(None), b"k" * 32, link_id=3)
+    LinkSigning(signed, b"k" * 32, link_id=3)
+    for cls in COVERED:
+        msg = sample(cls, rng, zeros)
+        p = codec.packer(cls)
+        payload = p.pack(*(getattr(msg, name) for name in cls.fieldnames))
+        theirs.seq = signed.seq = seq = int(rng.integers(0, 256))
+        frame = codec.frame(p.msgid, p.crc_extra, payload, seq, 42, 7)
+        assert frame == msg.pack(theirs), cls.msgname
+        assert codec.intact(frame) and codec.fields(frame, cls.unpacker) == cls.unpacker.unpack(
+            cls.unpacker.pack(*(getattr(msg, name) for name in cls.ordered_fieldnames))
+        )
+        ours = signing.sign(
+            codec.frame(p.msgid, p.crc_extra, payload, seq, 42, 7, mavlink.MAVLINK_IFLAG_SIGNED)
+        )
+        signed.signing.timestamp = signature_fields(ours)[1]  # the timestamp ``sign`` used
+        assert ours == msg.pack(signed), cls.msgname
+        assert codec.intact(ours)
+    with pytest.raises(ValueError, match="not covered"):
+        codec.packer(mavlink.MAVLink_statustext_message)
+
+
+def test_intact_refuses_a_bad_crc_length_msgid_or_flag():
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    request = mavlink.MAVLink_mission_request_int_message
+    frame = request(255, 190, 7, 2).pack(mav)
+    assert codec.intact(frame) and codec.fields(frame, request.unpacker) == (7, 255, 190, 2)
+    assert codec.fields(request(255, 190, 7, 0).pack(mav), request.unpacker) == (7, 255, 190, 0)  # cut zeros
+    bad_crc = bytearray(frame)
+    bad_crc[-3] ^= 0x01
+    unknown_flag = bytearray(frame)
+    unknown_flag[2] = 0x02
+    unknown_id = bytearray(frame)
+    unknown_id[9] = 0x7F
+    for bad in (bad_crc, frame[:-1], frame + b"\x00", unknown_flag, unknown_id, b"\xfe" + frame[1:]):
+        assert not codec.intact(bytes(bad))
 
 
 def test_frames_it_does_not_cover_are_left_to_pymavlink():

@@ -291,7 +291,7 @@ def test_items_go_unasked_only_to_autopilots_that_drop_unexpected_ones(autopilot
     if autopilot is not None:
         link.vehicles[1] = VehicleInfo(1, ("127.0.0.1", 14550), autopilot=autopilot)
     timing = MissionClient(link, 1)._transfer(UploadTransfer, items=mission(3)).timing
-    assert (timing.window, timing.push_ahead) == ((2, True) if pipelined else (1, False))
+    assert (timing.window, timing.push_ahead) == ((Timing.window, True) if pipelined else (1, False))
 
 
 def test_a_window_of_no_items_is_refused():
@@ -463,13 +463,17 @@ def test_lossy_link_gives_equal_mission_or_reported_failure(profile, seed):
         assert srv.items() == before
 
 
-def test_lossy_link_mostly_succeeds():
+@pytest.mark.parametrize("window", [2, 8, 16])
+def test_lossy_link_mostly_succeeds(window):
+    """ack_lost only where the vehicle holds the mission: with a wide window a push sends the last
+    item while the vehicle still waits for an earlier one, and the final-item timer resends from
+    there instead of running out (it reported a lost ACK of a vehicle mid-upload: window 8, seed 7)."""
     ok = 0
     for seed in range(10):
         srv = server("ardupilot")
         sim = Sim(srv, Channel(loss=0.2, seed=seed))
         items = mission(30)
-        outcome = upload(sim, items).outcome
+        outcome = upload(sim, items, timing=Timing(window=window)).outcome
         if outcome.ack_lost:  # ArduPilot never repeats a lost final ACK: the vehicle holds the mission
             assert [i.x for i in srv.items()] == [i.x for i in items]
         ok += outcome.error is None or outcome.ack_lost

@@ -18,6 +18,13 @@ Choices:
   pymavlink decoder. Frames carry a sequence number that advances per frame sent.
 - Frames are dispatched synchronously in ``datagram_received``: a transfer's reply goes out in the
   same callback that received the request (no task hop, no sleep) - the hot path of an upload.
+  What the subscribers send while one datagram's (or stream read's) frames are dispatched leaves
+  when they all were, in one datagram per address (up to MAX_DATAGRAM_BYTES, frames in order), as
+  ArduPilot's and PX4's UDP drivers send what their buffer holds: a vehicle that answers several
+  items with one datagram of requests gets the next items in one datagram, one system call and one
+  wake-up for all of them (``corked()``: mission.py sends a push's window the same way).
+  Autopilots and routers parse a UDP datagram as a byte stream, so several frames in one are read
+  as if they came one by one.
 - Routing: every peer address belongs to the endpoint it was heard on (addresses are
   endpoint-qualified, transports.py, so two endpoints never collide). A message with
   ``target_system`` goes out of the endpoint and address that system was last heard from;
@@ -34,6 +41,11 @@ Choices:
   component ids (pymavlink leaves them 0), so they count for their own vehicle, never for system 0.
 - ``subscribe(callback, sysid=N)`` delivers only that vehicle's frames: a fleet upload's transfers
   each see their own vehicle, so dispatch stays O(frames), not O(frames x transfers).
+- ``take(sysid, msgids, callback, owner)``: those frames of that vehicle go to ``callback(frame,
+  t_s)`` undecoded, once their length, CRC (codec.intact) and signature are checked, instead of as
+  messages to ``owner``; every other subscriber still gets them decoded. ``send_payload`` sends a
+  payload packed once (codec.packer) with only the header, CRC and signature made per frame. With
+  both a mission upload answers a request without a message object either way (mission.py).
 - Subscribers get ``(msg, raw, t_s)``: the exact received frame and the receive time as Unix
   seconds (telemetry logging); MISSION_COUNT/ACK/CURRENT carry their opaque ids (wire.py).
 - The GCS sends HEARTBEAT (MAV_TYPE_GCS) at 1 Hz from open until close: autopilots use it for
@@ -54,9 +66,10 @@ import logging
 import os
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Iterator
 from dataclasses import dataclass, field
 from operator import methodcaller
+from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")
 
@@ -82,6 +95,7 @@ log = logging.getLogger(__name__)
 GCS_SYSID = 255
 GCS_COMPID = mavlink.MAV_COMP_ID_MISSIONPLANNER  # 190
 DUPLICATE_WINDOW_S = 5.0  # two addresses heard within this time with one sysid = duplicate [s]
+MAX_DATAGRAM_BYTES = 1400  # frames sent together stay within one Ethernet MTU
 FLEET_RCVBUF_BYTES = 4 << 20  # a fleet link's socket receive buffer (Linux caps it at net.core.rmem_max)
 HEARTBEAT_PERIOD_S = 1.0
 _NOT_AUTOPILOT = mavlink.MAV_AUTOPILOT_INVALID  # HEARTBEAT of a camera, gimbal, companion or GCS
@@ -107,6 +121,7 @@ _is_closing = methodcaller("is_closing")
 
 Address = tuple[str, int]
 Callback = Callable[[mavlink.MAVLink_message, bytes, float], None]
+FrameCallback = Callable[[bytes, float], None]
 
 
 @dataclass
@@ -208,6 +223,8 @@ class MavlinkLink:
         self._peers: dict[Address, tuple[object, Address]] = {}
         self._subscribers: list[Callback] = []  # every frame
         self._by_sysid: dict[int, list[Callback]] = {}  # one vehicle's frames
+        # (sysid, msgid) -> the frame callbacks of take() and the subscribers they replace
+        self._takers: dict[tuple[int, int], tuple[tuple[FrameCallback, ...], frozenset[Callback]]] = {}
         self.vehicles: dict[int, VehicleInfo] = {}
         self._transport = None  # the first endpoint: the UDP socket udpout remotes share, else the first
         self._endpoints: list = []  # every transport (UDP sockets, TCP connections, serial ports)
@@ -218,6 +235,8 @@ class MavlinkLink:
         self.frames_sent = 0
         self.frames_dropped = 0  # undecodable, bad CRC, or (signing) unsigned / badly signed
         self.unverified: dict[int, int] = {}  # header sysid -> signed frames dropped (not our key)
+        # frames held while a datagram's frames are dispatched: (transport, address, frame)
+        self._corked: list[tuple[Any, Address, bytes]] | None = None
         self._now_s: Callable[[], float] = now_s  # the clocks; open() binds them to its loop
         self._unix_s: Callable[[], float] = unix_s
 
@@ -319,23 +338,85 @@ class MavlinkLink:
     # ----------------------------------------------------------------- sending
     def send(self, msg: mavlink.MAVLink_message) -> None:
         """Pack and send now; to the target system's address, or to every peer for broadcasts."""
-        if self._closed or all(map(_is_closing, self._endpoints)):
-            raise ConnectionError("MAVLink link is closed")
-        target = getattr(msg, "target_system", 0)
+        self._check_open()
         raw = codec.encode(msg, self._mav) or self.signing.pack(msg)
         self._mav.seq = (self._mav.seq + 1) % 256
+        self._route(getattr(msg, "target_system", 0), raw)
+
+    def send_payload(self, target: int, packer: codec.Packer, payload: bytes) -> None:
+        """Send the message ``packer`` packed into ``payload`` to system ``target`` (0: broadcast) as
+        ``send`` sends it: the next sequence number, signed when there is a key."""
+        self._check_open()
+        mav = self._mav
+        key = self.signing.key
+        flags = 0 if key is None else _SIGNED
+        raw = codec.frame(
+            packer.msgid, packer.crc_extra, payload, mav.seq, mav.srcSystem, mav.srcComponent, flags
+        )
+        if key is not None:
+            raw = self.signing.sign(raw)
+        mav.seq = (mav.seq + 1) % 256
+        self._route(target, raw)
+
+    def _check_open(self) -> None:
+        if self._closed or all(map(_is_closing, self._endpoints)):
+            raise ConnectionError("MAVLink link is closed")
+
+    def _route(self, target: int, raw: bytes) -> None:
+        """Send one frame to the address system ``target`` was heard from, or to every peer."""
         info = self.vehicles.get(target) if target else None
         if info is None:
             for transport, addr in self._peers.values():
-                transport.sendto(raw, addr)
+                self._sendto(transport, raw, addr)
         else:
             if len(info.addresses) > 1:  # fast path: one address can never be ambiguous
                 live = info.live_addresses(self._now_s())
                 if len(live) > 1:
                     raise DuplicateSysidError(target, live)
             transport, addr = self._peers[info.address]
-            transport.sendto(raw, addr)
+            self._sendto(transport, raw, addr)
         self.frames_sent += 1
+
+    @contextlib.contextmanager
+    def corked(self) -> Iterator[None]:
+        """What is sent inside the block leaves at its end, in one datagram per address (module
+        docstring); inside another, the outermost one sends."""
+        if self._corked is not None:
+            yield
+            return
+        self._corked = []
+        try:
+            yield
+        finally:
+            corked, self._corked = self._corked, None
+            if corked:
+                self._uncork(corked)
+
+    def _sendto(self, transport, raw: bytes, addr: Address) -> None:
+        """Send ``raw`` now, or hold it while a datagram's frames are dispatched (module docstring)."""
+        if self._corked is None:
+            transport.sendto(raw, addr)
+        else:
+            self._corked.append((transport, addr, raw))
+
+    @staticmethod
+    def _uncork(corked: list[tuple[Any, Address, bytes]]) -> None:
+        """Send the held frames: to each address in order, as few datagrams as MAX_DATAGRAM_BYTES allows."""
+        if len(corked) == 1:
+            transport, addr, raw = corked[0]
+            transport.sendto(raw, addr)
+            return
+        by_peer: dict[tuple[Any, Address], list[bytes]] = {}
+        for transport, addr, raw in corked:
+            by_peer.setdefault((transport, addr), []).append(raw)
+        for (transport, addr), frames in by_peer.items():
+            start, size = 0, 0
+            for k, raw in enumerate(frames):
+                if size + len(raw) > MAX_DATAGRAM_BYTES and k > start:
+                    transport.sendto(b"".join(frames[start:k]), addr)
+                    start, size = k, 0
+                size += len(raw)
+            transport.sendto(b"".join(frames[start:]), addr)
 
     def check_target(self, sysid: int) -> None:
         """Raise DuplicateSysidError if ``sysid`` answers from more than one address."""
@@ -375,6 +456,28 @@ class MavlinkLink:
 
         return unsubscribe
 
+    def take(
+        self, sysid: int, msgids: Collection[int], callback: FrameCallback, owner: Callback
+    ) -> Callable[[], None]:
+        """Frames of ``msgids`` from system ``sysid`` go to ``callback(frame, t_s)`` undecoded (once
+        intact and verified) instead of to the subscriber ``owner`` as messages; the other
+        subscribers still get them (module docstring). Returns the function that ends it."""
+        keys = [(sysid, msgid) for msgid in msgids]
+        for key in keys:
+            takers, owners = self._takers.get(key, ((), frozenset()))
+            self._takers[key] = ((*takers, callback), owners | {owner})
+
+        def release() -> None:
+            for key in keys:
+                takers, owners = self._takers.get(key, ((), frozenset()))
+                rest = tuple(t for t in takers if t is not callback)
+                if rest:
+                    self._takers[key] = (rest, owners - {owner})
+                else:
+                    self._takers.pop(key, None)
+
+        return release
+
     async def wait_for(
         self, predicate: Callable[[mavlink.MAVLink_message], bool], timeout_s: float
     ) -> mavlink.MAVLink_message:
@@ -388,35 +491,54 @@ class MavlinkLink:
             self.frames_dropped += junk
         t_s = self._unix_s()
         now = self._now_s()
-        signing = self.signing
-        verifying = signing.key is not None
-        for frame in found:
+        with self.corked():
+            for frame in found:
+                self._on_frame(frame, addr, transport, raw_addr, t_s, now)
+
+    def _on_frame(
+        self, frame: bytes, addr: Address, transport, raw_addr: Address, t_s: float, now: float
+    ) -> None:
+        """One frame: decoded (taken ones only checked), verified, then delivered."""
+        taken = None
+        if self._takers and frame[0] == 0xFD:
+            taken = self._takers.get((frame[5], frame[7] | frame[8] << 8 | frame[9] << 16))
+        msg = None
+        if taken is None:
             msg = self._decode(frame, addr)
             if msg is None:
                 self.frames_dropped += 1
-                continue
-            accepted = signing.accept(frame)
-            if frame[0] == 0xFD and frame[2] & _SIGNED and not (accepted and verifying):
-                self.unverified[frame[5]] = self.unverified.get(frame[5], 0) + 1  # a key we lack
-            if not accepted:
-                self.frames_dropped += 1
-                continue
-            msg._signed = verifying  # verified above
-            if addr not in self._peers:  # udpin: answer whoever talks to us (once a frame verified)
-                self._peers[addr] = (transport, raw_addr)
-            sysid = msg.get_srcSystem()
-            self._note_source(msg, sysid, addr, now)
-            attach_extensions(msg, frame)
-            self.frames_received += 1
-            # the vehicle's own subscribers (transfers) first: their replies leave before logging
-            own = self._by_sysid.get(sysid)  # lists are replaced, never changed: safe to iterate
-            for callback in own + self._subscribers if own else self._subscribers:
-                try:
-                    callback(msg, frame, t_s)
-                except UserError as exc:  # said once more, in one line, by the operation it ends
-                    log.debug("MAVLink subscriber %r: %s", callback, exc)
-                except Exception:
-                    log.exception("MAVLink subscriber %r failed", callback)
+                return
+        elif not codec.intact(frame):
+            self.frames_dropped += 1
+            return
+        signing = self.signing
+        accepted = signing.accept(frame)
+        verifying = signing.key is not None
+        if frame[0] == 0xFD and frame[2] & _SIGNED and not (accepted and verifying):
+            self.unverified[frame[5]] = self.unverified.get(frame[5], 0) + 1  # a key we lack
+        if not accepted:
+            self.frames_dropped += 1
+            return
+        if addr not in self._peers:  # udpin: answer whoever talks to us (once a frame verified)
+            self._peers[addr] = (transport, raw_addr)
+        sysid = frame[5] if msg is None else msg.get_srcSystem()
+        self._note_source(msg, sysid, addr, now)
+        self.frames_received += 1
+        # the vehicle's own subscribers (transfers) first: their replies leave before logging
+        own = self._by_sysid.get(sysid)  # lists are replaced, never changed: safe to iterate
+        callbacks = own + self._subscribers if own else self._subscribers
+        if taken is not None:
+            takers, owners = taken
+            for taker in takers:
+                _call(taker, frame, t_s)
+            callbacks = [c for c in callbacks if c not in owners]
+            msg = self._decode(frame, addr) if callbacks else None  # intact: it decodes
+            if msg is None:
+                return
+        msg._signed = verifying  # verified above
+        attach_extensions(msg, frame)
+        for callback in callbacks:
+            _call(callback, msg, frame, t_s)
 
     def _decode(self, frame: bytes, addr: Address) -> mavlink.MAVLink_message | None:
         """The message of one whole frame; None when its CRC, length or flags are bad."""
@@ -431,10 +553,14 @@ class MavlinkLink:
             msg._header = _frame_header(frame)
         return msg
 
-    def _note_source(self, msg: mavlink.MAVLink_message, sysid: int, addr: Address, now: float) -> None:
+    def _note_source(
+        self, msg: mavlink.MAVLink_message | None, sysid: int, addr: Address, now: float
+    ) -> None:
+        """A verified frame from ``sysid`` at ``addr`` (``msg`` None: a taken frame, no HEARTBEAT)."""
+        heartbeat = msg is not None and is_autopilot_heartbeat(msg)
         info = self.vehicles.get(sysid)
         if info is None:
-            if not is_autopilot_heartbeat(msg):
+            if not heartbeat:
                 return  # a vehicle exists once its autopilot was heard
             info = self.vehicles[sysid] = VehicleInfo(sysid, addr)
         elif addr != info.address or len(info.addresses) > 1:
@@ -444,7 +570,7 @@ class MavlinkLink:
             elif addr not in live and addr not in info.addresses:
                 log.warning("system id %d heard from %s and %s: ambiguous", sysid, info.address, addr)
         info.addresses[addr] = now
-        if addr == info.address and is_autopilot_heartbeat(msg):
+        if addr == info.address and heartbeat:
             compid = msg.get_srcComponent()
             if compid != info.compid:
                 if info.compid is not None and (info.compid == _AUTOPILOT1 or compid != _AUTOPILOT1):
@@ -520,6 +646,16 @@ async def first_message(
         return await asyncio.wait_for(future, timeout_s)
     finally:
         unsubscribe()
+
+
+def _call(callback: Callable, *args: object) -> None:
+    """A subscriber's callback: what it raises is logged, never raised into the link."""
+    try:
+        callback(*args)
+    except UserError as exc:  # said once more, in one line, by the operation it ends
+        log.debug("MAVLink subscriber %r: %s", callback, exc)
+    except Exception:
+        log.exception("MAVLink subscriber %r failed", callback)
 
 
 def _frame_header(frame: bytes) -> mavlink.MAVLink_header:

@@ -5,21 +5,25 @@ fleet is split over several networks (a radio, a port, a mock process each), whe
 repeat. Above the links every vehicle is named by its fleet id, ``network x 256 + sysid``: on
 network 0 it is the system id itself, so a one-network fleet is unchanged. ``NetworkLinks`` opens
 one MavlinkLink per network and offers the MavlinkLink methods a flight uses (``send``,
-``subscribe``, ``wait_for``, ``vehicles``, ``check_target``, ``duplicates``, ``close``) in fleet ids:
-a received message's source system is rewritten to its fleet id before any subscriber sees it,
-and a sent message's ``target_system`` goes out as the system id on its own network (broadcasts
-to every network).
+``subscribe``, ``wait_for``, ``vehicles``, ``check_target``, ``duplicates``, ``close``, and an
+upload's ``take``, ``send_payload``, ``corked``) in fleet ids: a received message's source system
+is rewritten to its fleet id before any subscriber sees it, and a sent message's
+``target_system`` goes out as the system id on its own network (broadcasts to every network). A
+taken frame and a packed payload are bytes as on the wire: their system ids are the network's
+(mission.py packs the payload with ``wire_sysid``).
 """
 
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Iterator, Mapping, Sequence
+import contextlib
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.core.fleet_ids import fleet_id, network_of, wire_sysid
-from gcs_planner.mavlink.link import Address, Callback, MavlinkLink, VehicleInfo, first_message
+from gcs_planner.mavlink.link import Address, Callback, FrameCallback, MavlinkLink, VehicleInfo, first_message
+from gcs_planner.wire.codec import Packer
 
 __all__ = ["NetworkLinks", "open_networks"]
 
@@ -65,6 +69,7 @@ class NetworkLinks:
         self.links = links
         self.vehicles = _FleetVehicles(links)
         self.sysid, self.compid = links[0].sysid, links[0].compid
+        self._renamed: dict[Callback, Callback] = {}  # a vehicle's subscriber -> what its link calls
 
     @property
     def frames_received(self) -> int:
@@ -95,7 +100,14 @@ class NetworkLinks:
     def subscribe(self, callback: Callback, sysid: int | None = None) -> Callable[[], None]:
         """MavlinkLink.subscribe in fleet ids."""
         if sysid is not None:
-            return self._link(sysid).subscribe(_renamed(callback, network_of(sysid)), wire_sysid(sysid))
+            renamed = self._renamed[callback] = _renamed(callback, network_of(sysid))
+            stop = self._link(sysid).subscribe(renamed, wire_sysid(sysid))
+
+            def unsubscribe_vehicle() -> None:
+                self._renamed.pop(callback, None)
+                stop()
+
+            return unsubscribe_vehicle
         stops = [link.subscribe(_renamed(callback, n)) for n, link in enumerate(self.links)]
 
         def unsubscribe() -> None:
@@ -103,6 +115,29 @@ class NetworkLinks:
                 stop()
 
         return unsubscribe
+
+    def take(
+        self, sysid: int, msgids: Collection[int], callback: FrameCallback, owner: Callback
+    ) -> Callable[[], None]:
+        """MavlinkLink.take for fleet id ``sysid`` (``owner`` subscribed to it here)."""
+        owner = self._renamed.get(owner, owner)
+        return self._link(sysid).take(wire_sysid(sysid), msgids, callback, owner)
+
+    def send_payload(self, target: int, packer: Packer, payload: bytes) -> None:
+        """MavlinkLink.send_payload to fleet id ``target`` (the payload names its wire id); 0: all."""
+        if not target:
+            for link in self.links:
+                link.send_payload(0, packer, payload)
+            return
+        self._link(target).send_payload(wire_sysid(target), packer, payload)
+
+    @contextlib.contextmanager
+    def corked(self) -> Iterator[None]:
+        """MavlinkLink.corked on every network."""
+        with contextlib.ExitStack() as stack:
+            for link in self.links:
+                stack.enter_context(link.corked())
+            yield
 
     async def wait_for(self, predicate: Callable[[mavlink.MAVLink_message], bool], timeout_s: float):
         """The first message (in fleet ids) for which ``predicate`` is true; TimeoutError after timeout_s."""

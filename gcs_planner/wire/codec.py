@@ -7,6 +7,10 @@ the common case with what each message class needs looked up once (``_plan``: it
 extra and C-level field getters). They use pymavlink's own message classes, struct layouts and CRC
 extras for the frames they cover and return None for the rest, so the caller falls back to
 pymavlink. Tests check both paths agree byte for byte on every message of the dialect.
+
+Below messages, for a hot path that builds none (a mission upload's request -> item): ``intact``
+checks a received frame's length and CRC, ``fields`` reads its payload, ``packer(cls)`` packs a
+payload from the constructor's arguments once, and ``frame`` puts a header and CRC around it.
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ from __future__ import annotations
 import os
 import struct
 from collections.abc import Callable
-from functools import cache
+from functools import cache, lru_cache
 from operator import attrgetter, itemgetter
 from typing import NamedTuple
 
@@ -24,7 +28,7 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["decode", "encode"]
+__all__ = ["Packer", "decode", "encode", "fields", "frame", "intact", "packer"]
 
 _HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sysid, compid, msgid lo16, hi8
 _HEADER_LEN = 10
@@ -33,6 +37,7 @@ _MAP = mavlink.mavlink_map
 _MAVError = mavlink.MAVError
 _Header = mavlink.MAVLink_header
 _SIGNED = mavlink.MAVLINK_IFLAG_SIGNED
+_SIGNATURE_LEN = 13
 _mcrf4xx = crc16.mcrf4xx
 
 
@@ -73,6 +78,66 @@ def _plan_of_id(msgid: int) -> _Plan | None:
     return None if cls is None else _plan(cls)
 
 
+class Packer(NamedTuple):
+    """One covered message's payload from its constructor's arguments, without the message object."""
+
+    msgid: int
+    crc_extra: bytes
+    pack: Callable[..., bytes]  # constructor-order values -> the payload, trailing zeros dropped
+
+
+@cache
+def packer(cls: type[mavlink.MAVLink_message]) -> Packer:
+    """The Packer of a covered dialect class (ValueError for the rest)."""
+    plan = _plan(cls)
+    if plan is None:
+        raise ValueError(f"{cls.__name__} is not covered by codec.py")
+    to_wire = _tuple_getter(itemgetter, [cls.fieldnames.index(n) for n in cls.ordered_fieldnames])
+    wire = plan.wire
+
+    def pack(*values: object) -> bytes:
+        payload = wire.pack(*to_wire(values))
+        return payload.rstrip(b"\x00") or payload[:1]  # MAVLink 2 drops trailing zeros, keeps one byte
+
+    return Packer(cls.id, plan.crc_extra, pack)
+
+
+def frame(
+    msgid: int, crc_extra: bytes, payload: bytes, seq: int, sysid: int, compid: int, incompat: int = 0
+) -> bytes:
+    """One MAVLink 2 frame of a packed ``payload`` (a Packer's), up to its CRC; ``incompat`` = SIGNED
+    for a frame that a signature block will follow (the flag is under the CRC)."""
+    head = _HEADER.pack(_V2_MAGIC, len(payload), incompat, 0, seq, sysid, compid, msgid & 0xFFFF, msgid >> 16)
+    body = head + payload
+    return body + _mcrf4xx(crc_extra, _mcrf4xx(body[1:])).to_bytes(2, "little")
+
+
+@lru_cache(maxsize=1024)  # bounded: received frames name any msgid
+def _crc_extra_of(msgid: int) -> bytes | None:
+    cls = _MAP.get(msgid)
+    return None if cls is None else bytes((cls.crc_extra,))
+
+
+def intact(raw: bytes) -> bool:
+    """``raw`` is one whole MAVLink 2 frame (signed or not; the signature is not checked here) of a
+    dialect message, with the right length and CRC and no unknown incompatibility flag."""
+    if len(raw) < _HEADER_LEN + 2 or raw[0] != _V2_MAGIC or raw[2] & ~_SIGNED:
+        return False
+    crc_extra = _crc_extra_of(raw[7] | raw[8] << 8 | raw[9] << 16)
+    end = _HEADER_LEN + raw[1]
+    if crc_extra is None or len(raw) != end + 2 + (_SIGNATURE_LEN if raw[2] & _SIGNED else 0):
+        return False
+    return _mcrf4xx(crc_extra, _mcrf4xx(raw[1:end])) == raw[end] | raw[end + 1] << 8
+
+
+def fields(raw: bytes, wire: struct.Struct) -> tuple:
+    """The payload of an ``intact`` frame unpacked with ``wire`` (its class's ``unpacker``): the
+    values in wire order, the dropped trailing zeros restored."""
+    payload = raw[_HEADER_LEN : _HEADER_LEN + raw[1]]
+    size = wire.size
+    return wire.unpack(payload[:size] if len(payload) >= size else payload + bytes(size - len(payload)))
+
+
 def decode(raw: bytes) -> mavlink.MAVLink_message | None:
     """The message in ``raw`` (exactly one unsigned MAVLink 2 frame), as pymavlink would decode it;
     None if the frame is not covered; raises mavlink.MAVError for a bad length or CRC."""
@@ -110,10 +175,4 @@ def encode(msg: mavlink.MAVLink_message, mav: mavlink.MAVLink) -> bytes | None:
         return None
     payload = plan.wire.pack(*plan.values(msg))
     payload = payload.rstrip(b"\x00") or payload[:1]  # MAVLink 2 drops trailing zeros, keeps one byte
-    msgid = plan.cls.id
-    frame = _HEADER.pack(
-        _V2_MAGIC, len(payload), 0, 0, mav.seq, mav.srcSystem, mav.srcComponent, msgid & 0xFFFF, msgid >> 16
-    )
-    frame += payload
-    crc = _mcrf4xx(plan.crc_extra, _mcrf4xx(frame[1:]))
-    return frame + crc.to_bytes(2, "little")
+    return frame(plan.cls.id, plan.crc_extra, payload, mav.seq, mav.srcSystem, mav.srcComponent)
