@@ -17,14 +17,11 @@ Outgoing and incoming datagrams each pass through their own `FaultyChannel`; a d
 on the way in teaches the vehicle nothing (not even the peer's address).
 
 Receiving: each datagram is framed on its own (gcs_planner/wire/framing.py; no bytes carried
-to the next datagram), each frame decoded by gcs_planner/wire/codec.py where it covers the frame
-(unsigned, numeric fields: a mission item, a request) and else by one keyless pymavlink decoder;
-frames are encoded the same way (codec.py, else pymavlink: signed frames, strings, arrays). An
-address becomes a peer only once a frame from it decoded and, with signing on, verified: junk or
-forged frames from any number of ports cannot push the GCS out of the peer table. That is a
-choice, not a claim: ArduPilot's UDP drivers learn a peer address below the MAVLink parser, from
-whatever arrives; a mock whose peer table junk can flush would make every GCS test behind it depend
-on its neighbours.
+to the next datagram), each frame decoded by one keyless pymavlink decoder. An address becomes a
+peer only once a frame from it decoded and, with signing on, verified: junk or forged frames from
+any number of ports cannot push the GCS out of the peer table. That is a choice, not a claim:
+ArduPilot's UDP drivers learn a peer address below the MAVLink parser, from whatever arrives; a
+mock whose peer table junk can flush would make every GCS test behind it depend on its neighbours.
 
 Signing (signing.py, signing_streams.py): with a key the vehicle signs every frame with a
 timestamp that follows the wall clock and drops unsigned, badly signed and replayed frames, as
@@ -43,7 +40,6 @@ from collections.abc import Callable
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-from gcs_planner.wire import codec  # noqa: E402
 from gcs_planner.wire.framing import StreamFramer, frames  # noqa: E402
 from gcs_planner.wire.signing import LinkSigning  # noqa: E402
 from gcs_planner.wire.wire import attach_extensions  # noqa: E402
@@ -171,7 +167,7 @@ class VehicleLink(asyncio.DatagramProtocol):
         ``batching``, with the other frames of this tick (``flush``)."""
         if not self.peers:
             return
-        data = codec.encode(msg, self._mav) or self.signing.pack(msg)
+        data = self.signing.pack(msg)
         self._mav.seq = (self._mav.seq + 1) % 256
         if not self.batching:
             for peer in self.peers:
@@ -227,7 +223,7 @@ class VehicleLink(asyncio.DatagramProtocol):
         if frame[0] == 0xFD and frame[2] & ~mavlink.MAVLINK_IFLAG_SIGNED:
             return None
         try:
-            return codec.decode(frame) or self._decoder.decode(bytearray(frame))
+            return self._decoder.decode(bytearray(frame))
         except mavlink.MAVError as exc:
             log.debug("vehicle %d: undecodable frame: %s", self.sysid, exc)
             return None
