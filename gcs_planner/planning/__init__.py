@@ -140,6 +140,7 @@ def certify_plan(plan: Plan, scenario: Scenario, kinematics: bool = True) -> Non
     (docs/architecture.md, "The one safety checker")."""
     options = check_options(scenario, config_of(scenario))
     certify(plan, scenario, **options | ({} if kinematics else {"kinematics": False}))
+    plan.metrics["feasible_count"] = sum(vp.feasible for vp in plan.vehicles)  # the verdict's count
 
 
 def plan_scenario(scenario: Scenario, seed: int | None = None, progress: Progress | None = None) -> Plan:

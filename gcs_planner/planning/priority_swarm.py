@@ -567,15 +567,9 @@ def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.
         k = np.arange(0, math.ceil(prob.delay_s / cfg.dt_s - 1e-9))
         cols.append((k, np.broadcast_to(np.asarray(v.start, dtype=float), (len(k), 3))))
     end = np.asarray(v.goal, dtype=float)
-    if v.landing_mps > 0 and end[2] > 0:  # the mission's final landing: a stop, then the descent
-        t_stop = t_arrive + (abs(end[2] - prob.goal[2]) / v.speed_mps if len(prob.post) else 0.0)
-        k = np.arange(
-            math.ceil(t_stop / cfg.dt_s - 1e-9), math.ceil((t_stop + v.landing_stop_s) / cfg.dt_s - 1e-9)
-        )
-        cols.append((k, np.broadcast_to(end, (len(k), 3))))
-        cols.append(
-            _column(end, np.array([end[0], end[1], 0.0]), t_stop + v.landing_stop_s, v.landing_mps, cfg.dt_s)
-        )
+    if v.landing_mps > 0 and end[2] > 0:  # the mission's final landing, descended at the goal
+        t_land = t_arrive + (abs(end[2] - prob.goal[2]) / v.speed_mps if len(prob.post) else 0.0)
+        cols.append(_column(end, np.array([end[0], end[1], 0.0]), t_land, v.landing_mps, cfg.dt_s))
     if cols:
         ks = np.concatenate([slices] + [c[0] for c in cols])
         ps = np.vstack([pos] + [c[1] for c in cols])
