@@ -105,8 +105,9 @@ def test_a_route_that_loops_back_near_a_point_is_timed_at_the_pass_due_then():
     0.5 s late; taking the nearest sample of the whole stretch timed the first pass at the second."""
     arc = np.linspace(-np.pi / 2, np.pi / 2, 9)
     back = np.linspace(np.pi / 2, 3 * np.pi / 2, 9)
-    xy = np.vstack([[[0.0, 0.0], [60.0, 0.0]], np.c_[60 + 4 * np.cos(arc), 4 + 4 * np.sin(arc)],
-                    [[40.0, 8.0]], np.c_[40 + 4 * np.cos(back), 4 + 4 * np.sin(back)], [[100.0, 0.0]]])  # fmt: skip
+    out_loop = np.c_[60 + 4 * np.cos(arc), 4 + 4 * np.sin(arc)]
+    back_loop = np.c_[40 + 4 * np.cos(back), 4 + 4 * np.sin(back)]
+    xy = np.vstack([[[0.0, 0.0], [60.0, 0.0]], out_loop, [[40.0, 8.0]], back_loop, [[100.0, 0.0]]])
     path = np.c_[xy, np.full(len(xy), 20.0)]
     t = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1) / 10.0)])
     vp = VehiclePlan("uav1", 1, path, t, np.full(len(t), 10.0), path, t)
