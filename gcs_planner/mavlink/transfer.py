@@ -234,15 +234,19 @@ class Transfer:
 
     def accepts(self, msg: mavlink.MAVLink_message) -> bool:
         """True for messages of this transfer: from the target, to us (or broadcast), same mission type."""
-        if msg.get_type() not in self._accepted_types:
+        return msg.get_type() in self._accepted_types and self._ours(
+            (msg.get_srcSystem(), msg.get_srcComponent()),
+            (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0)),
+            getattr(msg, "mission_type", self.mission_type),
+        )
+
+    def _ours(self, source: tuple[int, int], target: tuple[int, int], mission_type: int) -> bool:
+        """From the target vehicle, to us (or broadcast), of this transfer's mission type."""
+        if source != (self.sysid, self.compid):
             return False
-        if msg.get_srcSystem() != self.sysid or msg.get_srcComponent() != self.compid:
-            return False
-        if getattr(msg, "target_system", 0) not in (0, self.gcs[0]):
-            return False
-        if getattr(msg, "target_component", 0) not in (0, self.gcs[1]):
+        if target[0] not in (0, self.gcs[0]) or target[1] not in (0, self.gcs[1]):
             return False  # another GCS with our sysid: its requests and ACKs are not ours
-        return getattr(msg, "mission_type", self.mission_type) == self.mission_type
+        return mission_type == self.mission_type
 
     def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
         raise NotImplementedError
@@ -401,10 +405,8 @@ class UploadTransfer(Transfer):
         """A MISSION_REQUEST(_INT) given by its fields, for a caller that reads them from the frame
         without a message (mission.py): the indexes of the items to answer with, MISSION_ITEM_INT of
         ``items[k]`` each - what ``on_message`` answers the same request with, with the same checks."""
-        if self.done or source != (self.sysid, self.compid) or mission_type != self.mission_type:
+        if self.done or not self._ours(source, target, mission_type):
             return []
-        if target[0] not in (0, self.gcs[0]) or target[1] not in (0, self.gcs[1]):
-            return []  # another GCS with our sysid: its requests are not ours
         due = self._on_request(seq, now_s)
         if due:
             self.stats.sent["MISSION_ITEM_INT"] = self.stats.sent.get("MISSION_ITEM_INT", 0) + len(due)
