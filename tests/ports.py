@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import random
 import socket
+import time
 
 
 def free_port_run(count: int) -> int:
@@ -21,3 +22,26 @@ def free_port_run(count: int) -> int:
             for s in socks:
                 s.close()
     raise RuntimeError("no free port run")
+
+
+def frames_from_a_gcs(vehicle: socket.socket, wait_s: float = 0.2) -> list[str]:
+    """The MAVLink messages from a ground station (sysid 255) that reach ``vehicle`` within ``wait_s``.
+
+    Other datagrams are ignored: a module's mock fleet keeps streaming to the GCS ports of tests that
+    have ended, and the kernel may give the same port number to ``vehicle`` (a flake of CI, 2026-12-05).
+    """
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    found: list[str] = []
+    deadline = time.monotonic() + wait_s
+    while (left := deadline - time.monotonic()) > 0:
+        vehicle.settimeout(left)
+        try:
+            data = vehicle.recv(65535)
+        except TimeoutError:
+            break
+        messages = parser.parse_buffer(data) or []
+        found += [m.get_type() for m in messages if m.get_srcSystem() == 255]
+    return found

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from ports import frames_from_a_gcs
 
 from gcs_planner.autopilots import readback
 from gcs_planner.cli import main
@@ -204,9 +205,7 @@ def test_bad_input_sends_nothing(tmp_path, capsys, in_process):
                 [sys.executable, "-m", "gcs_planner.cli", *argv], capture_output=True, text=True, timeout=60
             )
             code, err = proc.returncode, proc.stderr
-        vehicle.settimeout(0.2)
-        with pytest.raises(TimeoutError):
-            vehicle.recv(2048)
+        assert frames_from_a_gcs(vehicle) == []
     assert code == 2 and "Traceback" not in err and err.count("\n") == 1
     assert "item 2: field x" in err and "latitude 91" in err
 
