@@ -7,6 +7,12 @@ uploads missions of every size to it over UDP loopback. Per upload it records:
             library runs its own threads, plus any child process that is not the mock (none today:
             MAVSDK 4 is a library, not a mavsdk_server process);
   mock_cpu  CPU time of the mock's process, the other half of every round trip.
+Placement (``--placement``): ``shared`` leaves the mock and the client where the scheduler puts
+them; on this 2-core VM its wake-affine placement runs a ping-pong of two processes on one core, so
+the two take turns and the transfer lasts about both CPU times added. ``apart`` pins the mock's
+process to the last CPU and the client to the others, as a vehicle is a computer of its own: then
+each side can work while the other does, and every round trip crosses cores, as on any real link.
+Both are measured in the same run, for both clients.
 Ours runs with ``Timing(verdict_s=0)``: the transfer only, without the second a PX4 vehicle is
 listened to after its ACK for a refusal (verdict.py), which MAVSDK does not do and which costs no
 CPU; ``--window`` sets its Timing.window (default: the client's). Each round gives each client a
@@ -14,7 +20,7 @@ fresh mock and rotates the client order, so drifting machine load hits both alik
 rounds x reps uploads. The markdown goes to stdout (and --out).
 
     .venv/bin/python benchmarks/upload_cpu.py [--sizes 100 500] [--rounds 3] [--reps 5] [--window N]
-        [--out FILE]
+        [--placement shared apart] [--out FILE]
 """
 
 from __future__ import annotations
@@ -148,39 +154,59 @@ def mavsdk(address, meter: CpuMeter, sizes: list[int], reps: int) -> dict[int, l
 
 
 CLIENTS = {"ours": ours, "mavsdk": mavsdk}
+PLACEMENTS = ("shared", "apart")
+
+
+def place(placement: str, mock_pid: int) -> None:
+    """``apart``: every thread of the mock on the last CPU, this process (and the threads it starts
+    from now on, MAVSDK's included) on the others; ``shared``: every CPU for both."""
+    cpus = set(range(os.cpu_count() or 1))
+    mock, client = ({max(cpus)}, cpus - {max(cpus)}) if placement == "apart" else (cpus, cpus)
+    for tid in os.listdir(f"/proc/{mock_pid}/task"):
+        os.sched_setaffinity(int(tid), mock)
+    os.sched_setaffinity(0, client)
+
+
+Samples = dict[tuple[str, str], dict[int, list[Sample]]]  # (placement, client) -> size -> runs
 
 
 def run(
-    sizes: list[int], rounds: int, reps: int, profile: str, window: int = Timing.window
-) -> dict[str, dict[int, list[Sample]]]:
+    sizes: list[int], rounds: int, reps: int, profile: str, placements: list[str], window: int = Timing.window
+) -> Samples:
     clients = {**CLIENTS, "ours": functools.partial(ours, window=window)}
-    samples: dict[str, dict[int, list[Sample]]] = {c: {n: [] for n in sizes} for c in CLIENTS}
+    samples: Samples = {(p, c): {n: [] for n in sizes} for p in placements for c in CLIENTS}
     for r in range(rounds):
         names = list(CLIENTS)[r % 2 :] + list(CLIENTS)[: r % 2]
-        for name in names:
-            with Mock(1, profile) as mock:
-                meter = CpuMeter(mock._proc.pid)
-                for n, runs in clients[name](mock.addresses[0], meter, sizes, reps).items():
-                    samples[name][n] += runs
+        for placement in placements:
+            for name in names:
+                with Mock(1, profile) as mock:
+                    place(placement, mock._proc.pid)
+                    meter = CpuMeter(mock._proc.pid)
+                    for n, runs in clients[name](mock.addresses[0], meter, sizes, reps).items():
+                        samples[placement, name][n] += runs
+                place("shared", os.getpid())  # this process back on every CPU
     return samples
 
 
-def table(samples: dict[str, dict[int, list[Sample]]]) -> str:
+def table(samples: Samples) -> str:
     med = statistics.median
     rows = [
-        "| items | client | wall ms | wall / MAVSDK | client CPU us/item | CPU / MAVSDK | mock CPU us/item |",
-        "|---:|---|---:|---:|---:|---:|---:|",
+        "| items | placement | client | wall ms | wall / MAVSDK | client CPU us/item | CPU / MAVSDK"
+        " | mock CPU us/item |",
+        "|---:|---|---|---:|---:|---:|---:|---:|",
     ]
-    for n in samples["mavsdk"]:
-        ref_wall = med(w for w, _, _ in samples["mavsdk"][n])
-        ref_cpu = med(c for _, c, _ in samples["mavsdk"][n])
-        for name in CLIENTS:
-            runs = samples[name][n]
-            wall, cpu, mock = (med(x[k] for x in runs) for k in range(3))
-            rows.append(
-                f"| {n} | {name} | {1e3 * wall:.1f} | {wall / ref_wall:.2f} | {1e6 * cpu / n:.1f}"
-                f" | {cpu / ref_cpu:.2f} | {1e6 * mock / n:.1f} |"
-            )
+    for placement, name in samples:
+        if name != "mavsdk":
+            continue
+        for n, ref in samples[placement, "mavsdk"].items():
+            ref_wall, ref_cpu = med(w for w, _, _ in ref), med(c for _, c, _ in ref)
+            for client in CLIENTS:
+                runs = samples[placement, client][n]
+                wall, cpu, mock = (med(x[k] for x in runs) for k in range(3))
+                rows.append(
+                    f"| {n} | {placement} | {client} | {1e3 * wall:.1f} | {wall / ref_wall:.2f}"
+                    f" | {1e6 * cpu / n:.1f} | {cpu / ref_cpu:.2f} | {1e6 * mock / n:.1f} |"
+                )
     return "\n".join(rows)
 
 
@@ -195,10 +221,11 @@ def main() -> None:
     p.add_argument("--reps", type=int, default=5)
     p.add_argument("--profile", choices=("px4", "ardupilot"), default="px4")
     p.add_argument("--window", type=int, default=Timing.window, help="our items in flight (Timing.window)")
+    p.add_argument("--placement", nargs="+", choices=PLACEMENTS, default=list(PLACEMENTS))
     p.add_argument("--out", type=Path, help="also write the markdown here")
     args = p.parse_args()
     before = uptime()
-    samples = run(args.sizes, args.rounds, args.reps, args.profile, args.window)
+    samples = run(args.sizes, args.rounds, args.reps, args.profile, args.placement, args.window)
     text = "\n".join(
         [
             f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}."
@@ -206,7 +233,7 @@ def main() -> None:
             f"Load (`uptime`) before: {before}",
             f"Load (`uptime`) after: {uptime()}",
             f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}` (profile {args.profile},"
-            f" our window {args.window},"
+            f" our window {args.window}, placements {' and '.join(args.placement)},"
             f" medians of {args.rounds} rounds x {args.reps} uploads)",
             "",
             table(samples),

@@ -325,6 +325,24 @@ def test_fleet_upload_pool_retries_and_reports_per_vehicle():
     run(main())
 
 
+def test_a_fleet_upload_raises_an_error_that_is_not_a_vehicles(monkeypatch):
+    """A bug in the upload path (here a RuntimeError) ends the fleet upload with that error, once
+    every worker has hit it; it is not reported as a KeyError of a missing result, nor waited out."""
+
+    async def broken(self, items, **kwargs):
+        raise RuntimeError("a bug")
+
+    async def main():
+        async with MockFleet(count=3, profile="px4") as fleet:
+            link = await connected(fleet)
+            monkeypatch.setattr(MissionClient, "upload", broken)
+            with pytest.raises(RuntimeError, match="a bug"):
+                await asyncio.wait_for(upload_fleet(link, {s: mission(3) for s in (1, 2, 3)}, workers=2), 10)
+            await link.close()
+
+    run(main())
+
+
 @pytest.mark.parametrize("profile", ["ardupilot", "px4"])
 def test_commands_and_set_current(profile):
     async def main():

@@ -82,8 +82,9 @@ def two_uploads(profile: str, ids_b: tuple[int, int], start_b_s: float):
     old = mission(5, base_lat=300_000_000)
     preload(srv, old)
     before = srv.items()
-    # 160 items: A still runs when B starts (0.1 s, 0.3 s); eight in flight move ~1 item per 3 ms here
-    a_items, b_items = mission(160, base_lat=400_000_000), mission(160, base_lat=410_000_000)
+    # A still runs when B starts (0.1 s, 0.3 s): a window of items per 20 ms round trip here
+    n = 20 * Timing().window
+    a_items, b_items = mission(n, base_lat=400_000_000), mission(n, base_lat=410_000_000)
     sim = TwoGcs(srv)
     a = UploadTransfer(1, a_items, gcs_sysid=255, gcs_compid=190)
     b = UploadTransfer(1, b_items, gcs_sysid=ids_b[0], gcs_compid=ids_b[1])

@@ -150,6 +150,61 @@ def test_requests_in_one_datagram_are_answered_with_the_items_in_one_datagram(ke
     asyncio.run(main())
 
 
+@pytest.mark.parametrize("networks", [1, 2])
+def test_a_window_wider_than_a_batch_leaves_in_datagrams_of_a_batch(networks):
+    """Window 16, batch 8 (the defaults): the first request gets items 0-7 and 8-15 as two datagrams,
+    so the vehicle can work on the second while the GCS answers the first; the eight requests of
+    the first (one datagram) get 16-23 in one datagram. Also through NetworkLinks (fleet ids)."""
+
+    async def main():
+        loop = asyncio.get_running_loop()
+        links = [await MavlinkLink.open("udpin:127.0.0.1:0", heartbeat_period_s=0) for _ in range(networks)]
+        link = links[0] if networks == 1 else NetworkLinks(links)
+        vehicle = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        vehicle.bind(("127.0.0.1", 0))
+        vehicle.setblocking(False)
+        mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        to = links[-1].local_address
+
+        def send(*msgs) -> None:
+            vehicle.sendto(b"".join(m.pack(mav) for m in msgs), to)
+
+        async def receive() -> list[int]:
+            data, _ = await asyncio.wait_for(loop.sock_recvfrom(vehicle, 2048), 5)
+            return [getattr(m, "seq", m.get_type()) for m in messages(data)]
+
+        def request(seq: int):
+            return mavlink.MAVLink_mission_request_int_message(255, 190, seq, 0)
+
+        sysid = 1 if networks == 1 else 1 + 256 * (networks - 1)  # the fleet id on the last network
+        upload = None
+        try:
+            send(PX4_QUAD)
+            while sysid not in link.vehicles:
+                await asyncio.sleep(0.01)
+            assert (Timing().window, Timing().batch) == (16, 8)
+            upload = asyncio.ensure_future(
+                MissionClient(link, sysid, timing=Timing(verdict_s=0)).upload(items)
+            )
+            assert await receive() == ["MISSION_COUNT"]
+            send(request(0))
+            assert await receive() == list(range(8))
+            assert await receive() == list(range(8, 16))
+            send(*(request(k) for k in range(1, 9)))
+            assert await receive() == list(range(16, 24))
+            send(*(request(k) for k in range(9, 24)), mavlink.MAVLink_mission_ack_message(255, 190, 0, 0))
+            assert (await asyncio.wait_for(upload, 5)).count == 24
+        finally:
+            if upload is not None:
+                upload.cancel()
+            vehicle.close()
+            for one in links:
+                await one.close()
+
+    items = mission(24)
+    asyncio.run(main())
+
+
 def test_a_request_answered_from_its_fields_is_answered_as_the_message():
     """UploadTransfer.on_request (the raw path) and on_message: the same items for the same
     requests, the same state; a request for another mission type, to another GCS or from another

@@ -113,12 +113,16 @@ async def upload_fleet(
                 queue.task_done()
 
     tasks = [asyncio.create_task(worker()) for _ in range(min(workers, max(total, 1)))]
-    try:
-        await queue.join()
+    joined = asyncio.ensure_future(queue.join())
+    try:  # a worker ends only on an error that is not a vehicle's (a bug): raised, not waited out
+        await asyncio.wait([joined, *tasks], return_when=asyncio.FIRST_COMPLETED)
     finally:
-        for task in tasks:
+        for task in (joined, *tasks):
             task.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
+        await asyncio.gather(joined, *tasks, return_exceptions=True)
+    for task in tasks:
+        if not task.cancelled() and task.exception() is not None:
+            raise task.exception()
     return {sysid: results[sysid] for sysid in missions}
 
 

@@ -392,6 +392,12 @@ class MavlinkLink:
             if corked:
                 self._uncork(corked)
 
+    def flush(self) -> None:
+        """Send what a ``corked()`` block holds so far: a datagram boundary inside it."""
+        if self._corked:
+            corked, self._corked = self._corked, []
+            self._uncork(corked)
+
     def _sendto(self, transport, raw: bytes, addr: Address) -> None:
         """Send ``raw`` now, or hold it while a datagram's frames are dispatched (module docstring)."""
         if self._corked is None:

@@ -45,6 +45,7 @@ import math
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TypeVar
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
@@ -83,6 +84,7 @@ _active: weakref.WeakKeyDictionary[MavlinkLink, set[tuple[int, int]]] = weakref.
 _REQUESTS = (mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_INT, mavlink.MAVLINK_MSG_ID_MISSION_REQUEST)
 _REQUEST_FIELDS = mavlink.MAVLink_mission_request_int_message.unpacker  # seq, targets, type: both
 _ITEM_INT = codec.packer(mavlink.MAVLink_mission_item_int_message)
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -286,7 +288,7 @@ class MissionClient:
                 mission_type=transfer.mission_type,
             )
         loop = asyncio.get_running_loop()
-        send = self.link.send
+        send = _in_batches(self.link.send, self.link.flush, transfer.timing.batch)
         wakeup = loop.create_future()
         armed_s = math.inf  # the deadline the waiting loop below wakes up at
 
@@ -298,8 +300,7 @@ class MissionClient:
                 wakeup.set_result(None)  # finished, or a timer moved earlier: re-arm
 
         def on_frame(msg, raw: bytes, t_s: float) -> None:
-            for out in transfer.on_message(msg, loop.time()):  # [] for frames of other transfers
-                send(out)
+            send(transfer.on_message(msg, loop.time()))  # [] for frames of other transfers
             rearm()
 
         active.add(key)
@@ -308,8 +309,7 @@ class MissionClient:
             release = self.link.take(self.sysid, _REQUESTS, self._request_path(transfer, rearm), on_frame)
             unsubscribe = _both(release, unsubscribe)
         try:
-            for out in transfer.start(loop.time()):
-                send(out)
+            send(transfer.start(loop.time()))
             while not transfer.done:
                 armed_s = due_s()
                 delay = armed_s - loop.time()
@@ -317,12 +317,10 @@ class MissionClient:
                     wakeup = loop.create_future()
                     await asyncio.wait([wakeup], timeout=delay)
                     continue
-                with self.link.corked():  # a push's window leaves in one datagram, as answers do
-                    for out in transfer.on_timeout(loop.time()):
-                        send(out)
+                with self.link.corked():  # a push's window leaves in batches, as answers do
+                    send(transfer.on_timeout(loop.time()))
         except asyncio.CancelledError:
-            for out in transfer.cancel(loop.time()):
-                send(out)
+            send(transfer.cancel(loop.time()))
             raise
         finally:
             unsubscribe()
@@ -339,13 +337,15 @@ class MissionClient:
         target = transfer.sysid
         wire = wire_sysid(target)  # its system id on its own network (a fleet id past network 0)
         payloads = [_ITEM_INT.pack(wire, transfer.compid, *item.fields()) for item in transfer.items]
+        send_items = _in_batches(
+            lambda k: send_payload(target, _ITEM_INT, payloads[k]), self.link.flush, transfer.timing.batch
+        )
 
         def on_request(frame: bytes, t_s: float) -> None:
             seq, target_system, target_component, mission_type = codec.fields(frame, _REQUEST_FIELDS)
             source = (target, frame[6])  # the link takes the frames of the target's system only
             to = (target_system, target_component)
-            for k in transfer.on_request(seq, source, to, mission_type, loop.time()):
-                send_payload(target, _ITEM_INT, payloads[k])
+            send_items(transfer.on_request(seq, source, to, mission_type, loop.time()))
             rearm()
 
         return on_request
@@ -403,6 +403,21 @@ class MissionClient:
     def _difference(self, sent: Sequence[MissionItem], got: Sequence[MissionItem]) -> str | None:
         q = self.quirks
         return compare_items(sent, got, q.readback_model(), skip_home=q.home_at_seq0)
+
+
+def _in_batches(
+    send: Callable[[T], None], flush: Callable[[], None], batch: int
+) -> Callable[[list[T]], None]:
+    """``send`` for a transfer's replies, with a datagram boundary (``flush``) after every ``batch``
+    while the link corks: an upload's window leaves in batches (transfer.py, items in flight)."""
+
+    def send_all(replies: list[T]) -> None:
+        for n, reply in enumerate(replies):
+            if n and n % batch == 0:
+                flush()
+            send(reply)
+
+    return send_all
 
 
 def _both(first: Callable[[], None], second: Callable[[], None]) -> Callable[[], None]:

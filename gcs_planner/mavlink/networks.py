@@ -139,6 +139,11 @@ class NetworkLinks:
                 stack.enter_context(link.corked())
             yield
 
+    def flush(self) -> None:
+        """MavlinkLink.flush on every network."""
+        for link in self.links:
+            link.flush()
+
     async def wait_for(self, predicate: Callable[[mavlink.MAVLink_message], bool], timeout_s: float):
         """The first message (in fleet ids) for which ``predicate`` is true; TimeoutError after timeout_s."""
         return await first_message(self.subscribe, predicate, timeout_s)

@@ -14,20 +14,20 @@ Choices (where the spec leaves room):
   ago is a duplicate (link duplication, reordering, or the request for an item already in flight)
   and is ignored instead of answered again: this is what keeps slow links from flooding (PX4
   #11078). Genuine re-requests come after the vehicle's retry time (>= 250 ms), so they pass.
-- Items in flight (``Timing.window``, default 8): the first request for item r also sends the items
-  up to r + window - 1 not sent yet, so the vehicle's next item is already on its way when it asks.
-  That moves ``window`` items per round trip instead of one. The first window leaves in one
-  datagram (link.py sends what one datagram's requests are answered with together); a vehicle
-  that answers a datagram of items with one datagram of requests (both autopilots' UDP drivers
-  send what their buffer holds) gets the next ``window`` items in one, so on a fast link each side
-  wakes once per window, not once per item (8 items: 400 bytes). It rests on the behaviour
-  push-ahead relies on (below): both autopilots store the item they wait for and drop or refuse
-  the others; on an in-order link items arrive in order, so nothing is refused. The cost is on a
-  lossy link: a lost item makes the vehicle drop the rest of the window (ArduPilot answers each
-  with INVALID_SEQUENCE), resent by the push (fake-time runs of 30 items on ArduPilot: faster than
-  a window of 2 at 5 % loss each way, 1.5x slower at 20 % loss with 2 ms delay). The final-ACK phase
-  starts once the vehicle asked for the last item (or a push sent it).
-  ``Timing(push_ahead=False, window=1)`` is the spec-literal client.
+- Items in flight (``Timing.window``, default 16): the first request for item r also sends the
+  items up to r + window - 1 not sent yet, so the vehicle's next item is already on its way when it
+  asks. That moves ``window`` items per round trip instead of one. They leave in datagrams of
+  ``Timing.batch`` items (8: 400 bytes; mission.py puts a datagram boundary after each batch of
+  what link.py would otherwise send together), so the first window is two datagrams: the vehicle
+  works on the second while the client answers the requests of the first with the next batch, and
+  each side keeps the other busy instead of waiting for it (a vehicle answers a datagram of items
+  with one datagram of requests: both autopilots' UDP drivers send what their buffer holds). On a
+  fast link each side wakes once per batch, not once per item. It rests on the behaviour push-ahead
+  relies on (below): both autopilots store the item they wait for and drop or refuse the others; on
+  an in-order link items arrive in order, so nothing is refused. The cost is on a lossy link: a
+  lost item makes the vehicle drop the rest of the window (ArduPilot answers each with
+  INVALID_SEQUENCE), resent by the push. The final-ACK phase starts once the vehicle asked for the
+  last item (or a push sent it). ``Timing(push_ahead=False, window=1)`` is the spec-literal client.
 - Only the last item is resent on our own timer, until MISSION_ACK (lost final ACK, devguide #171);
   its timeout adapts to the measured round trip (4 x smoothed RTT within 0.3..1.5 s). Where a push
   sent the last item before the vehicle asked for it, the vehicle may still wait for an earlier one
@@ -152,7 +152,8 @@ class Timing:
     push_timeout_min_s: float = 0.05
     push_timeout_max_s: float = 0.5
     push_rtts: float = 1.5  # a request this many smoothed RTTs overdue starts a push
-    window: int = 8  # items in flight during an upload: 1 = answer each request only (the spec)
+    window: int = 16  # items in flight during an upload: 1 = answer each request only (the spec)
+    batch: int = 8  # items per datagram: a wider window leaves in several, worked on in turn
     deadline_base_s: float = DEADLINE_BASE_S
     deadline_per_item_s: float = DEADLINE_PER_ITEM_S
     restart_window_s: float = RESTART_WINDOW_S
@@ -163,6 +164,8 @@ class Timing:
     def __post_init__(self) -> None:
         if self.window < 1:
             raise ValueError(f"Timing.window is {self.window}: at least one item must be in flight")
+        if self.batch < 1:
+            raise ValueError(f"Timing.batch is {self.batch}: a datagram holds at least one item")
 
 
 @dataclass
