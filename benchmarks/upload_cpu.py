@@ -17,10 +17,12 @@ Ours runs with ``Timing(verdict_s=0)``: the transfer only, without the second a 
 listened to after its ACK for a refusal (verdict.py), which MAVSDK does not do and which costs no
 CPU; ``--window`` sets its Timing.window (default: the client's). Each round gives each client a
 fresh mock and rotates the client order, so drifting machine load hits both alike; medians over
-rounds x reps uploads. The markdown goes to stdout (and --out).
+rounds x reps uploads. The markdown goes to stdout (and --out). ``--sitl PORT PID``: a real
+autopilot (SITL) instead of the mock, started by hand to send to 127.0.0.1:PORT; each client in turn
+listens there, and "mock CPU" is that process's.
 
     .venv/bin/python benchmarks/upload_cpu.py [--sizes 100 500] [--rounds 3] [--reps 5] [--window N]
-        [--placement shared apart] [--out FILE]
+        [--placement shared apart] [--sitl PORT PID] [--out FILE]
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ import statistics
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -104,10 +106,10 @@ async def measured_async(meter: CpuMeter, upload) -> Sample:
 
 
 def ours(
-    address, meter: CpuMeter, sizes: list[int], reps: int, window: int = Timing.window
+    url: str, meter: CpuMeter, sizes: list[int], reps: int, window: int = Timing.window
 ) -> dict[int, list[Sample]]:
     async def main() -> dict[int, list[Sample]]:
-        link = await MavlinkLink.open(f"udpout:{address[0]}:{address[1]}")
+        link = await MavlinkLink.open(url)
         await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 30)
         client = MissionClient(link, 1, timing=Timing(verdict_s=0, window=window))
         await client.upload(items(10, 99))  # warm-up: first-call costs (caches, imports)
@@ -125,14 +127,14 @@ def ours(
     return asyncio.run(main())
 
 
-def mavsdk(address, meter: CpuMeter, sizes: list[int], reps: int) -> dict[int, list[Sample]]:
+def mavsdk(url: str, meter: CpuMeter, sizes: list[int], reps: int) -> dict[int, list[Sample]]:
     from mavsdk import Configuration, Mavsdk, log_subscribe
     from mavsdk.plugins.mission_raw import MissionItem as RawItem
     from mavsdk.plugins.mission_raw import MissionRaw
 
     log_subscribe(lambda *args: True)
     sdk = Mavsdk(Configuration.create_manual(253, 190, True))
-    sdk.add_any_connection(f"udpout://{address[0]}:{address[1]}")
+    sdk.add_any_connection(url.replace(":", "://", 1))
     raw = MissionRaw(sdk.first_autopilot(10.0))
 
     def mission(n: int, r: int) -> list:
@@ -171,21 +173,39 @@ Samples = dict[tuple[str, str], dict[int, list[Sample]]]  # (placement, client) 
 
 
 def run(
-    sizes: list[int], rounds: int, reps: int, profile: str, placements: list[str], window: int = Timing.window
+    sizes: list[int],
+    rounds: int,
+    reps: int,
+    profile: str,
+    placements: list[str],
+    window: int = Timing.window,
+    sitl: tuple[int, int] | None = None,
 ) -> Samples:
+    """Every client, placement and size; ``sitl`` = (UDP port, pid) of a real vehicle that sends to
+    that port (ArduPilot ``--serial0 udpclient:127.0.0.1:PORT``, PX4's GCS port) instead of a mock."""
     clients = {**CLIENTS, "ours": functools.partial(ours, window=window)}
     samples: Samples = {(p, c): {n: [] for n in sizes} for p in placements for c in CLIENTS}
     for r in range(rounds):
         names = list(CLIENTS)[r % 2 :] + list(CLIENTS)[: r % 2]
         for placement in placements:
             for name in names:
-                with Mock(1, profile) as mock:
-                    place(placement, mock._proc.pid)
-                    meter = CpuMeter(mock._proc.pid)
-                    for n, runs in clients[name](mock.addresses[0], meter, sizes, reps).items():
+                with vehicle(profile, sitl) as (url, pid):
+                    place(placement, pid)
+                    for n, runs in clients[name](url, CpuMeter(pid), sizes, reps).items():
                         samples[placement, name][n] += runs
                 place("shared", os.getpid())  # this process back on every CPU
     return samples
+
+
+@contextlib.contextmanager
+def vehicle(profile: str, sitl: tuple[int, int] | None) -> Iterator[tuple[str, int]]:
+    """(url, pid): a fresh mock for each client, or the real vehicle, whose port each client binds."""
+    if sitl is not None:
+        yield f"udpin:127.0.0.1:{sitl[0]}", sitl[1]
+        return
+    with Mock(1, profile) as mock:
+        host, port = mock.addresses[0]
+        yield f"udpout:{host}:{port}", mock._proc.pid
 
 
 def table(samples: Samples) -> str:
@@ -222,17 +242,25 @@ def main() -> None:
     p.add_argument("--profile", choices=("px4", "ardupilot"), default="px4")
     p.add_argument("--window", type=int, default=Timing.window, help="our items in flight (Timing.window)")
     p.add_argument("--placement", nargs="+", choices=PLACEMENTS, default=list(PLACEMENTS))
+    p.add_argument(
+        "--sitl",
+        nargs=2,
+        type=int,
+        metavar=("PORT", "PID"),
+        help="a real vehicle sending to 127.0.0.1:PORT (process PID) instead of the mock",
+    )
     p.add_argument("--out", type=Path, help="also write the markdown here")
     args = p.parse_args()
     before = uptime()
-    samples = run(args.sizes, args.rounds, args.reps, args.profile, args.placement, args.window)
+    samples = run(args.sizes, args.rounds, args.reps, args.profile, args.placement, args.window, args.sitl)
     text = "\n".join(
         [
             f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}."
             f" Date: {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC.",
             f"Load (`uptime`) before: {before}",
             f"Load (`uptime`) after: {uptime()}",
-            f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}` (profile {args.profile},"
+            f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`"
+            f" ({'real vehicle' if args.sitl else f'profile {args.profile}'},"
             f" our window {args.window}, placements {' and '.join(args.placement)},"
             f" medians of {args.rounds} rounds x {args.reps} uploads)",
             "",
