@@ -76,7 +76,7 @@ async def _connect(addresses) -> MavlinkLink:
 def ours(address, sizes: list[int], reps: int, window: int = Timing.window) -> dict[int, list[float]]:
     async def main():
         link = await _connect([address])
-        client = MissionClient(link, 1, timing=Timing(window=window))
+        client = MissionClient(link, 1, timing=Timing(window=window, verdict_s=0))  # the transfer only
         out = {}
         for n in sizes:
             times = []

@@ -72,8 +72,8 @@ def _plan(cls: type[mavlink.MAVLink_message]) -> _Plan | None:
     return _Plan(cls, cls.unpacker, bytes((cls.crc_extra,)), values, _tuple_getter(itemgetter, cls.orders))
 
 
-@cache
 def _plan_of_id(msgid: int) -> _Plan | None:
+    """Not cached by id: junk frames carry any of 2^24 ids; ``_plan`` caches per dialect class."""
     cls = _MAP.get(msgid)
     return None if cls is None else _plan(cls)
 
