@@ -120,6 +120,13 @@ FIGURES: tuple[Figure, ...] = (
         needs=("mavsdk",),
     ),
     Figure(
+        "upload_window",
+        "Upload time against items in flight on lossy and slow links (fake time)",
+        ("python benchmarks/upload_window.py",),
+        quick=("python benchmarks/upload_window.py --items 30 --seeds 4",),
+        minutes=0.2,
+    ),
+    Figure(
         "fleet_upload",
         "Fleet upload: gcs-planner upload --sysid all to N mock vehicles",
         ("python benchmarks/fleet_upload.py --counts 100 200 400 1000",),
