@@ -116,6 +116,25 @@ def held(fleet, sysid: int, mission_type: int = 0):
     return fleet.call(lambda: fleet.vehicle(sysid).mission_server.items(mission_type))
 
 
+@pytest.mark.parametrize("sysids", [["--sysid", "1"], ["--sysid", "all"]])
+def test_in_flight_sets_the_items_an_upload_sends_ahead(fleet, tmp_path, monkeypatch, sysids):
+    """`upload --in-flight 2` (one vehicle and a fleet): every list goes with Timing.window 2."""
+    from gcs_planner.mavlink.mission import MissionClient
+
+    windows = []
+    real = MissionClient.upload
+
+    async def upload(self, *args, **kw):
+        windows.append(self.timing.window)
+        return await real(self, *args, **kw)
+
+    monkeypatch.setattr(MissionClient, "upload", upload)
+    plan_path = make_plan(tmp_path, sysids=(1,))
+    argv = ["upload", "--connect", url(fleet, 1), *sysids, str(plan_path), "--in-flight", "2"]
+    assert main(argv) == 0
+    assert windows and set(windows) == {2}
+
+
 def test_upload_download_start_clear_ardupilot(fleet, tmp_path, capsys):
     plan_path = make_plan(tmp_path, sysids=(1,))
     scenario = tmp_path / "s.toml"

@@ -60,12 +60,25 @@ def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_p
     assert result.report_path == tmp_path / "report.png" and result.report_path.stat().st_size > 20_000
 
 
-def test_fly_fails_when_a_vehicle_drifts(scenario_and_plan, tmp_path):
+def test_fly_fails_when_a_vehicle_drifts(scenario_and_plan, tmp_path, monkeypatch):
     """The southern lane drifts south, away from the others: it alone fails (a drift into a
-    neighbour's lane would also fail the neighbour on separation, by as much as the timing)."""
+    neighbour's lane would also fail the neighbour on separation, by as much as the timing).
+    Uploaded with two items in flight (`fly --in-flight 2`)."""
+    from gcs_planner.flight import runner
+
+    windows = []
+
+    async def upload_fleet(*args, timing, **kw):
+        windows.append(timing.window)
+        return await real(*args, timing=timing, **kw)
+
+    real = runner.upload_fleet
+    monkeypatch.setattr(runner, "upload_fleet", upload_fleet)
     scenario, plan = scenario_and_plan
-    result = _fly(scenario, plan, tmp_path, rrd=False, drift_mps={1: (0.0, -1.5)}, max_cross_track_m=10.0)
-    assert not result.passed
+    result = _fly(
+        scenario, plan, tmp_path, rrd=False, drift_mps={1: (0.0, -1.5)}, max_cross_track_m=10.0, in_flight=2
+    )
+    assert windows == [2] and not result.passed
     by_sysid = {r.sysid: r for r in result.reports}
     assert any("cross-track" in f for f in by_sysid[1].failures), [r.failures for r in result.reports]
     assert all(by_sysid[s].passed for s in (2, 3, 4)), [r.failures for r in result.reports]
@@ -109,5 +122,7 @@ def test_fly_flies_a_coalition_scenario_award_by_award(tmp_path, monkeypatch, ca
         7,
     )
     assert cli.main(["fly", scenario, "--speedup", "10"]) == 0 and seen[1].speedup == 10.0
-    assert cli.main(["fly", scenario, "--plan", "p.json", "--tlog"]) == 2 and len(seen) == 2
-    assert "--plan, --tlog not supported" in capsys.readouterr().err
+    assert (
+        cli.main(["fly", scenario, "--plan", "p.json", "--tlog", "--in-flight", "2"]) == 2 and len(seen) == 2
+    )
+    assert "--plan, --tlog, --in-flight not supported" in capsys.readouterr().err

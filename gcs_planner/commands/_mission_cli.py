@@ -26,6 +26,7 @@ from gcs_planner.core.validation import number_flag
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.link import GCS_COMPID, GCS_SYSID, MavlinkLink, check_signing
 from gcs_planner.mavlink.networks import NetworkLinks, open_networks
+from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.wire.signing import key_from_passphrase
 from gcs_planner.wire.types import MissionItem, MissionType
 
@@ -213,6 +214,17 @@ async def vehicle_link(args: argparse.Namespace) -> AsyncIterator[tuple[MavlinkL
         yield link, heartbeat
     finally:
         await link.close()
+
+
+def add_in_flight_argument(p: argparse.ArgumentParser) -> None:
+    """--in-flight: items sent ahead of the vehicle's requests during an upload (Timing.window)."""
+    p.add_argument(
+        "--in-flight",
+        type=number_flag(1, 64, whole=True),
+        default=Timing.window,
+        help=f"mission items sent ahead of the vehicle's requests [{Timing.window}]; 2 for a telemetry"
+        " radio with a small buffer, 1 for one item per request",
+    )
 
 
 def add_force_argument(p: argparse.ArgumentParser) -> None:

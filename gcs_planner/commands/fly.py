@@ -19,6 +19,7 @@ from tqdm import tqdm
 
 from gcs_planner.autopilots import Conventions
 from gcs_planner.commands import fly_coalition
+from gcs_planner.commands._mission_cli import add_in_flight_argument
 from gcs_planner.commands._viewer import check_display, live_recording
 from gcs_planner.commands.fly_coalition import SPEEDUP
 from gcs_planner.commands.plan import SEED
@@ -37,6 +38,7 @@ from gcs_planner.core.validation import (
 from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_summary, fly, networks
 from gcs_planner.flight.starts import format_homes, starts
 from gcs_planner.flight.vehicles import ConnectedVehicles, mock_vehicles
+from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.model.plan import Plan
 from gcs_planner.model.scenario import Scenario
 from gcs_planner.planning import certify_plan, load_scenario, planner
@@ -68,6 +70,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--autopilot", choices=tuple(Conventions), default=Conventions.ARDUPILOT)
     p.add_argument("--workers", type=WORKERS, default=8, help="concurrent uploads [8]")
+    add_in_flight_argument(p)
     p.add_argument("--seed", type=SEED, default=None, help="planner seed (default: the file's)")
     p.add_argument(
         "--tlog", action="store_true", help="also write OUT/flight.tlog (flight.netN.tlog for network N > 0)"
@@ -121,6 +124,7 @@ def build_parser_defaults(scenario: Path, out: str, speedup: float | None) -> ar
 def _fly_coalition(args: argparse.Namespace) -> int:
     """A coalition scenario has no plan to upload up front: its awards are flown as they are made."""
     given = {"--plan": args.plan, "--connect": args.connect, "--drift": args.drift, "--tlog": args.tlog}
+    given["--in-flight"] = args.in_flight != Timing.window  # award uploads keep their own timing
     unsupported = [flag for flag, value in given.items() if value]
     if unsupported:
         raise UserError(
@@ -209,6 +213,7 @@ def run(args: argparse.Namespace) -> int:
     options = FlyOptions(
         out_dir=out,
         workers=args.workers,
+        in_flight=args.in_flight,
         tlog=args.tlog,
         rrd=not args.no_rrd,
         max_cross_track_m=args.max_cross_track,

@@ -29,6 +29,7 @@ from gcs_planner.autopilots import AutopilotQuirks, Conventions, quirks_for
 from gcs_planner.commands._mission_cli import (
     add_connection_arguments,
     add_force_argument,
+    add_in_flight_argument,
     autopilot_of,
     check_not_flying_mission,
     fleet_link,
@@ -42,6 +43,7 @@ from gcs_planner.mavlink.errors import MissionRejectedError
 from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
 from gcs_planner.mavlink.mission import MissionClient
 from gcs_planner.mavlink.params import set_param
+from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.missions.files import (
     MissionFile,
     load_plan_json,
@@ -76,6 +78,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     add_clear_absent_argument(p)
     add_force_argument(p)
+    add_in_flight_argument(p)
 
 
 def add_clear_absent_argument(p: argparse.ArgumentParser) -> None:
@@ -226,7 +229,7 @@ async def _upload_one(args: argparse.Namespace, source: UploadSource) -> int:
         autopilot = autopilot_of(heartbeat.autopilot, heartbeat.type, args.autopilot)
         lists = prepare(args, autopilot, args.sysid, source)
         check_not_flying_mission(link, args.sysid, args.force, "an upload")
-        client = MissionClient(link, args.sysid, args.compid)
+        client = MissionClient(link, args.sysid, args.compid, timing=Timing(window=args.in_flight))
         print(f"vehicle {args.sysid} ({autopilot})")
         print(f"{'list':<8} {'items':>6} {'result':<10} {'opaque_id':>10} {'time_s':>7} verified")
         for mission_type, items in lists:
@@ -282,6 +285,7 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int], source: Uplo
                     mission_type=mission_type,
                     compid=args.compid,
                     verify=args.verify,
+                    timing=Timing(window=args.in_flight),
                 )
         uploaded = [s for s in sysids if all(per[s].ok for per in results.values())]
         families = {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in uploaded}

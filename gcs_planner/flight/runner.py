@@ -52,6 +52,7 @@ from gcs_planner.mavlink.fleet import VehicleResult, upload_fleet
 from gcs_planner.mavlink.link import FLEET_RCVBUF_BYTES, MavlinkLink
 from gcs_planner.mavlink.networks import open_networks
 from gcs_planner.mavlink.preflight import request_streams
+from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.model.plan import Plan
 from gcs_planner.model.scenario import Scenario
@@ -86,6 +87,7 @@ class RunOptions:
     tlog: bool = False  # a .tlog per network beside the MCAP log
     timeout_factor: float = 2.0  # a stage may take this many times its planned flight time
     live: object | None = None  # a rerun.RecordingStream: the Rerun views streamed while flying
+    in_flight: int = Timing.window  # mission items sent ahead of a vehicle's requests
 
 
 class FlightStrategy(Protocol):
@@ -312,6 +314,7 @@ class Flight:
             self.missions,
             workers=self.options.workers,
             progress=lambda done, total, r: progress and progress("upload", done, total),
+            timing=Timing(window=self.options.in_flight),
         )
         self.upload_s = now_s() - t_up
         for sysid, r in self.uploads.items():

@@ -33,6 +33,7 @@ from gcs_planner.flight.runner import Flight, RunOptions, networks, run_flight
 from gcs_planner.flight.timekeeping import ScheduleKeeper
 from gcs_planner.flight.vehicles import VehicleSource
 from gcs_planner.mavlink.fleet import VehicleResult
+from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.missions.items import AUTOPILOTS
 from gcs_planner.model.plan import Plan
 from gcs_planner.model.scenario import Scenario
@@ -58,6 +59,7 @@ class FlyOptions:
     timeout_factor: float = 2.0
     keep_schedule: bool = True
     live: object | None = None  # a rerun.RecordingStream: the Rerun views streamed while flying
+    in_flight: int = Timing.window  # mission items sent ahead of a vehicle's requests
 
 
 @dataclass
@@ -92,7 +94,14 @@ async def fly(
     ``progress(stage, done, total)`` reports "upload" (vehicles) and "fly" (completed vehicles);
     ``progress("wait", sysid, reason)`` while a vehicle is not ready to arm.
     """
-    run = RunOptions(options.out_dir, options.workers, options.tlog, options.timeout_factor, options.live)
+    run = RunOptions(
+        options.out_dir,
+        options.workers,
+        options.tlog,
+        options.timeout_factor,
+        options.live,
+        options.in_flight,
+    )
     return await run_flight(StaticPlan(scenario, plan, options), vehicles, run, progress)
 
 
