@@ -6,7 +6,7 @@ uploads missions of every size to it over UDP loopback. Per upload it records:
   cpu       CPU time (user + system, every thread) of the client: this process, where MAVSDK's C++
             library runs its own threads, plus any child process that is not the mock (none today:
             MAVSDK 4 is a library, not a mavsdk_server process);
-  mock_cpu  CPU time of the mock's process, the other half of every round trip.
+  vehicle   CPU time of the mock's (or the SITL's) process, the other half of every round trip.
 Placement (``--placement``): ``shared`` leaves the mock and the client where the scheduler puts
 them; on this 2-core VM its wake-affine placement runs a ping-pong of two processes on one core, so
 the two take turns and the transfer lasts about both CPU times added. ``apart`` pins the mock's
@@ -212,7 +212,7 @@ def table(samples: Samples) -> str:
     med = statistics.median
     rows = [
         "| items | placement | client | wall ms | wall / MAVSDK | client CPU us/item | CPU / MAVSDK"
-        " | mock CPU us/item |",
+        " | vehicle CPU us/item |",
         "|---:|---|---|---:|---:|---:|---:|---:|",
     ]
     for placement, name in samples:
