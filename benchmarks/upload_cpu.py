@@ -19,7 +19,7 @@ CPU; ``--window`` sets its Timing.window (default: the client's). Each round giv
 fresh mock and rotates the client order, so drifting machine load hits both alike; medians over
 rounds x reps uploads. The markdown goes to stdout (and --out). ``--sitl PORT PID``: a real
 autopilot (SITL) instead of the mock, started by hand to send to 127.0.0.1:PORT; each client in turn
-listens there, and "mock CPU" is that process's.
+listens there, and "vehicle CPU" is that process's.
 
     .venv/bin/python benchmarks/upload_cpu.py [--sizes 100 500] [--rounds 3] [--reps 5] [--window N]
         [--placement shared apart] [--sitl PORT PID] [--out FILE]

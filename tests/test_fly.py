@@ -63,7 +63,7 @@ def test_fly_passes_and_log_holds_every_vehicle_plan_and_metadata(scenario_and_p
 def test_fly_fails_when_a_vehicle_drifts(scenario_and_plan, tmp_path, monkeypatch):
     """The southern lane drifts south, away from the others: it alone fails (a drift into a
     neighbour's lane would also fail the neighbour on separation, by as much as the timing).
-    Uploaded with two items in flight (`fly --in-flight 2`)."""
+    Uploaded with two items in flight (FlyOptions.in_flight, what `fly --in-flight 2` sets)."""
     from gcs_planner.flight import runner
 
     windows = []
