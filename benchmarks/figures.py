@@ -111,7 +111,11 @@ FIGURES: tuple[Figure, ...] = (
     Figure(
         "upload_cpu",
         "Upload CPU per item and transfer time: ours against MAVSDK in one run",
-        ("python benchmarks/upload_cpu.py", "python benchmarks/upload_hot_path.py"),
+        (
+            "python benchmarks/upload_cpu.py",
+            "python benchmarks/upload_cpu.py --profile ardupilot",
+            "python benchmarks/upload_hot_path.py",
+        ),
         quick=(
             "python benchmarks/upload_cpu.py --sizes 100 --rounds 1 --reps 2",
             "python benchmarks/upload_hot_path.py --items 100 --runs 2",

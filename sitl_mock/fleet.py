@@ -6,8 +6,9 @@ Each tick (every ``tick_s`` of wall time) the fleet
    events after every step (numpy over all vehicles; Python only for vehicles with an event),
 2. runs the mission servers' re-request/timeout timers (wall clock, the GCS's clock),
 3. sends the telemetry that is due (positions for all due vehicles converted to geodetic in one
-   pyproj call); each vehicle's frames of the tick leave as one datagram, as a real autopilot's
-   UDP driver sends what its buffer holds (sitl_mock/link.py ``batching``).
+   pyproj call); each vehicle's frames of the tick leave as one datagram, as ArduPilot's UDP
+   driver sends what its buffer holds (sitl_mock/link.py ``batching``), or one datagram a frame
+   where the profile says so (PX4: ``AutopilotProfile.frame_per_datagram``).
 
 If the process cannot keep up (more than ``MAX_CATCH_UP_WALL_S`` behind), simulated time slips
 instead of bursting: the lag is logged and counted in ``lag_events``.
@@ -100,7 +101,8 @@ class MockFleet:
         a test about something else); the profile's real behaviour is the default. ``clock_zero_s``:
         the time.monotonic() (one clock for every process of the machine) at which simulated time
         is 0, so that fleets in several processes share one simulated clock (default: the start).
-        ``batch_frames``: each vehicle's frames of a tick leave in one datagram (False: one each)."""
+        ``batch_frames``: each vehicle's frames of a tick leave in one datagram (False: one each, as a
+        profile with ``frame_per_datagram`` always sends them)."""
         if (count is None) == (vehicles is None):
             raise ValueError("MockFleet needs exactly one of count= or vehicles=")
         if count is not None and not (isinstance(count, int) and 1 <= count <= 254):
@@ -358,7 +360,7 @@ class MockFleet:
             self._sim_base = self.speedup * (time.monotonic() - self.clock_zero_s)
             self.world.sim_time_s = max(0.0, self._sim_base)
         for v in self.vehicles:
-            v.link.batching = self.batch_frames
+            v.link.batching = self.batch_frames and not v.profile.frame_per_datagram
         while True:
             now = loop.time()
             self._advance(now)

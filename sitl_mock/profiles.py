@@ -189,6 +189,11 @@ class AutopilotProfile:
         streams/CURRENT_MODE.hpp): a message the pinned pymavlink 2.4.50 ardupilotmega dialect does
         not know, so a GCS meets a frame it cannot decode (sitl_mock/vehicle.py packs it with the CRC
         extra 193 of pymavlink's development dialect).
+    frame_per_datagram: every frame leaves in a UDP datagram of its own, as PX4 sends each message
+        when it is made (``Mavlink::send_finish``); PX4 SITL v1.15.4, measured 2026-12-05 with 16
+        items in flight: one datagram per MISSION_REQUEST_INT (docs/results/upload_cpu.md, "Real
+        PX4 SITL"). False: the frames of a tick, and the replies to one received datagram, leave
+        together, as ArduPilot's UART driver sends what its buffer holds when it runs.
     ArduPilot ignores a GCS's MISSION_ACK during an upload (MissionItemProtocol has no handler for it:
     a session ends by completion, an item error or its 8 s timeout in ``update()``); PX4 ends it on
     MISSION_ACK(OPERATION_CANCELLED) from the partner (handle_mission_ack).
@@ -220,6 +225,7 @@ class AutopilotProfile:
     foreign_item_denied: bool = True
     stores_as_received: frozenset[int] = frozenset()
     current_mode_message: bool = False
+    frame_per_datagram: bool = False
 
     def custom_mode(self, mode: str, vehicle_type: str = "multirotor") -> int:
         """HEARTBEAT custom_mode of a mode name; ValueError naming the mode if it does not exist."""
@@ -281,6 +287,7 @@ PX4 = AutopilotProfile(
     same_partner_restarts=False,
     foreign_item_denied=False,
     current_mode_message=True,
+    frame_per_datagram=True,
 )
 
 PROFILES: dict[str, AutopilotProfile] = {p.name: p for p in (ARDUPILOT, PX4)}

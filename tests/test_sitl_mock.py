@@ -403,3 +403,48 @@ def test_scripted_mission_failure_and_duplicate_sysids():
         assert b.upload(7, items, timeout_s=1.0) is None  # the failure was set on both
         a.close()
         b.close()
+
+
+@pytest.mark.parametrize(("profile", "requests_per_datagram"), [("px4", [1] * 8), ("ardupilot", [8])])
+def test_a_datagram_of_items_is_answered_as_the_autopilot_sends(profile, requests_per_datagram):
+    """Eight items in one datagram: PX4 answers each with a MISSION_REQUEST_INT in a datagram of its
+    own (measured on PX4 SITL v1.15.4, AutopilotProfile.frame_per_datagram), ArduPilot sends what
+    its buffer holds: the eight requests in one datagram."""
+    import socket
+
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    with (
+        MockFleet(count=1, profile=profile, speedup=1.0) as fleet,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as gcs,
+    ):
+        gcs.bind(("127.0.0.1", 0))
+        gcs.settimeout(5.0)
+        mav, parser = mavlink.MAVLink(None, srcSystem=255, srcComponent=190), mavlink.MAVLink(None)
+        to = fleet.vehicle(1).address
+        items = [
+            MissionItem(seq=k, frame=3, command=16, x=473_977_000 + k, y=85_455_000, z=20.0)
+            for k in range(20)
+        ]
+
+        def send(*msgs) -> None:
+            gcs.sendto(b"".join(m.pack(mav) for m in msgs), to)
+
+        def requests() -> list[int]:
+            got = parser.parse_buffer(gcs.recv(65535)) or []
+            return [m.seq for m in got if m.get_type() in ("MISSION_REQUEST", "MISSION_REQUEST_INT")]
+
+        send(
+            mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 4, 3),
+            mavlink.MAVLink_mission_count_message(1, 1, 20, 0),
+        )
+        while requests() != [0]:
+            pass
+        send(*(mavlink.MAVLink_mission_item_int_message(1, 1, *items[k].fields()) for k in range(8)))
+        counts, asked = [], []
+        while len(asked) < 8:
+            got = requests()
+            if got:
+                counts.append(len(got))
+                asked += got
+    assert asked == list(range(1, 9)) and counts == requests_per_datagram
