@@ -20,14 +20,15 @@ Choices (where the spec leaves room):
   ``Timing.batch`` items (8: 400 bytes; mission.py puts a datagram boundary after each batch of
   what link.py would otherwise send together), so the first window is two datagrams: the vehicle
   works on the second while the client answers the requests of the first with the next batch, and
-  each side keeps the other busy instead of waiting for it (a vehicle answers a datagram of items
-  with one datagram of requests: both autopilots' UDP drivers send what their buffer holds). On a
-  fast link each side wakes once per batch, not once per item. It rests on the behaviour push-ahead
-  relies on (below): both autopilots store the item they wait for and drop or refuse the others; on
-  an in-order link items arrive in order, so nothing is refused. The cost is on a lossy link: a
-  lost item makes the vehicle drop the rest of the window (ArduPilot answers each with
-  INVALID_SEQUENCE), resent by the push. The final-ACK phase starts once the vehicle asked for the
-  last item (or a push sent it). ``Timing(push_ahead=False, window=1)`` is the spec-literal client.
+  each side keeps the other busy instead of waiting for it. ArduPilot answers a datagram of items
+  with one datagram of requests (its UDP driver sends what its buffer holds), so on a fast link each
+  side wakes once per batch, not once per item; PX4 sends each request in a datagram of its own.
+  It rests on the behaviour push-ahead relies on (below): both autopilots store the item they wait
+  for and drop or refuse the others; on an in-order link items arrive in order, so nothing is
+  refused. The cost is on a lossy link: a lost item makes the vehicle drop the rest of the window
+  (ArduPilot answers each with INVALID_SEQUENCE), resent by the push. The final-ACK phase starts
+  once the vehicle asked for the last item (or a push sent it). ``Timing(push_ahead=False,
+  window=1)`` is the spec-literal client.
 - Only the last item is resent on our own timer, until MISSION_ACK (lost final ACK, devguide #171);
   its timeout adapts to the measured round trip (4 x smoothed RTT within 0.3..1.5 s). Where a push
   sent the last item before the vehicle asked for it, the vehicle may still wait for an earlier one
