@@ -667,6 +667,23 @@ def test_accepted_after_skipped_items_is_a_protocol_error_naming_them(window, as
     assert f"without items {missing[0]}" in text and f"{missing[-1]} (never" in text
 
 
+@pytest.mark.parametrize(("window", "batch", "top_up"), [(16, 8, 8), (8, 8, 4), (2, 8, 1), (3, 8, 1)])
+def test_a_window_is_topped_up_a_batch_at_a_time(window, batch, top_up):
+    """PX4 sends each request alone: the window is refilled only when a whole top-up (a batch, at
+    most half the window) is due, so most requests send nothing and the items leave together; the
+    tail of the list goes when the window reaches it; every item goes once."""
+    n = 41
+    up = UploadTransfer(1, mission(n), timing=Timing(window=window, batch=batch))
+    up.start(0.0)
+    sends = [up.on_request(seq, (1, 1), (255, 190), 0, 0.001 * (seq + 1)) for seq in range(n)]
+    assert sends[0] == list(range(window))
+    sent = [k for due in sends for k in due]
+    assert sent == list(range(n))  # once each, in order
+    refills = [due for due in sends[1:] if due]
+    assert all(len(due) == top_up for due in refills[:-1]) and 0 < len(refills[-1]) <= top_up
+    assert sum(1 for due in sends if due) == 1 + len(refills)  # the other requests sent nothing
+
+
 def test_lost_request_for_an_item_in_flight_still_succeeds():
     """With two items in flight a lost request skips an item that was sent: that upload is complete."""
     up = UploadTransfer(1, mission(4), timing=Timing(window=2, push_ahead=False))
