@@ -15,14 +15,14 @@ each side can work while the other does, and every round trip crosses cores, as 
 Both are measured in the same run, for both clients.
 Ours runs with ``Timing(verdict_s=0)``: the transfer only, without the second a PX4 vehicle is
 listened to after its ACK for a refusal (verdict.py), which MAVSDK does not do and which costs no
-CPU; ``--window`` sets its Timing.window (default: the client's). Each round gives each client a
-fresh mock and rotates the client order, so drifting machine load hits both alike; medians over
-rounds x reps uploads. The markdown goes to stdout (and --out). ``--sitl PORT PID``: a real
-autopilot (SITL) instead of the mock, started by hand to send to 127.0.0.1:PORT; each client in turn
-listens there, and "vehicle CPU" is that process's.
+CPU; ``--window`` and ``--batch`` set its Timing.window and .batch (default: the client's). Each
+round gives each client a fresh mock and rotates the client order, so drifting machine load hits
+both alike; medians over rounds x reps uploads. The markdown goes to stdout (and --out).
+``--sitl PORT PID``: a real autopilot (SITL) instead of the mock, started by hand to send to
+127.0.0.1:PORT; each client in turn listens there, and "vehicle CPU" is that process's.
 
     .venv/bin/python benchmarks/upload_cpu.py [--sizes 100 500] [--rounds 3] [--reps 5] [--window N]
-        [--placement shared apart] [--sitl PORT PID] [--out FILE]
+        [--batch N] [--placement shared apart] [--sitl PORT PID] [--out FILE]
 """
 
 from __future__ import annotations
@@ -50,6 +50,7 @@ from gcs_planner.mavlink.link import MavlinkLink  # noqa: E402
 from gcs_planner.mavlink.mission import MissionClient  # noqa: E402
 from gcs_planner.mavlink.transfer import Timing  # noqa: E402
 
+TIMING = Timing(verdict_s=0)  # ours: the transfer only (docstring)
 Sample = tuple[float, float, float]  # wall, client cpu, mock cpu [s]
 
 
@@ -106,12 +107,12 @@ async def measured_async(meter: CpuMeter, upload) -> Sample:
 
 
 def ours(
-    url: str, meter: CpuMeter, sizes: list[int], reps: int, window: int = Timing.window
+    url: str, meter: CpuMeter, sizes: list[int], reps: int, timing: Timing = TIMING
 ) -> dict[int, list[Sample]]:
     async def main() -> dict[int, list[Sample]]:
         link = await MavlinkLink.open(url)
         await link.wait_for(lambda m: m.get_type() == "HEARTBEAT", 30)
-        client = MissionClient(link, 1, timing=Timing(verdict_s=0, window=window))
+        client = MissionClient(link, 1, timing=timing)
         await client.upload(items(10, 99))  # warm-up: first-call costs (caches, imports)
         out = {}
         for n in sizes:
@@ -178,12 +179,12 @@ def run(
     reps: int,
     profile: str,
     placements: list[str],
-    window: int = Timing.window,
+    timing: Timing = TIMING,
     sitl: tuple[int, int] | None = None,
 ) -> Samples:
     """Every client, placement and size; ``sitl`` = (UDP port, pid) of a real vehicle that sends to
     that port (ArduPilot ``--serial0 udpclient:127.0.0.1:PORT``, PX4's GCS port) instead of a mock."""
-    clients = {**CLIENTS, "ours": functools.partial(ours, window=window)}
+    clients = {**CLIENTS, "ours": functools.partial(ours, timing=timing)}
     samples: Samples = {(p, c): {n: [] for n in sizes} for p in placements for c in CLIENTS}
     for r in range(rounds):
         names = list(CLIENTS)[r % 2 :] + list(CLIENTS)[: r % 2]
@@ -241,6 +242,7 @@ def main() -> None:
     p.add_argument("--reps", type=int, default=5)
     p.add_argument("--profile", choices=("px4", "ardupilot"), default="px4")
     p.add_argument("--window", type=int, default=Timing.window, help="our items in flight (Timing.window)")
+    p.add_argument("--batch", type=int, default=Timing.batch, help="our items per datagram (Timing.batch)")
     p.add_argument("--placement", nargs="+", choices=PLACEMENTS, default=list(PLACEMENTS))
     p.add_argument(
         "--sitl",
@@ -252,7 +254,8 @@ def main() -> None:
     p.add_argument("--out", type=Path, help="also write the markdown here")
     args = p.parse_args()
     before = uptime()
-    samples = run(args.sizes, args.rounds, args.reps, args.profile, args.placement, args.window, args.sitl)
+    timing = Timing(verdict_s=0, window=args.window, batch=args.batch)
+    samples = run(args.sizes, args.rounds, args.reps, args.profile, args.placement, timing, args.sitl)
     text = "\n".join(
         [
             f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()}."
@@ -261,7 +264,8 @@ def main() -> None:
             f"Load (`uptime`) after: {uptime()}",
             f"Command: `{' '.join([Path(sys.executable).name, *sys.argv])}`"
             f" ({'real vehicle' if args.sitl else f'profile {args.profile}'},"
-            f" our window {args.window}, placements {' and '.join(args.placement)},"
+            f" our window {args.window} in datagrams of {args.batch},"
+            f" placements {' and '.join(args.placement)},"
             f" medians of {args.rounds} rounds x {args.reps} uploads)",
             "",
             table(samples),
