@@ -441,6 +441,18 @@ def test_stale_accepted_before_last_item_is_ignored():
     assert up.on_message(stale, 0.1) == [] and not up.done
 
 
+def test_accepted_counts_once_every_item_went_out_though_the_last_request_was_lost():
+    """Three items leave with the first request; the vehicle stores them and ACKs, but its request
+    for the last item is lost: the ACK is the upload's (not stale, not a lost ACK to read back)."""
+    up = UploadTransfer(1, mission(3))
+    up.start(0.0)
+    assert up.on_request(0, (1, 1), (255, 190), 0, 0.01) == [0, 1, 2]
+    up.on_request(1, (1, 1), (255, 190), 0, 0.02)  # the request for 2 is lost
+    ack = _from_vehicle(mavlink.MAVLink_mission_ack_message(255, 190, MissionResult.ACCEPTED, 0))
+    up.on_message(ack, 0.03)
+    assert up.done and up.outcome.error is None and not up.outcome.ack_lost
+
+
 @pytest.mark.parametrize("profile", PROFILE_NAMES)
 @pytest.mark.parametrize("seed", range(6))
 def test_lossy_link_gives_equal_mission_or_reported_failure(profile, seed):

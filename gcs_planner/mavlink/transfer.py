@@ -52,7 +52,9 @@ Choices (where the spec leaves room):
   ``Timing(push_ahead=False)`` turns it off.
 - MISSION_ACK(INVALID_SEQUENCE) mid-upload is ignored: ArduPilot sends it for an out-of-order item
   and then re-requests the expected one (QGC PR #6718). Success only on MISSION_ACK(ACCEPTED) after
-  the last item was sent; an ACCEPTED before that is stale and ignored. An ACCEPTED while some item
+  the last item was sent (whether or not the vehicle's request for it arrived: with items in flight
+  the vehicle may store the last items of a datagram and ACK at once, and a lost request must not
+  turn its ACK into a lost one); an ACCEPTED before that is stale and ignored. An ACCEPTED while some item
   was never sent, or was jumped over before we sent it, is a MissionProtocolError naming those seqs
   (the vehicle cannot hold them: it may hold a mix of old and new items).
 - After the final-item retries the outcome is a timeout with ``ack_lost=True``: the vehicle may hold
@@ -514,7 +516,7 @@ class UploadTransfer(Transfer):
     def _on_ack(self, msg: mavlink.MAVLink_message) -> list[mavlink.MAVLink_message]:
         result = msg.type
         if result == MissionResult.ACCEPTED:
-            if self.phase is Phase.FINAL_ACK or (not self.items and self.phase is Phase.COUNT):
+            if self.ack_lost_possible or (not self.items and self.phase is Phase.COUNT):
                 missing = self._missing()
                 if missing:
                     self._finish(
@@ -528,7 +530,7 @@ class UploadTransfer(Transfer):
                     )
                     return []
                 self._finish(None, opaque_id=getattr(msg, "opaque_id", 0))
-            return []  # stale ACCEPTED (e.g. a re-ack of an earlier upload)
+            return []  # before the last item went out: stale (e.g. a re-ack of an earlier upload)
         if result == MissionResult.INVALID_SEQUENCE:  # before our first item it is not about ours
             self.stats.invalid_sequence_acks += 1
             return []
