@@ -252,31 +252,30 @@ def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
     rows = np.arange(p)[:, None]
     flat = leg + rows * n_leg  # leg index into (P, W-1) arrays
     node = flat + rows  # its first waypoint's index into (P, W) arrays
-    take = np.take  # faster than fancy indexing on these sizes
-    l3 = take(dec.l3, flat)
-    f = np.where(l3 > 0, (s - take(dec.cum, node)) / np.where(l3 > 0, l3, 1.0), 0.0)
+    l3 = dec.l3.take(flat)
+    f = np.where(l3 > 0, (s - dec.cum.take(node)) / np.where(l3 > 0, l3, 1.0), 0.0)
     pz = dec.pts[..., 2]
-    z0 = take(pz, node)
+    z0 = pz.take(node)
     out = np.empty((p, k, 3))
-    out[..., 2] = z0 + f * (take(pz, node + 1) - z0)
-    sh = (f * take(dec.lh, flat)).ravel()
+    out[..., 2] = z0 + f * (pz.take(node + 1) - z0)
+    sh = (f * dec.lh.take(flat)).ravel()
     flat = flat.ravel()
     x0, y0, h0, sin0, cos0, kappa, e0, e1, e2 = dec.segments
-    e0, e1 = take(e0, flat), take(e1, flat)
-    np.minimum(sh, take(e2, flat), out=sh)
+    e0, e1 = e0.take(flat), e1.take(flat)
+    np.minimum(sh, e2.take(flat), out=sh)
     after0, after1 = sh > e0, sh > e1
     seg = flat * 3 + after0 + after1
     ds = sh - np.where(after0, np.where(after1, e1, e0), 0.0)
-    sin_h, cos_h = take(sin0, seg), take(cos0, seg)
-    x = take(x0, seg) + ds * cos_h  # straight segments
-    y = take(y0, seg) + ds * sin_h
-    arc = np.flatnonzero(take(kappa, seg) != 0.0)
+    sin_h, cos_h = sin0.take(seg), cos0.take(seg)
+    x = x0.take(seg) + ds * cos_h  # straight segments
+    y = y0.take(seg) + ds * sin_h
+    arc = np.flatnonzero(kappa.take(seg) != 0.0)
     if len(arc):
-        on = take(seg, arc)
-        kap = take(kappa, on)
-        h = take(h0, on) + kap * take(ds, arc)
-        x[arc] = take(x0, on) + (np.sin(h) - take(sin_h, arc)) / kap
-        y[arc] = take(y0, on) - (np.cos(h) - take(cos_h, arc)) / kap
+        on = seg.take(arc)
+        kap = kappa.take(on)
+        h = h0.take(on) + kap * ds.take(arc)
+        x[arc] = x0.take(on) + (np.sin(h) - sin_h.take(arc)) / kap
+        y[arc] = y0.take(on) - (np.cos(h) - cos_h.take(arc)) / kap
     out[..., 0] = x.reshape(p, k)
     out[..., 1] = y.reshape(p, k)
     return out
@@ -300,7 +299,7 @@ class _Raster:
         nx, ny = self.mask.shape
         cx = np.clip(np.floor((x - self.lo[0]) / self.cell_m), -1, nx) + 1  # -1 and n: the border
         cy = np.clip(np.floor((y - self.lo[1]) / self.cell_m), -1, ny) + 1
-        return np.take(self._padded, (cx * (ny + 2) + cy).astype(np.int64), mode="clip")  # NaN: 0, empty
+        return self._padded.take((cx * (ny + 2) + cy).astype(np.int64), mode="clip")  # NaN: 0, empty
 
 
 @functools.lru_cache(maxsize=16)
@@ -339,7 +338,7 @@ class CostModel:
         flat = mid.reshape(-1, 3)
         n_nb = min(4, len(self.obs.cx))
         close = np.flatnonzero(self._near.covers(flat[:, 0], flat[:, 1]))  # the tree is asked about these
-        near = np.take(flat, close, axis=0)
+        near = flat.take(close, axis=0)
         dxy, j = self._obs_tree.query(near[:, :2], k=n_nb, distance_upper_bound=self._reach)
         dxy, j = dxy.reshape(len(close), n_nb), j.reshape(len(close), n_nb)
         row, col = np.nonzero(np.isfinite(dxy))
