@@ -66,7 +66,7 @@ import logging
 import os
 import socket
 import time
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 from operator import methodcaller
 from typing import Any
@@ -377,20 +377,10 @@ class MavlinkLink:
             self._sendto(transport, raw, addr)
         self.frames_sent += 1
 
-    @contextlib.contextmanager
-    def corked(self) -> Iterator[None]:
+    def corked(self) -> _Cork:
         """What is sent inside the block leaves at its end, in one datagram per address (module
         docstring); inside another, the outermost one sends."""
-        if self._corked is not None:
-            yield
-            return
-        self._corked = []
-        try:
-            yield
-        finally:
-            corked, self._corked = self._corked, None
-            if corked:
-                self._uncork(corked)
+        return _Cork(self)
 
     def flush(self) -> None:
         """Send what a ``corked()`` block holds so far: a datagram boundary inside it."""
@@ -652,6 +642,26 @@ async def first_message(
         return await asyncio.wait_for(future, timeout_s)
     finally:
         unsubscribe()
+
+
+class _Cork:
+    """MavlinkLink.corked's block (a class, not a generator: it is entered for every datagram)."""
+
+    __slots__ = ("link", "outer")
+
+    def __init__(self, link: MavlinkLink) -> None:
+        self.link = link
+
+    def __enter__(self) -> None:
+        self.outer = self.link._corked is None
+        if self.outer:
+            self.link._corked = []
+
+    def __exit__(self, *exc: object) -> None:
+        if self.outer:
+            corked, self.link._corked = self.link._corked, None
+            if corked:
+                self.link._uncork(corked)
 
 
 def _call(callback: Callable, *args: object) -> None:
