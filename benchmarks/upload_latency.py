@@ -4,7 +4,7 @@ The mock fleet runs in a child process (its own interpreter and GIL), so every c
 same vehicle. Sections (all on 127.0.0.1):
   loopback  10/100/1000 items, each client, median wall time and client CPU time (all threads of the
             client process; MAVSDK's C++ threads included); ratio to MAVSDK. ``ours`` is the default
-            client (two items in flight), ``ours_w1`` the one-item-per-request client.
+            client (Timing's items in flight), ``ours_w1`` the one-item-per-request client.
   delay     20 ms one-way (40 ms RTT) link: time / (items x RTT), target <= 1.2, both windows.
   loss      10 % loss each way (+ 20 ms delay): success over --loss-uploads uploads, slowdown vs no loss.
   fleet     100 vehicles at once (upload_fleet, workers=100 and the default 8) vs one vehicle.
