@@ -311,6 +311,8 @@ def test_fly_homes_puts_a_plane_one_climb_run_behind_its_first_waypoint_and_a_co
         (x0, y0, z0), (x1, y1, _) = vp.waypoints[0], vp.waypoints[1]
         assert abs(alt - plan.origin.alt_m) < 0.5 and f"MAV_SYSID {vp.sysid}" in line
         assert f"PX4_HOME_LAT={lat:.7f} PX4_HOME_LON={lon:.7f}" in line and f"MAV_SYS_ID {vp.sysid}" in line
+        sih = line.split("PX4 SIH: ")[1]  # SIH_LOC_LAT0 / LON0 are integers of 1e-7 degrees
+        assert f"PX4_HOME_LAT={round(lat * 1e7)} PX4_HOME_LON={round(lon * 1e7)}" in sih
         assert math.hypot(x0 - x, y0 - y) == pytest.approx(z0 * run_per_m, abs=0.5)
         assert abs(math.remainder(heading - math.degrees(math.atan2(x1 - x0, y1 - y0)), 360.0)) < 1.0
 
@@ -342,3 +344,23 @@ def test_arduplane_takeoff_mode_ends_its_straight_climb_at_tkoff_dist_and_climbs
     centre = start[:2] + run_m * heading[:2] / max(math.hypot(*heading[:2]), 1e-9)
     assert end[2] - start[2] == pytest.approx(98.0, abs=1.0)  # up, in the end
     assert math.hypot(*(end[:2] - centre)) < 1.5 * loiter_r  # circling TKOFF_DIST along the climb-out
+
+
+def test_a_relative_plan_is_judged_on_the_height_above_home_whatever_the_homes_amsl_altitude():
+    """PX4 SIH v1.15 starts at 32 m AMSL unless SIH_LOC_H0 is set (PX4_HOME_ALT is not applied), a
+    real GPS's AMSL altitude is off by metres: a vehicle flying a "relative" plan is told heights
+    above its home, so its track is its relative_alt over the origin's altitude (it was recorded at
+    -436 m, "never airborne", before); a plan over a site ("amsl") keeps the AMSL altitude."""
+    from gcs_planner.flight.ops import TrackRecorder, boot_clock
+
+    recorder = TrackRecorder(ORIGIN, boot_clock, [1, 2], relative=[1])  # origin 488 m AMSL
+    for sysid in (1, 2):
+        for k in range(3):
+            msg = mavlink.MAVLink_global_position_int_message(
+                1000 * k, int(ORIGIN.lat_deg * 1e7), int(ORIGIN.lon_deg * 1e7), 52_000, 20_000, 0, 0, 0, 0
+            )
+            msg._header = mavlink.MAVLink_header(msg.id, srcSystem=sysid, srcComponent=1)
+            recorder.on_frame(msg, b"", 0.0)
+    tracks = recorder.tracks()
+    assert tracks[1].positions[:, 2] == pytest.approx(20.0, abs=0.01)
+    assert tracks[2].positions[:, 2] == pytest.approx(52.0 - 488.0, abs=0.01)

@@ -47,6 +47,9 @@ FAMILY = Px4(
     verdict_after_ack_s=1.0,
     rejection_texts=("mission rejected", "mission invalid"),
     ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO", 1.0),  # mc_pos_control / FlightTaskAuto
+    # SIH v1.15.4 multicopters pass 1 and 5 m/s 0.4-1.0 s after the MPC_ACC_HOR / MPC_JERK_AUTO
+    # S-curve from MISSION_START would (four vehicles, docs/real-autopilots.md)
+    start_latency_s=0.7,
     params_bytewise=True,  # MAVLinkParameters: integers memcpy'd into param_value
     stack="PX4",
     fence_alt_param="GF_MAX_VER_DIST",  # geofence: max vertical distance from home

@@ -73,11 +73,18 @@ def receive_clock(rate: float = 1.0, zero_s: float = 0.0) -> FrameClock:
 
 
 class TrackRecorder:
-    """Collects each vehicle's positions from the link's frames (completion is VehicleStatus's)."""
+    """Collects each vehicle's positions from the link's frames (completion is VehicleStatus's).
 
-    def __init__(self, origin: Origin, clock: FrameClock, sysids) -> None:
+    A vehicle in ``relative`` (its plan gives altitudes above its home, the "relative" frame) is
+    recorded at its height above home (GLOBAL_POSITION_INT.relative_alt) over the origin's
+    altitude: that is what its mission tells it to fly, whatever its home's AMSL altitude (a GPS's
+    error, a SITL started elsewhere: PX4 SIH's home is 32 m AMSL unless SIH_LOC_H0 is set). The
+    others (plans over a site's terrain, "amsl") by their AMSL altitude."""
+
+    def __init__(self, origin: Origin, clock: FrameClock, sysids, relative=()) -> None:
         self.origin = origin
         self.clock = clock
+        self.relative = frozenset(relative)
         self.samples: dict[int, list[tuple[float, float, float, float]]] = {s: [] for s in sysids}
         self.completed: dict[int, bool] = {}
         self.impossible: dict[int, int] = {}  # sysid -> reports of a position that cannot be
@@ -90,7 +97,8 @@ class TrackRecorder:
             if impossible_position(msg):
                 self.impossible[sysid] = self.impossible.get(sysid, 0) + 1
             return
-        self.samples[sysid].append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, msg.alt / 1000.0))
+        alt = self.origin.alt_m + msg.relative_alt / 1000.0 if sysid in self.relative else msg.alt / 1000.0
+        self.samples[sysid].append((self.clock(msg, t_s), msg.lat / 1e7, msg.lon / 1e7, alt))
 
     def latest(self, sysid: int) -> tuple[float, np.ndarray] | None:
         """Time [s] and ENU position [m] of the vehicle's newest position report."""

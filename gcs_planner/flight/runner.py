@@ -193,7 +193,8 @@ class Flight:
             [tlog_network_path(tlog, n) for n in range(networks(self.plan))] if options.tlog else []
         )
         self.clock = boot_clock if vehicles.simulated else receive_clock(vehicles.speedup, unix_s())
-        self.recorder = TrackRecorder(self.plan.origin, self.clock, self.sysids)
+        relative = [vp.sysid for vp in self.plan.vehicles if vp.altitude_frame == "relative"]
+        self.recorder = TrackRecorder(self.plan.origin, self.clock, self.sysids, relative)
         self.clocks = ClockRate(self.sysids)
         self.link: MavlinkLink | None = None
         self.logger: FlightLogger | None = None

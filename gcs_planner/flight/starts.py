@@ -59,7 +59,9 @@ def starts(plans: list[VehiclePlan], origin: Origin) -> list[Start]:
 
 def format_homes(found: list[Start], sysids: frozenset[int] | None) -> str:
     """One line per start (of ``sysids``; None: all): ArduPilot SITL's ``--home`` and system id
-    parameter, then PX4 SITL's home environment variables and its MAV_SYS_ID."""
+    parameter, then PX4 SITL's home environment variables and its MAV_SYS_ID. PX4 v1.15's SIH reads
+    PX4_HOME_LAT / LON into SIH_LOC_LAT0 / LON0, integers of 1e-7 degrees (a value in degrees puts
+    the vehicle near 0 N 0 E), and not PX4_HOME_ALT: those are printed for it too."""
     rows = []
     for s in found:
         if sysids is not None and s.sysid not in sysids:
@@ -68,7 +70,9 @@ def format_homes(found: list[Start], sysids: frozenset[int] | None) -> str:
         rows.append(
             f"sysid {s.sysid} ({s.vehicle_id}): --home {lat},{lon},{alt},{s.heading_deg:.0f}  (MAV_SYSID"
             f" {s.sysid}; SYSID_THISMAV before ArduPilot 4.7) | PX4: PX4_HOME_LAT={lat} PX4_HOME_LON={lon}"
-            f" PX4_HOME_ALT={alt}, param MAV_SYS_ID {s.sysid}"
+            f" PX4_HOME_ALT={alt}, param MAV_SYS_ID {s.sysid} | PX4 SIH:"
+            f" PX4_HOME_LAT={round(s.home.lat_deg * 1e7)} PX4_HOME_LON={round(s.home.lon_deg * 1e7)},"
+            f" param SIH_LOC_H0 {alt}"
         )
     return "\n".join(rows)
 
