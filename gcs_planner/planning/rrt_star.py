@@ -217,8 +217,8 @@ def _nearest(nodes: np.ndarray, x: np.ndarray) -> int:
 
 
 def _length(v: np.ndarray) -> float:
-    """|v| of one vector: np.linalg.norm's arithmetic without its dispatch (RRT* asks ~440,000
-    times in swarm500, a few microseconds each)."""
+    """|v| of one vector: np.linalg.norm's arithmetic without its per-call dispatch (RRT* asks
+    once or twice an iteration; docs/results/priority_swarm_scale.md)."""
     return math.sqrt(v.dot(v))
 
 
