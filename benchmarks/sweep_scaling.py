@@ -13,7 +13,7 @@ on the machine), and the speed-up falls short by that factor. The table gives bo
 machine's load average before and after each configuration. ``--dask`` adds a Dask configuration
 per worker count: ``local`` (a LocalCluster of that many workers) or a scheduler address (a cluster
 started as a user would: ``dask scheduler`` and ``dask worker ADDRESS --nworkers N --nthreads 1``;
-its worker count is whatever it has). --seeds N replaces the study's seeds by 0..N-1.
+measured once, at the worker count it has). --seeds N replaces the study's seeds by 0..N-1.
 """
 
 from __future__ import annotations
@@ -61,6 +61,14 @@ def measure(study, base: Path, workers: int, scheduler: str | None, tmp: Path) -
     }
 
 
+def cluster_workers(address: str) -> int:
+    """How many workers the Dask cluster whose scheduler is at ``address`` has now."""
+    from distributed import Client
+
+    with Client(address) as client:
+        return len(client.scheduler_info()["workers"])
+
+
 def table(results: dict[str, dict], one: dict) -> str:
     rows = [
         "| configuration | workers | runs | wall s | runs / min | speed-up | CPU s / run (mean, median, max) "
@@ -90,12 +98,15 @@ def main() -> None:
         study = msgspec.structs.replace(study, seeds=list(range(args.seeds)))
     results: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as tmp:
+        configs = [("local pool", None)] + [("Dask LocalCluster", "local")] * ("local" in args.dask)
         for workers in args.workers:
-            configs = [("local pool", None)]
-            configs += [(f"Dask {s}" if s != "local" else "Dask LocalCluster", s) for s in args.dask]
             for name, scheduler in configs:
                 r = measure(study, base, workers, scheduler, Path(tmp))
                 results[f"{name}, {workers}"] = {**r, "workers": workers}
+        for address in (s for s in args.dask if s != "local"):  # a cluster has the workers it has
+            workers = cluster_workers(address)
+            r = measure(study, base, workers, address, Path(tmp))
+            results[f"Dask {address}, {workers}"] = {**r, "workers": workers}
     one = results[f"local pool, {args.workers[0]}"]
     text = "\n".join(
         [

@@ -1,5 +1,5 @@
-"""A sweep's pool worker runs with one native (BLAS / OpenMP / MKL) thread unless the user chose a
-number, and has numpy and the planners imported before its first run, so no run's CPU time
+"""A sweep's worker (a pool process or a Dask worker) runs with one native (BLAS / OpenMP / MKL) thread
+unless the user chose a number, and has numpy and the planners imported before its first run, so no run's CPU time
 carries the imports or competes with N x cores BLAS threads."""
 
 from __future__ import annotations
@@ -41,17 +41,19 @@ def probe(tmp_path, monkeypatch):
     sys.modules.pop("sweep_probe_mod", None)
 
 
-def _sweep(tmp_path: Path, study_path: Path, workers: int) -> list[dict]:
+def _sweep(tmp_path: Path, study_path: Path, workers: int, scheduler: str | None = None) -> list[dict]:
     study, base = load_study(study_path, allow_user_task=True)
-    out = tmp_path / f"r{workers}.csv"
-    assert run_study(study, base, out, workers=workers, allow_user_task=True) == 2
+    out = tmp_path / f"r{workers}{scheduler or ''}.csv"
+    assert run_study(study, base, out, workers, scheduler, allow_user_task=True) == 2
     with out.open(newline="") as f:
         return list(csv.DictReader(f))
 
 
-@pytest.mark.parametrize("workers", [1, 2])
-def test_every_run_finds_one_native_thread_and_the_imports_done(tmp_path, probe, workers):
-    rows = _sweep(tmp_path, probe, workers)
+@pytest.mark.parametrize(("workers", "scheduler"), [(1, None), (2, None), (2, "local")])
+def test_every_run_finds_one_native_thread_and_the_imports_done(tmp_path, probe, workers, scheduler):
+    if scheduler:
+        pytest.importorskip("distributed")
+    rows = _sweep(tmp_path, probe, workers, scheduler)
     assert all(not r["error"] for r in rows)
     for r in rows:
         assert float(r["loaded"]) == 1.0  # the first run of each worker too

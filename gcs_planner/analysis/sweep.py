@@ -294,7 +294,7 @@ def _cannot_write(out: Path, exc: OSError) -> UserError:
 
 class _executor:
     """``with _executor(scheduler, workers, task) as submit``: a process pool or a Dask client;
-    ``task``: the study task pool workers import before their first run (None: none)."""
+    ``task``: the study task every worker, pool or Dask, imports before its first run (None: none)."""
 
     def __init__(self, scheduler: str | None, workers: int, task: str | None = None) -> None:
         self.scheduler, self.workers, self.task = scheduler, workers, task
@@ -308,6 +308,8 @@ class _executor:
         try:
             import dask
             from distributed import Client, LocalCluster
+
+            from gcs_planner.analysis.sweep_dask import PrepareWorker
         except ImportError:
             raise UserError("--scheduler needs dask.distributed: pip install 'gcs-planner[dask]'") from None
         # the workers' stack profiler samples every 10 ms and takes the GIL from the planners; the
@@ -323,6 +325,7 @@ class _executor:
             if self.scheduler == "local" else None
         )  # fmt: skip
         self.pool = Client(self.cluster or self.scheduler)
+        self.pool.register_plugin(PrepareWorker(self.task))
         return lambda fn, *args: self.pool.submit(fn, *args, pure=False)
 
     def __exit__(self, *exc) -> None:
