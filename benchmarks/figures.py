@@ -195,10 +195,14 @@ FIGURES: tuple[Figure, ...] = (
     ),
     Figure(
         "sweep_scaling",
-        "Sweep scaling: runs / min and CPU per run at 1 and 2 workers",
-        ("python benchmarks/sweep_scaling.py studies/swarm_one_point.toml --workers 1 2",),
+        "Sweep scaling: runs / min and CPU per run at 1 and 2 workers, local pool and Dask",
+        (
+            "python benchmarks/sweep_scaling.py studies/swarm_one_point.toml --seeds 32 --workers 1 2"
+            " --dask local cli",
+        ),
         quick=("python benchmarks/sweep_scaling.py studies/swarm_one_point.toml --seeds 2 --workers 1",),
-        minutes=1,
+        minutes=2,
+        needs=("distributed",),
     ),
     Figure(
         "priority_swarm_ablation",

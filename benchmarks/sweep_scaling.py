@@ -1,7 +1,7 @@
 """Sweep scaling: runs per minute and CPU time per run at 1, 2, ... N workers (local pool, Dask).
 
     .venv/bin/python benchmarks/sweep_scaling.py studies/swarm_small_budget.toml --seeds 4 --workers 1 2
-    .venv/bin/python benchmarks/sweep_scaling.py STUDY --workers 1 8 16 --dask local tcp://HOST:8786
+    .venv/bin/python benchmarks/sweep_scaling.py STUDY --workers 1 8 16 --dask local cli tcp://HOST:8786
 
 Each configuration runs the whole study into a fresh CSV (``run_study``, as ``gcs-planner sweep``).
 Wall time is from submit to the last row (a LocalCluster's start-up included); CPU per run is the
@@ -11,22 +11,27 @@ at one worker and runs / min grows with the workers; a CPU time per run that gro
 is contention (shared caches and memory bandwidth, SMT siblings, native thread pools, or other jobs
 on the machine), and the speed-up falls short by that factor. The table gives both, and the
 machine's load average before and after each configuration. ``--dask`` adds a Dask configuration
-per worker count: ``local`` (a LocalCluster of that many workers) or a scheduler address (a cluster
-started as a user would: ``dask scheduler`` and ``dask worker ADDRESS --nworkers N --nthreads 1``;
-measured once, at the worker count it has). --seeds N replaces the study's seeds by 0..N-1.
+per worker count: ``local`` (a LocalCluster of that many workers) or ``cli`` (a cluster started as a
+user would, by this script: ``dask scheduler`` and ``dask worker ADDRESS --nworkers N --nthreads 1``
+as processes of their own, over tcp on loopback); a scheduler address is a cluster you started,
+measured once, at the worker count it has. --seeds N replaces the study's seeds by 0..N-1.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import csv
 import datetime
 import os
 import platform
+import socket
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import msgspec
@@ -69,6 +74,32 @@ def cluster_workers(address: str) -> int:
         return len(client.scheduler_info()["workers"])
 
 
+@contextlib.contextmanager
+def dask_cli_cluster(workers: int) -> Iterator[str]:
+    """The address of a Dask cluster started as a user starts one: a ``dask scheduler`` process and
+    a ``dask worker`` process with ``workers`` single-threaded workers, on loopback; stopped after."""
+    from distributed import Client
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        address = f"tcp://127.0.0.1:{s.getsockname()[1]}"
+    dask = str(Path(sys.executable).with_name("dask"))
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    port = address.rsplit(":", 1)[1]
+    scheduler = subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", port, "--no-dashboard"],
+                                 **quiet)  # fmt: skip
+    worker = subprocess.Popen([dask, "worker", address, "--nworkers", str(workers), "--nthreads", "1",
+                               "--no-dashboard"], **quiet)  # fmt: skip
+    try:
+        with Client(address, timeout=60) as client:
+            client.wait_for_workers(workers, timeout=120)
+        yield address
+    finally:
+        for proc in (worker, scheduler):
+            proc.terminate()
+            proc.wait(30)
+
+
 def table(results: dict[str, dict], one: dict) -> str:
     rows = [
         "| configuration | workers | runs | wall s | runs / min | speed-up | CPU s / run (mean, median, max) "
@@ -103,7 +134,11 @@ def main() -> None:
             for name, scheduler in configs:
                 r = measure(study, base, workers, scheduler, Path(tmp))
                 results[f"{name}, {workers}"] = {**r, "workers": workers}
-        for address in (s for s in args.dask if s != "local"):  # a cluster has the workers it has
+            if "cli" in args.dask:
+                with dask_cli_cluster(workers) as address:
+                    r = measure(study, base, workers, address, Path(tmp))
+                results[f"Dask scheduler + worker processes (tcp), {workers}"] = {**r, "workers": workers}
+        for address in (s for s in args.dask if s not in ("local", "cli")):  # it has the workers it has
             workers = cluster_workers(address)
             r = measure(study, base, workers, address, Path(tmp))
             results[f"Dask {address}, {workers}"] = {**r, "workers": workers}
