@@ -153,3 +153,32 @@ def test_the_report_says_where_a_landing_touched_down_against_the_plan():
     r = conformance_report(plan, {1: track}, {1: 5.0})[0]
     assert r.touchdown_m == pytest.approx(40.0) and r.passed
     assert np.isnan(conformance_report(plan, {1: flown}, {1: 5.0})[0].touchdown_m)  # never came down
+
+
+RAMP = {1: (3.0, np.inf)}
+
+
+@pytest.mark.parametrize(("vehicle_type", "ramps", "passed"), [
+    ("multirotor", None, False), ("multirotor", RAMP, True), ("fixed_wing", RAMP, False),
+])  # fmt: skip
+def test_a_multirotor_on_its_speed_ramps_is_on_time(vehicle_type, ramps, passed):
+    """A copter that leaves its start from the hover v / 2a = 1.67 s early (the route lead), cruises
+    on schedule and brakes at 3 m/s^2 for its last waypoint is early at the start and late at the
+    end by up to 1.67 s against a plan at constant speed: with its ramp known that is its ramps,
+    not a schedule error (a plane flies through its route's ends, so no ramp is allowed for)."""
+    vp = _vehicle(1, 0.0)  # 200 m at 10 m/s
+    vp.vehicle_type = vehicle_type
+    plan = Plan(Origin(47.0, 8.0, 400.0), "test", [vp])
+    done = np.linspace(0.0, 200.0, 401)
+    ramp_m = 10.0**2 / 6.0
+    times = 100.0 + done / 10.0
+    times = np.where(done < ramp_m, 100.0 - 10.0 / 6.0 + np.sqrt(2.0 * done / 3.0), times)
+    to_go = 200.0 - done
+    times = np.where(to_go < ramp_m, times + 10.0 / 6.0 - (np.sqrt(2.0 * to_go / 3.0) - to_go / 10.0), times)
+    track = Track(times, np.stack([done, np.zeros_like(done), np.full_like(done, 20.0)], axis=1), True)
+    r = conformance_report(plan, {1: track}, {1: 5.0}, route_t0_s={1: 100.0}, max_schedule_error_s=1.0,
+                           acceptance_m=0.5, ramps=ramps)[0]  # fmt: skip
+    assert r.passed is passed, r.failures
+    # the first and last points are timed where the route counts as left / reached (0.5 m out):
+    # 1.14 s into the ramps
+    assert abs(r.schedule_error_s) == pytest.approx(0.05 if passed else 1.14, abs=0.1)

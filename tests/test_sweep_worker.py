@@ -1,6 +1,6 @@
-"""A sweep's worker (a pool process or a Dask worker) runs with one native (BLAS / OpenMP / MKL) thread
-unless the user chose a number, and has numpy and the planners imported before its first run, so no run's CPU time
-carries the imports or competes with N x cores BLAS threads."""
+"""A sweep's worker (a pool process or a Dask worker) runs with one native (BLAS / OpenMP / MKL)
+thread unless the user chose a number, and has numpy and the planners imported before its first
+run, so no run's CPU time carries the imports or competes with N x cores BLAS threads."""
 
 from __future__ import annotations
 

@@ -48,8 +48,10 @@ FAMILY = Px4(
     rejection_texts=("mission rejected", "mission invalid"),
     ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO", 1.0),  # mc_pos_control / FlightTaskAuto
     # SIH v1.15.4 multicopters pass 1 and 5 m/s 0.4-1.0 s after the MPC_ACC_HOR / MPC_JERK_AUTO
-    # S-curve from MISSION_START would (four vehicles, docs/real-autopilots.md)
-    start_latency_s=0.7,
+    # S-curve from MISSION_START would, and cruise ~1 s further behind it: the route start lead
+    # left them 1.0-1.4 s late 8-12 s into the route at 0.7 s (two four-vehicle flights,
+    # docs/real-autopilots.md)
+    start_latency_s=1.7,
     params_bytewise=True,  # MAVLinkParameters: integers memcpy'd into param_value
     stack="PX4",
     fence_alt_param="GF_MAX_VER_DIST",  # geofence: max vertical distance from home

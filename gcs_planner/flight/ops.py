@@ -26,6 +26,7 @@ from gcs_planner.core.geo import Origin, geodetic_to_enu
 from gcs_planner.core.lockstep import now_s
 from gcs_planner.flight.starts import CLIMB_RUN_PER_M
 from gcs_planner.flight.timekeeping import ScheduleKeeper
+from gcs_planner.geometry.ramp import ramp_loss_s
 from gcs_planner.mavlink.actions import change_speed, start_mission_at, take_off
 from gcs_planner.mavlink.errors import MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink, check_signing
@@ -246,11 +247,10 @@ async def take_off_all(
 
 def accel_lead_s(vp, accel_mps2: float, jerk_mps3: float = math.inf, latency_s: float = 0.0) -> float:
     """How much earlier than planned a route starts, so that accelerating from the hover puts the
-    vehicle where a plan assuming instant cruise speed has it: half the ramp to cruise speed v
-    (an S-curve with acceleration a and jerk j takes v / a + a / j, half of which is lost), plus
-    the autopilot's latency from MISSION_START to moving."""
+    vehicle where a plan assuming instant cruise speed has it: the time lost on the ramp to cruise
+    speed (geometry.ramp), plus the autopilot's latency from MISSION_START to moving."""
     v = float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0])
-    return v / (2.0 * accel_mps2) + accel_mps2 / (2.0 * jerk_mps3) + latency_s
+    return ramp_loss_s(v, accel_mps2, jerk_mps3) + latency_s
 
 
 async def start_routes(

@@ -20,6 +20,7 @@ Choices:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -174,11 +175,8 @@ class StaticPlan:
         its autopilot's start latency (docs/real-autopilots.md). Route time 0 after the largest."""
         leads = {}
         for vp in self.plan.vehicles:
-            if flight.vehicles.simulated or vp.sysid not in flight.ramps:
-                leads[vp.sysid] = accel_lead_s(vp, flight.vehicles.accel_mps2(vp.sysid))
-            else:
-                ramp = flight.ramps[vp.sysid]
-                leads[vp.sysid] = accel_lead_s(vp, *ramp, flight.quirks[vp.sysid].start_latency_s)
+            latency_s = 0.0 if flight.vehicles.simulated else flight.quirks[vp.sysid].start_latency_s
+            leads[vp.sysid] = accel_lead_s(vp, *_ramp(flight, vp.sysid), latency_s)
         return max(leads.values()), leads
 
     async def fly(self, flight: Flight) -> None:
@@ -213,6 +211,7 @@ class StaticPlan:
             route_t0_s=flight.route_t0 or None,
             max_schedule_error_s=options.max_schedule_error_s,
             site=scenario.site,
+            ramps={vp.sysid: _ramp(flight, vp.sysid) for vp in plan.vehicles},
         )
         for r in reports:
             upload = flight.uploads.get(r.sysid)
@@ -235,3 +234,11 @@ class StaticPlan:
             reports, flight.uploads, flight.mcap_path, rrd_path, flight.tlog_paths, wall_s, flight.end_states,
             report_path, log_error, flight.frames_received,
         )  # fmt: skip
+
+
+def _ramp(flight: Flight, sysid: int) -> tuple[float, float]:
+    """(acceleration, jerk) of the vehicle's speed ramps: a connected vehicle's own S-curve
+    parameters where it has them (limits.read_ramps), else its airframe's acceleration."""
+    if flight.vehicles.simulated or sysid not in flight.ramps:
+        return flight.vehicles.accel_mps2(sysid), math.inf
+    return flight.ramps[sysid]

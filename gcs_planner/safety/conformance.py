@@ -19,7 +19,11 @@ Choices:
 - Schedule: a deconflicted plan is separated in time as much as in space, so each vehicle's
   along-track time error is bounded. At every planned path point (one per ``SCHEDULE_STEP_S`` of
   plan time) the vehicle's time of closest approach is taken, in order along the route, and
-  compared with the route start plus the point's planned time (see ``schedule_errors_s``).
+  compared with the route start plus the point's planned time (see ``schedule_errors_s``). A
+  multirotor whose speed ramp is known (``ramps``) starts its route from the hover, early by what
+  the ramp loses (flight.ops.accel_lead_s), and brakes to a stop at its end: the points within
+  its ramp's distance of the start are due that much earlier, those within it of the end that
+  much later (geometry.ramp.stop_lag_s, the braking run backwards being the start).
   Telemetry that does not show the route flown in order is a failure, never a pass.
 - On a site (gcs_planner.model.sites) the flown route (the cross-track window) is held to what the
   plan checker proved on the plan: inside the area, out of every no-fly zone's polygon and band,
@@ -36,6 +40,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gcs_planner.geometry.obstacles import Obstacles
+from gcs_planner.geometry.ramp import stop_lag_s
 from gcs_planner.model.plan import Plan, land_point
 from gcs_planner.model.scenario import Cylinder, Hemisphere
 from gcs_planner.safety.separation import Trajectory, closest_approach_m
@@ -148,10 +153,20 @@ PASS_TOLERANCE_M = 3.0  # samples this much farther than a stretch's closest sti
 MAX_SCHEDULE_ERROR_S = 3.0  # default bound on the along-track time error [s] (docs/real-autopilots.md)
 
 
-def schedule_errors_s(track: Track, vp, route_t0_s: float, near_m: float) -> np.ndarray:
+def schedule_errors_s(
+    track: Track,
+    vp,
+    route_t0_s: float,
+    near_m: float,
+    ramp: tuple[float, float] | None = None,
+    reached_m: float = 0.0,
+) -> np.ndarray:
     """Flown minus planned time at path points ``SCHEDULE_STEP_S`` apart from the first waypoint's
     time to the last one's (+ = late) [s]; a plan's climb and descent, flown at the vehicle's own
-    pace before and after its route, are not timed.
+    pace before and after its route, are not timed. ``ramp``: (acceleration, jerk) of the S-curve
+    the vehicle leaves its start and brakes to its final stop on (module docstring);
+    ``reached_m``: how near its ends the track's route begins and ends (route_window), where the
+    first and last points are met, so their ramp times are taken there.
 
     Each point's flown time is that of a pass of the track near it, searched in the first stretch
     of samples within ``near_m`` after the previous point's match (so a route that passes a place
@@ -162,9 +177,17 @@ def schedule_errors_s(track: Track, vp, route_t0_s: float, near_m: float) -> np.
     """
     times = np.arange(vp.times_s[0], vp.times_s[-1] + 1e-9, SCHEDULE_STEP_S)
     points = np.stack([np.interp(times, vp.path_times_s, vp.path[:, k]) for k in range(3)], axis=1)
+    due = times
+    if ramp is not None:
+        arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(vp.path, axis=0), axis=1))])
+        done = np.interp(times, vp.path_times_s, arc)
+        cruise = float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0])  # as the lead
+        early = stop_lag_s(np.maximum(done, reached_m), cruise, *ramp)
+        late = stop_lag_s(np.maximum(arc[-1] - done, reached_m), float(vp.speeds_mps[-1]), *ramp)
+        due = times - early + late
     errors = np.full(len(times), np.nan)
     i, last_error = 0, 0.0
-    for k, (point, planned_s) in enumerate(zip(points, times)):
+    for k, (point, planned_s) in enumerate(zip(points, due)):
         d = np.linalg.norm(track.positions[i:] - point, axis=1)
         near = np.flatnonzero(d <= near_m)
         if not len(near):
@@ -220,10 +243,12 @@ def conformance_report(
     route_t0_s: Mapping[int, float] | None = None,
     max_schedule_error_s: float = MAX_SCHEDULE_ERROR_S,
     site: Site | None = None,
+    ramps: Mapping[int, tuple[float, float]] | None = None,
 ) -> list[VehicleReport]:
     """Per-vehicle report; ``failures`` lists every bound broken (empty = passed). ``route_t0_s``:
     sysid -> when its route's time 0 was, on the tracks' clock (None: no schedule is checked);
-    ``site``: the scenario's site, whose area, zones and terrain clearance the route keeps."""
+    ``site``: the scenario's site, whose area, zones and terrain clearance the route keeps;
+    ``ramps``: sysid -> (acceleration, jerk) of a multirotor's speed ramps (schedule_errors_s)."""
     airborne = {}
     for sysid, tr in tracks.items():
         up = tr.positions[:, 2] >= min_airborne_alt_m
@@ -250,8 +275,9 @@ def conformance_report(
         late_s = np.nan
         if route_t0_s is not None:
             route = Track(tr.times_s[window], tr.positions[window])
+            ramp = (ramps or {}).get(vp.sysid) if vp.vehicle_type == "multirotor" else None
             late_s, problem = _schedule_verdict(route, vp, route_t0_s[vp.sysid], max_cross_track_m + accept,
-                                                max_schedule_error_s)  # fmt: skip
+                                                max_schedule_error_s, ramp, accept)  # fmt: skip
             failures += [problem] if problem else []
         clearance = _obstacle_clearance_m(tr.positions, cylinders, hemispheres)
         traffic_m = _traffic_m(tr, traffic, failures)
@@ -305,10 +331,16 @@ def _traffic_m(track: Track, traffic: list[MovingObstacle], failures: list[str])
 
 
 def _schedule_verdict(
-    track: Track, vp, route_t0_s: float, near_m: float, bound_s: float
+    track: Track,
+    vp,
+    route_t0_s: float,
+    near_m: float,
+    bound_s: float,
+    ramp: tuple[float, float] | None,
+    reached_m: float,
 ) -> tuple[float, str]:
     """(worst signed time error, the failure in words or '')."""
-    errors = schedule_errors_s(track, vp, route_t0_s, near_m)
+    errors = schedule_errors_s(track, vp, route_t0_s, near_m, ramp, reached_m)
     missed = int(np.isnan(errors).sum())
     if missed:
         return np.nan, f"route not flown in order: {missed} of {len(errors)} path points never come near"
