@@ -16,23 +16,23 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["closest_under_timing", "closest_under_timing_t"]
+__all__ = ["closest_under_timing", "closest_under_timing_t", "dot3"]
 
 
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Dot products of vectors stored component-first, (3, ...) -> (...), summed x + y + z in order
     (a reduction over a last axis of 3 is several times slower than three products)."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 def _norm(a: np.ndarray) -> np.ndarray:
-    return np.sqrt(_dot(a, a))
+    return np.sqrt(dot3(a, a))
 
 
 def _segment(p: np.ndarray, q: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """Distance from the origin to p + q s, s in [lo, hi]; vectors component-first (3, ...)."""
-    qq = _dot(q, q)
-    s = np.clip(-_dot(p, q) / np.where(qq > 0, qq, 1.0), lo, hi)
+    qq = dot3(q, q)
+    s = np.clip(-dot3(p, q) / np.where(qq > 0, qq, 1.0), lo, hi)
     return _norm(p + s * q)
 
 
@@ -51,7 +51,7 @@ def closest_under_timing_t(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.n
         np.minimum(_segment(d0 - w, u, 0.0, 1.0), _segment(d0 + w, u, 0.0, 1.0)),
         np.minimum(_segment(d0, w, -1.0, 1.0), _segment(d0 + u, w, -1.0, 1.0)),
     )
-    uu, ww, uw, du, dw = _dot(u, u), _dot(w, w), _dot(u, w), _dot(d0, u), _dot(d0, w)
+    uu, ww, uw, du, dw = dot3(u, u), dot3(w, w), dot3(u, w), dot3(d0, u), dot3(d0, w)
     det = uu * ww - uw * uw
     ok = det > 1e-9 * np.maximum(uu * ww, 1e-300)  # u and w not parallel (nor zero)
     safe = np.where(ok, det, 1.0)

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gcs_planner.geometry.timing import closest_under_timing_t
+from gcs_planner.geometry.timing import closest_under_timing_t, dot3
 
 __all__ = ["TIMING_ERROR_S", "Traffic"]
 
@@ -249,14 +249,14 @@ class Traffic:
         b1 = np.where(has_next, self.xyz.take(np.where(nxt >= 0, nxt, j), axis=1), b0)
         d0 = b0 - a0
         dv = (b1 - a1) - d0
-        vv = _dot(dv, dv)
-        tau = np.clip(-_dot(d0, dv) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
+        vv = dot3(dv, dv)
+        tau = np.clip(-dot3(d0, dv) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
         closest = d0 + tau * dv
-        dmin = np.sqrt(_dot(closest, closest))
+        dmin = np.sqrt(dot3(closest, closest))
         need = np.maximum(self.sep[j], sep_m) + margin_m
         if timing_s > 0:  # under any relative schedule error up to timing_s (geometry/timing.py)
             w = (b1 - b0) * (timing_s / self.dt_s)
-            near = dmin - np.sqrt(_dot(w, w)) < need  # a shift by w moves it at most |w|
+            near = dmin - np.sqrt(dot3(w, w)) < need  # a shift by w moves it at most |w|
             dmin[near] = closest_under_timing_t(d0[:, near], dv[:, near], w[:, near])
         short = np.maximum(0.0, need - dmin)
         # summed per particle in the nearest-first order of neighbours(); a pair short of nothing
@@ -266,8 +266,3 @@ class Traffic:
         depth = np.bincount(part[hit], weights=short[hit], minlength=p)
         count = np.bincount(part[hit], weights=(short[hit] > 0).astype(float), minlength=p)
         return depth, count
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Dot products of (3, n) component-first vectors, summed x + y + z in order."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
