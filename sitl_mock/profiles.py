@@ -79,6 +79,9 @@ class FlightRules:
     land_start_needs_autoland: a mission holding DO_LAND_START while parameter RTL_AUTOLAND is 0
         is refused at arming, "PreArm: DO_LAND_START set and RTL_AUTOLAND disable" (ArduPlane SITL,
         docs/real-autopilots.md).
+    landed_disarm_s: after a touchdown the vehicle stays armed this long, then disarms (PX4
+        COM_DISARM_LAND, 2 s by default: PX4 SIH v1.15.4 said "Landing detected" and "Disarmed by
+        landing" 2.0 s apart, docs/real-autopilots.md); ArduPilot disarms on touchdown.
     ramp_params: the names of the waypoint acceleration [m/s^2] and jerk [m/s^3] limits
         (ArduCopter AC_WPNav WP_ACC / WP_JERK, PX4 MPC_ACC_HOR / MPC_JERK_AUTO); the mock serves
         its airframe's acceleration and a jerk it never limits (it ramps linearly), which is
@@ -103,6 +106,7 @@ class FlightRules:
     takeoff_param: str | None = None
     params: dict[str, float] = field(default_factory=dict)
     position_fix_s: float = 0.0
+    landed_disarm_s: float = 0.0
     ramp_params: tuple[str, str] | None = None
 
 
@@ -145,6 +149,7 @@ PX4_FLIGHT = FlightRules(
     streams_by_request=False,
     rejects_position_before_takeoff=True,
     signing_refused_armed=True,
+    landed_disarm_s=2.0,
     ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO"),
 )
 

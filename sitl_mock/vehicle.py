@@ -20,7 +20,7 @@ way of a GCS under test, strict where a GCS must handle the refusal):
   AUTO and the mission runs as soon as the vehicle is armed.
 - Entering AUTO without a mission fails (ArduPilot). NAV_TAKEOFF needs arming and the ground and
   switches to TAKEOFF (plane, PX4) or GUIDED (copter). Disarming in the air needs force (21196).
-- A vehicle disarms itself on touchdown.
+- A vehicle disarms itself on touchdown (PX4 ``FlightRules.landed_disarm_s`` later).
 - Reboot: lists lost unless ``persist_mission``, disarmed on the ground at home, peers forgotten
   (the GCS's next heartbeat reconnects it), time_boot_ms restarts.
 """
@@ -185,6 +185,7 @@ class MockVehicle:
         self._offered: dict[int, int] = {}  # message id -> times the fleet's stream offered it
         self.mission_rejected = False  # PX4 feasibility check failed on the stored mission
         self._armed_at_s = math.inf  # sim time of arming while on the ground
+        self._landed_disarm_at_s = math.inf  # sim time it disarms after a touchdown
         self._modes = self.profile.modes[vehicle_type]
         self._default_mode = next(m for m in ("STABILIZE", "MANUAL") if m in self._modes)
         self.mode = self._default_mode
@@ -346,6 +347,9 @@ class MockVehicle:
             self.send(msg)
         for msg in self.param_server.poll():
             self.send(msg)
+        if self.armed and self._world.sim_time_s >= self._landed_disarm_at_s:
+            self.statustext("Disarmed by landing")
+            self._landed_disarm()
         if self.armed and self._world.sim_time_s - self._armed_at_s >= self.flight.auto_disarm_s:
             running = self.mode == "AUTO" and self._nav.running
             if not running and not self._world.kin.airborne()[self.index]:
@@ -761,13 +765,18 @@ class MockVehicle:
 
     def _on_landed(self) -> None:
         self.statustext("Landed")
+        self._landed_disarm_at_s = self._world.sim_time_s + self.flight.landed_disarm_s
+        if self.flight.landed_disarm_s <= 0.0:
+            self._landed_disarm()
+
+    def _landed_disarm(self) -> None:
         self._disarm()
         if self.flight.final_land_disarms and not self._nav.running:
             self._nav.reset()  # AP_Arming_Copter::disarm resets the mission
             self._emit_progress()
 
     def _disarm(self) -> None:
-        self._armed_at_s = math.inf
+        self._armed_at_s = self._landed_disarm_at_s = math.inf
         self.armed = False
         self._world.armed[self.index] = False
         self._nav.idle()

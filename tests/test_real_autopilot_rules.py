@@ -30,6 +30,8 @@ from gcs_planner.mavlink.preflight import arm_when_ready, request_streams
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.missions.wpl import loads_wpl
 from gcs_planner.planning import load_scenario, plan_scenario
+from gcs_planner.telemetry.reader import frame_msgid, read_flight
+from gcs_planner.wire import codec
 from sitl_mock.flight import AIRFRAMES
 from sitl_mock.l1 import SITL_PLANE
 from sitl_mock.mission_server import Failure
@@ -73,6 +75,17 @@ def test_fly_passes_against_each_autopilots_real_behaviour(scenario, autopilot, 
     assert result.passed, [(r.sysid, r.failures) for r in result.reports]
     assert all(r.completed for r in result.reports)
     assert set(result.end_states.values()) <= {"landed (disarmed)", "holding (mission complete)"}
+
+
+def test_a_flight_ending_in_landings_is_logged_until_they_have_disarmed(tmp_path):
+    """PX4 completes its mission at touchdown and disarms 2 s later (COM_DISARM_LAND): the flight
+    waits for the disarm, so the end line says landed and the log holds each disarmed HEARTBEAT."""
+    result = _fly("straight_4uav.toml", "px4", tmp_path)
+    assert result.end_states == {s: "landed (disarmed)" for s in (1, 2, 3, 4)}, result.end_states
+    flight = read_flight(tmp_path / "flight.mcap")
+    for sysid in (1, 2, 3, 4):
+        beats = [codec.decode(f.data) for f in flight.frames_of(sysid) if frame_msgid(f.data) == 0]
+        assert not beats[-1].base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 
 
 def test_a_failing_fly_leaves_every_vehicle_landed_or_returning_and_says_so(tmp_path):

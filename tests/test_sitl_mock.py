@@ -12,6 +12,7 @@ import time
 import numpy as np
 import pytest
 from child_process import child, group_alive
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from gcs_planner.core.geo import Origin, enu_to_geodetic, geodetic_to_enu
 from gcs_planner.missions.items import plan_to_items
@@ -193,7 +194,8 @@ def test_mission_flown_end_to_end(profile, vehicle_type):
         tolerance = 3.0 if vehicle_type == "multirotor" else 2 * fleet.vehicles[0].airframe.loiter_radius_m
         assert np.hypot(e - last_target[0], n - last_target[1]) < tolerance
         assert abs(gpi.relative_alt) < 200  # on the ground
-        assert not fleet.vehicles[0].state.armed  # disarmed after landing
+        disarmed = gcs.recv("HEARTBEAT", 10.0, lambda m: not m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
+        assert disarmed is not None  # after landing (PX4: 2 s after, COM_DISARM_LAND)
         gcs.close()
 
 
@@ -411,8 +413,6 @@ def test_a_datagram_of_items_is_answered_as_the_autopilot_sends(profile, request
     own (measured on PX4 SITL v1.15.4, AutopilotProfile.frame_per_datagram), ArduPilot sends what
     its buffer holds: the eight requests in one datagram."""
     import socket
-
-    from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
     with (
         MockFleet(count=1, profile=profile, speedup=1.0) as fleet,

@@ -74,6 +74,7 @@ log = logging.getLogger(__name__)
 HEARTBEAT_WAIT_S = 10.0  # simulated vehicles answer at once
 REAL_HEARTBEAT_WAIT_S = 30.0  # real vehicles / SITL started by hand
 END_WAIT_S = 300.0  # after a signal, how long the log waits for the vehicles to land [s flight time]
+LANDING_WAIT_S = 60.0  # after the missions, how long the log waits for final landings [s flight time]
 
 Progress = Callable[[str, float, float], None]  # (stage, done, total); ("wait", sysid, reason)
 
@@ -385,8 +386,13 @@ class Flight:
             self.end_states = await asyncio.shield(safe_end(self.link, self.status, self.quirks))
             if self.signals.received is not None:
                 await self._until_landed()
-        elif self.quirks:  # every mission done: say where each vehicle ended, command nothing
-            self.end_states = {s: _end_state(self.link, s) for s in self.sysids}
+        elif self.quirks:  # every mission done: command nothing, say where each vehicle ended
+            landing = {vp.sysid for vp in self.plan.vehicles if vp.final_action == "land"}
+            try:
+                await self._until_disarmed(landing, LANDING_WAIT_S)
+            except asyncio.CancelledError:  # a signal: they land on their own missions; stop waiting
+                asyncio.current_task().uncancel()
+            self.end_states = {s: _end_state(self.link, s, s in landing) for s in self.sysids}
         if self.end_states:
             states = {str(k): v for k, v in self.end_states.items()}
             self.logger.log_event({"event": "safe_end" if sent_home else "end", "states": states})
@@ -402,14 +408,20 @@ class Flight:
             task.uncancel()  # the signal's cancel is handled: this wait may await again
         log.warning("%s: vehicles sent home; logging until they land (send it again to stop waiting)",
                     self.signals.received.name)  # fmt: skip
-        deadline = now_s() + END_WAIT_S / self.speedup
-        armed = [s for s in self.sysids if _armed(self.link, s)]
-        while armed and now_s() < deadline and not self.signals.hurry.is_set():
-            await asyncio.sleep(0.1)
-            armed = [s for s in armed if _armed(self.link, s)]
+        armed = await self._until_disarmed(self.sysids, END_WAIT_S)
         ended = self.end_states
         self.end_states = {s: what if s in armed else "landed (disarmed)" for s, what in ended.items()}
         self.logger.log_event({"event": "end_wait", "still_armed": armed})
+
+    async def _until_disarmed(self, sysids, wait_s: float) -> list[int]:
+        """Keep logging until the armed ones of ``sysids`` have disarmed (landed), for at most
+        ``wait_s`` of flight time or until a second signal; those still armed."""
+        deadline = now_s() + wait_s / self.speedup
+        armed = [s for s in sysids if _armed(self.link, s)]
+        while armed and now_s() < deadline and not self.signals.hurry.is_set():
+            await asyncio.sleep(0.1)
+            armed = [s for s in armed if _armed(self.link, s)]
+        return armed
 
 
 class _KeptLog:
@@ -444,9 +456,11 @@ def _armed(link: MavlinkLink, sysid: int) -> bool:
     return info is not None and info.armed
 
 
-def _end_state(link: MavlinkLink, sysid: int) -> str:
-    info = link.vehicles.get(sysid)
-    return "holding (mission complete)" if info is not None and info.armed else "landed (disarmed)"
+def _end_state(link: MavlinkLink, sysid: int, lands: bool) -> str:
+    """Where a vehicle whose mission is complete ended; ``lands``: its mission ends in a landing."""
+    if not _armed(link, sysid):
+        return "landed (disarmed)"
+    return "still armed on its final landing (mission complete)" if lands else "holding (mission complete)"
 
 
 def end_summary(end_states: dict[int, str]) -> str:
