@@ -249,8 +249,7 @@ def accel_lead_s(vp, accel_mps2: float, jerk_mps3: float = math.inf, latency_s: 
     """How much earlier than planned a route starts, so that accelerating from the hover puts the
     vehicle where a plan assuming instant cruise speed has it: the time lost on the ramp to cruise
     speed (geometry.ramp), plus the autopilot's latency from MISSION_START to moving."""
-    v = float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0])
-    return ramp_loss_s(v, accel_mps2, jerk_mps3) + latency_s
+    return ramp_loss_s(vp.first_leg_speed_mps, accel_mps2, jerk_mps3) + latency_s
 
 
 async def start_routes(

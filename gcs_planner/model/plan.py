@@ -74,6 +74,11 @@ class VehiclePlan:
                 f" ({len(self.path_times_s)}) must have the same length"
             )
 
+    @property
+    def first_leg_speed_mps(self) -> float:
+        """The speed it leaves its start at [m/s] (the first leg's; a one-point plan's own)."""
+        return float(self.speeds_mps[1] if len(self.speeds_mps) > 1 else self.speeds_mps[0])
+
     def to_dict(self) -> dict:
         frame = {} if self.altitude_frame == "relative" else {"altitude_frame": self.altitude_frame}
         return {

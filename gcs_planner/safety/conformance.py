@@ -181,8 +181,7 @@ def schedule_errors_s(
     if ramp is not None:
         arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(vp.path, axis=0), axis=1))])
         done = np.interp(times, vp.path_times_s, arc)
-        cruise = float(vp.speeds_mps[1] if len(vp.speeds_mps) > 1 else vp.speeds_mps[0])  # as the lead
-        early = stop_lag_s(np.maximum(done, reached_m), cruise, *ramp)
+        early = stop_lag_s(np.maximum(done, reached_m), vp.first_leg_speed_mps, *ramp)
         late = stop_lag_s(np.maximum(arc[-1] - done, reached_m), float(vp.speeds_mps[-1]), *ramp)
         due = times - early + late
     errors = np.full(len(times), np.nan)
