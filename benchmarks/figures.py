@@ -115,10 +115,12 @@ FIGURES: tuple[Figure, ...] = (
             "python benchmarks/upload_cpu.py",
             "python benchmarks/upload_cpu.py --profile ardupilot",
             "python benchmarks/upload_hot_path.py",
+            "python benchmarks/udp_wakeup.py",
         ),
         quick=(
             "python benchmarks/upload_cpu.py --sizes 100 --rounds 1 --reps 2",
             "python benchmarks/upload_hot_path.py --items 100 --runs 2",
+            "python benchmarks/udp_wakeup.py --count 500 --rounds 1",
         ),
         minutes=3,
         needs=("mavsdk",),
