@@ -137,8 +137,8 @@ def main() -> None:
             per[name].append(one_round(name, args.count, args.gap_us * 1e-6))
     floor = statistics.median(per["blocking"])
     print(
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, {platform.processor() or '?'},"
-        f" Python {platform.python_version()}; {args.count} datagrams {args.gap_us:g} us apart,"
+        f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()};"
+        f" {args.count} datagrams {args.gap_us:g} us apart,"
         f" medians of {args.rounds} rounds\n"
     )
     print("| receiver | CPU us per datagram | / blocking |\n|---|---:|---:|")
