@@ -55,6 +55,8 @@ def split(data: bytes | bytearray) -> tuple[list[bytes], int, int]:
 
 def frames(datagram: bytes) -> tuple[list[bytes], int]:
     """The whole frames of one datagram and the number of junk pieces (a cut tail counts)."""
+    if datagram and datagram[0] == _V2 and _frame_length(datagram, 0) == len(datagram):
+        return [datagram], 0  # exactly one MAVLink 2 frame, as PX4 sends every message: no copy
     out, junk, end = split(datagram)
     return out, junk + (end < len(datagram))
 
