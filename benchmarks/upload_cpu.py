@@ -214,7 +214,7 @@ def vehicle(profile: str, sitl: tuple[int, int] | None) -> Iterator[tuple[str, i
 
 
 def table(samples: Samples, floor: bool) -> str:
-    """The markdown table; ``floor``: add the mock's CPU over MAVSDK's wall (docstring above)."""
+    """The markdown table; ``floor``: add the mock's CPU over MAVSDK's wall (the module docstring)."""
     med = statistics.median
     rows = [
         "| items | placement | client | wall ms | wall / MAVSDK | client CPU us/item | CPU / MAVSDK"
