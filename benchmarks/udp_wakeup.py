@@ -20,7 +20,6 @@ import argparse
 import asyncio
 import multiprocessing
 import os
-import platform
 import socket
 import statistics
 import sys
@@ -30,6 +29,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+from results_md import machine_line  # noqa: E402
 
 import gcs_planner.mavlink.mission  # noqa: E402, F401  (the client's imports: its allocator state)
 from gcs_planner.mavlink.transports import UdpProtocol  # noqa: E402
@@ -137,8 +137,7 @@ def main() -> None:
             per[name].append(one_round(name, args.count, args.gap_us * 1e-6))
     floor = statistics.median(per["blocking"])
     print(
-        f"Machine: {platform.machine()}, {os.cpu_count()} CPUs, Python {platform.python_version()};"
-        f" {args.count} datagrams {args.gap_us:g} us apart,"
+        f"Machine: {machine_line()}; {args.count} datagrams {args.gap_us:g} us apart,"
         f" medians of {args.rounds} rounds\n"
     )
     print("| receiver | CPU us per datagram | / blocking |\n|---|---:|---:|")
