@@ -8,8 +8,12 @@ import time
 
 
 def free_port_run(count: int) -> int:
-    """The first of ``count`` consecutive UDP ports on 127.0.0.1 that are free now."""
-    for base in random.Random().sample(range(20000, 60000, 32), 50):
+    """The first of ``count`` consecutive UDP ports on 127.0.0.1 that are free now.
+
+    Drawn below Linux's ephemeral range (32768 up), where the kernel hands out ports to sockets
+    bound to port 0 (a mock fleet's, or another pytest worker's), so only another draw can race it.
+    """
+    for base in random.Random().sample(range(20000, 32768 - 32, 32), 50):
         socks = []
         try:
             for port in range(base, base + count):
