@@ -6,7 +6,7 @@ import numpy as np
 
 from gcs_planner.geometry.obstacles import Obstacles
 from gcs_planner.model.scenario import Cylinder
-from gcs_planner.planning.rrt_star import RRTConfig, rrt_star
+from gcs_planner.planning.rrt_star import RRTConfig, _EdgeCheck, rrt_star
 
 LO, HI = np.array([0.0, -150.0, 20.0]), np.array([400.0, 150.0, 80.0])
 
@@ -79,3 +79,17 @@ def test_reports_no_path_when_goal_is_walled_in():
         RRTConfig(step_m=30, max_iterations=400),
     )
     assert res.path is None and res.iterations == 400
+
+
+def test_the_near_set_check_is_the_edge_check_for_points_in_the_band():
+    """RRT*'s per-iteration check of its near set (``star``) answers as the general edge check, edge
+    for edge, for segments that clear the wall's towers, graze them, cross them or pass a gap."""
+    check = _EdgeCheck(_wall(), (LO[2], HI[2]), 2.0)
+    rng = np.random.default_rng(3)
+    nodes = LO + (HI - LO) * rng.random((400, 3))
+    answers = []
+    for p in LO + (HI - LO) * rng.random((60, 3)):
+        star = check.star(nodes, p)
+        assert np.array_equal(star, check(nodes, np.broadcast_to(p, nodes.shape)))
+        answers.append(star)
+    assert 0.05 < np.mean(answers) < 0.95  # both answers are exercised

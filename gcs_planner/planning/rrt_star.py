@@ -106,6 +106,29 @@ class _EdgeCheck:
         d = self.obs.cylinder_distances_pairs(np.broadcast_to(a, (m, 3)), np.broadcast_to(b, (m, 3)), cand)
         return np.bool_(np.all(d > self.need[cand]))
 
+    def star(self, nodes: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """``self(nodes, p)`` for tree nodes (m, 3) and one point p (3,), all in the band (each is
+        the end of a valid edge or the start): the band is not checked again, and one point's
+        bounds need no broadcasting. RRT* asks this once an iteration (its near set)."""
+        if len(self.obs.dome_radius_m):
+            return self(nodes, np.broadcast_to(p, nodes.shape))
+        ok = np.ones(len(nodes), dtype=bool)
+        px, py = float(p[0]), float(p[1])
+        x, y = nodes[:, :1], nodes[:, 1:2]
+        cand = (
+            (self.x_above > np.minimum(x, px))
+            & (self.x_below < np.maximum(x, px))
+            & (self.y_above > np.minimum(y, py))
+            & (self.y_below < np.maximum(y, py))
+        )
+        edge, cyl = np.nonzero(cand)
+        if len(edge):
+            a = nodes[edge]
+            d = self.obs.cylinder_distances_pairs(a, np.broadcast_to(p, a.shape), cyl)
+            blocked = ~(d > self.need[cyl])
+            ok[edge[blocked]] = False
+        return ok
+
     def _clear_of_cylinders(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """True (...) where segments a -> b clear every cylinder's radius + buffer + margin."""
         a, b = np.broadcast_arrays(a, b)
@@ -149,14 +172,17 @@ def rrt_star(
     cost = np.zeros(n_max)
     nodes[0] = start
     n = 1
-    volume = float(np.prod(np.maximum(box_hi - box_lo, 1.0)))
+    span = box_hi - box_lo
+    volume = float(np.prod(np.maximum(span, 1.0)))
     gamma = 2.0 * (1.0 + 1.0 / 3.0) ** (1.0 / 3.0) * (volume / (4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
     first_hit = None
     it = 0
     for it in range(1, cfg.max_iterations + 1):
         if first_hit is not None and it - first_hit >= cfg.extra_iterations:
             break
-        target = goal if rng.random() < cfg.goal_bias else rng.uniform(box_lo, box_hi)
+        # box_lo + span * U is rng.uniform(box_lo, box_hi)'s arithmetic on the same draws, at a
+        # seventh of its per-call cost (13 against 1.8 us)
+        target = goal if rng.random() < cfg.goal_bias else box_lo + span * rng.random(3)
         near_i = _nearest(nodes[:n], target)
         d = target - nodes[near_i]
         dist = _length(d)
@@ -169,7 +195,7 @@ def rrt_star(
         inside[near_i] = True  # the nearest node is always a candidate parent
         near = np.flatnonzero(inside)
         seg = dist_all[near]
-        ok = valid(nodes[near], np.broadcast_to(new, (len(near), 3)))
+        ok = valid.star(nodes[near], new)
         through = np.where(ok, cost[near] + seg, np.inf)
         best = int(np.argmin(through))
         k = n
