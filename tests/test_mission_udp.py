@@ -185,7 +185,9 @@ def test_missing_request_is_pushed_ahead_long_before_the_vehicle_would_cancel():
             fleet.set_mission_failure(1, Failure.WRITE_REQUEST1_NO_RESPONSE)
             items = mission(6)
             result = await MissionClient(link, 1, timing=Timing(window=1)).upload(items)
-            assert result.elapsed_s < 1.0 and result.stats.sent["MISSION_ITEM_INT"] == 7
+            # before the 1.5 s MISSION_COUNT deadline the waiting loop was armed at (push timeouts
+            # are 0.5 s at most): a busy machine's scheduling delays fit in the difference
+            assert result.elapsed_s < 1.5 and result.stats.sent["MISSION_ITEM_INT"] == 7
             server = fleet.vehicle(1).mission_server
             assert server.items()[1:] == [server.storage(i) for i in items[1:]]
             await link.close()
