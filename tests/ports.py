@@ -28,6 +28,13 @@ def free_port_run(count: int) -> int:
     raise RuntimeError("no free port run")
 
 
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 the kernel has just given out and taken back (free now)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def frames_from_a_gcs(vehicle: socket.socket, wait_s: float = 0.2) -> list[str]:
     """The MAVLink messages from a ground station (sysid 255) that reach ``vehicle`` within ``wait_s``.
 

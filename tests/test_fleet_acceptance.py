@@ -4,10 +4,10 @@ sending to one GCS port, one over TCP, fly a priority-swarm plan and pass in spa
 
 from __future__ import annotations
 
-import socket
 from pathlib import Path
 
 import pytest
+from ports import free_udp_port
 
 from gcs_planner.cli import main
 from gcs_planner.flight.starts import starts
@@ -33,12 +33,6 @@ max_alt_m = 120.0
 separation_m = 8.0
 priority = 1.0
 """
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_three_px4_and_three_arducopters_on_ports_a_shared_port_and_tcp_pass_in_space_and_time(

@@ -9,11 +9,11 @@
 from __future__ import annotations
 
 import asyncio
-import socket
 import threading
 from dataclasses import replace
 
 import pytest
+from ports import free_udp_port
 
 mavsdk = pytest.importorskip("mavsdk")
 from mavsdk import ComponentType, Configuration, Mavsdk, log_subscribe  # noqa: E402
@@ -32,12 +32,6 @@ from gcs_planner.wire.types import MissionItem  # noqa: E402
 ORIGIN = Origin(47.397742, 8.545594, 488.0)
 
 log_subscribe(lambda *args: True)  # keep MAVSDK's console logging out of test output
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def vehicle_plan(n: int = 8, **kw) -> VehiclePlan:
