@@ -180,8 +180,7 @@ def rrt_star(
     for it in range(1, cfg.max_iterations + 1):
         if first_hit is not None and it - first_hit >= cfg.extra_iterations:
             break
-        # box_lo + span * U is rng.uniform(box_lo, box_hi)'s arithmetic on the same draws, at a
-        # seventh of its per-call cost (13 against 1.8 us)
+        # rng.uniform(box_lo, box_hi)'s arithmetic on the same draws, without its per-call dispatch
         target = goal if rng.random() < cfg.goal_bias else box_lo + span * rng.random(3)
         near_i = _nearest(nodes[:n], target)
         d = target - nodes[near_i]
