@@ -112,22 +112,10 @@ class _EdgeCheck:
         bounds need no broadcasting. RRT* asks this once an iteration (its near set)."""
         if len(self.obs.dome_radius_m):
             return self(nodes, np.broadcast_to(p, nodes.shape))
-        ok = np.ones(len(nodes), dtype=bool)
         px, py = float(p[0]), float(p[1])
         x, y = nodes[:, :1], nodes[:, 1:2]
-        cand = (
-            (self.x_above > np.minimum(x, px))
-            & (self.x_below < np.maximum(x, px))
-            & (self.y_above > np.minimum(y, py))
-            & (self.y_below < np.maximum(y, py))
-        )
-        edge, cyl = np.nonzero(cand)
-        if len(edge):
-            a = nodes[edge]
-            d = self.obs.cylinder_distances_pairs(a, np.broadcast_to(p, a.shape), cyl)
-            blocked = ~(d > self.need[cyl])
-            ok[edge[blocked]] = False
-        return ok
+        box = np.minimum(x, px), np.maximum(x, px), np.minimum(y, py), np.maximum(y, py)
+        return self._clear_in_boxes(nodes, np.broadcast_to(p, nodes.shape), *box)
 
     def _clear_of_cylinders(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         """True (...) where segments a -> b clear every cylinder's radius + buffer + margin."""
@@ -135,18 +123,18 @@ class _EdgeCheck:
         shape = a.shape[:-1]
         a, b = a.reshape(-1, 3), b.reshape(-1, 3)
         lo, hi = np.minimum(a, b), np.maximum(a, b)
-        cand = (
-            (self.x_above > lo[:, :1])
-            & (self.x_below < hi[:, :1])
-            & (self.y_above > lo[:, 1:2])
-            & (self.y_below < hi[:, 1:2])
-        )
+        return self._clear_in_boxes(a, b, lo[:, :1], hi[:, :1], lo[:, 1:2], hi[:, 1:2]).reshape(shape)
+
+    def _clear_in_boxes(self, a, b, x_lo, x_hi, y_lo, y_hi) -> np.ndarray:
+        """True (m,) where segments a -> b (m, 3), with xy bounding boxes (m, 1) each, clear every
+        cylinder: exact distances only for the cylinders whose reach meets a segment's box."""
+        cand = (self.x_above > x_lo) & (self.x_below < x_hi) & (self.y_above > y_lo) & (self.y_below < y_hi)
         edge, cyl = np.nonzero(cand)
         ok = np.ones(len(a), dtype=bool)
         if len(edge):
             blocked = ~(self.obs.cylinder_distances_pairs(a[edge], b[edge], cyl) > self.need[cyl])
             ok[edge[blocked]] = False
-        return ok.reshape(shape)
+        return ok
 
 
 def rrt_star(
