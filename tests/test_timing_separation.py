@@ -114,6 +114,49 @@ def test_hashed_traffic_finds_the_four_nearest_of_a_brute_force_search():
         assert list(zip(row.tolist(), j.tolist())) == expect
 
 
+@pytest.mark.parametrize("timing_s", [0.0, 0.75])
+def test_compiled_violations_sum_what_a_pair_by_pair_computation_does(timing_s):
+    """Traffic.violations (a compiled chain walk) against the model written out pair by pair: the
+    four nearest same-slice traffic samples of each valid particle sample, their closest approach
+    over the slice under the timing error (geometry/timing.py), the shortfall summed per particle."""
+    rng = np.random.default_rng(2)
+    traffic, uavs = Traffic(DT, cell_m=30.0), []
+    for _ in range(40):
+        k0 = int(rng.integers(0, 20))
+        k = np.arange(k0, k0 + int(rng.integers(10, 50)))
+        pos = rng.uniform([-25, -25, 28], [25, 25, 32], 3) + np.cumsum(rng.normal(size=(len(k), 3)) * 2, 0)
+        sep = float(rng.uniform(3.0, 8.0))
+        traffic.add(k, pos, sep, SPEED)
+        uavs.append((k, pos, sep))
+    slices = np.arange(5, 45)
+    pos = rng.uniform([-25, -25, 28], [25, 25, 32], (6, 1, 3)) + np.cumsum(rng.normal(size=(6, 40, 3)) * 2, 1)
+    valid = rng.random((6, 40)) < 0.9
+    radius = max(u[2] for u in uavs) + 2.0 + timing_s * SPEED + 2.0 * SPEED * DT
+    depth, count = traffic.violations(slices, pos, valid, 5.0, 2.0, timing_s)
+    want_depth, want_count, crowded = np.zeros(6), np.zeros(6), 0
+    for p, i in zip(*np.nonzero(valid)):
+        near = []  # (distance, uav, index in its samples)
+        for u, (k, tp, _) in enumerate(uavs):
+            at = np.flatnonzero(k == slices[i])
+            if len(at) and np.linalg.norm(tp[at[0]] - pos[p, i]) < radius:
+                near.append((np.linalg.norm(tp[at[0]] - pos[p, i]), u, at[0]))
+        crowded += len(near) > 4
+        for _, u, at in sorted(near)[:4]:
+            k, tp, sep = uavs[u]
+            both = i + 1 < 40 and valid[p, i + 1] and at + 1 < len(k)
+            a0, b0 = pos[p, i], tp[at]
+            a1, b1 = (pos[p, i + 1], tp[at + 1]) if both else (a0, b0)
+            d0 = b0 - a0
+            miss = closest_under_timing(d0, (b1 - a1) - d0, (b1 - b0) * timing_s / DT)
+            short = max(sep, 5.0) + 2.0 - miss
+            if short > 0:
+                want_depth[p] += short
+                want_count[p] += 1
+    assert want_count.sum() > 10 and crowded > 10  # the draw has conflicts, and more than four near
+    assert np.array_equal(count, want_count)
+    np.testing.assert_allclose(depth, want_depth, rtol=1e-9, atol=1e-9)
+
+
 def _crossing_scenario(timing_s: float) -> tuple[Scenario, priority_swarm.Config]:
     """Two UAVs whose straight routes cross at the same place and time."""
     base = dict(type="multirotor", speed_mps=SPEED, turn_radius_m=20.0, min_alt_m=40.0, max_alt_m=60.0,

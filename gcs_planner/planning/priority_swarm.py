@@ -73,6 +73,7 @@ from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 from msgspec import Meta
+from numba import njit
 from scipy.spatial import cKDTree
 
 from gcs_planner.core.config import Count, Distance, Fraction, NonNegative, PositiveDistance
@@ -242,43 +243,40 @@ def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
     position is integrated from the segment's start (dubins.advance's formulas; the sine and cosine
     of a segment's start heading are computed once per segment, the end heading's only on arcs).
     """
-    p, k = s.shape
-    n_leg = dec.lh.shape[1]
-    s = np.clip(s, 0.0, dec.total[:, None])
-    leg = np.zeros(s.shape, dtype=np.intp)  # legs ended before s, one junction at a time (a
-    for c in dec.cum[:, 1:-1].T:  # reduction over a short last axis is slow)
-        leg += s > c[:, None]
-    np.minimum(leg, n_leg - 1, out=leg)
-    rows = np.arange(p)[:, None]
-    flat = leg + rows * n_leg  # leg index into (P, W-1) arrays
-    node = flat + rows  # its first waypoint's index into (P, W) arrays
-    l3 = dec.l3.take(flat)
-    f = np.where(l3 > 0, (s - dec.cum.take(node)) / np.where(l3 > 0, l3, 1.0), 0.0)
-    pz = dec.pts[..., 2]
-    z0 = pz.take(node)
-    out = np.empty((p, k, 3))
-    out[..., 2] = z0 + f * (pz.take(node + 1) - z0)
-    sh = (f * dec.lh.take(flat)).ravel()
-    flat = flat.ravel()
-    x0, y0, h0, sin0, cos0, kappa, e0, e1, e2 = dec.segments
-    e0, e1 = e0.take(flat), e1.take(flat)
-    np.minimum(sh, e2.take(flat), out=sh)
-    after0, after1 = sh > e0, sh > e1
-    seg = flat * 3 + after0 + after1
-    ds = sh - np.where(after0, np.where(after1, e1, e0), 0.0)
-    sin_h, cos_h = sin0.take(seg), cos0.take(seg)
-    x = x0.take(seg) + ds * cos_h  # straight segments
-    y = y0.take(seg) + ds * sin_h
-    arc = np.flatnonzero(kappa.take(seg) != 0.0)
-    if len(arc):
-        on = seg.take(arc)
-        kap = kappa.take(on)
-        h = h0.take(on) + kap * ds.take(arc)
-        x[arc] = x0.take(on) + (np.sin(h) - sin_h.take(arc)) / kap
-        y[arc] = y0.take(on) - (np.cos(h) - cos_h.take(arc)) / kap
-    out[..., 0] = x.reshape(p, k)
-    out[..., 1] = y.reshape(p, k)
+    out = np.empty((*s.shape, 3))
+    _positions(dec.cum, dec.l3, dec.lh, dec.pts[..., 2], dec.segments, np.asarray(s, dtype=float), out)
     return out
+
+
+@njit(cache=True)
+def _positions(cum, l3, lh, pz, segments, s, out) -> None:
+    """``positions_at_length`` into ``out``, one sample at a time (compiled: the vectorised form
+    spent most of its time on temporaries)."""
+    x0, y0, h0, sin0, cos0, kappa, e0, e1, e2 = segments
+    n_leg = l3.shape[1]
+    for p in range(s.shape[0]):
+        for i in range(s.shape[1]):
+            si = min(max(s[p, i], 0.0), cum[p, -1])
+            leg = 0  # legs ended before si
+            while leg < n_leg - 1 and si > cum[p, leg + 1]:
+                leg += 1
+            f = (si - cum[p, leg]) / l3[p, leg] if l3[p, leg] > 0 else 0.0
+            out[p, i, 2] = pz[p, leg] + f * (pz[p, leg + 1] - pz[p, leg])
+            at = p * n_leg + leg  # the leg's three segments: at * 3 + 0, 1, 2
+            sh = min(f * lh[p, leg], e2[at])
+            seg, ds = at * 3, sh
+            if sh > e1[at]:
+                seg, ds = seg + 2, sh - e1[at]
+            elif sh > e0[at]:
+                seg, ds = seg + 1, sh - e0[at]
+            kap = kappa[seg]
+            if kap == 0.0:
+                out[p, i, 0] = x0[seg] + ds * cos0[seg]
+                out[p, i, 1] = y0[seg] + ds * sin0[seg]
+            else:
+                h = h0[seg] + kap * ds
+                out[p, i, 0] = x0[seg] + (np.sin(h) - sin0[seg]) / kap
+                out[p, i, 1] = y0[seg] - (np.cos(h) - cos0[seg]) / kap
 
 
 @dataclass(frozen=True)

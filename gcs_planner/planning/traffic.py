@@ -17,14 +17,18 @@ one cell its own point lies in (one random read per query). The table is laid ou
 cell's slices are adjacent), so the consecutive slices of one path read nearby memory. Adding
 UAVs is one vectorised insertion, with no rebuild of what is there. At most the four nearest
 traffic samples within reach count per particle sample, nearest first, as a k = 4 nearest-
-neighbour query would return them; the pairs are sorted only where a query has more than four.
+neighbour query would return them.
+
+The look-up and the separation check are compiled (numba): one pass per particle sample walks its
+cell's chain and keeps the nearest four, where numpy passes over every candidate pair spent most of
+their time on temporaries. Their arithmetic is the vectorised code's term for term (no fused
+multiply-adds, sums in the same order), so plans stayed the same bit for bit.
 """
 
 from __future__ import annotations
 
 import numpy as np
-
-from gcs_planner.geometry.timing import closest_under_timing_t, dot3
+from numba import njit
 
 __all__ = ["TIMING_ERROR_S", "Traffic"]
 
@@ -38,6 +42,7 @@ _NEAREST = 4  # traffic samples counted per particle sample
 _EMPTY = np.zeros(0, dtype=np.int64)
 
 
+@njit(cache=True)
 def _block(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
     """Table block of an (x cell, y cell)."""
     mask = (1 << _CELL_BITS) - 1
@@ -51,7 +56,7 @@ class Traffic:
         self.dt_s, self.cell_m = dt_s, cell_m
         self.reach_m = 0.5 * cell_m  # the half-width of the square each sample is entered for
         self.n = 0
-        self.xyz = np.zeros((3, 0))  # sample positions, component-first
+        self.xyz = np.zeros((0, 3))  # sample positions
         self.slice = _EMPTY
         self.sep = np.zeros(0)
         self.next = _EMPTY  # the same vehicle's sample at the next slice (-1 at its last)
@@ -72,7 +77,7 @@ class Traffic:
         if self.n + extra <= cap:
             return
         new = max(2 * cap, self.n + extra, 1024)
-        self.xyz = np.concatenate([self.xyz, np.zeros((3, new - cap))], axis=1)
+        self.xyz = np.concatenate([self.xyz, np.zeros((new - cap, 3))])
         self.slice, self.next = (
             np.concatenate([a, np.full(new - cap, -1, dtype=np.int64)]) for a in (self.slice, self.next)
         )
@@ -116,7 +121,7 @@ class Traffic:
         self._grow(k)
         self._grow_slices(int(slices.max()) + 1)
         idx = np.arange(self.n, self.n + k)
-        self.xyz[:, idx] = pos.T
+        self.xyz[idx] = pos
         self.slice[idx] = slices
         self.sep[idx] = np.repeat([u[2] for u in uavs], sizes)
         self.next[idx] = idx + 1
@@ -147,68 +152,20 @@ class Traffic:
         self.v_max = max(self.v_max, *(u[3] for u in uavs))
         self.sep_max = max(self.sep_max, *(u[2] for u in uavs))
 
+    def _query(self, radius_m: float) -> tuple:
+        """The hash table and the cells a query within ``radius_m`` reads, as ``_nearest`` takes them."""
+        extra = max(radius_m - self.reach_m, 0.0)  # beyond what a sample's entries cover
+        span = int(np.ceil(2.0 * extra / self.cell_m)) + 1 if extra > 0 else 1
+        return self.head, self.entries, self.xyz, self.slices, self.cell_m, extra, span, radius_m**2
+
     def neighbours(
         self, slices: np.ndarray, pos: np.ndarray, radius_m: float
     ) -> tuple[np.ndarray, np.ndarray]:
         """Pairs (query row, traffic sample) of the same slice closer than ``radius_m``: the
         ``_NEAREST`` nearest per query, ordered by query then distance (then sample). slices (Q,),
         pos (Q, 3)."""
-        row, j, d2 = self._near_pairs(slices, pos, radius_m)
-        order = np.lexsort((j, d2, row))
-        return row[order], j[order]
-
-    def _near_pairs(
-        self, slices: np.ndarray, pos: np.ndarray, radius_m: float
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``neighbours``' pairs and squared distances, in no particular order: only a query with
-        more than ``_NEAREST`` pairs needs its pairs sorted."""
-        extra = max(radius_m - self.reach_m, 0.0)  # beyond what a sample's entries cover
-        span = int(np.ceil(2.0 * extra / self.cell_m)) + 1 if extra > 0 else 1
-        cx, cy = self._cells(pos[:, :2] - extra)
-        inside = np.flatnonzero((slices >= 0) & (slices < self.slices))  # no traffic after its last slice
-        cx, cy, sl = cx[inside], cy[inside], slices[inside]
-        if span == 1:
-            q = inside
-            cand = self.head[_block(cx, cy) * self.slices + sl]
-        else:
-            off = np.arange(span)
-            ox, oy = (o.ravel() for o in np.meshgrid(off, off, indexing="ij"))
-            key = _block(cx[:, None] + ox, cy[:, None] + oy) * self.slices + sl[:, None]
-            cand = self.head[key.ravel()]
-            q = np.repeat(inside, len(ox))
-        rows, samples = [], []
-        while len(q):
-            live = cand >= 0
-            q, cand = q[live], cand[live]
-            rows.append(q)
-            entry = self.entries.take(cand)
-            samples.append(entry >> 32)
-            cand = entry << 32 >> 32
-        if not rows:
-            return _EMPTY, _EMPTY, np.zeros(0)
-        row, j = np.concatenate(rows), np.concatenate(samples)
-        x, y, z = self.xyz
-        q = pos.take(row, axis=0)
-        d2 = (x.take(j) - q[:, 0]) ** 2 + (y.take(j) - q[:, 1]) ** 2
-        d2 += (z.take(j) - q[:, 2]) ** 2
-        near = d2 < radius_m**2
-        row, j, d2 = row[near], j[near], d2[near]
-        if span > 1:  # a sample entered in several of the cells read: sort, drop the repeats
-            order = np.lexsort((j, d2, row))
-            row, j, d2 = row[order], j[order], d2[order]
-            fresh = np.ones(len(row), dtype=bool)
-            fresh[1:] = (row[1:] != row[:-1]) | (j[1:] != j[:-1])
-            row, j, d2 = row[fresh], j[fresh], d2[fresh]
-        crowded = np.flatnonzero(np.bincount(row, minlength=len(pos))[row] > _NEAREST)
-        if not len(crowded):
-            return row, j, d2
-        order = crowded[
-            np.lexsort((j[crowded], d2[crowded], row[crowded]))
-        ]  # the crowded queries, nearest first
-        ranked = row[order]
-        keep = np.ones(len(row), dtype=bool)
-        keep[order[np.arange(len(order)) - np.searchsorted(ranked, ranked) >= _NEAREST]] = False
-        return row[keep], j[keep], d2[keep]
+        slices = np.asarray(slices, dtype=np.int64)
+        return _all_nearest(self._query(radius_m), slices, np.asarray(pos, dtype=float))
 
     def violations(
         self,
@@ -224,45 +181,150 @@ class Traffic:
         slices (K,), pos (P, K, 3), valid (P, K): the particle samples on the grid; the margin is
         ``margin_m`` beyond the separation under any relative schedule error up to ``timing_s``.
         """
-        p, k, _ = pos.shape
-        zero = np.zeros(p)
-        idx = np.flatnonzero(valid.ravel())
-        if not self.n or not len(idx):
-            return zero, zero.copy()
-        v_max = max(self.v_max, 1e-6)
-        radius = max(self.sep_max, sep_m) + margin_m + timing_s * v_max + 2.0 * v_max * self.dt_s
-        flat_pos = pos.reshape(-1, 3)
-        # take: several times faster than fancy indexing for rows of a 2-D array (the method, not
-        # np.take: no dispatch on a path called ~900,000 times a plan)
-        row, j, d2 = self._near_pairs(np.tile(slices, p)[idx], flat_pos.take(idx, axis=0), radius)
-        if not len(row):
-            return zero, zero.copy()
-        # vectors component-first (3, pairs): a reduction over a last axis of 3 is slow
-        flat = idx[row]  # particle sample = particle * k + slice offset
-        part = flat // k
-        nxt = self.next[j]
-        after = np.minimum(flat + 1, len(flat_pos) - 1)
-        has_next = (flat - part * k + 1 < k) & valid.ravel()[after] & (nxt >= 0)
-        a0 = flat_pos.take(flat, axis=0).T
-        b0 = self.xyz.take(j, axis=1)
-        a1 = np.where(has_next, flat_pos.take(after, axis=0).T, a0)
-        b1 = np.where(has_next, self.xyz.take(np.where(nxt >= 0, nxt, j), axis=1), b0)
-        d0 = b0 - a0
-        dv = (b1 - a1) - d0
-        vv = dot3(dv, dv)
-        tau = np.clip(-dot3(d0, dv) / np.where(vv > 0, vv, 1.0), 0.0, 1.0)
-        closest = d0 + tau * dv
-        dmin = np.sqrt(dot3(closest, closest))
-        need = np.maximum(self.sep[j], sep_m) + margin_m
-        if timing_s > 0:  # under any relative schedule error up to timing_s (geometry/timing.py)
-            w = (b1 - b0) * (timing_s / self.dt_s)
-            near = dmin - np.sqrt(dot3(w, w)) < need  # a shift by w moves it at most |w|
-            dmin[near] = closest_under_timing_t(d0[:, near], dv[:, near], w[:, near])
-        short = np.maximum(0.0, need - dmin)
-        # summed per particle in the nearest-first order of neighbours(); a pair short of nothing
-        # adds 0 to its sum, so only the others need that order
-        hit = np.flatnonzero(short != 0.0)
-        hit = hit[np.lexsort((j[hit], d2[hit], row[hit]))]
-        depth = np.bincount(part[hit], weights=short[hit], minlength=p)
-        count = np.bincount(part[hit], weights=(short[hit] > 0).astype(float), minlength=p)
+        depth, count = np.zeros(len(pos)), np.zeros(len(pos))
+        if self.n:
+            v_max = max(self.v_max, 1e-6)
+            radius = max(self.sep_max, sep_m) + margin_m + timing_s * v_max + 2.0 * v_max * self.dt_s
+            limits = (float(sep_m), float(margin_m), timing_s / self.dt_s)
+            table = self._query(radius)
+            _violations(table, self.next, self.sep, np.asarray(slices, dtype=np.int64), pos, valid, limits,
+                        depth, count)  # fmt: skip
         return depth, count
+
+
+@njit(cache=True)
+def _nearest(table: tuple, sl: int, q: tuple, js: np.ndarray, d2s: np.ndarray) -> int:
+    """The ``_NEAREST`` traffic samples of slice ``sl`` within reach of point ``q``, nearest first
+    (then by sample), into ``js`` / ``d2s``; returns how many."""
+    head, entries, xyz, n_slices, cell_m, extra, span, r2 = table
+    if sl < 0 or sl >= n_slices:  # no traffic after its last slice
+        return 0
+    cx0 = np.int64(np.floor((q[0] - extra) / cell_m))
+    cy0 = np.int64(np.floor((q[1] - extra) / cell_m))
+    n = 0
+    for ox in range(span):
+        for oy in range(span):
+            e = np.int64(head[_block(cx0 + ox, cy0 + oy) * n_slices + sl])
+            while e >= 0:
+                j = entries[e] >> 32
+                e = entries[e] << 32 >> 32
+                d2 = (xyz[j, 0] - q[0]) ** 2 + (xyz[j, 1] - q[1]) ** 2
+                d2 += (xyz[j, 2] - q[2]) ** 2
+                if d2 >= r2 or j in js[:n]:  # out of reach, or met in another cell already
+                    continue
+                at = n
+                while at > 0 and (d2s[at - 1] > d2 or (d2s[at - 1] == d2 and js[at - 1] > j)):
+                    at -= 1
+                if at == _NEAREST:
+                    continue
+                n = min(n + 1, _NEAREST)
+                for m in range(n - 1, at, -1):  # the farther ones move down, the last one out
+                    js[m], d2s[m] = js[m - 1], d2s[m - 1]
+                js[at], d2s[at] = j, d2
+    return n
+
+
+@njit(cache=True)
+def _all_nearest(table: tuple, slices: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``Traffic.neighbours``: every query's ``_nearest`` as (query row, sample) pairs."""
+    rows = np.empty(len(slices) * _NEAREST, dtype=np.int64)
+    samples = np.empty_like(rows)
+    js, d2s = np.empty(_NEAREST, dtype=np.int64), np.empty(_NEAREST)
+    m = 0
+    for r in range(len(slices)):
+        n = _nearest(table, slices[r], (pos[r, 0], pos[r, 1], pos[r, 2]), js, d2s)
+        rows[m : m + n] = r
+        samples[m : m + n] = js[:n]
+        m += n
+    return rows[:m], samples[:m]
+
+
+@njit(cache=True)
+def _violations(table, nxt, sep, slices, pos, valid, limits, depth, count) -> None:
+    """``Traffic.violations`` into ``depth`` / ``count`` (P,): for each valid particle sample, its
+    nearest traffic samples' closest approach over the slice (both moving linearly to their next
+    samples), under the timing error where ``shift`` (= timing_s / dt_s) > 0, short of the need."""
+    sep_m, margin_m, shift = limits
+    xyz = table[2]
+    n_part, k, _ = pos.shape
+    js, d2s = np.empty(_NEAREST, dtype=np.int64), np.empty(_NEAREST)
+    for p in range(n_part):
+        for i in range(k):
+            if not valid[p, i]:
+                continue
+            a0 = (pos[p, i, 0], pos[p, i, 1], pos[p, i, 2])
+            n = _nearest(table, slices[i], a0, js, d2s)
+            follows = i + 1 < k and valid[p, i + 1]
+            for m in range(n):  # nearest first: the order of the sums is the vectorised one's
+                j = js[m]
+                b0 = (xyz[j, 0], xyz[j, 1], xyz[j, 2])
+                a1, b1 = a0, b0
+                if follows and nxt[j] >= 0:
+                    a1 = (pos[p, i + 1, 0], pos[p, i + 1, 1], pos[p, i + 1, 2])
+                    b1 = (xyz[nxt[j], 0], xyz[nxt[j], 1], xyz[nxt[j], 2])
+                d0 = _sub(b0, a0)
+                dv = _sub(_sub(b1, a1), d0)
+                dmin = _closest(d0, dv, 0.0, 1.0)
+                need = max(sep[j], sep_m) + margin_m
+                if shift > 0:  # under any relative schedule error up to timing_s (geometry/timing.py)
+                    w = _scale(_sub(b1, b0), shift)
+                    if dmin - np.sqrt(_dot(w, w)) < need:  # a shift by w moves it at most |w|
+                        dmin = _closest_under_timing(d0, dv, w)
+                short = max(0.0, need - dmin)
+                if short > 0.0:
+                    depth[p] += short
+                    count[p] += 1.0
+
+
+@njit(cache=True)
+def _dot(a: tuple, b: tuple) -> float:
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _add(a: tuple, b: tuple) -> tuple:
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit(cache=True)
+def _sub(a: tuple, b: tuple) -> tuple:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True)
+def _scale(a: tuple, s: float) -> tuple:
+    return (a[0] * s, a[1] * s, a[2] * s)
+
+
+@njit(cache=True)
+def _along(p: tuple, s: float, q: tuple) -> tuple:
+    """p + s q."""
+    return (p[0] + s * q[0], p[1] + s * q[1], p[2] + s * q[2])
+
+
+@njit(cache=True)
+def _closest(p: tuple, q: tuple, lo: float, hi: float) -> float:
+    """Distance from the origin to p + q s, s in [lo, hi] (geometry/timing.py's ``_segment``)."""
+    qq = _dot(q, q)
+    s = min(max(-_dot(p, q) / (qq if qq > 0 else 1.0), lo), hi)
+    c = _along(p, s, q)
+    return np.sqrt(_dot(c, c))
+
+
+@njit(cache=True)
+def _closest_under_timing(d0: tuple, u: tuple, w: tuple) -> float:
+    """geometry/timing.py's ``closest_under_timing`` of one pair, in its arithmetic."""
+    edges = min(
+        min(_closest(_sub(d0, w), u, 0.0, 1.0), _closest(_add(d0, w), u, 0.0, 1.0)),
+        min(_closest(d0, w, -1.0, 1.0), _closest(_add(d0, u), w, -1.0, 1.0)),
+    )
+    uu, ww, uw, du, dw = _dot(u, u), _dot(w, w), _dot(u, w), _dot(d0, u), _dot(d0, w)
+    det = uu * ww - uw * uw
+    if not det > 1e-9 * max(uu * ww, 1e-300):  # u and w parallel (or zero)
+        return edges
+    s = (-du * ww + dw * uw) / det
+    e = (-dw * uu + du * uw) / det
+    if not (0.0 <= s <= 1.0 and -1.0 <= e <= 1.0):
+        return edges
+    c = _along(_along(d0, s, u), e, w)
+    return min(np.sqrt(_dot(c, c)), edges)
