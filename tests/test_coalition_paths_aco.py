@@ -9,7 +9,6 @@ import msgspec
 import numpy as np
 import pytest
 
-from gcs_planner.geometry import dubins
 from gcs_planner.geometry.dubins import (
     WORDS,
     DubinsPath,
@@ -225,8 +224,6 @@ def test_word_lengths_of_a_batch_equal_row_by_row_calls():
     rows = np.array([word_lengths(a, b, x, y)[0] for a, b, x, y in zip(q0, q1, r0, r1)])
     np.testing.assert_array_equal(batch, rows)
     assert np.isinf(batch).any() and np.isfinite(batch).any()
-    # from 32 problems on, CCC words are computed only where the circles are close enough
-    assert len(q0) >= dubins._CCC_SUBSET_MIN
     ccc = batch[:, 4:].sum(2)
     assert np.isfinite(ccc).any(1).any() and (~np.isfinite(ccc).any(1)).any()
     far = q1.copy()

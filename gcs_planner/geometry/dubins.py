@@ -18,11 +18,10 @@ Method (why it is general rather than the textbook normalised formulas):
   are exact for CCC words too.
 - Arc angles are taken modulo 2 pi; an angle within ``_ANGLE_EPS`` of 2 pi is treated as 0 (a
   pose already on the tangent must not produce a spurious full circle).
-- All constructions are numpy-vectorised over a batch of N problems, with the four CSC words and
-  the two CCC words each evaluated in one pass (small batches are bound by numpy call overhead:
-  the coalition planner makes hundreds of calls per formation); invalid words get length inf.
-  From 32 problems on, CCC words are evaluated only for the problems whose end circles are close
-  enough for a middle circle (far-apart batches, such as the planner's root scans, skip them).
+- ``word_lengths`` takes a batch of N problems and is compiled (numba), one problem at a time:
+  the planners make many calls on small batches (the coalition planner hundreds per formation, the
+  priority swarm one per cost evaluation), where numpy passes were mostly call overhead; invalid
+  words get length inf. Its arithmetic is the earlier vectorised code's, term for term.
 
 Free terminal heading (shortest path to a point): the optimum is a CS path (or a CC path when the
 point is inside a turning circle). We evaluate the analytic CS tangent headings for both turn
@@ -48,6 +47,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.optimize import brentq, minimize_scalar
 
 from gcs_planner.core.geo import wrap_pi
@@ -71,14 +71,8 @@ __all__ = [
 WORDS = ("LSL", "RSR", "LSR", "RSL", "RLR", "LRL")
 _SIGN = {"L": 1.0, "R": -1.0, "S": 0.0}
 _WORD_SIGNS = np.array([[_SIGN[c] for c in w] for w in WORDS])
-_FIRST_TURN = (_WORD_SIGNS[:, 0] < 0).astype(int)  # index into _centres: 0 = L, 1 = R
-_LAST_TURN = (_WORD_SIGNS[:, 2] < 0).astype(int)
-_SIDES = np.array([1.0, -1.0])[:, None, None]  # middle circle of CCC words: left / right of c0 -> c1
 _TWO_PI = 2.0 * math.pi
 _ANGLE_EPS = 1e-9
-# word_lengths: from this many problems on, CCC words are evaluated only for the problems whose end
-# circles are close enough for a middle circle (the others are inf anyway; row-wise the same values)
-_CCC_SUBSET_MIN = 32
 
 
 @dataclass(frozen=True)
@@ -191,30 +185,8 @@ def word_lengths(
     rm = np.minimum(r0, r1) if r_mid is None else _rows(np.asarray(r_mid, dtype=float), (n,))
     if ((rm if r_mid is None else np.minimum(np.minimum(r0, r1), rm)) <= 0).any():
         raise ValueError(f"Dubins radii must be > 0, got r0={r0.min()}, r1={r1.min()}, r_mid={rm.min()}")
-    h0, h1 = q0[:, 2], q1[:, 2]
-    # Start- and end-circle centres (6, N) per word; then all CSC words in one set of numpy calls on
-    # (4, N) arrays and both CCC words (both middle-circle sides) on (2, 2, N): for small N the cost
-    # is call overhead, not arithmetic.
-    c0, c1 = _centres(q0, r0), _centres(q1, r1)
-    x0, y0 = c0[_FIRST_TURN, 0], c0[_FIRST_TURN, 1]
-    x1, y1 = c1[_LAST_TURN, 0], c1[_LAST_TURN, 1]
-    first, last = _WORD_SIGNS[:, 0], _WORD_SIGNS[:, 2]
     out = np.empty((n, 6, 3))
-    csc = _csc(h0, h1, x1[:4] - x0[:4], y1[:4] - y0[:4], r0, r1, first[:4, None], last[:4, None])
-    out[:, :4] = csc.transpose(2, 1, 0)
-    rows = slice(None)
-    if n >= _CCC_SUBSET_MIN:  # CCC words only for rows whose circles may touch a middle circle
-        reach = np.hypot(x1[4:] - x0[4:], y1[4:] - y0[4:]) <= (r0 + rm) + (r1 + rm) + 1e-6
-        rows = np.flatnonzero(reach.any(axis=0))
-        out[:, 4:] = np.inf
-        if not len(rows):
-            return out
-    a, b = _ccc(
-        h0[rows], h1[rows], x0[4:, rows], y0[4:, rows], x1[4:, rows], y1[4:, rows],
-        r0[rows], r1[rows], rm[rows], first[4:, None],
-    )  # fmt: skip
-    better_b = b.sum(axis=0) < a.sum(axis=0)
-    out[rows, 4:] = np.where(better_b[None], b, a).transpose(2, 1, 0)
+    _word_lengths(q0, q1, r0, r1, rm, out)
     return out
 
 
@@ -422,56 +394,73 @@ def _make(q0, word: str, lengths: np.ndarray, r0: float, r1: float, rm: float) -
     )
 
 
-def _ccw_angle(a: np.ndarray) -> np.ndarray:
-    """Angle mod 2 pi in [0, 2 pi), with near-2 pi values snapped to 0.
-
-    fmod plus a sign fix equals np.mod (same rounding) at half its cost."""
-    a = np.fmod(a, _TWO_PI)
-    a = np.where(a < 0.0, a + _TWO_PI, a)
-    return np.where(a > _TWO_PI - _ANGLE_EPS, 0.0, a)
-
-
 def _rows(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return a if a.shape == shape else np.broadcast_to(a, shape)
 
 
-def _centres(q: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """Turning-circle centres (2, 2, N): [L (left of the heading), R] x [x, y]."""
-    rs, rc = r * np.sin(q[:, 2]), r * np.cos(q[:, 2])
-    return np.array([[q[:, 0] - rs, q[:, 1] + rc], [q[:, 0] + rs, q[:, 1] - rc]])
+@njit(cache=True)
+def _word_lengths(q0, q1, r0, r1, rm, out) -> None:
+    """``word_lengths`` into ``out`` (N, 6, 3), one problem at a time (compiled: numpy's passes over
+    small batches were mostly call overhead)."""
+    for i in range(len(out)):
+        h0, h1 = q0[i, 2], q1[i, 2]
+        # turning-circle centres, L (left of the heading) then R
+        rs0, rc0 = r0[i] * np.sin(h0), r0[i] * np.cos(h0)
+        rs1, rc1 = r1[i] * np.sin(h1), r1[i] * np.cos(h1)
+        c0 = ((q0[i, 0] - rs0, q0[i, 1] + rc0), (q0[i, 0] + rs0, q0[i, 1] - rc0))
+        c1 = ((q1[i, 0] - rs1, q1[i, 1] + rc1), (q1[i, 0] + rs1, q1[i, 1] - rc1))
+        for w in range(6):
+            s0, s1 = _WORD_SIGNS[w, 0], _WORD_SIGNS[w, 2]
+            a, b = c0[0 if s0 > 0 else 1], c1[0 if s1 > 0 else 1]
+            if w < 4:
+                out[i, w] = _csc(h0, h1, b[0] - a[0], b[1] - a[1], r0[i], r1[i], s0, s1)
+            else:
+                left = _ccc(h0, h1, a, b, r0[i], r1[i], rm[i], s0, 1.0)
+                right = _ccc(h0, h1, a, b, r0[i], r1[i], rm[i], s0, -1.0)
+                better = (right[0] + right[1]) + right[2] < (left[0] + left[1]) + left[2]
+                out[i, w] = right if better else left
 
 
-def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> np.ndarray:
-    """Segment lengths (3, W, N) of CSC words with turn signs s0, s1 (W, 1), centre offsets dx, dy (W, N)."""
+@njit(cache=True)
+def _ccw(a: float) -> float:
+    """Angle mod 2 pi in [0, 2 pi), with near-2 pi values snapped to 0."""
+    a = np.fmod(a, _TWO_PI)  # fmod and a sign fix: np.mod's value
+    if a < 0.0:
+        a += _TWO_PI
+    return 0.0 if a > _TWO_PI - _ANGLE_EPS else a
+
+
+@njit(cache=True)
+def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> tuple[float, float, float]:
+    """Segment lengths of a CSC word with turn signs s0, s1 and centre offset (dx, dy)."""
     dist = np.hypot(dx, dy)
     dr = s1 * r1 - s0 * r0
-    valid = np.abs(dr) <= dist + 1e-12
-    apart = dist > 1e-12
-    ratio = np.divide(dr, dist, out=np.zeros_like(dist), where=apart)
-    alpha = np.arctan2(dy, dx) - np.arcsin(np.minimum(np.maximum(ratio, -1.0), 1.0))
-    alpha = np.where(apart, alpha, h0)  # concentric equal circles: no straight part
-    straight = np.sqrt(np.maximum(dist**2 - dr**2, 0.0))
-    turn = _ccw_angle(np.array([s0 * (alpha - h0), s1 * (h1 - alpha)]))  # np.array: stack, less overhead
-    return np.where(valid, np.array([turn[0] * r0, straight, turn[1] * r1]), np.inf)
+    if not abs(dr) <= dist + 1e-12:
+        return np.inf, np.inf, np.inf
+    alpha = h0  # concentric equal circles: no straight part
+    if dist > 1e-12:
+        alpha = np.arctan2(dy, dx) - np.arcsin(min(max(dr / dist, -1.0), 1.0))
+    straight = np.sqrt(max(dist**2 - dr**2, 0.0))
+    return _ccw(s0 * (alpha - h0)) * r0, straight, _ccw(s1 * (h1 - alpha)) * r1
 
 
-def _ccc(h0, h1, x0, y0, x1, y1, r0, r1, rm, s) -> np.ndarray:
-    """Segment lengths (2, 3, W, N) of CCC words (first turn sign s (W, 1)), middle circle on the left /
-    right of c0 -> c1 (first axis)."""
-    dx, dy = x1 - x0, y1 - y0
+@njit(cache=True)
+def _ccc(h0, h1, c0, c1, r0, r1, rm, s, side) -> tuple[float, float, float]:
+    """Segment lengths of a CCC word (first turn sign s), middle circle on the ``side`` (+1 left,
+    -1 right) of c0 -> c1."""
+    dx, dy = c1[0] - c0[0], c1[1] - c0[1]
     dist = np.hypot(dx, dy)
     a, b = r0 + rm, r1 + rm
-    valid = (dist > 1e-12) & (dist <= a + b) & (dist >= np.abs(a - b))
-    safe = np.where(valid, dist, 1.0)
-    x = (a**2 - b**2 + safe**2) / (2.0 * safe)
-    h = _SIDES * np.sqrt(np.maximum(a**2 - x**2, 0.0))  # (2, W, N)
-    ex, ey = dx / safe, dy / safe
-    cmx = x0 + x * ex + h * -ey
-    cmy = y0 + x * ey + h * ex
-    hq0 = np.arctan2(cmy - y0, cmx - x0) + s * (math.pi / 2)  # tangency with circle 0 is along c0 -> cm
-    hq1 = np.arctan2(y1 - cmy, x1 - cmx) - s * (math.pi / 2)  # middle circle turns the other way
-    turn = _ccw_angle(np.array([s * (hq0 - h0), -s * (hq1 - hq0), s * (h1 - hq1)]))
-    return np.where(valid, np.array([turn[0] * r0, turn[1] * rm, turn[2] * r1]).swapaxes(0, 1), np.inf)
+    if not (dist > 1e-12 and dist <= a + b and dist >= abs(a - b)):
+        return np.inf, np.inf, np.inf
+    x = (a**2 - b**2 + dist**2) / (2.0 * dist)
+    h = side * np.sqrt(max(a**2 - x**2, 0.0))
+    ex, ey = dx / dist, dy / dist
+    cmx = c0[0] + x * ex + h * -ey
+    cmy = c0[1] + x * ey + h * ex
+    hq0 = np.arctan2(cmy - c0[1], cmx - c0[0]) + s * (math.pi / 2)  # tangency with circle 0 is along c0 -> cm
+    hq1 = np.arctan2(c1[1] - cmy, c1[0] - cmx) - s * (math.pi / 2)  # middle circle turns the other way
+    return _ccw(s * (hq0 - h0)) * r0, _ccw(-s * (hq1 - hq0)) * rm, _ccw(s * (h1 - hq1)) * r1
 
 
 def _advance(pose: np.ndarray, kappa: float, ds: float) -> np.ndarray:
