@@ -201,10 +201,8 @@ def shortest_batch(
     n = len(seg)
     r0 = np.broadcast_to(np.asarray(r0, dtype=float), (n,))
     r1 = r0 if r1 is None else np.broadcast_to(np.asarray(r1, dtype=float), (n,))
-    best = np.argmin(seg.sum(axis=2), axis=1)
-    lengths = seg[np.arange(n), best]
-    rm = np.minimum(r0, r1)
-    radii = np.column_stack([r0, np.where(best < 4, np.inf, rm), r1])
+    best, lengths, radii = np.empty(n, dtype=np.intp), np.empty((n, 3)), np.empty((n, 3))
+    _pick_shortest(seg, r0, r1, best, lengths, radii)
     return best, lengths, radii
 
 
@@ -232,12 +230,9 @@ def segment_starts(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Start pose of each segment (N, 3, 3) and signed curvature per segment (N, 3) [1/m]."""
     q0 = np.asarray(q0, dtype=float)
-    signs = _WORD_SIGNS[np.asarray(word)]
-    kappa = np.where(signs != 0, signs / np.where(np.isfinite(radii), radii, 1.0), 0.0)
-    starts = [q0]
-    for k in range(2):
-        starts.append(advance(starts[-1], kappa[:, k], lengths[:, k]))
-    return np.stack(starts, axis=1), kappa
+    starts, kappa = np.empty((len(q0), 3, 3)), np.empty((len(q0), 3))
+    _segment_starts(q0, np.asarray(word), np.asarray(lengths, dtype=float), radii, starts, kappa)
+    return starts, kappa
 
 
 def shortest_path(
@@ -469,11 +464,50 @@ def _advance(pose: np.ndarray, kappa: float, ds: float) -> np.ndarray:
 
 def advance(poses: np.ndarray, kappa: np.ndarray, ds: np.ndarray) -> np.ndarray:
     """Integrate constant-curvature motion exactly: poses (n, 3), signed curvature (n,), distance (n,)."""
-    x, y, h = poses[:, 0], poses[:, 1], poses[:, 2]
-    turning = kappa != 0.0
-    k = np.where(turning, kappa, 1.0)
-    h_new = h + np.where(turning, kappa * ds, 0.0)
-    sin_h, cos_h = np.sin(h), np.cos(h)
-    x_new = np.where(turning, x + (np.sin(h_new) - sin_h) / k, x + ds * cos_h)
-    y_new = np.where(turning, y - (np.cos(h_new) - cos_h) / k, y + ds * sin_h)
-    return np.column_stack([x_new, y_new, h_new])
+    poses = np.asarray(poses, dtype=float)
+    out = np.empty((len(poses), 3))
+    _advance_rows(poses, np.asarray(kappa, dtype=float), np.asarray(ds, dtype=float), out)
+    return out
+
+
+@njit(cache=True)
+def _advance_rows(poses, kappa, ds, out) -> None:
+    for i in range(len(poses)):
+        out[i] = _advance_one(poses[i, 0], poses[i, 1], poses[i, 2], kappa[i], ds[i])
+
+
+@njit(cache=True)
+def _advance_one(x: float, y: float, h: float, kappa: float, ds: float) -> tuple[float, float, float]:
+    """Pose after ``ds`` [m] at signed curvature ``kappa`` from (x, y, h)."""
+    if kappa == 0.0:
+        return x + ds * np.cos(h), y + ds * np.sin(h), h + 0.0
+    h_new = h + kappa * ds
+    return x + (np.sin(h_new) - np.sin(h)) / kappa, y - (np.cos(h_new) - np.cos(h)) / kappa, h_new
+
+
+@njit(cache=True)
+def _pick_shortest(seg, r0, r1, best, lengths, radii) -> None:
+    """``shortest_batch`` from the word lengths: the first shortest word of each row, its lengths and
+    radii (the middle one inf for CSC words)."""
+    for i in range(len(seg)):
+        b, low = 0, seg[i, 0, 0] + seg[i, 0, 1] + seg[i, 0, 2]
+        for w in range(1, 6):
+            total = seg[i, w, 0] + seg[i, w, 1] + seg[i, w, 2]
+            if total < low:
+                b, low = w, total
+        best[i] = b
+        lengths[i] = seg[i, b]
+        radii[i, 0], radii[i, 1], radii[i, 2] = r0[i], np.inf if b < 4 else min(r0[i], r1[i]), r1[i]
+
+
+@njit(cache=True)
+def _segment_starts(q0, word, lengths, radii, starts, kappa) -> None:
+    for i in range(len(q0)):
+        for k in range(3):
+            sign = _WORD_SIGNS[word[i], k]
+            kappa[i, k] = 0.0 if sign == 0 else sign / (radii[i, k] if np.isfinite(radii[i, k]) else 1.0)
+        starts[i, 0] = q0[i]
+        for k in range(2):
+            starts[i, k + 1] = _advance_one(
+                starts[i, k, 0], starts[i, k, 1], starts[i, k, 2], kappa[i, k], lengths[i, k]
+            )
