@@ -12,9 +12,9 @@ import pytest
 from gcs_planner.core.config import parse
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import Origin
-from gcs_planner.geometry.obstacles import HARD_PENALTY
+from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.model.scenario import Cylinder, Scenario, Vehicle
-from gcs_planner.planning import load_scenario, plan_scenario
+from gcs_planner.planning import load_scenario, plan_scenario, priority_swarm
 from gcs_planner.planning.priority_swarm import Config, CostModel, Traffic, prepare, timed_samples
 from gcs_planner.safety.separation import check_plan
 
@@ -146,6 +146,40 @@ def test_cost_model_prices_obstacles_and_traffic():
     slices, pos = timed_samples(prob, detour, cfg)
     traffic.add(slices, pos, 8.0, prob.vehicle.speed_mps)
     assert CostModel(prob, obstacles, traffic, cfg)(detour[None, :])[0] > HARD_PENALTY
+
+
+def test_cylinder_terms_are_the_four_nearest_axes_of_a_brute_force_search():
+    """F2 (a compiled walk of the axis grid) against every cylinder written out: per sample the
+    four nearest axes within reach, in their altitude band, buffer depth times the sample's length
+    and HARD + the depth inside the radius, summed per particle."""
+    rng = np.random.default_rng(3)
+    draw = rng.uniform([-60, -60, 3, 0, 0], [60, 60, 12, 8, 40], (60, 5))
+    cyl = [
+        Cylinder(x=x, y=y, radius_m=r, buffer_m=b, z_min_m=z0, z_max_m=z0 + 30.0)
+        for x, y, r, b, z0 in draw.tolist()
+    ]
+    obstacles = Obstacles.from_scenario(cyl)
+    cfg = parse(Config, FAST, "planner")
+    probs, _, _, _ = prepare(_random_scenario(1), cfg)
+    model = CostModel(probs[0], obstacles, Traffic(cfg.dt_s), cfg)
+    mid = rng.uniform([-80, -80, 0], [80, 80, 70], (5, 200, 3))
+    ds = rng.uniform(0.5, 6.0, (5, 200))
+    soft, hard = np.zeros(5), np.zeros(5)
+    priority_swarm._cylinder_sums(
+        mid, ds, model._axes, model._cyl, cfg.obstacle_margin_m, model._reach, soft, hard
+    )
+    want_soft, want_hard = np.zeros(5), np.zeros(5)
+    for p, k in np.ndindex(5, 200):
+        x, y, z = mid[p, k]
+        d = np.hypot(obstacles.cx - x, obstacles.cy - y)
+        for j in [j for j in np.argsort(d, kind="stable")[:4] if d[j] < model._reach]:
+            if obstacles.z_min_m[j] <= z <= obstacles.z_max_m[j]:
+                r, buf = obstacles.radius_m[j] + cfg.obstacle_margin_m, obstacles.buffer_m[j]
+                want_soft[p] += np.clip((r + buf - d[j]) / max(buf, 1e-9), 0.0, 1.0) * ds[p, k]
+                want_hard[p] += (HARD_PENALTY + r - d[j]) if r > d[j] else 0.0
+    assert (want_hard > HARD_PENALTY).all() and (want_soft > 0).all()
+    np.testing.assert_allclose(soft, want_soft, rtol=1e-9)
+    np.testing.assert_allclose(hard, want_hard, rtol=1e-9)
 
 
 def test_bad_planner_parameters_are_named():

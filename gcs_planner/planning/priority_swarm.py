@@ -28,7 +28,7 @@ Choices where the paper is open (all settable under [planner] in the scenario fi
   the vehicle's band get a vertical take-off/landing column (clamped into the band).
 - F1 length = flown 3-D length / straight start-goal distance. F2 threat (eqs. 5-6) on the path
   sampled every ``dt_s`` (point-to-axis distance, obstacles inflated by ``obstacle_margin_m``, which
-  covers the chord between samples; a cKDTree over the cylinder axes keeps the 4 nearest in reach
+  covers the chord between samples; a grid of the cylinder axes keeps the 4 nearest in reach
   per sample, enough when at most 4 buffers overlap): soft part = depth into the buffer / buffer
   width, integrated along the path and divided by the straight distance; inside radius = HARD +
   depth. F3 altitude (eqs. 7-8, the digest's reading): mean |z - band middle| / half band, HARD
@@ -280,36 +280,69 @@ def _positions(cum, l3, lh, pz, segments, s, out) -> None:
 
 
 @dataclass(frozen=True)
-class _Raster:
-    """Cells (``cell_m`` square, from ``lo``) that lie within ``reach`` of a cylinder axis: a point
-    outside them has no axis in reach, so the nearest-axis query can skip it."""
+class _AxisGrid:
+    """Square cells (``cell_m``, from ``lo``) and, per cell, the cylinders whose axis may lie within
+    ``reach`` of a point in it (CSR: ``cand[start[c]:start[c + 1]]``): a sample reads its own cell."""
 
     lo: np.ndarray
     cell_m: float
-    mask: np.ndarray  # (nx, ny) bool
-
-    @functools.cached_property
-    def _padded(self) -> np.ndarray:
-        """The mask with a border of empty cells, flat: clipped cell indices land there."""
-        return np.pad(self.mask, 1).ravel()
-
-    def covers(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        nx, ny = self.mask.shape
-        cx = np.clip(np.floor((x - self.lo[0]) / self.cell_m), -1, nx) + 1  # -1 and n: the border
-        cy = np.clip(np.floor((y - self.lo[1]) / self.cell_m), -1, ny) + 1
-        return self._padded.take((cx * (ny + 2) + cy).astype(np.int64), mode="clip")  # NaN: 0, empty
+    shape: tuple[int, int]
+    start: np.ndarray
+    cand: np.ndarray
 
 
 @functools.lru_cache(maxsize=16)
-def _near_axes(cx: bytes, cy: bytes, reach: float) -> _Raster:
-    """The raster of the cylinder axes (x, y as bytes: a cache key) within ``reach``."""
+def _axis_grid(cx: bytes, cy: bytes, reach: float) -> _AxisGrid:
+    """The grid of the cylinder axes (x, y as bytes: a cache key) within ``reach``."""
     axes = np.column_stack([np.frombuffer(cx), np.frombuffer(cy)])
     cell = max(reach / 4.0, 1.0)
     lo = axes.min(axis=0) - reach - cell
     n = np.ceil((axes.max(axis=0) + reach + cell - lo) / cell).astype(int) + 1
     centre = lo + cell * (np.stack(np.meshgrid(np.arange(n[0]), np.arange(n[1]), indexing="ij"), -1) + 0.5)
-    d = cKDTree(axes).query(centre.reshape(-1, 2), distance_upper_bound=reach + cell)[0]
-    return _Raster(lo, cell, np.isfinite(d).reshape(n[0], n[1]))  # a cell's corner is cell / sqrt 2 off
+    # a cell's corner is cell / sqrt 2 from its centre
+    near = cKDTree(axes).query_ball_point(centre.reshape(-1, 2), reach + cell, return_sorted=True)
+    start = np.concatenate([[0], np.cumsum([len(c) for c in near])])
+    cand = np.concatenate([np.asarray(c, dtype=np.int64) for c in near])
+    return _AxisGrid(lo, cell, (int(n[0]), int(n[1])), start, cand)
+
+
+@njit(cache=True)
+def _cylinder_sums(mid, ds, grid, cyl, margin_m, reach_m, soft, hard) -> None:
+    """F2 per particle into ``soft`` / ``hard`` (P,): at each sample mid (P, K, 3) the four nearest
+    cylinder axes within ``reach_m`` (nearest first), in their altitude band: the depth into the
+    buffer (times the sample's length ds (P, K)) and HARD + the depth inside the radius."""
+    lo, cell, (nx, ny), start, cand = grid
+    cx, cy, radius, buffer, z_min, z_max = cyl
+    js, d2s = np.empty(4, dtype=np.int64), np.empty(4)
+    for p in range(mid.shape[0]):
+        for k in range(mid.shape[1]):
+            x, y, z = mid[p, k, 0], mid[p, k, 1], mid[p, k, 2]
+            fx, fy = np.floor((x - lo[0]) / cell), np.floor((y - lo[1]) / cell)
+            if not (0 <= fx < nx and 0 <= fy < ny):  # NaN too
+                continue
+            c = np.int64(fx) * ny + np.int64(fy)
+            n = 0  # the four nearest within reach, nearest first (then by index)
+            for j in cand[start[c] : start[c + 1]]:
+                d2 = (x - cx[j]) ** 2 + (y - cy[j]) ** 2
+                if d2 >= reach_m**2:
+                    continue
+                at = n
+                while at > 0 and d2s[at - 1] > d2:
+                    at -= 1
+                if at == 4:
+                    continue
+                n = min(n + 1, 4)
+                for m in range(n - 1, at, -1):
+                    js[m], d2s[m] = js[m - 1], d2s[m - 1]
+                js[at], d2s[at] = j, d2
+            for m in range(n):
+                j = js[m]
+                if not z_min[j] <= z <= z_max[j]:
+                    continue
+                d, r, buf = np.sqrt(d2s[m]), radius[j] + margin_m, buffer[j]
+                soft[p] += min(max((r + buf - d) / max(buf, 1e-9), 0.0), 1.0) * ds[p, k]
+                if r - d > 0:
+                    hard[p] += HARD_PENALTY + (r - d)
 
 
 # Every cost evaluation of one plan() call (swarms, inherited-path checks, repairs), for a budget
@@ -323,37 +356,15 @@ class CostModel:
     def __init__(self, prob: VehicleProblem, obstacles: Obstacles, traffic: Traffic, cfg: Config) -> None:
         self.prob, self.obs, self.traffic, self.cfg = prob, obstacles, traffic, cfg
         self.evaluations = 0
-        self._obs_tree = cKDTree(np.column_stack([obstacles.cx, obstacles.cy])) if len(obstacles.cx) else None
         self._reach = (
             float(np.max(obstacles.radius_m + obstacles.buffer_m, initial=0.0)) + cfg.obstacle_margin_m
         )
-        if self._obs_tree is not None:
-            self._near = _near_axes(obstacles.cx.tobytes(), obstacles.cy.tobytes(), self._reach)
-
-    def _cylinder_terms(self, mid: np.ndarray, ds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Soft buffer integral and hard term per particle; only the <= 4 nearest cylinders in reach count."""
-        p, k, _ = mid.shape
-        flat = mid.reshape(-1, 3)
-        n_nb = min(4, len(self.obs.cx))
-        close = np.flatnonzero(self._near.covers(flat[:, 0], flat[:, 1]))  # the tree is asked about these
-        near = flat.take(close, axis=0)
-        dxy, j = self._obs_tree.query(near[:, :2], k=n_nb, distance_upper_bound=self._reach)
-        dxy, j = dxy.reshape(len(close), n_nb), j.reshape(len(close), n_nb)
-        row, col = np.nonzero(np.isfinite(dxy))
-        if not len(row):
-            return np.zeros(p), np.zeros(p)
-        jj, d = j[row, col], dxy[row, col]
-        z = near[row, 2]
-        row = close[row]
-        band = (z >= self.obs.z_min_m[jj]) & (z <= self.obs.z_max_m[jj])
-        r = self.obs.radius_m[jj] + self.cfg.obstacle_margin_m
-        buf = self.obs.buffer_m[jj]
-        depth_hard = np.where(band, np.maximum(0.0, r - d), 0.0)
-        depth_soft = np.where(band, np.clip((r + buf - d) / np.maximum(buf, 1e-9), 0.0, 1.0), 0.0)
-        part = row // k
-        soft = np.bincount(part, weights=depth_soft * ds.ravel()[row], minlength=p)
-        hard = np.bincount(part, weights=(depth_hard > 0) * HARD_PENALTY + depth_hard, minlength=p)
-        return soft, hard
+        self._axes = None
+        if len(obstacles.cx):
+            grid = _axis_grid(obstacles.cx.tobytes(), obstacles.cy.tobytes(), self._reach)
+            self._axes = (grid.lo, grid.cell_m, grid.shape, grid.start, grid.cand)
+            self._cyl = (obstacles.cx, obstacles.cy, obstacles.radius_m, obstacles.buffer_m) + (
+                obstacles.z_min_m, obstacles.z_max_m)  # fmt: skip
 
     def grid(self, dec: Decoded) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Samples of every particle on the shared time grid: slices (K,), pos (P, K, 3), valid (P, K), s."""
@@ -380,8 +391,10 @@ class CostModel:
         mid = 0.5 * (pos[:, 1:] + pos[:, :-1])
         soft = np.zeros(len(f1))
         hard = np.zeros(len(f1))
-        if self._obs_tree is not None:
-            soft, hard = self._cylinder_terms(mid, ds)
+        if self._axes is not None:
+            _cylinder_sums(
+                mid, ds, self._axes, self._cyl, self.cfg.obstacle_margin_m, self._reach, soft, hard
+            )
             soft = soft / ref
         if len(self.obs.dome_radius_m):
             dd = np.linalg.norm(mid[..., None, :] - self.obs.dome_centre, axis=-1)

@@ -40,6 +40,9 @@ _CELL_BITS = 6  # cells per axis in the table: 64, aliased 64 cells apart (extra
 _BLOCKS = 1 << 2 * _CELL_BITS
 _NEAREST = 4  # traffic samples counted per particle sample
 _EMPTY = np.zeros(0, dtype=np.int64)
+# a hash entry: its sample's position (read where the chain is walked: one place per step), the
+# sample, and the next entry of the same table cell (-1 at its last)
+_ENTRY = np.dtype([("x", "f8"), ("y", "f8"), ("z", "f8"), ("sample", "i4"), ("next", "i4")])
 
 
 @njit(cache=True)
@@ -61,9 +64,7 @@ class Traffic:
         self.sep = np.zeros(0)
         self.next = _EMPTY  # the same vehicle's sample at the next slice (-1 at its last)
         self.n_entries = 0
-        # per hash entry: its sample << 32 | the next entry of the same table cell (-1 at its last),
-        # so that following a chain reads one place per step
-        self.entries = _EMPTY
+        self.entries = np.zeros(0, dtype=_ENTRY)
         self.slices = 0  # slices per block of the table
         self.head = np.zeros(0, dtype=np.int32)  # first entry per (block, slice), block-major
         self.v_max = 0.0
@@ -88,7 +89,7 @@ class Traffic:
         if self.n_entries + extra <= cap:
             return
         new = max(2 * cap, self.n_entries + extra, 4096)
-        self.entries = np.concatenate([self.entries, np.full(new - cap, -1, dtype=np.int64)])
+        self.entries = np.concatenate([self.entries, np.zeros(new - cap, dtype=_ENTRY)])
 
     def _grow_slices(self, needed: int) -> None:
         """Widen every block of the table to ``needed`` slices or more (a copy, rarely)."""
@@ -144,7 +145,11 @@ class Traffic:
         nxt = np.empty(m, dtype=np.int64)  # each entry links to the one before it in its cell
         nxt[first] = self.head[key[first]]
         nxt[~first] = ent[:-1][~first[1:]]
-        self.entries[ent] = sample[order] << 32 | nxt & 0xFFFFFFFF
+        sample = sample[order]
+        for axis, name in enumerate("xyz"):
+            self.entries[name][ent] = self.xyz[sample, axis]
+        self.entries["sample"][ent] = sample
+        self.entries["next"][ent] = nxt
         last = np.append(first[1:], True)
         self.head[key[last]] = ent[last]
         self.n_entries += m
@@ -206,10 +211,10 @@ def _nearest(table: tuple, sl: int, q: tuple, js: np.ndarray, d2s: np.ndarray) -
         for oy in range(span):
             e = np.int64(head[_block(cx0 + ox, cy0 + oy) * n_slices + sl])
             while e >= 0:
-                j = entries[e] >> 32
-                e = entries[e] << 32 >> 32
-                d2 = (xyz[j, 0] - q[0]) ** 2 + (xyz[j, 1] - q[1]) ** 2
-                d2 += (xyz[j, 2] - q[2]) ** 2
+                entry = entries[e]
+                j, e = np.int64(entry.sample), np.int64(entry.next)
+                d2 = (entry.x - q[0]) ** 2 + (entry.y - q[1]) ** 2
+                d2 += (entry.z - q[2]) ** 2
                 if d2 >= r2 or j in js[:n]:  # out of reach, or met in another cell already
                     continue
                 at = n
