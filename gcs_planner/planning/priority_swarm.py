@@ -82,6 +82,7 @@ from gcs_planner.core.geo import wrap_pi
 from gcs_planner.core.heap import keep_heap_slack
 from gcs_planner.core.validation import MAX_DURATION_S
 from gcs_planner.geometry.dubins import segment_starts, shortest_batch
+from gcs_planner.geometry.nearest import keep_nearest
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Scenario, Vehicle
@@ -321,20 +322,11 @@ def _cylinder_sums(mid, ds, grid, cyl, margin_m, reach_m, soft, hard) -> None:
             if not (0 <= fx < nx and 0 <= fy < ny):  # NaN too
                 continue
             c = np.int64(fx) * ny + np.int64(fy)
-            n = 0  # the four nearest within reach, nearest first (then by index)
+            n = 0  # the four nearest within reach
             for j in cand[start[c] : start[c + 1]]:
                 d2 = (x - cx[j]) ** 2 + (y - cy[j]) ** 2
-                if d2 >= reach_m**2:
-                    continue
-                at = n
-                while at > 0 and d2s[at - 1] > d2:
-                    at -= 1
-                if at == 4:
-                    continue
-                n = min(n + 1, 4)
-                for m in range(n - 1, at, -1):
-                    js[m], d2s[m] = js[m - 1], d2s[m - 1]
-                js[at], d2s[at] = j, d2
+                if d2 < reach_m**2:
+                    n = keep_nearest(js, d2s, n, j, d2)
             for m in range(n):
                 j = js[m]
                 if not z_min[j] <= z <= z_max[j]:

@@ -30,6 +30,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from gcs_planner.geometry.nearest import keep_nearest
+
 __all__ = ["TIMING_ERROR_S", "Traffic"]
 
 # How far apart in time two vehicles' schedule errors may be where they meet [s]: measured on the
@@ -215,17 +217,8 @@ def _nearest(table: tuple, sl: int, q: tuple, js: np.ndarray, d2s: np.ndarray) -
                 j, e = np.int64(entry.sample), np.int64(entry.next)
                 d2 = (entry.x - q[0]) ** 2 + (entry.y - q[1]) ** 2
                 d2 += (entry.z - q[2]) ** 2
-                if d2 >= r2 or j in js[:n]:  # out of reach, or met in another cell already
-                    continue
-                at = n
-                while at > 0 and (d2s[at - 1] > d2 or (d2s[at - 1] == d2 and js[at - 1] > j)):
-                    at -= 1
-                if at == _NEAREST:
-                    continue
-                n = min(n + 1, _NEAREST)
-                for m in range(n - 1, at, -1):  # the farther ones move down, the last one out
-                    js[m], d2s[m] = js[m - 1], d2s[m - 1]
-                js[at], d2s[at] = j, d2
+                if d2 < r2 and j not in js[:n]:  # in reach, and not met in another cell already
+                    n = keep_nearest(js, d2s, n, j, d2)
     return n
 
 
