@@ -10,53 +10,61 @@ such timing error. Where they cross at an angle this is the planned miss distanc
 ``T x v_perp`` (v_perp = |v_a x v_b| / |v_a - v_b|, the speed they share across their relative
 motion); side by side or head-on it is the planned miss distance; one behind the other it is
 the gap less the ``v T`` the follower may close. ``T = 0`` is the plain closest approach.
+
+Computed one pair at a time and compiled (numba): the priority swarm's traffic walk calls it from
+its own compiled loop, the 4-D planner through the batched ``closest_under_timing``.
 """
 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
-__all__ = ["closest_under_timing", "closest_under_timing_t", "dot3"]
+from gcs_planner.geometry.vec3 import add, along, dot, sub
 
-
-def dot3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Dot products of vectors stored component-first, (3, ...) -> (...), summed x + y + z in order
-    (a reduction over a last axis of 3 is several times slower than three products)."""
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def _norm(a: np.ndarray) -> np.ndarray:
-    return np.sqrt(dot3(a, a))
-
-
-def _segment(p: np.ndarray, q: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """Distance from the origin to p + q s, s in [lo, hi]; vectors component-first (3, ...)."""
-    qq = dot3(q, q)
-    s = np.clip(-dot3(p, q) / np.where(qq > 0, qq, 1.0), lo, hi)
-    return _norm(p + s * q)
+__all__ = ["closest_on_segment", "closest_under_timing", "closest_under_timing_one"]
 
 
 def closest_under_timing(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """min |d0 + u s + w e| over s in [0, 1], e in [-1, 1]; vectors (..., 3) -> (...).
+    """min |d0 + u s + w e| over s in [0, 1], e in [-1, 1]; vectors (..., 3), broadcast -> (...)."""
+    d0, u, w = (np.asarray(a, dtype=float) for a in np.broadcast_arrays(d0, u, w))
+    out = np.empty(d0.shape[:-1])
+    _closest_rows(d0.reshape(-1, 3), u.reshape(-1, 3), w.reshape(-1, 3), out.reshape(-1))
+    return out
 
-    The minimum of a convex function over the box is its stationary point where that lies inside,
-    else on one of the four edges.
-    """
-    return closest_under_timing_t(np.moveaxis(d0, -1, 0), np.moveaxis(u, -1, 0), np.moveaxis(w, -1, 0))
+
+@njit(cache=True)
+def _closest_rows(d0, u, w, out) -> None:
+    for i in range(len(out)):
+        out[i] = closest_under_timing_one(
+            (d0[i, 0], d0[i, 1], d0[i, 2]), (u[i, 0], u[i, 1], u[i, 2]), (w[i, 0], w[i, 1], w[i, 2])
+        )
 
 
-def closest_under_timing_t(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``closest_under_timing`` of vectors stored component-first, (3, ...) -> (...)."""
-    edges = np.minimum(
-        np.minimum(_segment(d0 - w, u, 0.0, 1.0), _segment(d0 + w, u, 0.0, 1.0)),
-        np.minimum(_segment(d0, w, -1.0, 1.0), _segment(d0 + u, w, -1.0, 1.0)),
+@njit(cache=True)
+def closest_under_timing_one(d0: tuple, u: tuple, w: tuple) -> float:
+    """``closest_under_timing`` of one pair. The minimum of a convex function over the box is its
+    stationary point where that lies inside, else on one of the four edges."""
+    edges = min(
+        min(closest_on_segment(sub(d0, w), u, 0.0, 1.0), closest_on_segment(add(d0, w), u, 0.0, 1.0)),
+        min(closest_on_segment(d0, w, -1.0, 1.0), closest_on_segment(add(d0, u), w, -1.0, 1.0)),
     )
-    uu, ww, uw, du, dw = dot3(u, u), dot3(w, w), dot3(u, w), dot3(d0, u), dot3(d0, w)
+    uu, ww, uw, du, dw = dot(u, u), dot(w, w), dot(u, w), dot(d0, u), dot(d0, w)
     det = uu * ww - uw * uw
-    ok = det > 1e-9 * np.maximum(uu * ww, 1e-300)  # u and w not parallel (nor zero)
-    safe = np.where(ok, det, 1.0)
-    s = (-du * ww + dw * uw) / safe
-    e = (-dw * uu + du * uw) / safe
-    inside = ok & (s >= 0.0) & (s <= 1.0) & (e >= -1.0) & (e <= 1.0)
-    interior = _norm(d0 + s * u + e * w)
-    return np.where(inside, np.minimum(interior, edges), edges)
+    if not det > 1e-9 * max(uu * ww, 1e-300):  # u and w parallel (or zero)
+        return edges
+    s = (-du * ww + dw * uw) / det
+    e = (-dw * uu + du * uw) / det
+    if not (0.0 <= s <= 1.0 and -1.0 <= e <= 1.0):
+        return edges
+    c = along(along(d0, s, u), e, w)
+    return min(np.sqrt(dot(c, c)), edges)
+
+
+@njit(cache=True)
+def closest_on_segment(p: tuple, q: tuple, lo: float, hi: float) -> float:
+    """Distance from the origin to p + q s, s in [lo, hi]."""
+    qq = dot(q, q)
+    s = min(max(-dot(p, q) / (qq if qq > 0 else 1.0), lo), hi)
+    c = along(p, s, q)
+    return np.sqrt(dot(c, c))

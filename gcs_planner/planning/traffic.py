@@ -31,6 +31,8 @@ import numpy as np
 from numba import njit
 
 from gcs_planner.geometry.nearest import keep_nearest
+from gcs_planner.geometry.timing import closest_on_segment, closest_under_timing_one
+from gcs_planner.geometry.vec3 import dot, scale, sub
 
 __all__ = ["TIMING_ERROR_S", "Traffic"]
 
@@ -260,69 +262,15 @@ def _violations(table, nxt, sep, slices, pos, valid, limits, depth, count) -> No
                 if follows and nxt[j] >= 0:
                     a1 = (pos[p, i + 1, 0], pos[p, i + 1, 1], pos[p, i + 1, 2])
                     b1 = (xyz[nxt[j], 0], xyz[nxt[j], 1], xyz[nxt[j], 2])
-                d0 = _sub(b0, a0)
-                dv = _sub(_sub(b1, a1), d0)
-                dmin = _closest(d0, dv, 0.0, 1.0)
+                d0 = sub(b0, a0)
+                dv = sub(sub(b1, a1), d0)
+                dmin = closest_on_segment(d0, dv, 0.0, 1.0)
                 need = max(sep[j], sep_m) + margin_m
                 if shift > 0:  # under any relative schedule error up to timing_s (geometry/timing.py)
-                    w = _scale(_sub(b1, b0), shift)
-                    if dmin - np.sqrt(_dot(w, w)) < need:  # a shift by w moves it at most |w|
-                        dmin = _closest_under_timing(d0, dv, w)
+                    w = scale(sub(b1, b0), shift)
+                    if dmin - np.sqrt(dot(w, w)) < need:  # a shift by w moves it at most |w|
+                        dmin = closest_under_timing_one(d0, dv, w)
                 short = max(0.0, need - dmin)
                 if short > 0.0:
                     depth[p] += short
                     count[p] += 1.0
-
-
-@njit(cache=True)
-def _dot(a: tuple, b: tuple) -> float:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True)
-def _add(a: tuple, b: tuple) -> tuple:
-    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
-
-
-@njit(cache=True)
-def _sub(a: tuple, b: tuple) -> tuple:
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-@njit(cache=True)
-def _scale(a: tuple, s: float) -> tuple:
-    return (a[0] * s, a[1] * s, a[2] * s)
-
-
-@njit(cache=True)
-def _along(p: tuple, s: float, q: tuple) -> tuple:
-    """p + s q."""
-    return (p[0] + s * q[0], p[1] + s * q[1], p[2] + s * q[2])
-
-
-@njit(cache=True)
-def _closest(p: tuple, q: tuple, lo: float, hi: float) -> float:
-    """Distance from the origin to p + q s, s in [lo, hi] (geometry/timing.py's ``_segment``)."""
-    qq = _dot(q, q)
-    s = min(max(-_dot(p, q) / (qq if qq > 0 else 1.0), lo), hi)
-    c = _along(p, s, q)
-    return np.sqrt(_dot(c, c))
-
-
-@njit(cache=True)
-def _closest_under_timing(d0: tuple, u: tuple, w: tuple) -> float:
-    """geometry/timing.py's ``closest_under_timing`` of one pair, in its arithmetic."""
-    edges = min(
-        min(_closest(_sub(d0, w), u, 0.0, 1.0), _closest(_add(d0, w), u, 0.0, 1.0)),
-        min(_closest(d0, w, -1.0, 1.0), _closest(_add(d0, u), w, -1.0, 1.0)),
-    )
-    uu, ww, uw, du, dw = _dot(u, u), _dot(w, w), _dot(u, w), _dot(d0, u), _dot(d0, w)
-    det = uu * ww - uw * uw
-    if not det > 1e-9 * max(uu * ww, 1e-300):  # u and w parallel (or zero)
-        return edges
-    s = (-du * ww + dw * uw) / det
-    e = (-dw * uu + du * uw) / det
-    if not (0.0 <= s <= 1.0 and -1.0 <= e <= 1.0):
-        return edges
-    c = _along(_along(d0, s, u), e, w)
-    return min(np.sqrt(_dot(c, c)), edges)

@@ -1,0 +1,34 @@
+"""3-vectors as tuples of floats, for compiled (numba) loops: no array allocated per vector."""
+
+from __future__ import annotations
+
+from numba import njit
+
+__all__ = ["add", "along", "dot", "scale", "sub"]
+
+
+@njit(cache=True)
+def dot(a: tuple, b: tuple) -> float:
+    """a . b, summed x + y + z in order (the vectorised code's order, for the same bits)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def add(a: tuple, b: tuple) -> tuple:
+    return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
+
+
+@njit(cache=True)
+def sub(a: tuple, b: tuple) -> tuple:
+    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
+
+
+@njit(cache=True)
+def scale(a: tuple, s: float) -> tuple:
+    return (a[0] * s, a[1] * s, a[2] * s)
+
+
+@njit(cache=True)
+def along(p: tuple, s: float, q: tuple) -> tuple:
+    """p + s q."""
+    return (p[0] + s * q[0], p[1] + s * q[1], p[2] + s * q[2])
