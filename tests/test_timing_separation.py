@@ -91,15 +91,24 @@ def test_closest_under_timing_matches_brute_force():
     assert np.all(got <= brute + 1e-9) and np.all(brute - got < 0.05)
 
 
+def _random_traffic(rng, cell_m: float, n: int, first: int, length: tuple, box: tuple, step_m: float):
+    """Traffic of n random walks (start slice below ``first``, ``length`` samples, starting in box)
+    and the walks themselves: (slices, positions, separation) each."""
+    traffic, uavs = Traffic(DT, cell_m=cell_m), []
+    for _ in range(n):
+        k0 = int(rng.integers(0, first))
+        k = np.arange(k0, k0 + int(rng.integers(*length)))
+        pos = rng.uniform(*box, 3) + np.cumsum(rng.normal(size=(len(k), 3)) * step_m, 0)
+        sep = float(rng.uniform(3.0, 8.0))
+        traffic.add(k, pos, sep, SPEED)
+        uavs.append((k, pos, sep))
+    return traffic, uavs
+
+
 def test_hashed_traffic_finds_the_four_nearest_of_a_brute_force_search():
     rng = np.random.default_rng(1)
-    traffic, samples = Traffic(DT, cell_m=15.0), []
-    for _ in range(60):
-        k0 = int(rng.integers(0, 40))
-        k = np.arange(k0, k0 + int(rng.integers(5, 40)))
-        pos = rng.uniform([-60, -60, 20], [60, 60, 40], 3) + np.cumsum(rng.normal(size=(len(k), 3)) * 3, 0)
-        traffic.add(k, pos, 5.0, SPEED)
-        samples += [(kk, p) for kk, p in zip(k, pos)]
+    traffic, uavs = _random_traffic(rng, 15.0, 60, 40, (5, 40), ([-60, -60, 20], [60, 60, 40]), 3.0)
+    samples = [(kk, p) for k, pos, _ in uavs for kk, p in zip(k, pos)]
     sl = np.array([s[0] for s in samples])
     tp = np.array([s[1] for s in samples])
     q_slices = rng.integers(0, 80, 500)
@@ -120,14 +129,7 @@ def test_compiled_violations_sum_what_a_pair_by_pair_computation_does(timing_s):
     four nearest same-slice traffic samples of each valid particle sample, their closest approach
     over the slice under the timing error (geometry/timing.py), the shortfall summed per particle."""
     rng = np.random.default_rng(2)
-    traffic, uavs = Traffic(DT, cell_m=30.0), []
-    for _ in range(40):
-        k0 = int(rng.integers(0, 20))
-        k = np.arange(k0, k0 + int(rng.integers(10, 50)))
-        pos = rng.uniform([-25, -25, 28], [25, 25, 32], 3) + np.cumsum(rng.normal(size=(len(k), 3)) * 2, 0)
-        sep = float(rng.uniform(3.0, 8.0))
-        traffic.add(k, pos, sep, SPEED)
-        uavs.append((k, pos, sep))
+    traffic, uavs = _random_traffic(rng, 30.0, 40, 20, (10, 50), ([-25, -25, 28], [25, 25, 32]), 2.0)
     slices = np.arange(5, 45)
     pos = rng.uniform([-25, -25, 28], [25, 25, 32], (6, 1, 3)) + np.cumsum(rng.normal(size=(6, 40, 3)) * 2, 1)
     valid = rng.random((6, 40)) < 0.9

@@ -415,9 +415,11 @@ class CostModel:
         climb_excess = np.maximum(0.0, np.abs(psi) - math.radians(cfg.max_climb_deg))
         hard = hard + (climb_excess > 0).sum(axis=1) * HARD_PENALTY + climb_excess.sum(axis=1)
         # F5 separation from higher-priority UAVs on the shared time grid
-        depth, count = self.traffic.violations(
-            slices, pos[:, 1:-1], valid, veh.separation_m, cfg.separation_margin_m, cfg.timing_error_s
-        )
+        limits = (veh.separation_m, cfg.separation_margin_m, cfg.timing_error_s)
+        depth, count = self.traffic.violations(slices, pos[:, 1:-1], valid, *limits)
+        for k, col, on in arrival_tail(prob, prob.t_offset + dec.total / veh.speed_mps, cfg.dt_s):
+            tail_depth, tail_count = self.traffic.violations(k, col, on, *limits)  # its landing too
+            depth, count = depth + tail_depth, count + tail_count
         f5 = count * HARD_PENALTY + depth
         total = cfg.b1 * f1 + cfg.b2 * soft + cfg.b3 * f3 + cfg.b4 * f4 + hard + f5
         return {"F1": f1, "F2": soft, "F3": f3, "F4": f4, "F5": f5, "hard": hard, "total": total}
@@ -557,21 +559,15 @@ def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.
     slices, pos, valid, _ = model.grid(dec)
     slices, pos = slices[valid[0]], pos[0, 1:-1][valid[0]]
     v = prob.vehicle
-    t_arrive = prob.t_offset + float(dec.total[0]) / v.speed_mps
     cols = []
-    for col, t_a, sign in ((prob.pre, prob.delay_s, 1), (prob.post, None, -1)):
-        if not len(col):
-            continue
-        top = prob.start if sign > 0 else prob.goal
-        a, b = (col[0], top) if sign > 0 else (top, col[0])
-        cols.append(_column(a, b, t_a if t_a is not None else t_arrive, v.speed_mps, cfg.dt_s))
+    if len(prob.pre):  # the take-off column, climbed at the end of the take-off delay
+        k, col, _ = _column(prob.pre[0], prob.start, prob.delay_s, v.speed_mps, cfg.dt_s)
+        cols.append((k, col[0]))
     if v.waits_airborne and prob.delay_s > 0:  # the delayed departure awaited hovering at the start
         k = np.arange(0, math.ceil(prob.delay_s / cfg.dt_s - 1e-9))
         cols.append((k, np.broadcast_to(np.asarray(v.start, dtype=float), (len(k), 3))))
-    end = np.asarray(v.goal, dtype=float)
-    if v.landing_mps > 0 and end[2] > 0:  # the mission's final landing, descended at the goal
-        t_land = t_arrive + (abs(end[2] - prob.goal[2]) / v.speed_mps if len(prob.post) else 0.0)
-        cols.append(_column(end, np.array([end[0], end[1], 0.0]), t_land, v.landing_mps, cfg.dt_s))
+    t_arrive = prob.t_offset + float(dec.total[0]) / v.speed_mps
+    cols += [(k[on[0]], col[0][on[0]]) for k, col, on in arrival_tail(prob, np.array([t_arrive]), cfg.dt_s)]
     if cols:
         ks = np.concatenate([slices] + [c[0] for c in cols])
         ps = np.vstack([pos] + [c[1] for c in cols])
@@ -582,12 +578,34 @@ def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.
     return slices, pos
 
 
-def _column(a: np.ndarray, b: np.ndarray, t_start: float, speed_mps: float, dt_s: float):
-    """Grid slices and positions of a vertical climb or descent from a to b starting at t_start."""
+def arrival_tail(
+    prob: VehicleProblem, t_arrive: np.ndarray, dt_s: float
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """What each particle flies after its path ends at t_arrive (P,) [s]: the column down to a goal
+    below the band, then the mission's landing at the goal (its stop, then ``landing_mps`` down);
+    per column, grid slices (K,), positions (P, K, 3) and valid (P, K)."""
+    v = prob.vehicle
+    cols, t = [], t_arrive
+    if len(prob.post):
+        cols.append(_column(prob.goal, prob.post[0], t, v.speed_mps, dt_s))
+        t = t + abs(prob.post[0, 2] - prob.goal[2]) / v.speed_mps
+    end = np.asarray(v.goal, dtype=float)
+    if v.landing_mps > 0 and end[2] > 0:
+        ground = np.array([end[0], end[1], 0.0])
+        cols.append(_column(end, ground, t, v.landing_mps, dt_s, hold_s=v.landing_stop_s))
+    return cols
+
+
+def _column(a: np.ndarray, b: np.ndarray, t_start, speed_mps: float, dt_s: float, hold_s: float = 0.0):
+    """Grid slices (K,), positions (P, K, 3) and valid (P, K) of vertical climbs or descents from a
+    to b that reach a at t_start (P,) [s] and leave it ``hold_s`` later."""
+    t_start = np.atleast_1d(np.asarray(t_start, dtype=float))
     dz = abs(b[2] - a[2])
-    k = np.arange(math.ceil(t_start / dt_s - 1e-9), math.floor((t_start + dz / speed_mps) / dt_s) + 1)
-    frac = (k * dt_s - t_start) * speed_mps / max(dz, 1e-9)
-    return k, a + np.clip(frac, 0, 1)[:, None] * (b - a)
+    first = np.ceil(t_start / dt_s - 1e-9).astype(np.int64)
+    last = np.floor((t_start + hold_s + dz / speed_mps) / dt_s).astype(np.int64)
+    k = np.arange(first.min(), last.max() + 1)
+    frac = (k * dt_s - (t_start + hold_s)[:, None]) * speed_mps / max(dz, 1e-9)
+    return k, a + np.clip(frac, 0, 1)[..., None] * (b - a), (k >= first[:, None]) & (k <= last[:, None])
 
 
 def new_traffic(problems: list[VehicleProblem], cfg: Config) -> Traffic:
