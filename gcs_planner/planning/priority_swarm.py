@@ -561,7 +561,7 @@ def timed_samples(prob: VehicleProblem, x: np.ndarray, cfg: Config) -> tuple[np.
     v = prob.vehicle
     cols = []
     if len(prob.pre):  # the take-off column, climbed at the end of the take-off delay
-        k, col, _ = _column(prob.pre[0], prob.start, prob.delay_s, v.speed_mps, cfg.dt_s)
+        k, col, _ = _column(prob.pre[0], prob.start, np.array([prob.delay_s]), v.speed_mps, cfg.dt_s)
         cols.append((k, col[0]))
     if v.waits_airborne and prob.delay_s > 0:  # the delayed departure awaited hovering at the start
         k = np.arange(0, math.ceil(prob.delay_s / cfg.dt_s - 1e-9))
@@ -596,16 +596,24 @@ def arrival_tail(
     return cols
 
 
-def _column(a: np.ndarray, b: np.ndarray, t_start, speed_mps: float, dt_s: float, hold_s: float = 0.0):
+@njit(cache=True)
+def _column(a, b, t_start, speed_mps, dt_s, hold_s=0.0):
     """Grid slices (K,), positions (P, K, 3) and valid (P, K) of vertical climbs or descents from a
-    to b that reach a at t_start (P,) [s] and leave it ``hold_s`` later."""
-    t_start = np.atleast_1d(np.asarray(t_start, dtype=float))
+    to b that reach a at t_start (P,) [s] and leave it ``hold_s`` later (compiled: the cost calls
+    it for every swarm)."""
     dz = abs(b[2] - a[2])
     first = np.ceil(t_start / dt_s - 1e-9).astype(np.int64)
     last = np.floor((t_start + hold_s + dz / speed_mps) / dt_s).astype(np.int64)
     k = np.arange(first.min(), last.max() + 1)
-    frac = (k * dt_s - (t_start + hold_s)[:, None]) * speed_mps / max(dz, 1e-9)
-    return k, a + np.clip(frac, 0, 1)[..., None] * (b - a), (k >= first[:, None]) & (k <= last[:, None])
+    pos = np.empty((len(t_start), len(k), 3))
+    valid = np.empty((len(t_start), len(k)), dtype=np.bool_)
+    for p in range(len(t_start)):
+        for i in range(len(k)):
+            frac = min(max((k[i] * dt_s - (t_start[p] + hold_s)) * speed_mps / max(dz, 1e-9), 0.0), 1.0)
+            for c in range(3):
+                pos[p, i, c] = a[c] + frac * (b[c] - a[c])
+            valid[p, i] = first[p] <= k[i] <= last[p]
+    return k, pos, valid
 
 
 def new_traffic(problems: list[VehicleProblem], cfg: Config) -> Traffic:
