@@ -1,6 +1,7 @@
 """A sweep's worker (a pool process or a Dask worker) runs with one native (BLAS / OpenMP / MKL)
 thread unless the user chose a number, and has numpy and the planners imported before its first
-run, so no run's CPU time carries the imports or competes with N x cores BLAS threads."""
+run, and the compiled kernels loaded, so no run's CPU time carries them or competes with N x cores
+BLAS threads."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ PROBE = """import os, sys
 def run(scenario, params, seed):
     return {
         "loaded": float("numpy" in sys.modules and "gcs_planner.planning.priority_swarm" in sys.modules),
+        "kernels": float(bool(sys.modules["gcs_planner.planning.traffic"]._violations.signatures)),
         **{name.lower(): float(os.environ.get(name, "-1"))
            for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")},
     }
@@ -34,7 +36,8 @@ def probe(tmp_path, monkeypatch):
     path = tmp_path / "study.toml"
     path.write_text(
         f'name = "t"\nscenario = "{MISSIONS / "straight_4uav"}.toml"\ntask = "sweep_probe_mod:run"\n'
-        'seeds = [0, 1]\nmetrics = ["loaded", "omp_num_threads", "openblas_num_threads", "mkl_num_threads"]\n'
+        'seeds = [0, 1]\nmetrics = ["loaded", "kernels", "omp_num_threads", "openblas_num_threads",'
+        ' "mkl_num_threads"]\n'
         "[grid]\nwaypoint_spacing_m = [50.0]\n"
     )
     yield path
@@ -57,6 +60,7 @@ def test_every_run_finds_one_native_thread_and_the_imports_done(tmp_path, probe,
     assert all(not r["error"] for r in rows)
     for r in rows:
         assert float(r["loaded"]) == 1.0  # the first run of each worker too
+        assert float(r["kernels"]) == 1.0  # the compiled kernels loaded (numba's cache) before it
         threads = ("omp_num_threads", "openblas_num_threads", "mkl_num_threads")
         assert [float(r[k]) for k in threads] == [1.0, 1.0, 1.0]
 
