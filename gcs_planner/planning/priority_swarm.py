@@ -355,8 +355,8 @@ class CostModel:
         if len(obstacles.cx):
             grid = _axis_grid(obstacles.cx.tobytes(), obstacles.cy.tobytes(), self._reach)
             self._axes = (grid.lo, grid.cell_m, grid.shape, grid.start, grid.cand)
-            self._cyl = (obstacles.cx, obstacles.cy, obstacles.radius_m, obstacles.buffer_m) + (
-                obstacles.z_min_m, obstacles.z_max_m)  # fmt: skip
+            obs = obstacles
+            self._cyl = (obs.cx, obs.cy, obs.radius_m, obs.buffer_m, obs.z_min_m, obs.z_max_m)
 
     def grid(self, dec: Decoded) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Samples of every particle on the shared time grid: slices (K,), pos (P, K, 3), valid (P, K), s."""

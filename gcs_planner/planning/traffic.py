@@ -44,9 +44,8 @@ _CELL_BITS = 6  # cells per axis in the table: 64, aliased 64 cells apart (extra
 _BLOCKS = 1 << 2 * _CELL_BITS
 _NEAREST = 4  # traffic samples counted per particle sample
 _EMPTY = np.zeros(0, dtype=np.int64)
-# a hash entry: its sample's position (read where the chain is walked: one place per step), the
-# sample, and the next entry of the same table cell (-1 at its last)
-_ENTRY = np.dtype([("x", "f8"), ("y", "f8"), ("z", "f8"), ("sample", "i4"), ("next", "i4")])
+# a hash entry: its sample and the next entry of the same table cell (-1 at its last)
+_ENTRY = np.dtype([("sample", "i4"), ("next", "i4")])
 
 
 @njit(cache=True)
@@ -149,10 +148,7 @@ class Traffic:
         nxt = np.empty(m, dtype=np.int64)  # each entry links to the one before it in its cell
         nxt[first] = self.head[key[first]]
         nxt[~first] = ent[:-1][~first[1:]]
-        sample = sample[order]
-        for axis, name in enumerate("xyz"):
-            self.entries[name][ent] = self.xyz[sample, axis]
-        self.entries["sample"][ent] = sample
+        self.entries["sample"][ent] = sample[order]
         self.entries["next"][ent] = nxt
         last = np.append(first[1:], True)
         self.head[key[last]] = ent[last]
@@ -215,10 +211,9 @@ def _nearest(table: tuple, sl: int, q: tuple, js: np.ndarray, d2s: np.ndarray) -
         for oy in range(span):
             e = np.int64(head[_block(cx0 + ox, cy0 + oy) * n_slices + sl])
             while e >= 0:
-                entry = entries[e]
-                j, e = np.int64(entry.sample), np.int64(entry.next)
-                d2 = (entry.x - q[0]) ** 2 + (entry.y - q[1]) ** 2
-                d2 += (entry.z - q[2]) ** 2
+                j, e = np.int64(entries[e].sample), np.int64(entries[e].next)
+                d2 = (xyz[j, 0] - q[0]) ** 2 + (xyz[j, 1] - q[1]) ** 2
+                d2 += (xyz[j, 2] - q[2]) ** 2
                 if d2 < r2 and j not in js[:n]:  # in reach, and not met in another cell already
                     n = keep_nearest(js, d2s, n, j, d2)
     return n
