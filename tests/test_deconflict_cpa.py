@@ -119,3 +119,22 @@ def test_blended_position_is_continuous_and_hits_straight_legs():
     assert np.abs(np.diff(p, axis=0)).max() < 0.05  # no jumps
     mid = position_at(pts, times, tau, np.array([7.0]))  # middle of a straight leg
     np.testing.assert_allclose(mid[0], [10.0 / 3 * 3 - 0.0, 0, 10], atol=1e-9)
+
+
+def test_the_time_sweep_over_legs_misses_no_overlap():
+    """With unbounded reach only time decides which leg pairs are computed: the pruned walk (legs
+    of j overlapping leg a of i found by a forward sweep) must equal computing every leg pair."""
+    rng = np.random.default_rng(5)
+    n_b, n_u, n_w = 2, 40, 6
+    pts = rng.uniform(-30, 30, size=(n_b, n_u, n_w, 3))
+    durations = rng.uniform(0.1, 4.0, size=(n_b, n_u, n_w - 1)) * (rng.random((n_b, n_u, n_w - 1)) > 0.1)
+    times = rng.uniform(0, 6, size=(n_b, n_u, 1)) + np.concatenate(
+        [np.zeros((n_b, n_u, 1)), np.cumsum(durations, axis=-1)], axis=-1
+    )
+    pairs = np.array([(i, j) for i in range(n_u) for j in range(i + 1, n_u)])
+    d_all, t_all = pair_closest_approach(pts, times, pairs)
+    d_swept, t_swept = pair_closest_approach(pts, times, pairs, np.full(n_u, np.inf))
+    assert np.isfinite(d_all).sum() > 0.9 * d_all.size
+    np.testing.assert_array_equal(d_swept, d_all)
+    finite = np.isfinite(d_all)
+    np.testing.assert_array_equal(t_swept[finite], t_all[finite])

@@ -9,7 +9,7 @@ import pytest
 from gcs_planner.core.config import parse
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import Origin
-from gcs_planner.geometry.timing import closest_under_timing
+from gcs_planner.geometry.timing import closest_under_timing_one
 from gcs_planner.model.scenario import Scenario, Vehicle
 from gcs_planner.planning import priority_swarm
 from gcs_planner.planning.deconflict4d.conflicts import pair_closest_approach
@@ -87,7 +87,7 @@ def test_closest_under_timing_matches_brute_force():
     brute = np.array(
         [np.linalg.norm(d0[i] + s[..., None] * u[i] + e[..., None] * w[i], axis=-1).min() for i in range(200)]
     )
-    got = closest_under_timing(d0, u, w)
+    got = np.array([closest_under_timing_one(tuple(a), tuple(b), tuple(c)) for a, b, c in zip(d0, u, w)])
     assert np.all(got <= brute + 1e-9) and np.all(brute - got < 0.05)
 
 
@@ -149,7 +149,8 @@ def test_compiled_violations_sum_what_a_pair_by_pair_computation_does(timing_s):
             a0, b0 = pos[p, i], tp[at]
             a1, b1 = (pos[p, i + 1], tp[at + 1]) if both else (a0, b0)
             d0 = b0 - a0
-            miss = closest_under_timing(d0, (b1 - a1) - d0, (b1 - b0) * timing_s / DT)
+            w = (b1 - b0) * timing_s / DT
+            miss = closest_under_timing_one(tuple(d0), tuple((b1 - a1) - d0), tuple(w))
             short = max(sep, 5.0) + 2.0 - miss
             if short > 0:
                 want_depth[p] += short

@@ -11,8 +11,8 @@ such timing error. Where they cross at an angle this is the planned miss distanc
 motion); side by side or head-on it is the planned miss distance; one behind the other it is
 the gap less the ``v T`` the follower may close. ``T = 0`` is the plain closest approach.
 
-Computed one pair at a time and compiled (numba): the priority swarm's traffic walk calls it from
-its own compiled loop, the 4-D planner through the batched ``closest_under_timing``.
+Computed one pair at a time and compiled (numba): the priority swarm's traffic walk and the 4-D
+planner's pair check call it from their own compiled loops.
 """
 
 from __future__ import annotations
@@ -22,29 +22,13 @@ from numba import njit
 
 from gcs_planner.geometry.vec3 import add, along, dot, sub
 
-__all__ = ["closest_on_segment", "closest_under_timing", "closest_under_timing_one"]
-
-
-def closest_under_timing(d0: np.ndarray, u: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """min |d0 + u s + w e| over s in [0, 1], e in [-1, 1]; vectors (..., 3), broadcast -> (...)."""
-    d0, u, w = (np.asarray(a, dtype=float) for a in np.broadcast_arrays(d0, u, w))
-    out = np.empty(d0.shape[:-1])
-    _closest_rows(d0.reshape(-1, 3), u.reshape(-1, 3), w.reshape(-1, 3), out.reshape(-1))
-    return out
-
-
-@njit(cache=True)
-def _closest_rows(d0, u, w, out) -> None:
-    for i in range(len(out)):
-        out[i] = closest_under_timing_one(
-            (d0[i, 0], d0[i, 1], d0[i, 2]), (u[i, 0], u[i, 1], u[i, 2]), (w[i, 0], w[i, 1], w[i, 2])
-        )
+__all__ = ["closest_on_segment", "closest_under_timing_one"]
 
 
 @njit(cache=True)
 def closest_under_timing_one(d0: tuple, u: tuple, w: tuple) -> float:
-    """``closest_under_timing`` of one pair. The minimum of a convex function over the box is its
-    stationary point where that lies inside, else on one of the four edges."""
+    """min |d0 + u s + w e| over s in [0, 1], e in [-1, 1]. The minimum of a convex function over
+    the box is its stationary point where that lies inside, else on one of the four edges."""
     edges = min(
         min(closest_on_segment(sub(d0, w), u, 0.0, 1.0), closest_on_segment(add(d0, w), u, 0.0, 1.0)),
         min(closest_on_segment(d0, w, -1.0, 1.0), closest_on_segment(add(d0, u), w, -1.0, 1.0)),

@@ -4,13 +4,20 @@ from __future__ import annotations
 
 from numba import njit
 
-__all__ = ["add", "along", "dot", "scale", "sub"]
+__all__ = ["add", "along", "dot", "dot_xzy", "scale", "sub", "times_each"]
 
 
 @njit(cache=True)
 def dot(a: tuple, b: tuple) -> float:
     """a . b, summed x + y + z in order (the vectorised code's order, for the same bits)."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def dot_xzy(a: tuple, b: tuple) -> float:
+    """a . b summed (x + z) + y: the order of the numpy einsum the 4-D planner's closest approach
+    used before it was compiled, so its plans kept their bits."""
+    return (a[0] * b[0] + a[2] * b[2]) + a[1] * b[1]
 
 
 @njit(cache=True)
@@ -32,3 +39,9 @@ def scale(a: tuple, s: float) -> tuple:
 def along(p: tuple, s: float, q: tuple) -> tuple:
     """p + s q."""
     return (p[0] + s * q[0], p[1] + s * q[1], p[2] + s * q[2])
+
+
+@njit(cache=True)
+def times_each(a: tuple, b: tuple) -> tuple:
+    """a * b axis by axis."""
+    return (a[0] * b[0], a[1] * b[1], a[2] * b[2])
