@@ -47,9 +47,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 from scipy.optimize import brentq, minimize_scalar
 
+from gcs_planner.core.compiled import compiled
 from gcs_planner.core.geo import wrap_pi
 
 __all__ = [
@@ -393,7 +393,7 @@ def _rows(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return a if a.shape == shape else np.broadcast_to(a, shape)
 
 
-@njit(cache=True)
+@compiled
 def _word_lengths(q0, q1, r0, r1, rm, out) -> None:
     """``word_lengths`` into ``out`` (N, 6, 3), one problem at a time (compiled: numpy's passes over
     small batches were mostly call overhead)."""
@@ -416,7 +416,7 @@ def _word_lengths(q0, q1, r0, r1, rm, out) -> None:
                 out[i, w] = right if better else left
 
 
-@njit(cache=True)
+@compiled
 def _ccw(a: float) -> float:
     """Angle mod 2 pi in [0, 2 pi), with near-2 pi values snapped to 0."""
     a = np.fmod(a, _TWO_PI)  # fmod and a sign fix: np.mod's value
@@ -425,7 +425,7 @@ def _ccw(a: float) -> float:
     return 0.0 if a > _TWO_PI - _ANGLE_EPS else a
 
 
-@njit(cache=True)
+@compiled
 def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> tuple[float, float, float]:
     """Segment lengths of a CSC word with turn signs s0, s1 and centre offset (dx, dy)."""
     dist = np.hypot(dx, dy)
@@ -439,7 +439,7 @@ def _csc(h0, h1, dx, dy, r0, r1, s0, s1) -> tuple[float, float, float]:
     return _ccw(s0 * (alpha - h0)) * r0, straight, _ccw(s1 * (h1 - alpha)) * r1
 
 
-@njit(cache=True)
+@compiled
 def _ccc(h0, h1, c0, c1, r0, r1, rm, s, side) -> tuple[float, float, float]:
     """Segment lengths of a CCC word (first turn sign s), middle circle on the ``side`` (+1 left,
     -1 right) of c0 -> c1."""
@@ -470,13 +470,13 @@ def advance(poses: np.ndarray, kappa: np.ndarray, ds: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@compiled
 def _advance_rows(poses, kappa, ds, out) -> None:
     for i in range(len(poses)):
         out[i] = _advance_one(poses[i, 0], poses[i, 1], poses[i, 2], kappa[i], ds[i])
 
 
-@njit(cache=True)
+@compiled
 def _advance_one(x: float, y: float, h: float, kappa: float, ds: float) -> tuple[float, float, float]:
     """Pose after ``ds`` [m] at signed curvature ``kappa`` from (x, y, h)."""
     if kappa == 0.0:
@@ -485,7 +485,7 @@ def _advance_one(x: float, y: float, h: float, kappa: float, ds: float) -> tuple
     return x + (np.sin(h_new) - np.sin(h)) / kappa, y - (np.cos(h_new) - np.cos(h)) / kappa, h_new
 
 
-@njit(cache=True)
+@compiled
 def _pick_shortest(seg, r0, r1, best, lengths, radii) -> None:
     """``shortest_batch`` from the word lengths: the first shortest word of each row, its lengths and
     radii (the middle one inf for CSC words)."""
@@ -500,7 +500,7 @@ def _pick_shortest(seg, r0, r1, best, lengths, radii) -> None:
         radii[i, 0], radii[i, 1], radii[i, 2] = r0[i], np.inf if b < 4 else min(r0[i], r1[i]), r1[i]
 
 
-@njit(cache=True)
+@compiled
 def _segment_starts(q0, word, lengths, radii, starts, kappa) -> None:
     for i in range(len(q0)):
         for k in range(3):

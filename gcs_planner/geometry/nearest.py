@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+
+from gcs_planner.core.compiled import compiled
 
 __all__ = ["keep_nearest"]
 
 
-@njit(cache=True)
+@compiled
 def keep_nearest(js: np.ndarray, d2s: np.ndarray, n: int, j: int, d2: float) -> int:
     """Offer candidate ``j`` at squared distance ``d2`` to the ``n`` kept so far in ``js`` / ``d2s``
     (nearest first, ties by index; at most ``len(js)``); returns how many are kept now."""

@@ -18,14 +18,14 @@ planner's pair check call it from their own compiled loops.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.vec3 import add, along, dot, sub
 
 __all__ = ["closest_on_segment", "closest_under_timing_one"]
 
 
-@njit(cache=True)
+@compiled
 def closest_under_timing_one(d0: tuple, u: tuple, w: tuple) -> float:
     """min |d0 + u s + w e| over s in [0, 1], e in [-1, 1]. The minimum of a convex function over
     the box is its stationary point where that lies inside, else on one of the four edges."""
@@ -45,7 +45,7 @@ def closest_under_timing_one(d0: tuple, u: tuple, w: tuple) -> float:
     return min(np.sqrt(dot(c, c)), edges)
 
 
-@njit(cache=True)
+@compiled
 def closest_on_segment(p: tuple, q: tuple, lo: float, hi: float) -> float:
     """Distance from the origin to p + q s, s in [lo, hi]."""
     qq = dot(q, q)

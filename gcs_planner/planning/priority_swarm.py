@@ -73,9 +73,9 @@ from typing import TYPE_CHECKING, Annotated
 
 import numpy as np
 from msgspec import Meta
-from numba import njit
 from scipy.spatial import cKDTree
 
+from gcs_planner.core.compiled import compiled
 from gcs_planner.core.config import Count, Distance, Fraction, NonNegative, PositiveDistance
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import wrap_pi
@@ -249,7 +249,7 @@ def positions_at_length(dec: Decoded, s: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@compiled
 def _positions(cum, l3, lh, pz, segments, s, out) -> None:
     """``positions_at_length`` into ``out``, one sample at a time (compiled: the vectorised form
     spent most of its time on temporaries)."""
@@ -307,7 +307,7 @@ def _axis_grid(cx: bytes, cy: bytes, reach: float) -> _AxisGrid:
     return _AxisGrid(lo, cell, (int(n[0]), int(n[1])), start, cand)
 
 
-@njit(cache=True)
+@compiled
 def _cylinder_sums(mid, ds, grid, cyl, margin_m, reach_m, soft, hard) -> None:
     """F2 per particle into ``soft`` / ``hard`` (P,): at each sample mid (P, K, 3) the four nearest
     cylinder axes within ``reach_m`` (nearest first), in their altitude band: the depth into the
@@ -596,7 +596,7 @@ def arrival_tail(
     return cols
 
 
-@njit(cache=True)
+@compiled
 def _column(a, b, t_start, speed_mps, dt_s, hold_s=0.0):
     """Grid slices (K,), positions (P, K, 3) and valid (P, K) of vertical climbs or descents from a
     to b that reach a at t_start (P,) [s] and leave it ``hold_s`` later (compiled: the cost calls

@@ -28,8 +28,8 @@ multiply-adds, sums in the same order), so plans stayed the same bit for bit.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.nearest import keep_nearest
 from gcs_planner.geometry.timing import closest_on_segment, closest_under_timing_one
 from gcs_planner.geometry.vec3 import dot, scale, sub
@@ -48,7 +48,7 @@ _EMPTY = np.zeros(0, dtype=np.int64)
 _ENTRY = np.dtype([("sample", "i4"), ("next", "i4")])
 
 
-@njit(cache=True)
+@compiled
 def _block(cx: np.ndarray, cy: np.ndarray) -> np.ndarray:
     """Table block of an (x cell, y cell)."""
     mask = (1 << _CELL_BITS) - 1
@@ -197,7 +197,7 @@ class Traffic:
         return depth, count
 
 
-@njit(cache=True)
+@compiled
 def _nearest(table: tuple, sl: int, q: tuple, js: np.ndarray, d2s: np.ndarray) -> int:
     """The ``_NEAREST`` traffic samples of slice ``sl`` within reach of point ``q``, nearest first
     (then by sample), into ``js`` / ``d2s``; returns how many."""
@@ -219,7 +219,7 @@ def _nearest(table: tuple, sl: int, q: tuple, js: np.ndarray, d2s: np.ndarray) -
     return n
 
 
-@njit(cache=True)
+@compiled
 def _all_nearest(table: tuple, slices: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``Traffic.neighbours``: every query's ``_nearest`` as (query row, sample) pairs."""
     rows = np.empty(len(slices) * _NEAREST, dtype=np.int64)
@@ -234,7 +234,7 @@ def _all_nearest(table: tuple, slices: np.ndarray, pos: np.ndarray) -> tuple[np.
     return rows[:m], samples[:m]
 
 
-@njit(cache=True)
+@compiled
 def _violations(table, nxt, sep, slices, pos, valid, limits, depth, count) -> None:
     """``Traffic.violations`` into ``depth`` / ``count`` (P,): for each valid particle sample, its
     nearest traffic samples' closest approach over the slice (both moving linearly to their next

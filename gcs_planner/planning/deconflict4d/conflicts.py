@@ -20,8 +20,8 @@ Pairs are pre-filtered by space-time bounding boxes so large fleets stay cheap.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.timing import closest_under_timing_one
 from gcs_planner.geometry.vec3 import along, dot_xzy, scale, sub, times_each
 
@@ -71,7 +71,7 @@ def candidate_pairs(points: np.ndarray, times: np.ndarray, reach_m: np.ndarray) 
     return _near_pairs(points, times, reach_m)
 
 
-@njit(cache=True)
+@compiled
 def _near_pairs(points, times, reach_m) -> np.ndarray:
     """``candidate_pairs``: each UAV's box per candidate, then every pair i < j in order."""
     n_b, n_u, n_w, _ = points.shape
@@ -125,7 +125,7 @@ def pair_closest_approach(
     return d_min, t_min
 
 
-@njit(cache=True)
+@compiled
 def _pair_kernel(points, times, pairs, reach, prune, timing_s, d_min, t_min) -> None:
     """Each pair's legs whose boxes come within reach (all legs unless ``prune``), every
     candidate's closest approach over them (``_leg_pair``), the minimum
@@ -163,7 +163,7 @@ def _pair_kernel(points, times, pairs, reach, prune, timing_s, d_min, t_min) -> 
             t_min[:, k] = when
 
 
-@njit(cache=True)
+@compiled
 def _leg_boxes(points, times) -> tuple:
     """Each leg's box (U, S, 3) and time span (U, S) over all candidates."""
     n_b, n_u, n_w, _ = points.shape
@@ -182,7 +182,7 @@ def _leg_boxes(points, times) -> tuple:
     return lo, hi, tlo, thi
 
 
-@njit(cache=True)
+@compiled
 def _boxes_near(lo, hi, i, a, j, b, r) -> bool:
     """Do the boxes of leg a of UAV i and leg b of UAV j come within r in x, y and z?"""
     return (
@@ -195,7 +195,7 @@ def _boxes_near(lo, hi, i, a, j, b, r) -> bool:
     )
 
 
-@njit(cache=True)
+@compiled
 def _leg_pair(points, times, i, a, j, b, timing_s) -> tuple:
     """Closest approach of leg a of UAV i and leg b of UAV j in one candidate: (distance, time)."""
     pa, va = _leg(points[i], times[i], a)
@@ -206,7 +206,7 @@ def _leg_pair(points, times, i, a, j, b, timing_s) -> tuple:
     return _cpa_one(d0, sub(va, vb), lo, hi, timing_s, vb)
 
 
-@njit(cache=True)
+@compiled
 def _cpa_one(d0, dv, lo, hi, timing_s, vb) -> tuple:
     """min |d0 + dv s| over the legs' common time [lo, hi] (+inf when empty) and when, s in
     [0, hi - lo]; with ``timing_s`` > 0 the distance under any schedule error up to that
@@ -224,7 +224,7 @@ def _cpa_one(d0, dv, lo, hi, timing_s, vb) -> tuple:
     return np.sqrt(dot_xzy(d, d)), lo + s
 
 
-@njit(cache=True)
+@compiled
 def _leg(p, t, s) -> tuple:
     """Start point and velocity of leg s of the polyline p (W, 3) timed t (W,); a leg of no
     duration does not move."""
@@ -274,7 +274,7 @@ def zone_closest_approach(
     return d_out, t_out
 
 
-@njit(cache=True)
+@compiled
 def _zone_kernel(points, times, zp, zt, axes, margin_m, first, last, d_out, t_out) -> None:
     """Each UAV's whitened closest approach to one zone, in the zone's axis frame, over the zone
     legs ``first..last`` of each of its legs (the semi-axes grown by the UAV's margin): the first
@@ -293,7 +293,7 @@ def _zone_kernel(points, times, zp, zt, axes, margin_m, first, last, d_out, t_ou
             d_out[c, u], t_out[c, u] = best, when
 
 
-@njit(cache=True)
+@compiled
 def _zone_leg_pair(p, t, a, zp, zt, k, axes, margin) -> tuple:
     """Closest approach of leg a of a UAV polyline (p, t) and leg k of a zone's centre, the
     relative motion divided by the zone's semi-axes plus margin: (distance, time)."""
