@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from gcs_planner.geometry.obstacles import Obstacles
-from gcs_planner.model.scenario import Cylinder
-from gcs_planner.planning.rrt_star import RRTConfig, _EdgeCheck, rrt_star
+from gcs_planner.model.scenario import Cylinder, Hemisphere
+from gcs_planner.planning.rrt_star import RRTConfig, edge_check, edges_valid, rrt_star
 
 LO, HI = np.array([0.0, -150.0, 20.0]), np.array([400.0, 150.0, 80.0])
 
@@ -81,15 +81,32 @@ def test_reports_no_path_when_goal_is_walled_in():
     assert res.path is None and res.iterations == 400
 
 
-def test_the_near_set_check_is_the_edge_check_for_points_in_the_band():
-    """RRT*'s per-iteration check of its near set (``star``) answers as the general edge check, edge
-    for edge, for segments that clear the wall's towers, graze them, cross them or pass a gap."""
-    check = _EdgeCheck(_wall(), (LO[2], HI[2]), 2.0)
+def test_the_compiled_edge_check_answers_as_the_obstacle_distances():
+    """Edge by edge, the tree's check (one segment at a time, only the cylinders whose box it meets)
+    answers as ``Obstacles``' vectorised distances over every cylinder and dome, and the band:
+    for segments that clear the towers, graze them, cross them, pass a gap, pass over a low tower,
+    run level or vertical, or leave the band."""
+    towers = _wall().cx.size
+    low = [Cylinder(x=100, y=0, radius_m=10, z_min_m=30, z_max_m=50, buffer_m=2)]
+    domes = [Hemisphere(x=300, y=80, z=0, radius_m=40)]
+    obs = Obstacles.from_scenario(
+        [Cylinder(x=200, y=float(y), radius_m=6, z_max_m=200, buffer_m=3) for y in _wall().cy] + low, domes
+    )
+    assert len(obs.cx) == towers + 1
     rng = np.random.default_rng(3)
-    nodes = LO + (HI - LO) * rng.random((400, 3))
-    answers = []
-    for p in LO + (HI - LO) * rng.random((60, 3)):
-        star = check.star(nodes, p)
-        assert np.array_equal(star, check(nodes, np.broadcast_to(p, nodes.shape)))
-        answers.append(star)
-    assert 0.05 < np.mean(answers) < 0.95  # both answers are exercised
+    a = LO + (HI - LO) * rng.uniform(-0.1, 1.1, size=(4000, 3))
+    b = LO + (HI - LO) * rng.uniform(-0.1, 1.1, size=(4000, 3))
+    b[:400, 2] = a[:400, 2]  # level
+    b[400:600, :2] = a[400:600, :2]  # vertical
+    margin = 2.0
+    want = (
+        np.all(obs.cylinder_distances(a, b) > obs.radius_m + obs.buffer_m + margin, axis=-1)
+        & np.all(obs.dome_distances(a, b) > obs.dome_radius_m + margin, axis=-1)
+        & (a[:, 2] >= LO[2])
+        & (a[:, 2] <= HI[2])
+        & (b[:, 2] >= LO[2])
+        & (b[:, 2] <= HI[2])
+    )
+    got = edges_valid(edge_check(obs, (LO[2], HI[2]), margin), a, b)
+    assert np.array_equal(got, want)
+    assert 0.05 < want.mean() < 0.95  # both answers are exercised

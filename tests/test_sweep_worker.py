@@ -18,7 +18,10 @@ PROBE = """import os, sys
 def run(scenario, params, seed):
     return {
         "loaded": float("numpy" in sys.modules and "gcs_planner.planning.priority_swarm" in sys.modules),
-        "kernels": float(bool(sys.modules["gcs_planner.planning.traffic"]._violations.signatures)),
+        "kernels": float(
+            bool(sys.modules["gcs_planner.planning.traffic"]._violations.signatures)
+            and bool(sys.modules["gcs_planner.planning.rrt_star"]._grow_tree.signatures)
+        ),
         **{name.lower(): float(os.environ.get(name, "-1"))
            for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")},
     }

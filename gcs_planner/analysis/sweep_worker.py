@@ -47,8 +47,9 @@ def prepare_worker(task: str | None) -> None:
 
 
 def _load_kernels() -> None:
-    """Plan two crossing vehicles past a tower, each landing at its goal, on a tiny budget: the
-    priority swarm's calls load its kernels and the Dubins and timing kernels the others share."""
+    """Plan two crossing vehicles, one with a tower in its way, each landing at its goal, on a tiny
+    budget: the priority swarm's calls (RRT* among them) load its kernels and the Dubins and timing
+    kernels the others share."""
     import numpy as np  # here: the thread variables above must be set first
 
     from gcs_planner.core.config import parse
@@ -69,7 +70,7 @@ def _load_kernels() -> None:
         Origin(47.4, 8.5, 488.0),
         table,
         vehicles,
-        [Cylinder(x=60.0, y=60.0, radius_m=10.0, z_max_m=100.0)],
+        [Cylinder(x=0.0, y=100.0, radius_m=10.0, z_max_m=100.0)],
     )
     priority_swarm.plan(scenario, parse(priority_swarm.Config, table, "planner"), np.random.default_rng(0))
 

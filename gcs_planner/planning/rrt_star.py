@@ -16,6 +16,8 @@ Choices where the paper is open (documented for reproducibility):
 - Nearest/near queries: a brute-force scan of the nodes. The trees hold hundreds to a few thousand
   nodes, where a scan costs less than a k-d tree's query (200 nodes: 8 us against cKDTree's 13 us,
   which also had to be rebuilt as the tree grew).
+- The tree grows in one compiled (numba) loop, an edge and a node at a time, drawing from the
+  caller's generator as ``rng.random()`` does; the goal connection and the shortcut stay in Python.
 - The start->goal straight edge is tried first (open field: no tree needed). After the goal is
   first reached, ``extra_iterations`` more samples refine the path; the result is then shortcut
   greedily (drop a vertex when the edge that skips it is valid).
@@ -25,9 +27,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.obstacles import Obstacles
 
 __all__ = ["RRTConfig", "RRTResult", "rrt_star", "shortcut"]
@@ -50,91 +54,108 @@ class RRTResult:
     nodes: int
 
 
-def edges_valid(
-    obstacles: Obstacles, a: np.ndarray, b: np.ndarray, z_band: tuple[float, float], margin_m: float
-) -> np.ndarray:
-    """True (...) where segments a -> b (..., 3) clear every obstacle's buffer + margin and stay in band."""
-    return _EdgeCheck(obstacles, z_band, margin_m)(a, b)
+class EdgeCheck(NamedTuple):
+    """What an edge must clear, as arrays a compiled loop reads: the altitude band, every cylinder's
+    radius + buffer + margin (``need``) and the box around its axis where a segment can come that
+    close, every dome's radius + margin. Built by ``edge_check``."""
+
+    z_lo: float
+    z_hi: float
+    cx: np.ndarray
+    cy: np.ndarray
+    z_min: np.ndarray
+    z_max: np.ndarray
+    need: np.ndarray
+    x_above: np.ndarray
+    x_below: np.ndarray
+    y_above: np.ndarray
+    y_below: np.ndarray
+    dome_centre: np.ndarray
+    dome_need: np.ndarray
 
 
-class _EdgeCheck:
-    """``edges_valid`` for one set of obstacles, band and margin, with what every check shares
-    computed once (RRT* asks about one edge at a time, so per-call work is what counts).
+def edge_check(obstacles: Obstacles, z_band: tuple[float, float], margin_m: float) -> EdgeCheck:
+    """The edge check for one set of obstacles, band and margin (what every edge shares)."""
+    need = obstacles.radius_m + obstacles.buffer_m + margin_m
+    reach = need + 1e-6  # rounding of a point on the segment
+    return EdgeCheck(
+        z_band[0] - 1e-9,
+        z_band[1] + 1e-9,
+        obstacles.cx,
+        obstacles.cy,
+        obstacles.z_min_m,
+        obstacles.z_max_m,
+        need,
+        obstacles.cx + reach,
+        obstacles.cx - reach,
+        obstacles.cy + reach,
+        obstacles.cy - reach,
+        obstacles.dome_centre,
+        obstacles.dome_radius_m + margin_m,
+    )
 
-    Only the (segment, cylinder) pairs whose axis lies within the clearance of the segment's xy
-    bounding box can fail; the exact distance is computed for those alone (most edges have none).
-    """
 
-    def __init__(self, obstacles: Obstacles, z_band: tuple[float, float], margin_m: float) -> None:
-        self.obs, self.margin_m = obstacles, margin_m
-        self.z_lo, self.z_hi = z_band[0] - 1e-9, z_band[1] + 1e-9
-        self.need = obstacles.radius_m + obstacles.buffer_m + margin_m
-        reach = self.need + 1e-6  # rounding of a point on the segment
-        self.x_above, self.x_below = obstacles.cx + reach, obstacles.cx - reach
-        self.y_above, self.y_below = obstacles.cy + reach, obstacles.cy - reach
+def edges_valid(check: EdgeCheck, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """True (n,) where segments a -> b (n, 3) clear every obstacle and keep both ends in the band."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    return _edges_clear(np.ascontiguousarray(a), np.ascontiguousarray(b), check)
 
-    def __call__(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-        if a.ndim == 1 and b.ndim == 1 and not len(self.obs.dome_radius_m):
-            return self._one(a, b)
-        ok = np.ones(np.broadcast_shapes(a.shape, b.shape)[:-1], dtype=bool)
-        if len(self.obs.radius_m):
-            ok &= self._clear_of_cylinders(a, b)
-        if len(self.obs.dome_radius_m):
-            ok &= np.all(self.obs.dome_distances(a, b) > self.obs.dome_radius_m + self.margin_m, axis=-1)
-        for p in (a, b):
-            ok &= (p[..., 2] >= self.z_lo) & (p[..., 2] <= self.z_hi)
-        return ok
 
-    def _one(self, a: np.ndarray, b: np.ndarray) -> np.bool_:
-        """One segment, no domes: the band first, then the cylinders near its bounding box."""
-        ax, ay, az = a.tolist()
-        bx, by, bz = b.tolist()
-        if not (self.z_lo <= az <= self.z_hi and self.z_lo <= bz <= self.z_hi):
-            return np.False_
-        if not len(self.need):
-            return np.True_
-        cand = np.flatnonzero(
-            (self.x_above > min(ax, bx))
-            & (self.x_below < max(ax, bx))
-            & (self.y_above > min(ay, by))
-            & (self.y_below < max(ay, by))
-        )
-        if not len(cand):
-            return np.True_
-        m = len(cand)
-        d = self.obs.cylinder_distances_pairs(np.broadcast_to(a, (m, 3)), np.broadcast_to(b, (m, 3)), cand)
-        return np.bool_(np.all(d > self.need[cand]))
+@compiled
+def _edges_clear(a, b, check) -> np.ndarray:
+    ok = np.empty(len(a), dtype=np.bool_)
+    for i in range(len(a)):
+        ok[i] = _edge_clear((a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]), check)
+    return ok
 
-    def star(self, nodes: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """``self(nodes, p)`` for tree nodes (m, 3) and one point p (3,), all in the band (each is
-        the end of a valid edge or the start): the band is not checked again, and one point's
-        bounds need no broadcasting. RRT* asks this once an iteration (its near set)."""
-        if len(self.obs.dome_radius_m):
-            return self(nodes, np.broadcast_to(p, nodes.shape))
-        px, py = float(p[0]), float(p[1])
-        x, y = nodes[:, :1], nodes[:, 1:2]
-        box = np.minimum(x, px), np.maximum(x, px), np.minimum(y, py), np.maximum(y, py)
-        return self._clear_in_boxes(nodes, np.broadcast_to(p, nodes.shape), *box)
 
-    def _clear_of_cylinders(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """True (...) where segments a -> b clear every cylinder's radius + buffer + margin."""
-        a, b = np.broadcast_arrays(a, b)
-        shape = a.shape[:-1]
-        a, b = a.reshape(-1, 3), b.reshape(-1, 3)
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        return self._clear_in_boxes(a, b, lo[:, :1], hi[:, :1], lo[:, 1:2], hi[:, 1:2]).reshape(shape)
+@compiled
+def _edge_clear(a: tuple, b: tuple, check) -> bool:
+    """Does the segment a -> b keep both ends in the band and clear every cylinder (only those whose
+    box it meets are measured) and dome? ``Obstacles``' distances, one segment at a time."""
+    if not (check.z_lo <= a[2] <= check.z_hi and check.z_lo <= b[2] <= check.z_hi):
+        return False
+    d = (b[0] - a[0], b[1] - a[1], b[2] - a[2])
+    x_lo, x_hi, y_lo, y_hi = min(a[0], b[0]), max(a[0], b[0]), min(a[1], b[1]), max(a[1], b[1])
+    for q in range(len(check.need)):
+        near = check.x_above[q] > x_lo and check.x_below[q] < x_hi
+        near = near and check.y_above[q] > y_lo and check.y_below[q] < y_hi
+        if near and not _axis_distance(a, d, check, q) > check.need[q]:
+            return False
+    for h in range(len(check.dome_need)):
+        if not _dome_distance(a, d, check.dome_centre[h]) > check.dome_need[h]:
+            return False
+    return True
 
-    def _clear_in_boxes(self, a, b, x_lo, x_hi, y_lo, y_hi) -> np.ndarray:
-        """True (m,) where segments a -> b (m, 3), with xy bounding boxes (m, 1) each, clear every
-        cylinder: exact distances only for the cylinders whose reach meets a segment's box."""
-        cand = (self.x_above > x_lo) & (self.x_below < x_hi) & (self.y_above > y_lo) & (self.y_below < y_hi)
-        edge, cyl = np.nonzero(cand)
-        ok = np.ones(len(a), dtype=bool)
-        if len(edge):
-            blocked = ~(self.obs.cylinder_distances_pairs(a[edge], b[edge], cyl) > self.need[cyl])
-            ok[edge[blocked]] = False
-        return ok
+
+@compiled
+def _axis_distance(a: tuple, d: tuple, check, q: int) -> float:
+    """``obstacles._axis_distance`` of one segment a -> a + d and cylinder q's axis."""
+    cx, cy, z_min, z_max = check.cx[q], check.cy[q], check.z_min[q], check.z_max[q]
+    if abs(d[2]) < 1e-12:
+        lo, hi = 0.0, 1.0
+        empty = not (z_min <= a[2] <= z_max)
+    else:
+        t1, t2 = (z_min - a[2]) / d[2], (z_max - a[2]) / d[2]
+        lo, hi = max(0.0, min(t1, t2)), min(1.0, max(t1, t2))
+        empty = lo > hi
+    if empty:
+        return np.inf
+    dxy2 = d[0] * d[0] + d[1] * d[1]
+    t = ((cx - a[0]) * d[0] + (cy - a[1]) * d[1]) / dxy2 if dxy2 > 1e-18 else 0.0
+    t = min(max(t, lo), max(lo, hi))
+    return np.hypot(a[0] + t * d[0] - cx, a[1] + t * d[1] - cy)
+
+
+@compiled
+def _dome_distance(a: tuple, d: tuple, centre) -> float:
+    """``Obstacles.dome_distances`` of one segment a -> a + d and one dome centre."""
+    rel = (centre[0] - a[0], centre[1] - a[1], centre[2] - a[2])
+    dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    t = (rel[0] * d[0] + rel[1] * d[1] + rel[2] * d[2]) / (dd if dd > 1e-18 else 1.0)
+    t = min(max(t, 0.0), 1.0)
+    x, y, z = a[0] + t * d[0] - centre[0], a[1] + t * d[1] - centre[1], a[2] + t * d[2] - centre[2]
+    return np.sqrt(x * x + y * y + z * z)
 
 
 def rrt_star(
@@ -148,57 +169,31 @@ def rrt_star(
 ) -> RRTResult:
     """Plan start -> goal (both (3,), inside the band box_lo[2]..box_hi[2])."""
     start, goal = np.asarray(start, float), np.asarray(goal, float)
-    band = (float(box_lo[2]), float(box_hi[2]))
-
-    valid = _EdgeCheck(obstacles, band, cfg.margin_m)
-
-    if valid(start, goal):
+    check = edge_check(obstacles, (float(box_lo[2]), float(box_hi[2])), cfg.margin_m)
+    if edges_valid(check, start[None], goal[None])[0]:
         return RRTResult(np.vstack([start, goal]), float(np.linalg.norm(goal - start)), 0, 2)
-    n_max = cfg.max_iterations + 1
-    nodes = np.empty((n_max, 3))
-    parent = np.full(n_max, -1)
-    cost = np.zeros(n_max)
-    nodes[0] = start
-    n = 1
-    span = box_hi - box_lo
+    box_lo = np.asarray(box_lo, float)
+    span = np.asarray(box_hi, float) - box_lo
     volume = float(np.prod(np.maximum(span, 1.0)))
     gamma = 2.0 * (1.0 + 1.0 / 3.0) ** (1.0 / 3.0) * (volume / (4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
-    first_hit = None
-    it = 0
-    for it in range(1, cfg.max_iterations + 1):
-        if first_hit is not None and it - first_hit >= cfg.extra_iterations:
-            break
-        # rng.uniform(box_lo, box_hi)'s arithmetic on the same draws, without its per-call dispatch
-        target = goal if rng.random() < cfg.goal_bias else box_lo + span * rng.random(3)
-        near_i = _nearest(nodes[:n], target)
-        d = target - nodes[near_i]
-        dist = _length(d)
-        new = target if dist <= cfg.step_m else nodes[near_i] + d * (cfg.step_m / dist)
-        if not valid(nodes[near_i], new):
-            continue
-        radius = min(gamma * (math.log(n + 1) / (n + 1)) ** (1.0 / 3.0), 3.0 * cfg.step_m)
-        dist_all = _lengths(nodes[:n] - new)
-        inside = dist_all <= max(radius, 1e-6)
-        inside[near_i] = True  # the nearest node is always a candidate parent
-        near = np.flatnonzero(inside)
-        seg = dist_all[near]
-        ok = valid.star(nodes[near], new)
-        through = np.where(ok, cost[near] + seg, np.inf)
-        best = int(np.argmin(through))
-        k = n
-        nodes[k], parent[k], cost[k] = new, near[best], through[best]
-        n += 1
-        improve = ok & (cost[k] + seg < cost[near] - 1e-9)
-        for j, c_new in zip(near[improve], (cost[k] + seg)[improve]):
-            _reparent(parent, cost, n, int(j), k, float(c_new))
-        if first_hit is None and _length(goal - new) <= cfg.step_m and valid(new, goal):
-            first_hit = it
+    nodes, parent, cost, n, it = _grow_tree(
+        start,
+        goal,
+        box_lo,
+        span,
+        gamma,
+        float(cfg.step_m),
+        cfg.max_iterations,
+        cfg.extra_iterations,
+        cfg.goal_bias,
+        check,
+        rng,
+    )
     # connect the goal to the cheapest valid node within one step
     d_goal = np.linalg.norm(nodes[:n] - goal, axis=1)
     cand = np.flatnonzero(d_goal <= cfg.step_m)
     if len(cand):
-        ok = valid(nodes[cand], np.broadcast_to(goal, (len(cand), 3)))
-        cand = cand[ok]
+        cand = cand[edges_valid(check, nodes[cand], goal[None])]
     if not len(cand):
         return RRTResult(None, math.inf, it, n)
     total = cost[cand] + d_goal[cand]
@@ -207,8 +202,102 @@ def rrt_star(
     while j >= 0:
         chain.append(nodes[j])
         j = int(parent[j])
-    path = shortcut(np.array(chain[::-1]), lambda a, b: valid(a, b))
+    path = shortcut(np.array(chain[::-1]), lambda a, b: edges_valid(check, a, b))
     return RRTResult(path, float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()), it, n)
+
+
+@compiled
+def _grow_tree(
+    start, goal, box_lo, span, gamma, step, max_iterations, extra_iterations, goal_bias, check, rng
+):
+    """The tree (nodes, parents, costs, node count, iterations run): sample (goal-biased), steer
+    from the nearest node, keep a clear edge, choose the cheapest clear parent in the near set,
+    rewire the near set through the new node."""
+    n_max = max_iterations + 1
+    nodes = np.empty((n_max, 3))
+    parent = np.full(n_max, -1)
+    cost = np.zeros(n_max)
+    nodes[0] = start
+    n = 1
+    first_hit = -1
+    it = 0
+    for it in range(1, max_iterations + 1):
+        if first_hit >= 0 and it - first_hit >= extra_iterations:
+            break
+        target = goal if rng.random() < goal_bias else box_lo + span * rng.random(3)
+        near_i = _nearest(nodes, n, target)
+        d = target - nodes[near_i]
+        dist = _length(d)
+        new = target.copy() if dist <= step else nodes[near_i] + d * (step / dist)
+        p = (new[0], new[1], new[2])
+        if not _edge_clear(_row(nodes, near_i), p, check):
+            continue
+        radius = min(gamma * (math.log(n + 1) / (n + 1)) ** (1.0 / 3.0), 3.0 * step)
+        dist_all = np.empty(n)
+        for j in range(n):
+            dist_all[j] = _length(nodes[j] - new)
+        near = np.flatnonzero((dist_all <= max(radius, 1e-6)) | (np.arange(n) == near_i))
+        seg = dist_all[near]
+        ok = np.empty(len(near), dtype=np.bool_)
+        for m in range(len(near)):
+            ok[m] = _edge_clear(_row(nodes, near[m]), p, check)
+        through = np.where(ok, cost[near] + seg, np.inf)
+        best = int(np.argmin(through))
+        k = n
+        nodes[k], parent[k], cost[k] = new, near[best], through[best]
+        n += 1
+        improve = ok & (cost[k] + seg < cost[near] - 1e-9)
+        c_new = cost[k] + seg
+        for m in range(len(near)):
+            if improve[m]:
+                _reparent(parent, cost, n, near[m], k, c_new[m])
+        if (
+            first_hit < 0
+            and _length(goal - new) <= step
+            and _edge_clear(p, (goal[0], goal[1], goal[2]), check)
+        ):
+            first_hit = it
+    return nodes, parent, cost, n, it
+
+
+@compiled
+def _row(points, i) -> tuple:
+    return (points[i, 0], points[i, 1], points[i, 2])
+
+
+@compiled
+def _nearest(nodes, n, x) -> int:
+    """Index of the first of the n nodes closest to ``x``."""
+    best, at = np.inf, 0
+    for j in range(n):
+        dx, dy, dz = nodes[j, 0] - x[0], nodes[j, 1] - x[1], nodes[j, 2] - x[2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 < best:
+            best, at = d2, j
+    return at
+
+
+@compiled
+def _length(v) -> float:
+    """|v| of one 3-vector, summed x + y + z as numpy's norm and dot do."""
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+@compiled
+def _reparent(parent, cost, n, j, new_parent, new_cost) -> None:
+    """Give node j a cheaper parent and pass the cost decrease on to its whole subtree."""
+    delta = cost[j] - new_cost
+    parent[j] = new_parent
+    cost[j] = new_cost
+    in_frontier = np.zeros(n, dtype=np.bool_)
+    in_frontier[j] = True
+    while in_frontier.any():
+        children = np.zeros(n, dtype=np.bool_)
+        for c in range(n):
+            if parent[c] >= 0 and in_frontier[parent[c]]:
+                children[c] = True
+                cost[c] -= delta
+        in_frontier = children
 
 
 def shortcut(path: np.ndarray, valid) -> np.ndarray:
@@ -221,32 +310,3 @@ def shortcut(path: np.ndarray, valid) -> np.ndarray:
         i = int(later[np.argmax(ok)]) if ok.any() else i + 1
         keep.append(i)
     return path[keep]
-
-
-def _nearest(nodes: np.ndarray, x: np.ndarray) -> int:
-    """Index of the node closest to ``x``."""
-    d = nodes - x
-    return int(np.argmin((d * d).sum(axis=1)))
-
-
-def _length(v: np.ndarray) -> float:
-    """|v| of one vector: np.linalg.norm's arithmetic without its per-call dispatch (RRT* asks
-    once or twice an iteration; docs/results/priority_swarm_scale.md)."""
-    return math.sqrt(v.dot(v))
-
-
-def _lengths(v: np.ndarray) -> np.ndarray:
-    """Row lengths of (n, 3) vectors, as np.linalg.norm(v, axis=1) computes them."""
-    return np.sqrt((v * v).sum(axis=1))
-
-
-def _reparent(parent: np.ndarray, cost: np.ndarray, n: int, j: int, new_parent: int, new_cost: float) -> None:
-    """Give node j a cheaper parent and pass the cost decrease on to its whole subtree."""
-    delta = cost[j] - new_cost
-    parent[j] = new_parent
-    frontier = np.array([j])
-    cost[j] = new_cost
-    while len(frontier):
-        children = np.flatnonzero(np.isin(parent[:n], frontier))
-        cost[children] -= delta
-        frontier = children
