@@ -128,9 +128,9 @@ def pair_closest_approach(
 @compiled
 def _pair_kernel(points, times, pairs, reach, prune, timing_s, d_min, t_min) -> None:
     """Each pair's legs whose boxes come within reach (all legs unless ``prune``), every
-    candidate's closest approach over them (``_leg_pair``), the minimum
-    and its latest time. Times are non-decreasing along each polyline, so the legs of UAV j that
-    overlap leg a of UAV i in time are a run that only moves forward with a."""
+    candidate's closest approach over them (``_leg_pair``), the minimum and its latest time.
+    Times are non-decreasing along each polyline, so the legs of UAV j that overlap leg a of UAV i
+    in time are a run that only moves forward with a."""
     n_b = points.shape[0]
     lo, hi, tlo, thi = _leg_boxes(points, times)
     n_s = tlo.shape[1]
@@ -256,6 +256,7 @@ def zone_closest_approach(
     d_out = np.full((n_b, n_u, n_z), np.inf)
     t_out = np.zeros((n_b, n_u, n_z))
     t_lo, t_hi = times.min(), times.max()
+    ta0, ta1 = times[..., :-1], times[..., 1:]
     for z in range(n_z):  # few zones (manned aircraft x motion modes)
         # only the zone legs that overlap the UAVs' time span matter
         legs = np.nonzero((zone_times[z, 1:] > t_lo) & (zone_times[z, :-1] < t_hi))[0]
@@ -267,7 +268,6 @@ def zone_closest_approach(
         zp = zone_points[z, sl] @ rot.T
         axes = zone_axes[z, legs[0] : legs[-1] + 1]
         # per UAV leg only the zone legs that overlap it in time (zt[k] < ta1 and zt[k + 1] > ta0)
-        ta0, ta1 = times[..., :-1], times[..., 1:]
         first = np.clip(np.searchsorted(zt, ta0, side="right") - 1, 0, len(legs) - 1)
         last = np.clip(np.searchsorted(zt, ta1, side="left") - 1, 0, len(legs) - 1)
         _zone_kernel(points @ rot.T, times, zp, zt, axes, margin_m, first, last, d_out[..., z], t_out[..., z])
