@@ -6,7 +6,7 @@ import numpy as np
 
 from gcs_planner.geometry.obstacles import Obstacles
 from gcs_planner.model.scenario import Cylinder, Hemisphere
-from gcs_planner.planning.rrt_star import RRTConfig, edge_check, edges_valid, rrt_star
+from gcs_planner.planning.rrt_star import RRTConfig, _grow_tree, edge_check, edges_valid, rrt_star
 
 LO, HI = np.array([0.0, -150.0, 20.0]), np.array([400.0, 150.0, 80.0])
 
@@ -110,3 +110,31 @@ def test_the_compiled_edge_check_answers_as_the_obstacle_distances():
     got = edges_valid(edge_check(obs, (LO[2], HI[2]), margin), a, b)
     assert np.array_equal(got, want)
     assert 0.05 < want.mean() < 0.95  # both answers are exercised
+
+
+def test_the_tree_stays_a_tree_whose_costs_are_its_path_lengths_after_rewiring():
+    """Every node's cost is its parent's plus the edge between them, and every node reaches the
+    start through its parents, after thousands of rewirings (a cost not passed on to a subtree, or
+    a parent set to a descendant, breaks one of them)."""
+    obs = _wall()
+    lo, hi = LO.astype(float), HI.astype(float)
+    span = hi - lo
+    check = edge_check(obs, (lo[2], hi[2]), 2.0)
+    nodes, parent, cost, n, _ = _grow_tree(
+        np.array([20.0, -100.0, 40.0]), np.array([380.0, -100.0, 50.0]), lo, span, 300.0, 30.0, 1500, 10**6,
+        0.1, check, np.random.default_rng(7),
+    )  # fmt: skip
+    assert n > 1000
+    k = np.arange(1, n)
+    edge = np.linalg.norm(nodes[k] - nodes[parent[k]], axis=1)
+    np.testing.assert_allclose(cost[k], cost[parent[k]] + edge, rtol=0, atol=1e-6)
+    depth = np.zeros(n, dtype=int)
+    at = np.arange(n)
+    for _ in range(n):
+        moving = at > 0
+        if not moving.any():
+            break
+        at[moving] = parent[at[moving]]
+        depth += moving
+    assert not (at > 0).any() and (at >= 0).all()  # every chain ends at the start, none loops
+    assert depth.max() > 5

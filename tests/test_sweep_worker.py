@@ -21,6 +21,7 @@ def run(scenario, params, seed):
         "kernels": float(
             bool(sys.modules["gcs_planner.planning.traffic"]._violations.signatures)
             and bool(sys.modules["gcs_planner.planning.rrt_star"]._grow_tree.signatures)
+            and bool(sys.modules["gcs_planner.planning.deconflict4d.conflicts"]._pair_kernel.signatures)
         ),
         **{name.lower(): float(os.environ.get(name, "-1"))
            for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")},

@@ -13,7 +13,7 @@ would otherwise make a run's measured CPU grow with the number of workers:
   cost; every planner module is imported here instead, once per worker.
 - Compiled kernels: the planners' numba kernels load from numba's on-disk cache on their first
   call (~0.2 s of LLVM start-up, ~10 ms a kernel; max 0.75-1.14 s against a median 0.5 s a run,
-  docs/results/sweep_scaling.md); a two-vehicle priority-swarm plan here loads them instead.
+  docs/results/sweep_scaling.md); ``planning.warm.load_kernels`` loads them here instead.
 """
 
 from __future__ import annotations
@@ -41,38 +41,11 @@ def prepare_worker(task: str | None) -> None:
     for module in (*modules, *([task.partition(":")[0]] if task else [])):
         _imported(module)
     try:
-        _load_kernels()
+        from gcs_planner.planning.warm import load_kernels  # here: the thread variables must be set first
+
+        load_kernels()
     except Exception:  # noqa: BLE001 - a run that needs what failed here reports it itself
         return
-
-
-def _load_kernels() -> None:
-    """Plan two crossing vehicles, one with a tower in its way, each landing at its goal, on a tiny
-    budget: the priority swarm's calls (RRT* among them) load its kernels and the Dubins and timing
-    kernels the others share."""
-    import numpy as np  # here: the thread variables above must be set first
-
-    from gcs_planner.core.config import parse
-    from gcs_planner.core.geo import Origin
-    from gcs_planner.model.scenario import Cylinder, Scenario, Vehicle
-    from gcs_planner.planning import priority_swarm
-
-    vehicles = [
-        Vehicle(id=name, sysid=i + 1, type="multirotor", start=start, goal=goal, landing_mps=1.0)
-        for i, (name, start, goal) in enumerate(
-            [("a", (0.0, -200.0, 30.0), (0.0, 200.0, 30.0)), ("b", (-200.0, 0.0, 30.0), (200.0, 0.0, 30.0))]
-        )
-    ]
-    table = {"name": "priority_swarm", "waypoints": 2, "particles": 4, "iterations": 2, "rounds": 1,
-             "rrt_iterations": 20}  # fmt: skip
-    scenario = Scenario(
-        "kernels",
-        Origin(47.4, 8.5, 488.0),
-        table,
-        vehicles,
-        [Cylinder(x=0.0, y=100.0, radius_m=10.0, z_max_m=100.0)],
-    )
-    priority_swarm.plan(scenario, parse(priority_swarm.Config, table, "planner"), np.random.default_rng(0))
 
 
 def _imported(name: str) -> ModuleType | None:

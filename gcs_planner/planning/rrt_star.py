@@ -33,6 +33,7 @@ import numpy as np
 
 from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.obstacles import Obstacles
+from gcs_planner.geometry.vec3 import add, scale, sub
 
 __all__ = ["RRTConfig", "RRTResult", "rrt_star", "shortcut"]
 
@@ -209,53 +210,63 @@ def rrt_star(
 @compiled
 def _grow_tree(
     start, goal, box_lo, span, gamma, step, max_iterations, extra_iterations, goal_bias, check, rng
-):
+) -> tuple:
     """The tree (nodes, parents, costs, node count, iterations run): sample (goal-biased), steer
     from the nearest node, keep a clear edge, choose the cheapest clear parent in the near set,
-    rewire the near set through the new node."""
+    rewire the near set through the new node. Scalar loops: numpy's array functions would each
+    be compiled too (seconds on the first plan after an install)."""
     n_max = max_iterations + 1
     nodes = np.empty((n_max, 3))
     parent = np.full(n_max, -1)
     cost = np.zeros(n_max)
+    near = np.empty(n_max, dtype=np.int64)  # the near set of this iteration: node, edge length,
+    seg = np.empty(n_max)  # clear or not, and the cost through the new node
+    ok = np.empty(n_max, dtype=np.bool_)
+    through = np.empty(n_max)
     nodes[0] = start
-    n = 1
-    first_hit = -1
-    it = 0
+    g = (goal[0], goal[1], goal[2])
+    n, first_hit, it = 1, -1, 0
     for it in range(1, max_iterations + 1):
         if first_hit >= 0 and it - first_hit >= extra_iterations:
             break
-        target = goal if rng.random() < goal_bias else box_lo + span * rng.random(3)
+        if rng.random() < goal_bias:
+            target = g
+        else:  # rng.uniform(box_lo, box_hi)'s arithmetic on the same draws, x then y then z
+            target = (
+                box_lo[0] + span[0] * rng.random(),
+                box_lo[1] + span[1] * rng.random(),
+                box_lo[2] + span[2] * rng.random(),
+            )
         near_i = _nearest(nodes, n, target)
-        d = target - nodes[near_i]
+        from_node = _row(nodes, near_i)
+        d = sub(target, from_node)
         dist = _length(d)
-        new = target.copy() if dist <= step else nodes[near_i] + d * (step / dist)
-        p = (new[0], new[1], new[2])
-        if not _edge_clear(_row(nodes, near_i), p, check):
+        new = target if dist <= step else add(from_node, scale(d, step / dist))
+        if not _edge_clear(from_node, new, check):
             continue
-        radius = min(gamma * (math.log(n + 1) / (n + 1)) ** (1.0 / 3.0), 3.0 * step)
-        dist_all = np.empty(n)
+        radius = max(min(gamma * (math.log(n + 1) / (n + 1)) ** (1.0 / 3.0), 3.0 * step), 1e-6)
+        m = 0
         for j in range(n):
-            dist_all[j] = _length(nodes[j] - new)
-        near = np.flatnonzero((dist_all <= max(radius, 1e-6)) | (np.arange(n) == near_i))
-        seg = dist_all[near]
-        ok = np.empty(len(near), dtype=np.bool_)
-        for m in range(len(near)):
-            ok[m] = _edge_clear(_row(nodes, near[m]), p, check)
-        through = np.where(ok, cost[near] + seg, np.inf)
-        best = int(np.argmin(through))
+            length = _length(sub(_row(nodes, j), new))
+            if length <= radius or j == near_i:  # the nearest node is always a candidate parent
+                near[m], seg[m] = j, length
+                ok[m] = _edge_clear(_row(nodes, j), new, check)
+                through[m] = cost[j] + length if ok[m] else np.inf
+                m += 1
+        best = 0
+        for q in range(1, m):
+            if through[q] < through[best]:
+                best = q
         k = n
-        nodes[k], parent[k], cost[k] = new, near[best], through[best]
+        nodes[k, 0], nodes[k, 1], nodes[k, 2] = new
+        parent[k], cost[k] = near[best], through[best]
         n += 1
-        improve = ok & (cost[k] + seg < cost[near] - 1e-9)
-        c_new = cost[k] + seg
-        for m in range(len(near)):
-            if improve[m]:
-                _reparent(parent, cost, n, near[m], k, c_new[m])
-        if (
-            first_hit < 0
-            and _length(goal - new) <= step
-            and _edge_clear(p, (goal[0], goal[1], goal[2]), check)
-        ):
+        for q in range(m):  # which to rewire, on the costs before any is rewired
+            ok[q] = ok[q] and cost[k] + seg[q] < cost[near[q]] - 1e-9
+        for q in range(m):
+            if ok[q]:
+                _reparent(parent, cost, n, near[q], k, cost[k] + seg[q])
+        if first_hit < 0 and _length(sub(g, new)) <= step and _edge_clear(new, g, check):
             first_hit = it
     return nodes, parent, cost, n, it
 
@@ -270,8 +281,8 @@ def _nearest(nodes, n, x) -> int:
     """Index of the first of the n nodes closest to ``x``."""
     best, at = np.inf, 0
     for j in range(n):
-        dx, dy, dz = nodes[j, 0] - x[0], nodes[j, 1] - x[1], nodes[j, 2] - x[2]
-        d2 = dx * dx + dy * dy + dz * dz
+        d = sub(_row(nodes, j), x)
+        d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
         if d2 < best:
             best, at = d2, j
     return at
@@ -279,25 +290,29 @@ def _nearest(nodes, n, x) -> int:
 
 @compiled
 def _length(v) -> float:
-    """|v| of one 3-vector, summed x + y + z as numpy's norm and dot do."""
+    """|v| of one 3-vector, summed (x + y) + z as numpy's norm and dot do."""
     return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
 
 
 @compiled
 def _reparent(parent, cost, n, j, new_parent, new_cost) -> None:
-    """Give node j a cheaper parent and pass the cost decrease on to its whole subtree."""
+    """Give node j a cheaper parent and pass the cost decrease on to its whole subtree, level by
+    level (a node's children are the nodes whose parent is on the level above)."""
     delta = cost[j] - new_cost
     parent[j] = new_parent
     cost[j] = new_cost
-    in_frontier = np.zeros(n, dtype=np.bool_)
-    in_frontier[j] = True
-    while in_frontier.any():
-        children = np.zeros(n, dtype=np.bool_)
+    level = np.zeros(n, dtype=np.bool_)
+    level[j] = True
+    more = True
+    while more:
+        below = np.zeros(n, dtype=np.bool_)
+        more = False
         for c in range(n):
-            if parent[c] >= 0 and in_frontier[parent[c]]:
-                children[c] = True
+            if parent[c] >= 0 and level[parent[c]]:
+                below[c] = True
                 cost[c] -= delta
-        in_frontier = children
+                more = True
+        level = below
 
 
 def shortcut(path: np.ndarray, valid) -> np.ndarray:
