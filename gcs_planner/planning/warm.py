@@ -3,8 +3,7 @@
 numba compiles a kernel at its first call after an install (~30 s for all of them) and loads it
 from its on-disk cache in every later process (~10 ms a kernel, ~0.2 s of LLVM start-up). A sweep's
 worker calls this before its first run, so that no run carries that; a user may run it after an
-install. (Not in CI: the test workers compile only the kernels their tests call, while others
-wait on sockets; compiling all first made the suite 23 s slower idle and 43 s under load.)
+install (docs/planners.md, "Compiled kernels").
 
     python -m gcs_planner.planning.warm
 """
