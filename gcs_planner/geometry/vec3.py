@@ -4,7 +4,13 @@ from __future__ import annotations
 
 from gcs_planner.core.compiled import compiled
 
-__all__ = ["add", "along", "dot", "dot_xzy", "scale", "sub", "times_each"]
+__all__ = ["add", "along", "dot", "dot_xzy", "row", "scale", "sub", "times_each"]
+
+
+@compiled
+def row(points, i: int) -> tuple:
+    """Row i of an (n, 3) array as a 3-vector."""
+    return (points[i, 0], points[i, 1], points[i, 2])
 
 
 @compiled

@@ -33,7 +33,7 @@ import numpy as np
 
 from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.obstacles import Obstacles
-from gcs_planner.geometry.vec3 import add, scale, sub
+from gcs_planner.geometry.vec3 import add, dot, row, scale, sub
 
 __all__ = ["RRTConfig", "RRTResult", "rrt_star", "shortcut"]
 
@@ -106,7 +106,7 @@ def edges_valid(check: EdgeCheck, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _edges_clear(a, b, check) -> np.ndarray:
     ok = np.empty(len(a), dtype=np.bool_)
     for i in range(len(a)):
-        ok[i] = _edge_clear((a[i, 0], a[i, 1], a[i, 2]), (b[i, 0], b[i, 1], b[i, 2]), check)
+        ok[i] = _edge_clear(row(a, i), row(b, i), check)
     return ok
 
 
@@ -213,8 +213,8 @@ def _grow_tree(
 ) -> tuple:
     """The tree (nodes, parents, costs, node count, iterations run): sample (goal-biased), steer
     from the nearest node, keep a clear edge, choose the cheapest clear parent in the near set,
-    rewire the near set through the new node. Scalar loops: numpy's array functions would each
-    be compiled too (seconds on the first plan after an install)."""
+    rewire the near set through the new node; in scalar loops (docs/planners.md, "Compiled
+    kernels")."""
     n_max = max_iterations + 1
     nodes = np.empty((n_max, 3))
     parent = np.full(n_max, -1)
@@ -238,7 +238,7 @@ def _grow_tree(
                 box_lo[2] + span[2] * rng.random(),
             )
         near_i = _nearest(nodes, n, target)
-        from_node = _row(nodes, near_i)
+        from_node = row(nodes, near_i)
         d = sub(target, from_node)
         dist = _length(d)
         new = target if dist <= step else add(from_node, scale(d, step / dist))
@@ -247,10 +247,10 @@ def _grow_tree(
         radius = max(min(gamma * (math.log(n + 1) / (n + 1)) ** (1.0 / 3.0), 3.0 * step), 1e-6)
         m = 0
         for j in range(n):
-            length = _length(sub(_row(nodes, j), new))
+            length = _length(sub(row(nodes, j), new))
             if length <= radius or j == near_i:  # the nearest node is always a candidate parent
                 near[m], seg[m] = j, length
-                ok[m] = _edge_clear(_row(nodes, j), new, check)
+                ok[m] = _edge_clear(row(nodes, j), new, check)
                 through[m] = cost[j] + length if ok[m] else np.inf
                 m += 1
         best = 0
@@ -272,17 +272,12 @@ def _grow_tree(
 
 
 @compiled
-def _row(points, i) -> tuple:
-    return (points[i, 0], points[i, 1], points[i, 2])
-
-
-@compiled
 def _nearest(nodes, n, x) -> int:
     """Index of the first of the n nodes closest to ``x``."""
     best, at = np.inf, 0
     for j in range(n):
-        d = sub(_row(nodes, j), x)
-        d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+        d = sub(row(nodes, j), x)
+        d2 = dot(d, d)
         if d2 < best:
             best, at = d2, j
     return at
@@ -290,8 +285,8 @@ def _nearest(nodes, n, x) -> int:
 
 @compiled
 def _length(v) -> float:
-    """|v| of one 3-vector, summed (x + y) + z as numpy's norm and dot do."""
-    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    """|v|, summed (x + y) + z as numpy's norm and dot do."""
+    return math.sqrt(dot(v, v))
 
 
 @compiled

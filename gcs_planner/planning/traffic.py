@@ -32,7 +32,7 @@ import numpy as np
 from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.nearest import keep_nearest
 from gcs_planner.geometry.timing import closest_on_segment, closest_under_timing_one
-from gcs_planner.geometry.vec3 import dot, scale, sub
+from gcs_planner.geometry.vec3 import dot, row, scale, sub
 
 __all__ = ["TIMING_ERROR_S", "Traffic"]
 
@@ -227,7 +227,7 @@ def _all_nearest(table: tuple, slices: np.ndarray, pos: np.ndarray) -> tuple[np.
     js, d2s = np.empty(_NEAREST, dtype=np.int64), np.empty(_NEAREST)
     m = 0
     for r in range(len(slices)):
-        n = _nearest(table, slices[r], (pos[r, 0], pos[r, 1], pos[r, 2]), js, d2s)
+        n = _nearest(table, slices[r], row(pos, r), js, d2s)
         rows[m : m + n] = r
         samples[m : m + n] = js[:n]
         m += n
@@ -252,11 +252,11 @@ def _violations(table, nxt, sep, slices, pos, valid, limits, depth, count) -> No
             follows = i + 1 < k and valid[p, i + 1]
             for m in range(n):  # nearest first: the order of the sums is the vectorised one's
                 j = js[m]
-                b0 = (xyz[j, 0], xyz[j, 1], xyz[j, 2])
+                b0 = row(xyz, j)
                 a1, b1 = a0, b0
                 if follows and nxt[j] >= 0:
                     a1 = (pos[p, i + 1, 0], pos[p, i + 1, 1], pos[p, i + 1, 2])
-                    b1 = (xyz[nxt[j], 0], xyz[nxt[j], 1], xyz[nxt[j], 2])
+                    b1 = row(xyz, nxt[j])
                 d0 = sub(b0, a0)
                 dv = sub(sub(b1, a1), d0)
                 dmin = closest_on_segment(d0, dv, 0.0, 1.0)

@@ -23,7 +23,7 @@ import numpy as np
 
 from gcs_planner.core.compiled import compiled
 from gcs_planner.geometry.timing import closest_under_timing_one
-from gcs_planner.geometry.vec3 import along, dot_xzy, scale, sub, times_each
+from gcs_planner.geometry.vec3 import along, dot_xzy, row, scale, sub, times_each
 
 __all__ = [
     "candidate_pairs",
@@ -228,11 +228,12 @@ def _cpa_one(d0, dv, lo, hi, timing_s, vb) -> tuple:
 def _leg(p, t, s) -> tuple:
     """Start point and velocity of leg s of the polyline p (W, 3) timed t (W,); a leg of no
     duration does not move."""
-    p0 = (p[s, 0], p[s, 1], p[s, 2])
+    p0 = row(p, s)
     dt = t[s + 1] - t[s]
     if not dt > 0:
         return p0, (0.0, 0.0, 0.0)
-    return p0, ((p[s + 1, 0] - p0[0]) / dt, (p[s + 1, 1] - p0[1]) / dt, (p[s + 1, 2] - p0[2]) / dt)
+    d = sub(row(p, s + 1), p0)
+    return p0, (d[0] / dt, d[1] / dt, d[2] / dt)
 
 
 def zone_closest_approach(
