@@ -35,3 +35,43 @@ def test_a_cache_in_place_says_nothing():
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["32.0"]
     assert "numba" not in done.stderr
+
+
+def test_a_compile_is_told_while_it_runs_and_a_compiled_kernel_is_not():
+    from numba import njit
+
+    from gcs_planner.core.compiled import on_compile
+
+    @njit
+    def twice(x):
+        return 2 * x
+
+    told = []
+    with on_compile(lambda: told.append(1)):
+        assert twice(2) == 4
+        assert len(told) == 1
+        assert twice(3) == 6  # compiled already: nothing to say
+    assert twice(2.5) == 5.0  # a new signature compiles, but outside the block nobody listens
+    assert len(told) == 1
+
+
+def test_the_plan_bar_says_it_is_compiling(monkeypatch):
+    """On a terminal the first plan after an install waits for numba: the bar says why."""
+    import io
+
+    from numba import njit
+    from tqdm import tqdm
+
+    from gcs_planner import planning
+    from gcs_planner.commands import progress
+
+    shown = io.StringIO()
+    monkeypatch.setattr(progress, "progress_bar", lambda total, desc: tqdm(total=total, file=shown))
+
+    @njit
+    def kernel(x):
+        return x + 1
+
+    monkeypatch.setattr(planning, "plan_scenario", lambda scenario, seed, progress: kernel(1))
+    assert progress.plan_with_progress(type("S", (), {"name": "s"})()) == 2
+    assert progress.COMPILING in shown.getvalue()

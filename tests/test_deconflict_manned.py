@@ -5,8 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gcs_planner.model.scenario import ScenarioError
+from gcs_planner.planning import parse_scenario
 from gcs_planner.planning.deconflict4d.manned import (
     MannedTrack,
+    mode_weights,
     posterior,
     predict_zones,
     predictive,
@@ -99,6 +102,20 @@ def test_union_over_modes_and_unlikely_modes_dropped():
     )
     best = max(zones, key=lambda z: z.weight)
     assert best.name == "ga:descent" and best.weight > 0.9
+
+
+def test_a_mode_of_weight_0_gets_no_weight_and_all_0_is_refused():
+    cruise = prior_from_velocity([20.0, 0, 0], [0.5, 0.5, 0.2], 10.0, DT)
+    descent = prior_from_velocity([18.0, 0, -3.0], [0.5, 0.5, 0.2], 10.0, DT)
+    track = _track([("cruise", cruise, 1.0), ("descent", descent, 0.0)], velocity=(18.0, 0, -3.0))
+    np.testing.assert_array_equal(mode_weights(track), [1.0, 0.0])  # the data favour descent: no matter
+    modes = [{"name": "a", "weight": 0.0}, {"name": "b", "weight": 0}]
+    data = {"origin": {"lat_deg": 47.0, "lon_deg": 8.0}, "planner": {"name": "deconflict_4d"},
+            "vehicles": [{"sysid": 1, "start": [0.0, 0.0, 20.0], "goal": [100.0, 0.0, 20.0]}],
+            "manned": [{"id": "ga", "position_m": [0.0, 0.0, 50.0], "velocity_mps": [10.0, 0, 0],
+                        "modes": modes}]}  # fmt: skip
+    with pytest.raises(ScenarioError, match=r"manned\[0\]\.modes: every weight is 0"):
+        parse_scenario(data)
 
 
 def test_track_spacing_is_validated():

@@ -7,6 +7,8 @@ import copy
 import errno
 import json
 import math
+import tomllib
+from pathlib import Path
 
 import pytest
 from cli_checks import refused as _fails
@@ -18,6 +20,8 @@ from gcs_planner.flight import runner as fly_module
 from gcs_planner.missions.validate import MissionValidationError, validate_items
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.wire.types import MissionItem, MissionType
+
+MISSIONS = Path(__file__).resolve().parents[1] / "missions"
 
 
 def _scenario(tmp_path, edit=None, name="s.toml"):
@@ -184,11 +188,73 @@ def test_full_disk_still_reports_the_flight(tmp_path, capsys, monkeypatch):
         (_veh(0, "goal", [4e7, 0.0, 20.0]), "goal"),
         (lambda d: d.update(vehicles=[]), "vehicles"),
         (lambda d: d["planner"].update(waypoint_spacing_m=-80.0), "waypoint_spacing_m"),
+        # a plan is sampled in time and space: these once asked the checker for terabytes
+        (_veh(0, "speed_mps", 1e-9), "speed_mps"),
+        (_veh(0, "speed_mps", 1e-6), "speed_mps"),
+        (
+            lambda d: d["vehicles"][0].update(speed_mps=0.01, goal=[9e5, 0.0, 20.0]),
+            "speed_mps 0.01 m/s takes",
+        ),
+        (_veh(1, "turn_radius_m", 1e-6), "turn_radius_m must be 0 or at least 1"),
+        (_veh(0, "landing_mps", 1e-9), "landing_mps"),
+        (lambda d: d["vehicles"][0].update(landing_mps=0.01, goal=[300.0, 0.0, 9e4]), "to land"),
     ],
 )
 def test_nonsense_scenario_values(tmp_path, capsys, edit, word):
     out = tmp_path / "p.json"
     _fails(["plan", _scenario(tmp_path, edit), "-o", str(out)], capsys, word)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "planner, key, value",
+    [
+        ("priority_swarm", "dt_s", 1e-4),
+        ("priority_swarm", "rrt_step_m", 1e-9),
+        ("priority_swarm", "delay_step_s", 1e-9),
+        ("deconflict_4d", "zone_step_s", 1e-9),
+        ("deconflict_4d", "delay_step_s", 1e-9),
+        ("acmpso", "validate_spacing_m", 1e-9),
+    ],
+)
+def test_sampling_steps_finer_than_a_vehicle_flies_are_refused(tmp_path, capsys, planner, key, value):
+    """A step of 1e-4 s made the swarm planner ask for 8 GiB; every step has a floor (core/validation.py)."""
+    out = tmp_path / "p.json"
+    scenario = _scenario(tmp_path, lambda d: d.update(planner={"name": planner, key: value}))
+    _fails(["plan", scenario, "-o", str(out)], capsys, f"planner.{key} must be a number >=")
+    assert not out.exists()
+
+
+def _target(key, value):
+    def edit(d):
+        d["coalition"]["targets"][0][key] = value
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        (lambda d: d["planner"].update(detect_radius_m=0), ["planner.detect_radius_m", ">= 1"]),
+        (lambda d: d["planner"].update(assess_radius_m=0), ["planner.assess_radius_m", ">= 1"]),
+        (lambda d: d["planner"].update(t_end_s=0), ["planner.t_end_s", "> 0"]),
+        (lambda d: d["planner"].update(kappa=1e9), ["planner.kappa", "<= 10"]),
+        (lambda d: d["planner"].update(sample_ds_m=1e-9), ["planner.sample_ds_m", ">= 0.1"]),
+        (_target("approx", [math.nan, 0.0]), ["targets[0]: approx[0]", "nan"]),
+        (_target("position", [1e12, 0.0]), ["targets[0]: position[0]", "<= 1e+06"]),
+        (_target("strike_angles_deg", [math.inf]), ["strike_angles_deg[0]", "inf"]),
+        (_target("recon_s", 1e308), ["targets[0]: recon_s", "<= 604800"]),
+        (lambda d: d["coalition"]["threats"][0].update(radius_m=-1.0), ["threats[0]: radius_m", "> 0"]),
+    ],
+)
+def test_nonsense_coalition_values(tmp_path, capsys, edit, words):
+    """Each once crashed the coalition planner (an infinite path length, an empty history) or asked
+    for gigabytes of samples."""
+    data = tomllib.loads((MISSIONS / "coalition_sitl.toml").read_text())
+    edit(data)
+    (tmp_path / "s.toml").write_text(toml_dumps(data))
+    out = tmp_path / "p.json"
+    _fails(["plan", str(tmp_path / "s.toml"), "-o", str(out)], capsys, *words)
     assert not out.exists()
 
 

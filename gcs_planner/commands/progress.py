@@ -9,6 +9,9 @@ from collections.abc import Callable, Iterator
 
 from tqdm import tqdm
 
+# what the bar says while numba compiles a planner's kernel (docs/planners.md, "Compiled kernels")
+COMPILING = "compiling the planner's kernels for this machine (once after an install)"
+
 
 def progress_bar(total: float, desc: str, unit: str = "it") -> tqdm:
     """A tqdm bar that stays silent when stderr is not a terminal or CI is set."""
@@ -46,12 +49,16 @@ def say_ignored_tables(scenario) -> None:
 
 def plan_with_progress(scenario, seed: int | None = None):
     """plan_scenario with a progress bar fed by the planner's ``progress(fraction, message)``."""
+    from gcs_planner.core.compiled import on_compile  # numba: only where a plan is made
     from gcs_planner.planning import plan_scenario
 
-    with progress_bar(1.0, f"planning {scenario.name}") as bar:
+    with progress_bar(1.0, f"planning {scenario.name}") as bar, on_compile(lambda: note(COMPILING)):
 
         def progress(fraction: float, message: str) -> None:
             bar.n = round(fraction, 3)
+            note(message)
+
+        def note(message: str) -> None:
             bar.set_postfix_str(message)
             bar.refresh()
 

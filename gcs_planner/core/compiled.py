@@ -9,12 +9,14 @@ once.
 
 from __future__ import annotations
 
+import contextlib
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 from numba import njit
+from numba.core import event
 
-__all__ = ["compiled"]
+__all__ = ["compiled", "on_compile"]
 
 _told = False
 
@@ -28,6 +30,22 @@ def compiled(fn: Callable) -> Callable:
             raise
         _tell_once()
         return njit(fn)
+
+
+@contextlib.contextmanager
+def on_compile(say: Callable[[], None]) -> Iterator[None]:
+    """``say()`` each time numba starts compiling a kernel inside the block: only where no cached
+    copy fits (the first run after an install or a change), so a progress bar can say why it waits."""
+
+    class Listener(event.Listener):
+        def on_start(self, _event: event.Event) -> None:
+            say()
+
+        def on_end(self, _event: event.Event) -> None:
+            pass
+
+    with event.install_listener("numba:compile", Listener()):
+        yield
 
 
 def _tell_once() -> None:

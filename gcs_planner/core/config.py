@@ -27,13 +27,15 @@ from gcs_planner.core.validation import (
     MAX_RANGE_M,
     MAX_SPEED_MPS,
     MIN_ALT_M,
+    MIN_DISTANCE_STEP_M,
+    MIN_TIME_STEP_S,
     InputError,
     known_keys,
 )
 
 __all__ = [
-    "Altitude", "Config", "Count", "Coordinate", "Distance", "Duration", "Fraction", "NonNegative",
-    "Positive", "PositiveDistance", "Seed", "Speed", "parse",
+    "Altitude", "Config", "Count", "Coordinate", "Distance", "DistanceStep", "Duration", "Fraction",
+    "NonNegative", "Positive", "PositiveDistance", "Seed", "Speed", "TimeStep", "parse",
 ]  # fmt: skip
 
 T = TypeVar("T", bound="Config")
@@ -52,6 +54,8 @@ Coordinate = Annotated[float, Meta(ge=-MAX_RANGE_M, le=MAX_RANGE_M)]
 Altitude = Annotated[float, Meta(ge=MIN_ALT_M, le=MAX_ALT_M)]
 Duration = Annotated[float, Meta(ge=0.0, le=MAX_DURATION_S)]
 Speed = Annotated[float, Meta(gt=0.0, le=MAX_SPEED_MPS)]
+TimeStep = Annotated[float, Meta(ge=MIN_TIME_STEP_S, le=MAX_DURATION_S)]  # a sampling step in time
+DistanceStep = Annotated[float, Meta(ge=MIN_DISTANCE_STEP_M, le=MAX_RADIUS_M)]  # ... in space
 
 
 class Config(msgspec.Struct, forbid_unknown_fields=True, frozen=True, kw_only=True):

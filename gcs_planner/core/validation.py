@@ -27,13 +27,18 @@ if TYPE_CHECKING:  # gcs_planner.core.geo imports numpy and pyproj: only the rea
 
 __all__ = [
     "FLOAT32_MAX", "MAX_ALT_M", "MAX_DURATION_S", "MAX_INPUT_BYTES", "MAX_RADIUS_M", "MAX_RANGE_M",
-    "MAX_SPEED_MPS", "MAX_WAYPOINTS", "MIN_ALT_M", "InputError", "atomic_write", "file_stem", "integer",
+    "MAX_SPEED_MPS", "MAX_WAYPOINTS", "MIN_ALT_M", "MIN_DISTANCE_STEP_M", "MIN_SPEED_MPS", "MIN_TIME_STEP_S",
+    "MIN_TURN_RADIUS_M", "InputError", "atomic_write", "file_stem", "integer",
     "items_of", "load_json", "load_toml", "name", "not_an_input", "number", "number_flag", "output_dir",
     "output_file", "read_text", "same_file", "table", "too_big", "unique", "write_text_atomic",
 ]  # fmt: skip
 
 FLOAT32_MAX = 3.4028234663852886e38  # MAVLink float fields (z, param1..4)
 MAX_SPEED_MPS = 340.0  # speed of sound at sea level: no UAV mission is faster
+MIN_SPEED_MPS = 0.01  # ArduCopter's slowest waypoint speed (AC_WPNav WPNAV_WP_SPEED_MIN_MS)
+MIN_TURN_RADIUS_M = 1.0  # a turn radius below this is a turn on the spot (0)
+MIN_TIME_STEP_S = 0.01  # a planner's time step: 100 Hz, finer than any autopilot follows a path
+MIN_DISTANCE_STEP_M = 0.1  # a planner's distance step: finer than GNSS places a vehicle
 MIN_ALT_M = -11_000.0  # deeper than the deepest ocean trench (relative altitude below a mountain home)
 MAX_ALT_M = 100_000.0  # the Karman line
 MAX_RANGE_M = 1_000_000.0  # east / north from the scenario origin (local ENU stays accurate)

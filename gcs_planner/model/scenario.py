@@ -41,6 +41,8 @@ from gcs_planner.core.validation import (
     MAX_RANGE_M,
     MAX_SPEED_MPS,
     MIN_ALT_M,
+    MIN_SPEED_MPS,
+    MIN_TURN_RADIUS_M,
     InputError,
     integer,
     items_of,
@@ -297,9 +299,12 @@ def _check_world_tables(data: dict[str, Any], tables: dict[str, TableSchema]) ->
     for i, m in enumerate(manned):
         known_keys(m, MANNED_KEYS, f"manned[{i}]")
         _manned(m, f"manned[{i}]")
-        for k, mode in enumerate(items_of(m.get("modes", []), f"manned[{i}].modes")):
+        modes = items_of(m.get("modes", []), f"manned[{i}].modes")
+        for k, mode in enumerate(modes):
             known_keys(mode, MANNED_MODE_KEYS, f"manned[{i}].modes[{k}]")
             _mode(mode, f"manned[{i}].modes[{k}]")
+        if modes and all(mode.get("weight", 1.0) == 0 for mode in modes):
+            raise InputError(f"manned[{i}].modes: every weight is 0; give at least one mode a weight above 0")
 
 
 def _peak(p: dict[str, Any], where: str) -> None:
@@ -393,21 +398,59 @@ def _vehicle(d: dict[str, Any], where: str, origin: Origin, keys: tuple[str, ...
     max_alt = number(d.get("max_alt_m", 120.0), f"{where}.max_alt_m", MIN_ALT_M, MAX_ALT_M)
     if min_alt > max_alt:
         raise InputError(f"{where}: min_alt_m {min_alt:g} is above max_alt_m {max_alt:g}")
+    start, goal = _start(d.get("start"), f"{where}.start"), _point(d.get("goal"), f"{where}.goal")
+    speed = number(d.get("speed_mps", 10.0), f"{where}.speed_mps", MIN_SPEED_MPS, MAX_SPEED_MPS)
+    landing = _zero_or_at_least(
+        d.get("landing_mps", 0.0), f"{where}.landing_mps", MIN_SPEED_MPS, MAX_SPEED_MPS
+    )
+    _within_a_week(start, goal, speed, landing, where)
     return Vehicle(
         id=vid,
         sysid=fleet_id(network, sysid),
         type=vtype,
-        start=_start(d.get("start"), f"{where}.start"),
-        goal=_point(d.get("goal"), f"{where}.goal"),
-        speed_mps=number(d.get("speed_mps", 10.0), f"{where}.speed_mps", 0, MAX_SPEED_MPS, lo_open=True),
-        turn_radius_m=number(d.get("turn_radius_m", 20.0), f"{where}.turn_radius_m", 0, MAX_RADIUS_M),
+        start=start,
+        goal=goal,
+        speed_mps=speed,
+        turn_radius_m=_zero_or_at_least(
+            d.get("turn_radius_m", 20.0), f"{where}.turn_radius_m", MIN_TURN_RADIUS_M, MAX_RADIUS_M
+        ),
         min_alt_m=min_alt,
         max_alt_m=max_alt,
         separation_m=number(d.get("separation_m", 5.0), f"{where}.separation_m", 0, MAX_RADIUS_M),
         priority=number(d.get("priority", 1.0), f"{where}.priority"),
-        landing_mps=number(d.get("landing_mps", 0.0), f"{where}.landing_mps", 0, MAX_SPEED_MPS),
+        landing_mps=landing,
         waits_airborne=_flag(d.get("waits_airborne", False), f"{where}.waits_airborne"),
     )
+
+
+def _zero_or_at_least(value: Any, field: str, least: float, most: float) -> float:
+    """0 (none: no turn radius, no landing) or a number in [least, most]; InputError otherwise."""
+    got = number(value, field, 0, most)
+    if 0 < got < least:
+        raise InputError(f"{field} must be 0 or at least {least:g}, got {got:g}")
+    return got
+
+
+def _within_a_week(
+    start: tuple[float, float, float],
+    goal: tuple[float, float, float],
+    speed_mps: float,
+    landing_mps: float,
+    where: str,
+) -> None:
+    """The straight flight from start to goal, and the landing, take at most MAX_DURATION_S: a
+    plan is sampled in time, and a slower one is no mission (it would fill the memory first)."""
+    flight_s = math.dist(start, goal) / speed_mps
+    if flight_s > MAX_DURATION_S:
+        raise InputError(
+            f"{where}.speed_mps {speed_mps:g} m/s takes {flight_s / 86_400:.3g} days from start to goal"
+            f" (at most {MAX_DURATION_S / 86_400:g})"
+        )
+    if landing_mps and max(goal[2], 0.0) / landing_mps > MAX_DURATION_S:
+        raise InputError(
+            f"{where}.landing_mps {landing_mps:g} m/s takes over {MAX_DURATION_S / 86_400:g} days to land"
+            f" from {goal[2]:g} m"
+        )
 
 
 def _geodetic_ends(d: dict[str, Any], where: str, origin: Origin) -> dict[str, list[float]]:

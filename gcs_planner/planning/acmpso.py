@@ -56,7 +56,7 @@ import numpy as np
 from msgspec import Meta
 from scipy.interpolate import CubicSpline
 
-from gcs_planner.core.config import Count, Distance, NonNegative, Positive, PositiveDistance
+from gcs_planner.core.config import Count, Distance, DistanceStep, NonNegative, Positive, PositiveDistance
 from gcs_planner.core.validation import MAX_ALT_M
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Scenario, ScenarioError, Vehicle
@@ -378,7 +378,7 @@ class Config(PlannerConfig, tag=NAME):
     weights: tuple[NonNegative, NonNegative, NonNegative, NonNegative] = (0.3, 4.85, 4.85, 0.07)
     collision: Literal["literal", "depth"] = "literal"
     init_noise: Positive = 0.05
-    validate_spacing_m: PositiveDistance = 100.0
+    validate_spacing_m: DistanceStep = 100.0
     follow_tolerance_m: PositiveDistance = 50.0
     max_climb_deg: Annotated[float, Meta(gt=0.0, le=90.0)] = 10.0
     margin_m: Distance = 25.0

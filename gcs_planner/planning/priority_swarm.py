@@ -76,11 +76,19 @@ from msgspec import Meta
 from scipy.spatial import cKDTree
 
 from gcs_planner.core.compiled import compiled
-from gcs_planner.core.config import Count, Distance, Fraction, NonNegative, PositiveDistance
+from gcs_planner.core.config import (
+    Count,
+    Distance,
+    DistanceStep,
+    Fraction,
+    NonNegative,
+    PositiveDistance,
+    TimeStep,
+)
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import wrap_pi
 from gcs_planner.core.heap import keep_heap_slack
-from gcs_planner.core.validation import MAX_DURATION_S
+from gcs_planner.core.validation import MIN_TIME_STEP_S
 from gcs_planner.geometry.dubins import segment_starts, shortest_batch
 from gcs_planner.geometry.nearest import keep_nearest
 from gcs_planner.geometry.obstacles import HARD_PENALTY, Obstacles
@@ -113,7 +121,7 @@ class Config(PlannerConfig, tag=NAME):
     rounds: Count = 3
     elite_fraction: Fraction = 0.15
     random_fraction: Fraction = 0.25
-    dt_s: Annotated[float, Meta(gt=0.0, le=0.5)] = 0.5
+    dt_s: Annotated[float, Meta(ge=MIN_TIME_STEP_S, le=0.5)] = 0.5
     separation_margin_m: Distance = 2.0
     timing_error_s: Annotated[float, Meta(ge=0.0, le=60.0)] = TIMING_ERROR_S  # docs/timing-separation.md
     obstacle_margin_m: Distance = 1.5
@@ -129,10 +137,10 @@ class Config(PlannerConfig, tag=NAME):
     w_min: NonNegative = 0.4
     v_max_fraction: Annotated[float, Meta(gt=0.0, le=1.0)] = 0.2  # of the bound span per iteration
     pad_m: Distance = 100.0
-    rrt_step_m: PositiveDistance = 60.0
+    rrt_step_m: DistanceStep = 60.0
     rrt_iterations: Count = 500
     rrt_extra_iterations: Annotated[int, Meta(ge=0, le=1_000_000)] = 150
-    delay_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 5.0
+    delay_step_s: TimeStep = 5.0
     repairs: Annotated[int, Meta(ge=0, le=1000)] = 4
     waypoint_tol_m: PositiveDistance = 1.0
     acceptance_radius_m: PositiveDistance = 2.0

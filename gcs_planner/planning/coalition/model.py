@@ -28,8 +28,10 @@ import numpy as np
 from msgspec import Meta
 
 from gcs_planner.core.config import (
+    MAX_FACTOR,
     Count,
     Distance,
+    DistanceStep,
     Duration,
     Fraction,
     NonNegative,
@@ -37,11 +39,21 @@ from gcs_planner.core.config import (
     PositiveDistance,
     parse,
 )
-from gcs_planner.core.validation import MAX_DURATION_S, InputError, items_of, table
+from gcs_planner.core.validation import (
+    MAX_DURATION_S,
+    MAX_RADIUS_M,
+    MAX_RANGE_M,
+    InputError,
+    items_of,
+    number,
+    table,
+)
 from gcs_planner.model.scenario import Scenario, ScenarioError
 from gcs_planner.planning import PlannerConfig
 
 __all__ = ["CoalitionParams", "Target", "Threat", "UavSpec", "World", "load_world"]
+
+MAX_UAV_RANGE_M = 40_075_000.0  # once around the Earth: no UAV flies further on one charge or tank
 
 STRIKE, ASSESS = 0, 1
 
@@ -112,13 +124,13 @@ class CoalitionParams(PlannerConfig, tag="coalition"):
     margin_s: Duration = 0.3
     delay_jitter_s: Duration = 0.0  # extra uniform one-way delay in [0, jitter]
     standoff_m: Distance = 200.0
-    kappa: NonNegative = 1.3
-    detect_radius_m: Distance = 400.0
-    assess_radius_m: Distance = 500.0
+    kappa: Annotated[float, Meta(ge=1.0, le=10.0)] = 1.3  # r_D = kappa r_T: outside the threat, near it
+    detect_radius_m: Annotated[float, Meta(ge=1.0, le=MAX_RADIUS_M)] = 400.0
+    assess_radius_m: Annotated[float, Meta(ge=1.0, le=MAX_RADIUS_M)] = 500.0
     loiter_radius_m: PositiveDistance = 300.0
     station_radius_m: PositiveDistance = 1000.0  # idle UAVs loiter on this ring about the nearest target
     retender_s: Duration = 10.0
-    t_end_s: Duration = 400.0
+    t_end_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 400.0
     method: Literal["aco", "polynomial", "global"] = "aco"
     w1: NonNegative = 1.0
     w2: NonNegative = 0.3
@@ -131,7 +143,7 @@ class CoalitionParams(PlannerConfig, tag="coalition"):
     q0: Fraction = 0.9
     rho: Fraction = 0.1
     tau0: Positive = 1.0
-    sample_ds_m: PositiveDistance = 10.0
+    sample_ds_m: DistanceStep = 10.0
 
     @property
     def delta_max_s(self) -> float:
@@ -168,10 +180,10 @@ def load_world(scenario: Scenario) -> World:
             raise ScenarioError(f"{where}: target {t.id}: recon_uav {t.recon_uav!r} is not a vehicle id")
     threats = [
         Threat(
-            x=_num(d, "x", f"{where}: coalition.threats[{i}]"),
-            y=_num(d, "y", f"{where}: coalition.threats[{i}]"),
-            radius_m=_num(d, "radius_m", f"{where}: coalition.threats[{i}]", positive=True),
-            appear_s=_num(d, "appear_s", f"{where}: coalition.threats[{i}]", 0.0),
+            x=_num(d, "x", f"{where}: coalition.threats[{i}]", None, -MAX_RANGE_M, MAX_RANGE_M),
+            y=_num(d, "y", f"{where}: coalition.threats[{i}]", None, -MAX_RANGE_M, MAX_RANGE_M),
+            radius_m=_num(d, "radius_m", f"{where}: coalition.threats[{i}]", None, 0.0, MAX_RADIUS_M, True),
+            appear_s=_num(d, "appear_s", f"{where}: coalition.threats[{i}]", 0.0, -MAX_DURATION_S),
         )
         for i, d in enumerate(threat_rows)
     ]
@@ -193,11 +205,11 @@ def _uav(index: int, v, row: dict[str, Any], where: str) -> UavSpec:
         id=v.id,
         sysid=v.sysid,
         xy0=(v.start[0], v.start[1]),
-        heading0_rad=np.radians(_num(row, "heading_deg", at, 90.0)),
+        heading0_rad=np.radians(_num(row, "heading_deg", at, 90.0, -360.0, 360.0)),
         altitude_m=v.start[2],
         speed_mps=v.speed_mps,
         r_min_m=v.turn_radius_m,
-        range_max_m=_num(row, "range_m", at, 20000.0, positive=True),
+        range_max_m=_num(row, "range_m", at, 20000.0, 0.0, MAX_UAV_RANGE_M, True),
         munitions=munitions if "S" in caps else 0,
         recon="R" in caps,
         strike="S" in caps and munitions > 0,
@@ -209,49 +221,61 @@ def _target(d: dict[str, Any], where: str) -> Target:
     timing = d.get("strike_timing", "simultaneous")
     if timing not in ("simultaneous", "sequential"):
         raise ScenarioError(f"{where}: strike_timing must be simultaneous|sequential, got {timing!r}")
-    interval = _num(d, "strike_interval_s", where, 5.0, positive=True) if timing == "sequential" else 0.0
+    interval = _num(d, "strike_interval_s", where, 5.0, 0.0, lo_open=True) if timing == "sequential" else 0.0
     return Target(
         id=str(d.get("id", "T?")),
         approx_xy=_xy(d, "approx", where, _xy(d, "position", where)),
         xy=_xy(d, "position", where),
-        appear_s=_num(d, "appear_s", where, 0.0, nonneg=True),
-        recon_s=_num(d, "recon_s", where, 20.0, nonneg=True),
-        recon_angle_rad=np.radians(_num(d, "recon_angle_deg", where, 90.0)),
+        appear_s=_num(d, "appear_s", where, 0.0),
+        recon_s=_num(d, "recon_s", where, 20.0),
+        recon_angle_rad=np.radians(_num(d, "recon_angle_deg", where, 90.0, -360.0, 360.0)),
         recon_uav=d.get("recon_uav"),
         strike_angles_rad=tuple(np.radians(_angles(d, "strike_angles_deg", where))),
         strike_interval_s=interval,
         assess_angles_rad=tuple(np.radians(_angles(d, "assess_angles_deg", where))),
-        assess_delay_s=_num(d, "assess_delay_s", where, 10.0, nonneg=True),
-        assess_duration_s=_num(d, "assess_duration_s", where, 20.0, nonneg=True),
-        reward=_num(d, "reward", where, 10.0, positive=True),
-        decay_per_s=_num(d, "decay_per_s", where, 0.002, nonneg=True),
+        assess_delay_s=_num(d, "assess_delay_s", where, 10.0),
+        assess_duration_s=_num(d, "assess_duration_s", where, 20.0),
+        reward=_num(d, "reward", where, 10.0, 0.0, MAX_FACTOR, True),
+        decay_per_s=_num(d, "decay_per_s", where, 0.002, 0.0, MAX_FACTOR),
     )
 
 
 def _angles(d: dict[str, Any], key: str, where: str) -> list[float]:
     value = d.get(key, [])
-    if not isinstance(value, list) or not all(isinstance(a, int | float) for a in value):
+    if not isinstance(value, list):
         raise ScenarioError(f"{where}: {key} must be a list of degrees, got {value!r}")
-    return [float(a) for a in value]
+    return [_checked(a, f"{where}: {key}[{k}]", -360.0, 360.0) for k, a in enumerate(value)]
 
 
 def _xy(d: dict[str, Any], key: str, where: str, default=None) -> tuple[float, float]:
     value = d.get(key)
     if value is None and default is not None:
         return default
-    if not (isinstance(value, list) and len(value) == 2 and all(isinstance(a, int | float) for a in value)):
+    if not (isinstance(value, list) and len(value) == 2):
         raise ScenarioError(f"{where}: {key} must be [x, y] in metres, got {value!r}")
-    return (float(value[0]), float(value[1]))
+    x, y = (_checked(a, f"{where}: {key}[{k}]", -MAX_RANGE_M, MAX_RANGE_M) for k, a in enumerate(value))
+    return x, y
 
 
-def _num(d: dict[str, Any], key: str, where: str, default=None, positive=False, nonneg=False) -> float:
+def _num(
+    d: dict[str, Any],
+    key: str,
+    where: str,
+    default: float | None = None,
+    lo: float = 0.0,
+    hi: float = MAX_DURATION_S,
+    lo_open: bool = False,
+) -> float:
+    """``d[key]`` (or ``default``) within [lo, hi] (lo excluded when ``lo_open``); the defaults
+    bound a time. ScenarioError naming the field and value otherwise."""
     value = d.get(key, default)
     if value is None:
         raise ScenarioError(f"{where}: missing {key}")
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
-        raise ScenarioError(f"{where}: {key} must be a finite number, got {value!r}")
-    if positive and value <= 0:
-        raise ScenarioError(f"{where}: {key} must be > 0, got {value!r}")
-    if nonneg and value < 0:
-        raise ScenarioError(f"{where}: {key} must be >= 0, got {value!r}")
-    return float(value)
+    return _checked(value, f"{where}: {key}", lo, hi, lo_open)
+
+
+def _checked(value: Any, field: str, lo: float, hi: float, lo_open: bool = False) -> float:
+    try:
+        return number(value, field, lo, hi, lo_open=lo_open)
+    except InputError as exc:
+        raise ScenarioError(str(exc)) from None

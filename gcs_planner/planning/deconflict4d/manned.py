@@ -185,9 +185,13 @@ def region_threshold(dof: float, confidence: float) -> float:
 
 
 def mode_weights(track: MannedTrack) -> np.ndarray:
-    """Posterior probability of each motion mode given the observed track."""
+    """Posterior probability of each motion mode given the observed track (a prior weight of 0
+    stays 0; the scenario gives at least one mode a weight above 0)."""
     logw = np.array(
-        [math.log(w) + log_marginal_likelihood(p, track.displacements) for _, p, w in track.modes]
+        [
+            math.log(w) + log_marginal_likelihood(p, track.displacements) if w > 0 else -math.inf
+            for _, p, w in track.modes
+        ]
     )
     w = np.exp(logw - logw.max())
     return w / w.sum()

@@ -40,8 +40,7 @@ from typing import Annotated
 import numpy as np
 from msgspec import Meta
 
-from gcs_planner.core.config import Count, Distance, Duration, Fraction, NonNegative
-from gcs_planner.core.validation import MAX_DURATION_S
+from gcs_planner.core.config import Count, Distance, Duration, Fraction, NonNegative, TimeStep
 from gcs_planner.planning import PlannerConfig, Progress
 from gcs_planner.planning.deconflict4d.conflicts import (
     candidate_pairs,
@@ -105,7 +104,7 @@ class Config(PlannerConfig, tag="deconflict_4d"):
     init_spread_m: Distance = 3.0
     insert_spread_m: Distance = 2.0
     insert_radius_m: Distance = 10.0
-    zone_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 5.0
+    zone_step_s: TimeStep = 5.0
     early_stop: bool = True
     w_conflict: NonNegative = 1000.0
     w_accel: NonNegative = 1000.0
@@ -114,7 +113,7 @@ class Config(PlannerConfig, tag="deconflict_4d"):
     w_time: NonNegative = 1.0
     w_time_limit: NonNegative = 100.0
     use_delay: bool = True
-    delay_step_s: Annotated[float, Meta(gt=0.0, le=MAX_DURATION_S)] = 1.0
+    delay_step_s: TimeStep = 1.0
     delay_max_steps: Annotated[int, Meta(ge=0, le=1_000_000)] = 200
     max_delay_s: Duration = 60.0
     use_waypoints: bool = True
