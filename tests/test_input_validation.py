@@ -225,6 +225,29 @@ def test_sampling_steps_finer_than_a_vehicle_flies_are_refused(tmp_path, capsys,
     assert not out.exists()
 
 
+@pytest.mark.parametrize(
+    "edit, words",
+    [
+        ({"a_max_mps2": 1e-9}, ["vehicles[0].a_max_mps2", ">= 0.01"]),  # asked for 37 GiB
+        ({"climb_mps": 1e-9}, ["vehicles[0].climb_mps", ">= 0.01"]),  # 119 GiB
+        ({"v_max_mps": math.inf}, ["vehicles[0].v_max_mps", "inf"]),
+        ({"takeoff_s": "x"}, ["vehicles[0].takeoff_s", "'x'"]),
+        ({"arrival_s": math.nan}, ["vehicles[0].arrival_s", "nan"]),
+        (
+            {"climb_mps": 0.01, "start": [0.0, 0.0, 9e3], "max_alt_m": 1e4},
+            ["vehicles[0]: the flight ends after"],
+        ),
+    ],
+)
+def test_nonsense_4d_vehicle_values(tmp_path, capsys, edit, words):
+    data = tomllib.loads((MISSIONS / "deconflict_4uav.toml").read_text())
+    data["vehicles"][0].update(edit)
+    (tmp_path / "s.toml").write_text(toml_dumps(data))
+    out = tmp_path / "p.json"
+    _fails(["plan", str(tmp_path / "s.toml"), "-o", str(out)], capsys, *words)
+    assert not out.exists()
+
+
 def _target(key, value):
     def edit(d):
         d["coalition"]["targets"][0][key] = value

@@ -32,6 +32,14 @@ from typing import Any
 
 import numpy as np
 
+from gcs_planner.core.validation import (
+    MAX_DURATION_S,
+    MAX_RADIUS_M,
+    MAX_SPEED_MPS,
+    MIN_SPEED_MPS,
+    InputError,
+    number,
+)
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Extensions, Scenario, ScenarioError
 from gcs_planner.planning import Progress, Traits
@@ -48,16 +56,20 @@ __all__ = ["NAME", "TRAITS", "Config", "build_problem", "plan", "to_plan"]
 
 NAME = "deconflict_4d"
 log = logging.getLogger(__name__)
-_DYN_KEYS = (
-    "v_max_mps",
-    "a_max_mps2",
-    "climb_mps",
-    "takeoff_settle_s",
-    "descent_mps",
-    "min_turn_radius_m",
-    "max_time_error_s",
-    "limit",
-)
+MIN_ACCEL_MPS2 = 0.01  # a vehicle slower to reach its speed is no vehicle
+MAX_ACCEL_MPS2 = 1000.0  # 100 g
+# a vehicle's dynamics keys with their ranges (core/validation.py: a rate below its floor makes a
+# flight longer than a week, which the planner samples in time); "limit" is checked by Dynamics
+_DYN_RANGES = {
+    "v_max_mps": (MIN_SPEED_MPS, MAX_SPEED_MPS),
+    "a_max_mps2": (MIN_ACCEL_MPS2, MAX_ACCEL_MPS2),
+    "climb_mps": (MIN_SPEED_MPS, MAX_SPEED_MPS),
+    "takeoff_settle_s": (0.0, MAX_DURATION_S),
+    "descent_mps": (MIN_SPEED_MPS, MAX_SPEED_MPS),
+    "min_turn_radius_m": (0.0, MAX_RADIUS_M),
+    "max_time_error_s": (0.0, MAX_DURATION_S),
+}
+_DYN_KEYS = (*_DYN_RANGES, "limit")
 # a vehicle's schedule (take-off and arrival times) and dynamics
 TRAITS = Traits(
     separation=True,
@@ -85,7 +97,13 @@ def _uav(scenario: Scenario, i: int) -> UavSpec:
     v = scenario.vehicles[i]
     raw = scenario.raw.get("vehicles", [])[i]
     where = f"{scenario.name}: vehicles[{i}]"
-    overrides = {k: raw[k] for k in _DYN_KEYS if k in raw}
+    try:
+        overrides = {k: number(raw[k], f"{where}.{k}", *_DYN_RANGES[k]) for k in _DYN_RANGES if k in raw}
+        takeoff = number(raw.get("takeoff_s", 0.0), f"{where}.takeoff_s", 0.0, MAX_DURATION_S)
+    except InputError as exc:
+        raise ScenarioError(str(exc)) from None
+    if "limit" in raw:
+        overrides["limit"] = raw["limit"]
     if v.type == "fixed_wing" and "min_turn_radius_m" not in overrides:
         overrides["min_turn_radius_m"] = v.turn_radius_m
     try:
@@ -97,9 +115,15 @@ def _uav(scenario: Scenario, i: int) -> UavSpec:
         raise ScenarioError(
             f"{where}: start/goal z must be > 0 (the climb is planned), got {v.start} / {v.goal}"
         )
-    takeoff = float(raw.get("takeoff_s", 0.0))
     climb = start[2] / dyn.climb_mps + dyn.takeoff_settle_s if dyn.vertical_takeoff else 0.0
-    arrival = float(raw.get("arrival_s", takeoff + climb + np.linalg.norm(goal - start) / v.speed_mps))
+    arrival = takeoff + climb + float(np.linalg.norm(goal - start)) / v.speed_mps
+    if "arrival_s" in raw:
+        try:
+            arrival = number(raw["arrival_s"], f"{where}.arrival_s", 0.0, MAX_DURATION_S)
+        except InputError as exc:
+            raise ScenarioError(str(exc)) from None
+    elif arrival > MAX_DURATION_S:
+        raise ScenarioError(f"{where}: the flight ends after {arrival / 86_400:.3g} days (at most 7)")
     if not arrival > takeoff + climb:
         raise ScenarioError(
             f"{where}: arrival_s must be after take-off + climb ({takeoff + climb:.1f} s), got {arrival}"
