@@ -58,6 +58,23 @@ def test_dataflash_bin_records_match_dfreader(tmp_path, capsys):
     )  # no fake vehicles
 
 
+def test_a_dataflash_record_with_a_damaged_time_is_skipped_and_said(tmp_path, caplog):
+    """An ATT record whose TimeUS reads 2^64 - 1 (its Unix time past the year 2100; a mutated log
+    once ended the import with a struct error): the rest is imported, the loss said once."""
+    source = LOGS / "pymavlink/test.BIN"
+    reader = DFReader.DFReader_binary(str(source), zero_time_base=False)
+    att = reader.name_to_id["ATT"]
+    data = bytearray(source.read_bytes())
+    ofs = reader.offsets[att][5]
+    data[ofs + 3 : ofs + 11] = b"\xff" * 8  # the first field after the 3-byte header: TimeUS (Q)
+    (tmp_path / "damaged.bin").write_bytes(data)
+    out = tmp_path / "out.mcap"
+    assert main(["import-log", str(tmp_path / "damaged.bin"), "-o", str(out)]) == 0
+    assert "1 records with a damaged time skipped" in caplog.text
+    counts = channel_counts(out)
+    assert counts["/dataflash/ATT"] == reader.counts[att] - 1
+
+
 def test_ulog_topics_match_pyulog_and_replay_to_rerun(tmp_path):
     from pyulog import ULog
 

@@ -17,8 +17,12 @@ the LocationFix channel, Rerun replay and MAVLink replay work as for a flown log
 
 from __future__ import annotations
 
+import contextlib
+import io
+import logging
 import math
 import os
+import re
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,6 +37,8 @@ from pymavlink import DFReader  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 __all__ = ["FORMATS", "ImportResult", "detect_format", "import_log"]
+
+log = logging.getLogger(__name__)
 
 FORMATS = ("tlog", "mavlink", "dataflash", "dataflash-text", "ulog")
 ULOG_MAGIC = b"ULog\x01\x12\x35"
@@ -290,8 +296,10 @@ class _Frames:
 
 def _import_dataflash(path, mcap_path, origin, plan, scenario_text, text: bool = False) -> ImportResult:
     reader_cls = DFReader.DFReader_text if text else DFReader.DFReader_binary
+    skipped = _Skipped()
     try:
-        reader = reader_cls(str(path), zero_time_base=False)
+        with contextlib.redirect_stderr(skipped):
+            reader = reader_cls(str(path), zero_time_base=False)
     except Exception as exc:  # noqa: BLE001 - DFReader raises anything on a damaged header
         raise UserError(f"{path}: cannot read the DataFlash log: {exc}") from None
     made = _Frames()
@@ -302,9 +310,11 @@ def _import_dataflash(path, mcap_path, origin, plan, scenario_text, text: bool =
             "gcs_planner.import",
             {"format": fmt, "frames": "GLOBAL_POSITION_INT from GPS, ATTITUDE from ATT (sysid 1)"},
         )
+        misplaced = 0
         while True:
             try:
-                m = reader.recv_msg()
+                with contextlib.redirect_stderr(skipped):
+                    m = reader.recv_msg()
             except Exception as exc:  # noqa: BLE001 - a damaged record ends the readable part
                 logger.log_event({"kind": "import", "text": f"log damaged after here: {exc}"})
                 break
@@ -313,6 +323,9 @@ def _import_dataflash(path, mcap_path, origin, plan, scenario_text, text: bool =
             kind = m.get_type()
             records[kind] = records.get(kind, 0) + 1
             t_s = m._timestamp
+            if not _placed(t_s):
+                misplaced += 1
+                continue
             fields = {k: v for k, v in m.to_dict().items() if k != "mavpackettype"}
             logger.log_record(f"/dataflash/{kind}", f"dataflash.{kind}", fields, t_s)
             t_ms = int(fields.get("TimeUS", 0) // 1000) if isinstance(fields.get("TimeUS"), int) else 0
@@ -329,7 +342,35 @@ def _import_dataflash(path, mcap_path, origin, plan, scenario_text, text: bool =
                 )
             elif kind == "MSG":
                 logger.log_event({"kind": "statustext", "text": fields.get("Message", "")}, t_s)
+        _say_damage(logger, path, skipped.count, misplaced)
     return ImportResult(fmt, records, logger.frames_logged)
+
+
+class _Skipped(io.TextIOBase):
+    """A stderr that adds up DFReader's "Skipped N bad bytes" lines instead of printing them (its
+    compiled indexer's own "bad header" lines go to the process's stdout and cannot be caught)."""
+
+    count = 0
+
+    def write(self, text: str) -> int:
+        self.count += sum(int(n) for n in re.findall(r"Skipped (\d+) bad bytes", text))
+        return len(text)
+
+
+def _placed(t_s: float) -> bool:
+    """A record time an MCAP log can hold: since boot or Unix, up to 2100; NaN or later is damage."""
+    return 0.0 <= t_s <= UNIX_2100_US * 1e-6
+
+
+def _say_damage(logger, path, bytes_skipped: int, misplaced: int) -> None:
+    """One warning (and one event in the log) for what a damaged log lost."""
+    lost = [f"{bytes_skipped} damaged bytes"] * bool(bytes_skipped) + [
+        f"{misplaced} records with a damaged time"
+    ] * bool(misplaced)
+    if lost:
+        text = " and ".join(lost) + " skipped"
+        logger.log_event({"kind": "import", "text": text})
+        log.warning("%s: %s", path, text)
 
 
 def _ned(speed: float, course_deg: float, vz: float) -> tuple[float, float, float]:
@@ -348,6 +389,7 @@ def _import_ulog(path, mcap_path, origin, plan, scenario_text) -> ImportResult:
     offset_s = _ulog_unix_offset_s(ulog)
     made = _Frames()
     records: dict[str, int] = {}
+    misplaced = 0
     with _logger(mcap_path, origin, plan, scenario_text) as logger:
         logger.add_metadata(
             "gcs_planner.import",
@@ -363,12 +405,18 @@ def _import_ulog(path, mcap_path, origin, plan, scenario_text) -> ImportResult:
             keys = list(columns)
             for i in range(n):
                 row = {k: _plain(columns[k][i]) for k in keys}
-                logger.log_record(f"/ulog/{name}", f"ulog.{d.name}", row, offset_s + row["timestamp"] * 1e-6)
+                t_s = offset_s + row["timestamp"] * 1e-6
+                if not _placed(t_s):
+                    misplaced += 1
+                    continue
+                logger.log_record(f"/ulog/{name}", f"ulog.{d.name}", row, t_s)
         for t_s, msg, raw in _ulog_frames(ulog, made, offset_s, np):
-            logger.on_frame(msg, raw, t_s)
+            if _placed(t_s):
+                logger.on_frame(msg, raw, t_s)
         for m in ulog.logged_messages:
-            logger.log_event({"kind": "statustext", "text": m.message, "level": m.log_level_str()},
-                             offset_s + m.timestamp * 1e-6)  # fmt: skip
+            if _placed(t_s := offset_s + m.timestamp * 1e-6):
+                logger.log_event({"kind": "statustext", "text": m.message, "level": m.log_level_str()}, t_s)
+        _say_damage(logger, path, 0, misplaced)
     return ImportResult("ulog", records, logger.frames_logged)
 
 
