@@ -75,6 +75,24 @@ def test_a_dataflash_record_with_a_damaged_time_is_skipped_and_said(tmp_path, ca
     assert counts["/dataflash/ATT"] == reader.counts[att] - 1
 
 
+def test_a_damaged_format_loses_its_records_not_the_import(tmp_path, caplog):
+    """Formats whose column names were damaged (mutated logs once ended the import with a KeyError):
+    DataFlash GPS without "Alt" makes no positions, a ULog topic without "timestamp" is skipped."""
+    bin_data = (LOGS / "pymavlink/test.BIN").read_bytes()
+    (tmp_path / "gps.bin").write_bytes(bin_data.replace(b"Lat,Lng,Alt", b"Lat,Lng,Alx"))
+    assert main(["import-log", str(tmp_path / "gps.bin"), "-o", str(tmp_path / "gps.mcap")]) == 0
+    counts = channel_counts(tmp_path / "gps.mcap")
+    assert counts["/dataflash/GPS"] > 0 and counts["/vehicle/1/location"] == 0
+
+    ulog = (LOGS / "pyulog/sample_log_small.ulg").read_bytes()
+    topic = b"actuator_controls_1:uint64_t "
+    (tmp_path / "a.ulg").write_bytes(ulog.replace(topic + b"timestamp;", topic + b"timestamq;"))
+    assert main(["import-log", str(tmp_path / "a.ulg"), "-o", str(tmp_path / "a.mcap")]) == 0
+    assert "records with a damaged time skipped" in caplog.text
+    counts = channel_counts(tmp_path / "a.mcap")
+    assert "/ulog/actuator_controls_1" not in counts and any(t.startswith("/ulog/") for t in counts)
+
+
 def test_ulog_topics_match_pyulog_and_replay_to_rerun(tmp_path):
     from pyulog import ULog
 

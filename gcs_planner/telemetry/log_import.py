@@ -322,19 +322,23 @@ def _import_dataflash(path, mcap_path, origin, plan, scenario_text, text: bool =
                 break
             kind = m.get_type()
             records[kind] = records.get(kind, 0) + 1
-            t_s = m._timestamp
+            t_s = getattr(m, "_timestamp", math.nan)  # DFReader sets none on some damaged records
             if not _placed(t_s):
                 misplaced += 1
                 continue
             fields = {k: v for k, v in m.to_dict().items() if k != "mavpackettype"}
             logger.log_record(f"/dataflash/{kind}", f"dataflash.{kind}", fields, t_s)
             t_ms = int(fields.get("TimeUS", 0) // 1000) if isinstance(fields.get("TimeUS"), int) else 0
-            if kind == "GPS" and fields.get("Status", 0) >= 3:
-                vel = _ned(fields.get("Spd", 0.0), fields.get("GCrs", 0.0), fields.get("VZ", 0.0))
+            if (
+                kind == "GPS"
+                and _value(fields, "Status") >= 3
+                and all(math.isfinite(_value(fields, k, math.nan)) for k in ("Lat", "Lng", "Alt"))
+            ):  # a damaged FMT may name other columns
+                vel = _ned(_value(fields, "Spd"), _value(fields, "GCrs"), _value(fields, "VZ"))
                 logger.on_frame(*made.position(t_ms, fields["Lat"], fields["Lng"], fields["Alt"], vel,
                                                fields.get("GCrs")), t_s)  # fmt: skip
             elif kind == "ATT":
-                angles = (math.radians(fields.get(k, 0.0)) for k in ("Roll", "Pitch", "Yaw"))
+                angles = (math.radians(_value(fields, k)) for k in ("Roll", "Pitch", "Yaw"))
                 logger.on_frame(*made.attitude(t_ms, *angles), t_s)
             elif kind == "MODE":
                 logger.log_event(
@@ -355,6 +359,12 @@ class _Skipped(io.TextIOBase):
     def write(self, text: str) -> int:
         self.count += sum(int(n) for n in re.findall(r"Skipped (\d+) bad bytes", text))
         return len(text)
+
+
+def _value(fields: dict, key: str, missing: float = 0.0) -> float:
+    """A record's number; ``missing`` where the column is absent or not a finite number (damage)."""
+    v = fields.get(key)
+    return float(v) if isinstance(v, int | float) and math.isfinite(v) else missing
 
 
 def _placed(t_s: float) -> bool:
@@ -400,6 +410,9 @@ def _import_ulog(path, mcap_path, origin, plan, scenario_text) -> ImportResult:
         for d in ulog.data_list:
             name = d.name if d.multi_id == 0 else f"{d.name}/{d.multi_id}"
             columns = {k: v for k, v in d.data.items()}
+            if "timestamp" not in columns:  # a damaged format: rows without a time
+                misplaced += len(next(iter(columns.values()), ()))
+                continue
             n = len(columns["timestamp"])
             records[name] = n
             keys = list(columns)
@@ -429,7 +442,10 @@ def _plain(value):
 def _ulog_unix_offset_s(ulog) -> float:
     """Unix time minus boot time [s], from the first GPS sample with a UTC time; 0 without one."""
     for d in ulog.data_list:
-        if d.name in ("vehicle_gps_position", "sensor_gps") and "time_utc_usec" in d.data:
+        if (
+            d.name in ("vehicle_gps_position", "sensor_gps")
+            and {"time_utc_usec", "timestamp"} <= d.data.keys()
+        ):
             utc, boot = d.data["time_utc_usec"], d.data["timestamp"]
             valid = utc > UNIX_2000_US
             if valid.any():
@@ -441,11 +457,8 @@ def _ulog_unix_offset_s(ulog) -> float:
 def _ulog_frames(ulog, made: _Frames, offset_s: float, np):
     topics = {d.name: d for d in ulog.data_list if d.multi_id == 0}
     out = []
-    pos = (
-        topics.get("vehicle_global_position")
-        or topics.get("vehicle_gps_position")
-        or topics.get("sensor_gps")
-    )
+    usable = [topics[n] for n in POSITION_TOPICS if n in topics]
+    pos = next((d for d in usable if {"timestamp", "lat", "lon", "alt"} <= d.data.keys()), None)
     if pos is not None:
         lat, lon, alt = (np.asarray(pos.data[k], dtype=float) for k in ("lat", "lon", "alt"))
         if np.nanmax(np.abs(lat)) > 1000:  # vehicle_gps_position: degE7 and mm
@@ -454,7 +467,7 @@ def _ulog_frames(ulog, made: _Frames, offset_s: float, np):
             if math.isfinite(a) and (a or b):
                 out.append((offset_s + int(t_us) * 1e-6, *made.position(int(t_us) // 1000, a, b, h)))
     att = topics.get("vehicle_attitude")
-    if att is not None and "q[0]" in att.data:
+    if att is not None and {"timestamp", "q[0]", "q[1]", "q[2]", "q[3]"} <= att.data.keys():
         q = [np.asarray(att.data[f"q[{k}]"], dtype=float) for k in range(4)]
         w, x, y, z = q
         roll = np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
