@@ -248,6 +248,12 @@ def test_nonsense_4d_vehicle_values(tmp_path, capsys, edit, words):
     assert not out.exists()
 
 
+def test_an_acmpso_path_of_one_node_is_refused(tmp_path, capsys):
+    """n_nodes = 1 passed the config and ended in the problem's own ValueError (a traceback)."""
+    scenario = _scenario(tmp_path, lambda d: d.update(planner={"name": "acmpso", "n_nodes": 1}))
+    _fails(["plan", scenario, "-o", str(tmp_path / "p.json")], capsys, "planner.n_nodes", ">= 2")
+
+
 def _target(key, value):
     def edit(d):
         d["coalition"]["targets"][0][key] = value

@@ -56,7 +56,15 @@ import numpy as np
 from msgspec import Meta
 from scipy.interpolate import CubicSpline
 
-from gcs_planner.core.config import Count, Distance, DistanceStep, NonNegative, Positive, PositiveDistance
+from gcs_planner.core.config import (
+    MAX_COUNT,
+    Count,
+    Distance,
+    DistanceStep,
+    NonNegative,
+    Positive,
+    PositiveDistance,
+)
 from gcs_planner.core.validation import MAX_ALT_M
 from gcs_planner.model.plan import Plan, VehiclePlan
 from gcs_planner.model.scenario import Scenario, ScenarioError, Vehicle
@@ -370,7 +378,7 @@ class Config(PlannerConfig, tag=NAME):
     particles: Count = 50
     iterations: Count = 100
     n_waypoints: Count = 8
-    n_nodes: Count = 100
+    n_nodes: Annotated[int, Meta(ge=2, le=MAX_COUNT)] = 100  # nodes of the path polyline: both ends
     length_unit_m: PositiveDistance = 1000.0
     h_safe_m: Annotated[float, Meta(gt=0.0, le=MAX_ALT_M)] = 500.0
     radar_strength_m: Positive = 10000.0
