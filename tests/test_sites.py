@@ -379,6 +379,18 @@ def test_bad_site_input_is_one_line_and_exit_2(tmp_path, capsys, features, dem, 
     assert not out.exists()
 
 
+def test_4d_vehicles_outside_the_site_area_are_one_line(tmp_path, capsys):
+    """The origin moved off the site: the 4-D planner's box of the vehicles and the site's area no
+    longer overlap (once a zero-size array error, after a warning line)."""
+    shutil.copytree(SITE, tmp_path / "site_valley")
+    text = (MISSIONS / "site_valley_4d.toml").read_text().replace("lat_deg = 47.397742", "lat_deg = 47.5")
+    (tmp_path / "s.toml").write_text(text)
+    refused(
+        ["plan", str(tmp_path / "s.toml"), "-o", str(tmp_path / "p.json")], capsys, "outside the site's area"
+    )
+    assert not (tmp_path / "p.json").exists()
+
+
 def test_a_dem_that_does_not_cover_the_site_is_refused(tmp_path, capsys):
     dem = read_dem(SITE / "valley_dem.tif", "dem")
     ny, nx = dem.elevation.shape

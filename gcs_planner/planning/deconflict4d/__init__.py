@@ -187,12 +187,6 @@ def _manned_track(d: dict[str, Any], where: str) -> MannedTrack:
 def build_problem(scenario: Scenario, config: Config) -> Problem:
     """Scenario -> Problem (settings, UAV specs, manned no-fly zones, waypoint box)."""
     settings = config
-    if scenario.cylinders or scenario.hemispheres:
-        log.warning(
-            "deconflict_4d ignores static obstacles and no-fly zones (cylinders / hemispheres) in %s;"
-            " the plan checker reports any it crosses",
-            scenario.name,
-        )
     if not scenario.vehicles:
         raise ScenarioError(f"{scenario.name}: deconflict_4d needs at least one [[vehicles]] entry")
     uavs = [_uav(scenario, i) for i in range(len(scenario.vehicles))]
@@ -204,6 +198,11 @@ def build_problem(scenario: Scenario, config: Config) -> Problem:
         if axis in scenario.bounds:
             lo, hi = scenario.bounds[axis]
             if scenario.site is not None:  # a site's area box holds the UAVs' own box (and its floor)
+                if lower[k] > hi or upper[k] < lo:
+                    raise ScenarioError(
+                        f"{scenario.name}: the vehicles' starts and goals ({axis} {lower[k] + pad:.0f}.."
+                        f"{upper[k] - pad:.0f} m) are outside the site's area ({axis} {lo:.0f}..{hi:.0f} m)"
+                    )
                 lower[k], upper[k] = max(lower[k], lo), min(upper[k], hi)
             else:
                 lower[k], upper[k] = lo, hi
@@ -225,6 +224,12 @@ def build_problem(scenario: Scenario, config: Config) -> Problem:
             config.confidence,
             config.min_mode_weight,
             settings.zone_step_s,
+        )
+    if scenario.cylinders or scenario.hemispheres:  # said once the input is checked: bad input is one line
+        log.warning(
+            "deconflict_4d ignores static obstacles and no-fly zones (cylinders / hemispheres) in %s;"
+            " the plan checker reports any it crosses",
+            scenario.name,
         )
     return Problem(uavs=uavs, zones=zones, settings=settings, lower_m=lower, upper_m=upper)
 
