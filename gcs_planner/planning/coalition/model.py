@@ -164,42 +164,43 @@ def load_world(scenario: Scenario) -> World:
     """Build the coalition model from a scenario; errors name the field and value."""
     raw = scenario.raw
     where = str(scenario.path or scenario.name)
-    try:
+    try:  # the numbers' errors (InputError) get the scenario's name here, once
         section = table(raw.get("coalition", {}), "[coalition]")
         params = parse(CoalitionParams, scenario.planner, "planner")
         targets_rows = items_of(section.get("targets", []), "coalition.targets")
         threat_rows = items_of(section.get("threats", []), "coalition.threats")
+        rows = raw.get("vehicles", [])
+        uavs = [_uav(i, v, rows[i] if i < len(rows) else {}) for i, v in enumerate(scenario.vehicles)]
+        targets = [_target(t, f"coalition.targets[{i}]") for i, t in enumerate(targets_rows)]
+        threats = [_threat(d, f"coalition.threats[{i}]") for i, d in enumerate(threat_rows)]
     except InputError as exc:
         raise ScenarioError(f"{where}: {exc}") from None
-    rows = raw.get("vehicles", [])
-    uavs = [_uav(i, v, rows[i] if i < len(rows) else {}, where) for i, v in enumerate(scenario.vehicles)]
-    targets = [_target(t, f"{where}: coalition.targets[{i}]") for i, t in enumerate(targets_rows)]
     ids = {u.id for u in uavs}
     for t in targets:
         if t.recon_uav is not None and t.recon_uav not in ids:
             raise ScenarioError(f"{where}: target {t.id}: recon_uav {t.recon_uav!r} is not a vehicle id")
-    threats = [
-        Threat(
-            x=_num(d, "x", f"{where}: coalition.threats[{i}]", None, -MAX_RANGE_M, MAX_RANGE_M),
-            y=_num(d, "y", f"{where}: coalition.threats[{i}]", None, -MAX_RANGE_M, MAX_RANGE_M),
-            radius_m=_num(d, "radius_m", f"{where}: coalition.threats[{i}]", None, 0.0, MAX_RADIUS_M, True),
-            appear_s=_num(d, "appear_s", f"{where}: coalition.threats[{i}]", 0.0, -MAX_DURATION_S),
-        )
-        for i, d in enumerate(threat_rows)
-    ]
     return World(uavs=uavs, targets=targets, threats=threats, params=params)
 
 
-def _uav(index: int, v, row: dict[str, Any], where: str) -> UavSpec:
-    at = f"{where}: vehicle {v.id}"
+def _threat(d: dict[str, Any], where: str) -> Threat:
+    return Threat(
+        x=_num(d, "x", where, None, -MAX_RANGE_M, MAX_RANGE_M),
+        y=_num(d, "y", where, None, -MAX_RANGE_M, MAX_RANGE_M),
+        radius_m=_num(d, "radius_m", where, None, 0.0, MAX_RADIUS_M, True),
+        appear_s=_num(d, "appear_s", where, 0.0, -MAX_DURATION_S),
+    )
+
+
+def _uav(index: int, v, row: dict[str, Any]) -> UavSpec:
+    at = f"vehicle {v.id}"
     caps = str(row.get("capabilities", "RSE")).upper()
     if not caps or set(caps) - set("RSE"):
-        raise ScenarioError(f"{at}: capabilities must be letters of 'RSE', got {caps!r}")
+        raise InputError(f"{at}: capabilities must be letters of 'RSE', got {caps!r}")
     munitions = row.get("munitions", 0)
     if not isinstance(munitions, int) or munitions < 0:
-        raise ScenarioError(f"{at}: munitions must be an integer >= 0, got {munitions!r}")
+        raise InputError(f"{at}: munitions must be an integer >= 0, got {munitions!r}")
     if v.turn_radius_m <= 0:
-        raise ScenarioError(f"{at}: turn_radius_m must be > 0, got {v.turn_radius_m!r}")
+        raise InputError(f"{at}: turn_radius_m must be > 0, got {v.turn_radius_m!r}")
     return UavSpec(
         index=index,
         id=v.id,
@@ -220,7 +221,7 @@ def _uav(index: int, v, row: dict[str, Any], where: str) -> UavSpec:
 def _target(d: dict[str, Any], where: str) -> Target:
     timing = d.get("strike_timing", "simultaneous")
     if timing not in ("simultaneous", "sequential"):
-        raise ScenarioError(f"{where}: strike_timing must be simultaneous|sequential, got {timing!r}")
+        raise InputError(f"{where}: strike_timing must be simultaneous|sequential, got {timing!r}")
     interval = _num(d, "strike_interval_s", where, 5.0, 0.0, lo_open=True) if timing == "sequential" else 0.0
     return Target(
         id=str(d.get("id", "T?")),
@@ -243,8 +244,8 @@ def _target(d: dict[str, Any], where: str) -> Target:
 def _angles(d: dict[str, Any], key: str, where: str) -> list[float]:
     value = d.get(key, [])
     if not isinstance(value, list):
-        raise ScenarioError(f"{where}: {key} must be a list of degrees, got {value!r}")
-    return [_checked(a, f"{where}: {key}[{k}]", -360.0, 360.0) for k, a in enumerate(value)]
+        raise InputError(f"{where}: {key} must be a list of degrees, got {value!r}")
+    return [number(a, f"{where}: {key}[{k}]", -360.0, 360.0) for k, a in enumerate(value)]
 
 
 def _xy(d: dict[str, Any], key: str, where: str, default=None) -> tuple[float, float]:
@@ -252,8 +253,8 @@ def _xy(d: dict[str, Any], key: str, where: str, default=None) -> tuple[float, f
     if value is None and default is not None:
         return default
     if not (isinstance(value, list) and len(value) == 2):
-        raise ScenarioError(f"{where}: {key} must be [x, y] in metres, got {value!r}")
-    x, y = (_checked(a, f"{where}: {key}[{k}]", -MAX_RANGE_M, MAX_RANGE_M) for k, a in enumerate(value))
+        raise InputError(f"{where}: {key} must be [x, y] in metres, got {value!r}")
+    x, y = (number(a, f"{where}: {key}[{k}]", -MAX_RANGE_M, MAX_RANGE_M) for k, a in enumerate(value))
     return x, y
 
 
@@ -267,15 +268,8 @@ def _num(
     lo_open: bool = False,
 ) -> float:
     """``d[key]`` (or ``default``) within [lo, hi] (lo excluded when ``lo_open``); the defaults
-    bound a time. ScenarioError naming the field and value otherwise."""
+    bound a time. InputError naming the field and value otherwise."""
     value = d.get(key, default)
     if value is None:
-        raise ScenarioError(f"{where}: missing {key}")
-    return _checked(value, f"{where}: {key}", lo, hi, lo_open)
-
-
-def _checked(value: Any, field: str, lo: float, hi: float, lo_open: bool = False) -> float:
-    try:
-        return number(value, field, lo, hi, lo_open=lo_open)
-    except InputError as exc:
-        raise ScenarioError(str(exc)) from None
+        raise InputError(f"{where}: missing {key}")
+    return number(value, f"{where}: {key}", lo, hi, lo_open=lo_open)

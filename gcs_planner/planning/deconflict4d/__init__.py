@@ -100,6 +100,9 @@ def _uav(scenario: Scenario, i: int) -> UavSpec:
     try:
         overrides = {k: number(raw[k], f"{where}.{k}", *_DYN_RANGES[k]) for k in _DYN_RANGES if k in raw}
         takeoff = number(raw.get("takeoff_s", 0.0), f"{where}.takeoff_s", 0.0, MAX_DURATION_S)
+        given_arrival = raw.get("arrival_s")
+        if given_arrival is not None:
+            given_arrival = number(given_arrival, f"{where}.arrival_s", 0.0, MAX_DURATION_S)
     except InputError as exc:
         raise ScenarioError(str(exc)) from None
     if "limit" in raw:
@@ -116,14 +119,11 @@ def _uav(scenario: Scenario, i: int) -> UavSpec:
             f"{where}: start/goal z must be > 0 (the climb is planned), got {v.start} / {v.goal}"
         )
     climb = start[2] / dyn.climb_mps + dyn.takeoff_settle_s if dyn.vertical_takeoff else 0.0
-    arrival = takeoff + climb + float(np.linalg.norm(goal - start)) / v.speed_mps
-    if "arrival_s" in raw:
-        try:
-            arrival = number(raw["arrival_s"], f"{where}.arrival_s", 0.0, MAX_DURATION_S)
-        except InputError as exc:
-            raise ScenarioError(str(exc)) from None
-    elif arrival > MAX_DURATION_S:
-        raise ScenarioError(f"{where}: the flight ends after {arrival / 86_400:.3g} days (at most 7)")
+    arrival = given_arrival
+    if arrival is None:
+        arrival = takeoff + climb + float(np.linalg.norm(goal - start)) / v.speed_mps
+        if arrival > MAX_DURATION_S:
+            raise ScenarioError(f"{where}: the flight ends after {arrival / 86_400:.3g} days (at most 7)")
     if not arrival > takeoff + climb:
         raise ScenarioError(
             f"{where}: arrival_s must be after take-off + climb ({takeoff + climb:.1f} s), got {arrival}"
