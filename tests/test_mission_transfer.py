@@ -705,3 +705,52 @@ def test_lost_request_for_an_item_in_flight_still_succeeds():
     ack = _from_vehicle(mavlink.MAVLink_mission_ack_message(255, 190, MissionResult.ACCEPTED, 0))
     up.on_message(ack, 0.4)
     assert up.done and up.outcome.error is None
+
+
+def _count(n: int) -> mavlink.MAVLink_message:
+    return _from_vehicle(mavlink.MAVLink_mission_count_message(255, 190, n, 0))
+
+
+def _item_int(seq: int) -> mavlink.MAVLink_message:
+    return _from_vehicle(
+        mavlink.MAVLink_mission_item_int_message(
+            255, 190, seq, 6, 16, 0, 1, 0, 0, 0, 0, 473977420, 85455940, 20, 0
+        )
+    )
+
+
+def test_a_vehicle_that_answers_each_request_on_its_last_retry_cannot_hold_a_download_for_hours():
+    """Each item came just before its retries ran out, so no per-item limit ever fired: 65535 items
+    took ~36 h. The download now ends at the upload's overall bound, 20 s + 1 s an item."""
+    n = 40  # ~3 s an item here: ~120 s unbounded
+    down = DownloadTransfer(1)
+    down.start(0.0)
+    t = 0.1
+    down.on_message(_count(n), t)
+    while not down.done and t < 3600:
+        for _ in range(Timing().download_retries):  # every re-request goes unanswered ...
+            t = down.deadline_s
+            down.on_timeout(t)
+            if down.done:
+                break
+        if not down.done:  # ... and the last one is answered
+            down.on_message(_item_int(len(down._items)), t + 0.01)
+    assert down.done and isinstance(down.outcome.error, errors.MissionTimeoutError)
+    assert t <= 20 + n + 0.1
+    assert f"of {n} items in {20 + n} s" in str(down.outcome.error)
+
+
+@pytest.mark.parametrize("x", [float("nan"), float("inf"), 1e30])
+def test_a_legacy_float_item_that_no_int32_holds_ends_the_download_naming_it(x):
+    """A float MISSION_ITEM with a NaN latitude raised inside the link's subscriber (logged, then
+    re-requested until 'item 0 not received'): now the download ends once, naming the item."""
+    down = DownloadTransfer(1)
+    down.start(0.0)
+    down.on_message(_count(2), 0.1)
+    legacy = _from_vehicle(
+        mavlink.MAVLink_mission_item_message(255, 190, 0, 6, 16, 0, 1, 0, 0, 0, 0, x, 8.5, 20, 0)
+    )
+    out = down.on_message(legacy, 0.2)
+    assert down.done and isinstance(down.outcome.error, errors.MissionProtocolError)
+    assert "item 0: x = " in str(down.outcome.error) and "MISSION_ITEM" in str(down.outcome.error)
+    assert [m.get_type() for m in out] == ["MISSION_ACK"]

@@ -43,6 +43,7 @@ from gcs_planner.mavlink.params import (
 from gcs_planner.missions.param_files import (
     ParamEntry,
     format_value,
+    is_param_name,
     is_qgc_name,
     read_param_file,
     write_param_file,
@@ -114,7 +115,22 @@ async def _vehicle_params(link, heartbeat, args: argparse.Namespace) -> tuple[di
         params = await download_params(
             link, args.sysid, args.compid, bytewise=bytewise, timeout_s=args.timeout, progress=progress
         )
-    return {p.name: p for p in params}, bytewise
+    return _by_name(params, args.sysid), bytewise
+
+
+def _by_name(params: list[Param], sysid: int) -> dict[str, Param]:
+    """The parameters by name; UserError for a name no file line can hold (a vehicle could write
+    a line of its choosing into the backup) or one the vehicle gives twice (which to set?)."""
+    by_name: dict[str, Param] = {}
+    for p in params:
+        if not is_param_name(p.name):
+            raise UserError(f"vehicle {sysid}: parameter {p.index} is named {p.name!r}, not 1-16 letters, "
+                            "digits or _; nothing written or set")  # fmt: skip
+        if p.name in by_name:
+            raise UserError(f"vehicle {sysid}: parameters {by_name[p.name].index} and {p.index} are both "
+                            f"named {p.name}; nothing written or set")  # fmt: skip
+        by_name[p.name] = p
+    return by_name
 
 
 async def _get(args: argparse.Namespace) -> int:

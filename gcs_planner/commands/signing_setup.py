@@ -54,7 +54,7 @@ async def _setup(args: argparse.Namespace, new_key: bytes) -> int:
             link.set_signing_key(current)  # the vehicle checks the request with the key it has
             link.send(setup_signing_message(new_key, args.sysid, args.compid))
             link.set_signing_key(after)
-            if await _heartbeat_with(link, args.sysid, signed=after is not None):
+            if await _heartbeat_with(link, args.sysid, args.compid, signed=after is not None):
                 state = "signing off" if after is None else "signs with the new key"
                 print(f"vehicle {args.sysid}: {state} (HEARTBEAT checked; SETUP_SIGNING sent {attempt}x)")
                 note = quirks_for(heartbeat.autopilot, heartbeat.type).signing_note
@@ -67,14 +67,16 @@ async def _setup(args: argparse.Namespace, new_key: bytes) -> int:
     )
 
 
-async def _heartbeat_with(link: MavlinkLink, sysid: int, *, signed: bool) -> bool:
-    """True when a HEARTBEAT of ``sysid`` arrives signed (the link dropped those not signed with its
-    key) or, for ``signed=False``, unsigned, within HEARTBEAT_WAIT_S."""
+async def _heartbeat_with(link: MavlinkLink, sysid: int, compid: int, *, signed: bool) -> bool:
+    """True when a HEARTBEAT of the vehicle's component ``sysid``/``compid`` arrives signed (the
+    link dropped those not signed with its key) or, for ``signed=False``, unsigned, within
+    HEARTBEAT_WAIT_S. Only that component counts: a gimbal or camera of the same system that never
+    signed would otherwise pass for an autopilot that still signs."""
     try:
         await link.wait_for(
             lambda m: (
                 m.get_type() == "HEARTBEAT"
-                and m.get_srcSystem() == sysid
+                and (m.get_srcSystem(), m.get_srcComponent()) == (sysid, compid)
                 and bool(m.get_header().incompat_flags & MAVLINK_IFLAG_SIGNED) is signed
             ),
             HEARTBEAT_WAIT_S,

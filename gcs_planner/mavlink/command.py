@@ -5,7 +5,9 @@ Choices:
 - COMMAND_LONG is resent every COMMAND_RETRY_S = 1.5 s (COMMAND_RETRIES = 3 times), with
   ``confirmation`` counting the resends as the spec asks; the matcher (COMMAND_ACK from the target
   for this command, addressed to us or broadcast) is subscribed before the first send.
-  IN_PROGRESS acks extend the wait; any other result ends it.
+  IN_PROGRESS acks extend the wait, for at most IN_PROGRESS_MAX_S in all (none of these commands
+  runs for long; a vehicle that says IN_PROGRESS for ever would hold the tool for ever); any other
+  result ends it.
 - Mode names are turned into numbers with the autopilot's own table, picked from the vehicle's
   HEARTBEAT (autopilots.quirks_for: autopilot, and MAV_TYPE for ArduPlane vs ArduCopter). DO_SET_MODE carries
   MAV_MODE_FLAG_CUSTOM_MODE_ENABLED in param1 and, for ArduPilot, custom_mode in param2; for PX4
@@ -25,10 +27,11 @@ from gcs_planner.mavlink.errors import CommandTimeoutError, command_error
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.wire.enums import CommandResult
 
-__all__ = ["COMMAND_RETRIES", "COMMAND_RETRY_S", "CommandClient", "mode_table"]
+__all__ = ["COMMAND_RETRIES", "COMMAND_RETRY_S", "IN_PROGRESS_MAX_S", "CommandClient", "mode_table"]
 
 COMMAND_RETRY_S = 1.5  # wait for COMMAND_ACK before resending [s]
 COMMAND_RETRIES = 3  # resends after the first COMMAND_LONG
+IN_PROGRESS_MAX_S = 30.0  # the longest a command waits on IN_PROGRESS acks, all tries together [s]
 FORCE_DISARM_MAGIC = 21196.0  # MAV_CMD_COMPONENT_ARM_DISARM param2 that forces (ArduPilot, PX4)
 
 
@@ -51,12 +54,14 @@ class CommandClient:
         *,
         retry_s: float = COMMAND_RETRY_S,
         retries: int = COMMAND_RETRIES,
+        in_progress_max_s: float = IN_PROGRESS_MAX_S,
     ) -> None:
         self.link = link
         self.sysid = sysid
         self.compid = compid
         self.retry_s = retry_s
         self.retries = retries
+        self.in_progress_max_s = in_progress_max_s
 
     async def command_long(self, command: int, *params: float) -> CommandResult:
         """Send COMMAND_LONG until COMMAND_ACK: ACCEPTED, or CommandError / CommandTimeoutError."""
@@ -79,6 +84,7 @@ class CommandClient:
                 acks.put_nowait(msg)
 
         unsubscribe = self.link.subscribe(on_frame, self.sysid)
+        give_up = loop.time() + self.in_progress_max_s
         try:
             for confirmation in range(self.retries + 1):
                 self.link.send(
@@ -93,7 +99,12 @@ class CommandClient:
                     except TimeoutError:
                         break
                     if ack.result == CommandResult.IN_PROGRESS:
-                        deadline = loop.time() + self.retry_s
+                        if loop.time() >= give_up:
+                            raise CommandTimeoutError(
+                                f"vehicle {self.sysid}: {name} still IN_PROGRESS after "
+                                f"{self.in_progress_max_s:g} s"
+                            )
+                        deadline = min(loop.time() + self.retry_s, give_up)
                         continue
                     if ack.result == CommandResult.ACCEPTED:
                         return CommandResult.ACCEPTED

@@ -11,8 +11,10 @@ The parameter protocol (https://mavlink.io/en/services/parameter.html) as implem
   (mavproxy_param.py ``fetch_check``: 10 at a time after 1 s of silence; ArduPilot queues at most
   20 such requests, GCS_Param.cpp ``param_requests(20)``). No answer at all to PARAM_REQUEST_LIST
   for ``QUIET_S``: it is sent again. The download fails (UserError naming the vehicle and how many
-  are missing) when ``timeout_s`` passes without a new parameter. Deadlines read the loop's clock
-  (gcs_planner.core.lockstep.now_s).
+  are missing) when ``timeout_s`` passes without a new parameter, or once the vehicle's
+  ``param_count`` is known, after the mission transfers' overall bound (20 s + 1 s a parameter,
+  transfer.py), so a vehicle that dribbles one new value every few seconds cannot hold it for
+  hours. Deadlines read the loop's clock (gcs_planner.core.lockstep.now_s).
 - Values: the 4 bytes of PARAM_VALUE.param_value are read from the frame itself. ArduPilot sends
   every type as a float (C cast, ``AP_Param::cast_to_float``); PX4 copies an integer's bytes into
   the float field (bytewise: ``MavlinkParametersManager::send_param``'s memcpy), as MAVProxy reads
@@ -42,6 +44,7 @@ from gcs_planner.core.errors import UserError
 from gcs_planner.core.lockstep import now_s
 from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.transfer import DEADLINE_BASE_S, DEADLINE_PER_ITEM_S
 
 __all__ = [
     "DOWNLOAD_TIMEOUT_S", "INT_RANGES", "QUIET_S", "READ_BATCH", "REAL32", "TYPE_NAMES", "Param",
@@ -208,8 +211,14 @@ async def _collect(
     passed without a new one."""
     request_list = mavlink.MAVLink_param_request_list_message(sysid, compid)
     link.send(request_list)
-    last_new, asked = now_s(), set()
+    started = last_new = now_s()
+    asked: set[int] = set()
     while count_of() is None or len(got) < count_of():
+        if (count := count_of()) is not None and now_s() - started > (
+            limit_s := DEADLINE_BASE_S + DEADLINE_PER_ITEM_S * count
+        ):
+            raise UserError(f"vehicle {sysid}: {count - len(got)} of {count} parameters missing after"
+                            f" {limit_s:g} s")  # fmt: skip
         arrived.clear()
         try:
             await asyncio.wait_for(arrived.wait(), QUIET_S)

@@ -4,14 +4,17 @@ A text longer than one STATUSTEXT's 50 characters is sent as chunks that share a
 and count up ``chunk_seq``; the last chunk is the one shorter than 50 characters (the MAVLink
 common.xml STATUSTEXT definition; PX4 splits long texts this way, mavlink_messages.cpp). A text
 with ``id`` 0 stands alone. A chunk that does not follow its predecessor (a lost chunk) drops the
-text: a text is whole or not shown, never a fragment or two texts glued together.
+text: a text is whole or not shown, never a fragment or two texts glued together. At most
+MAX_OPEN texts wait for their next chunk, the one waiting longest dropped first: first chunks that
+never finish, from any number of senders and ids, cannot fill the memory.
 """
 
 from __future__ import annotations
 
-__all__ = ["CHUNK_CHARS", "TextAssembler", "text_of"]
+__all__ = ["CHUNK_CHARS", "MAX_OPEN", "TextAssembler", "text_of"]
 
 CHUNK_CHARS = 50
+MAX_OPEN = 64  # unfinished texts kept (chunk_seq is a uint8: each at most 256 x 50 characters)
 
 
 def text_of(msg) -> str:
@@ -44,5 +47,7 @@ class TextAssembler:
             return None
         if len(part) < CHUNK_CHARS:
             return "".join(parts)
-        self._open[key] = (seq, parts)
+        self._open[key] = (seq, parts)  # re-inserted: the dict's first key waited longest
+        if len(self._open) > MAX_OPEN:
+            del self._open[next(iter(self._open))]
         return None

@@ -62,7 +62,9 @@ Choices (where the spec leaves room):
 - Overall deadline: an upload ends after DEADLINE_BASE_S + DEADLINE_PER_ITEM_S x items
   (20 s + 1 s per item: 1000 items on a 0.5 s round-trip radio with two in flight take ~250 s) however
   busy the vehicle keeps it, e.g. one that re-requests item 0 for ever (each request resets the
-  inactivity timer). Giving up sends MISSION_ACK(OPERATION_CANCELLED).
+  inactivity timer). A download gets the same bound from the vehicle's MISSION_COUNT (a vehicle
+  that answers each request only on its last retry would hold it for hours). Giving up sends
+  MISSION_ACK(OPERATION_CANCELLED).
 - The transfer is bound to its peer: it takes only frames addressed to our sysid *and* compid (or
   broadcast), of its mission type. A request that goes back to an item the vehicle asked for long
   ago (more than max(RESTART_WINDOW_S, 4 x smoothed RTT): no delayed duplicate is that late) means
@@ -630,6 +632,7 @@ class DownloadTransfer(Transfer):
         self._opaque_id = 0
         self._items: list[MissionItem] = []
         self._requested_at = 0.0
+        self._give_up_s = math.inf  # the overall deadline, set by the vehicle's MISSION_COUNT
 
     def start(self, now_s: float) -> list[mavlink.MAVLink_message]:
         self.phase = Phase.COUNT
@@ -651,6 +654,9 @@ class DownloadTransfer(Transfer):
                 return []  # duplicate COUNT
             self._rtt_sample(now_s - self._requested_at)
             self._count, self._opaque_id = msg.count, getattr(msg, "opaque_id", 0)
+            self._give_up_s = (
+                now_s + self.timing.deadline_base_s + self.timing.deadline_per_item_s * self._count
+            )
             if self._count == 0:
                 self._finish(None, items=[], opaque_id=self._opaque_id)
                 return [self._ack(MissionResult.ACCEPTED)]
@@ -660,7 +666,11 @@ class DownloadTransfer(Transfer):
             return []  # duplicate, stale or a seq we did not ask for: the timer re-requests
         if self._retries == 0:
             self._rtt_sample(now_s - self._requested_at)
-        self._items.append(MissionItem.from_message(msg, self.mission_type))
+        try:
+            self._items.append(MissionItem.from_message(msg, self.mission_type))
+        except ValueError as exc:  # a legacy float item MISSION_ITEM_INT cannot hold
+            self._finish(MissionProtocolError(f"vehicle {self.sysid}: {exc}", sysid=self.sysid))
+            return [self._ack(MissionResult.OPERATION_CANCELLED)]
         if len(self._items) == self._count:
             self._finish(None, items=list(self._items), opaque_id=self._opaque_id)
             return [self._ack(MissionResult.ACCEPTED)]
@@ -669,10 +679,14 @@ class DownloadTransfer(Transfer):
     def _request_next(self, now_s: float) -> mavlink.MAVLink_message:
         self._retries = 0
         self._requested_at = now_s
-        self.deadline_s = now_s + self._adaptive(
-            self.timing.item_timeout_min_s, self.timing.item_timeout_max_s
-        )
+        self._set_item_deadline(now_s)
         return self._request(len(self._items))
+
+    def _set_item_deadline(self, now_s: float) -> None:
+        """The next re-request, never after the overall deadline (a vehicle that answers each
+        request just before its last retry would otherwise hold the download for hours)."""
+        item_s = self._adaptive(self.timing.item_timeout_min_s, self.timing.item_timeout_max_s)
+        self.deadline_s = min(now_s + item_s, self._give_up_s)
 
     def _request(self, seq: int) -> mavlink.MAVLink_message:
         return mavlink.MAVLink_mission_request_int_message(self.sysid, self.compid, seq, self.mission_type)
@@ -684,14 +698,15 @@ class DownloadTransfer(Transfer):
             self._retries += 1
             self.deadline_s = now_s + self.timing.count_retry_s
             return [self._request_list()]
+        if now_s >= self._give_up_s:
+            limit_s = self.timing.deadline_base_s + self.timing.deadline_per_item_s * self._count
+            return self._fail_timeout(f"{len(self._items)} of {self._count} items in {limit_s:g} s")
         if self._retries >= self.timing.download_retries:
             return self._fail_timeout(
                 f"item {len(self._items)} not received after {self._retries + 1} requests"
             )
         self._retries += 1
-        self.deadline_s = now_s + self._adaptive(
-            self.timing.item_timeout_min_s, self.timing.item_timeout_max_s
-        )
+        self._set_item_deadline(now_s)
         return [self._request(len(self._items))]
 
 

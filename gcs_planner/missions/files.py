@@ -27,6 +27,7 @@ from gcs_planner.missions.mission_file import (
     ranges,
     unknown_command_notes,
 )
+from gcs_planner.wire.dialect import has_position
 from gcs_planner.wire.types import MissionType
 
 if TYPE_CHECKING:  # numpy-backed; imported only by the readers of plan.json
@@ -92,16 +93,29 @@ def save_mission_file(path: str | Path, mission_file: MissionFile) -> list[Loss]
 
 
 def _check_storable(mf: MissionFile, path: Path) -> None:
-    """MissionFileError for an infinite value (a vehicle may hold one): JSON cannot hold it and a
-    WPL with "inf" is refused when read back, so no file is written."""
-    for name in ("mission", "fence", "rally"):
-        for i, it in enumerate(getattr(mf, name)):
-            for key in ("param1", "param2", "param3", "param4", "z"):
-                if math.isinf(getattr(it, key)):
-                    raise MissionFileError(
-                        f"{path}: {name} item {i}: {key} = {getattr(it, key)} cannot be stored in a"
-                        " mission file (the vehicle holds an infinite value); nothing written"
-                    )
+    """MissionFileError, and no file written, for what a vehicle may hold but no mission file can:
+    an infinite value (JSON cannot hold it, a WPL "inf" is refused when read back), a home that is
+    not three finite numbers, or a NaN altitude of an item with a position (a .plan's null is
+    refused when read back, a WPL writes 0: a waypoint on the ground)."""
+    if mf.home is not None and not all(math.isfinite(v) for v in mf.home):
+        raise MissionFileError(f"{path}: home {mf.home} cannot be stored in a mission file; nothing written")
+    lists = [("mission", i, it) for i, it in enumerate(mf.mission)]
+    lists += [("fence", i, it) for i, it in enumerate(mf.fence)] + [
+        ("rally", i, it) for i, it in enumerate(mf.rally)
+    ]
+    if mf.home_item is not None:
+        lists.append(("home", 0, mf.home_item))
+    for name, i, it in lists:
+        altitude_kept = has_position(it.command) and (
+            name != "fence" or it.command == mavlink.MAV_CMD_NAV_FENCE_RETURN_POINT
+        )  # a fence vertex or circle is stored without one
+        for key in ("param1", "param2", "param3", "param4", "z"):
+            value = getattr(it, key)
+            if math.isinf(value) or (math.isnan(value) and key == "z" and altitude_kept):
+                raise MissionFileError(
+                    f"{path}: {name} item {i}: {key} = {value} cannot be stored in a mission file"
+                    " (the vehicle holds it so); nothing written"
+                )
 
 
 def plan_mission_file(

@@ -35,8 +35,8 @@ from gcs_planner.core.validation import InputError, read_text, write_text_atomic
 from gcs_planner.mavlink.params import TYPE_NAMES, Param, fits_float32, float32
 
 __all__ = [
-    "ParamEntry", "format_value", "is_qgc_name", "parse_params", "read_param_file", "render_params",
-    "write_param_file",
+    "ParamEntry", "format_value", "is_param_name", "is_qgc_name", "parse_params", "read_param_file",
+    "render_params", "write_param_file",
 ]  # fmt: skip
 
 QGC_SUFFIX = ".params"
@@ -105,8 +105,13 @@ def _whole(text: str, lo: int, hi: int) -> bool:
     return text.isdigit() and lo <= int(text) <= hi
 
 
+def is_param_name(text: str) -> bool:
+    """1-16 letters, digits or _: every name ArduPilot and PX4 use, and all a file line can hold."""
+    return _NAME.fullmatch(text) is not None
+
+
 def _name(text: str, what: str, number: int, line: str) -> str:
-    if not _NAME.fullmatch(text):
+    if not is_param_name(text):
         raise _bad(what, number, line, f"parameter name {text!r} is not 1-16 letters, digits or _")
     return text
 

@@ -8,6 +8,7 @@ from enum import IntEnum
 __all__ = ["GLOBAL_FRAMES", "MissionItem", "MissionType"]
 
 GLOBAL_FRAMES = frozenset({0, 3, 5, 6, 10, 11})  # MAV_FRAMEs whose x, y are latitude, longitude
+INT32_MAX = 2**31 - 1
 
 
 class MissionType(IntEnum):
@@ -53,10 +54,17 @@ class MissionItem:
     @classmethod
     def from_message(cls, msg, mission_type: int | None = None) -> MissionItem:
         """From a received MISSION_ITEM_INT, or a legacy float MISSION_ITEM (degrees -> degE7,
-        local metres -> x 1e4); ``mission_type`` overrides the message's."""
+        local metres -> x 1e4); ``mission_type`` overrides the message's. ValueError naming the
+        item for a legacy x or y that MISSION_ITEM_INT's int32 cannot hold (NaN, inf, too large)."""
         x, y = msg.x, msg.y
         if msg.get_type() == "MISSION_ITEM":
             scale = 1e7 if msg.frame in GLOBAL_FRAMES else 1e4
+            for name, value in (("x", x), ("y", y)):
+                if not abs(value * scale) <= INT32_MAX:  # also NaN
+                    raise ValueError(
+                        f"item {msg.seq}: {name} = {value} in a float MISSION_ITEM does not fit"
+                        f" MISSION_ITEM_INT's int32 ({name} x {scale:g})"
+                    )
             x, y = round(x * scale), round(y * scale)
         return cls(
             msg.seq, msg.frame, msg.command, msg.current, msg.autocontinue,
