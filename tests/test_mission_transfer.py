@@ -754,3 +754,17 @@ def test_a_legacy_float_item_that_no_int32_holds_ends_the_download_naming_it(x):
     assert down.done and isinstance(down.outcome.error, errors.MissionProtocolError)
     assert "item 0: x = " in str(down.outcome.error) and "MISSION_ITEM" in str(down.outcome.error)
     assert [m.get_type() for m in out] == ["MISSION_ACK"]
+
+
+def test_a_vehicle_that_asks_only_for_items_outside_the_upload_is_not_called_silent():
+    """It asked for item 45 of 40 every time: the timeout said 'no answer to MISSION_COUNT'."""
+    up = UploadTransfer(1, mission(40))
+    up.start(0.0)
+    t = 0.0
+    while not up.done:
+        up.on_message(_request(45), t + 0.01)
+        t = up.deadline_s
+        up.on_timeout(t)
+    text = str(up.outcome.error)
+    assert isinstance(up.outcome.error, errors.MissionTimeoutError) and "no answer" not in text
+    assert "asked only for items outside this upload's 0-39, e.g. 45" in text

@@ -376,6 +376,7 @@ class UploadTransfer(Transfer):
         self._requested = -1  # the highest item the vehicle asked for
         self._pushes = 0  # push-ahead rounds since the last request
         self._skipped: set[int] = set()  # items the vehicle went past before we ever sent them
+        self._stray: int | None = None  # the last request for an item outside this upload
         self._top_up = max(1, min(self.timing.batch, self.timing.window // 2))
 
     @property
@@ -448,6 +449,7 @@ class UploadTransfer(Transfer):
         i = seq - self.first
         if not 0 <= i < len(self.items):
             log.warning("vehicle %d requested item %d, not in this upload: ignored", self.sysid, seq)
+            self._stray = seq
             return []
         if self.phase is Phase.COUNT and i != 0:
             return []  # a session starts at its first item: this request answers someone else's COUNT
@@ -566,6 +568,11 @@ class UploadTransfer(Transfer):
         if self.phase is Phase.COUNT:
             if self._retries >= self.timing.count_retries:
                 what = "MISSION_WRITE_PARTIAL_LIST" if self.partial else "MISSION_COUNT"
+                if self._stray is not None:
+                    return self._fail_timeout(
+                        f"{what} sent {self._retries + 1} times; the vehicle asked only for items outside"
+                        f" this upload's {self.first}-{self.first + len(self.items) - 1}, e.g. {self._stray}"
+                    )
                 return self._fail_timeout(f"no answer to {what} sent {self._retries + 1} times")
             self._retries += 1
             self.deadline_s = now_s + self.timing.count_retry_s
