@@ -15,6 +15,7 @@ import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from test_link_attacks import Peer
 
+from gcs_planner.autopilots import quirks_named
 from gcs_planner.commands.params import _by_name
 from gcs_planner.commands.signing_setup import _heartbeat_with
 from gcs_planner.core.errors import UserError
@@ -22,6 +23,7 @@ from gcs_planner.mavlink import params as params_module
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandTimeoutError
 from gcs_planner.mavlink.link import MavlinkLink
+from gcs_planner.mavlink.mission import _describe
 from gcs_planner.mavlink.params import Param, download_params
 from gcs_planner.mavlink.statustext import MAX_OPEN, TextAssembler
 from gcs_planner.missions.files import save_mission_file
@@ -194,3 +196,13 @@ def test_a_nan_param_written_to_wpl_is_said_and_a_nan_altitude_refused(tmp_path)
                 out, MissionFile.from_items([_home_item(), _waypoint(1), _waypoint(2, z=math.nan)])
             )
         assert not out.exists()
+
+
+def test_a_vehicle_that_acks_early_holds_a_truncated_list_and_is_said_so():
+    """It ACKed after two of the rows: 'a mixed list of 2 items: seq 1-1 as sent, 0 not from this
+    upload' described a list that holds nothing foreign, only too little."""
+    sent = [_home_item(), *(_waypoint(k) for k in range(1, 5))]
+    held = sent[:2]
+    text = _describe(sent, held, quirks_named("ardupilot"), None)
+    assert text.startswith("the vehicle now holds only the first 1 of this upload's 4 items")
+    assert "mixed" in _describe(sent, [sent[0], _waypoint(1, z=99.0)], quirks_named("ardupilot"), None)

@@ -451,6 +451,11 @@ def _describe(
         same += 1
     home = 1 if q.home_at_seq0 and sent and sent[0].seq == 0 else 0
     start = sent[0].seq if sent else 0
+    if same == len(got) < len(sent):
+        return (
+            f"the vehicle now holds only the first {same - home} of this upload's {len(sent) - home} items"
+            " (it stores items as they arrive)"
+        )
     if same - home > 0:
         kept = f"seq {start + home}-{start + same - 1} as sent, {len(got) - same} not from this upload"
     else:
