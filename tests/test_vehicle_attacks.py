@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+from types import SimpleNamespace
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
@@ -19,6 +20,7 @@ from gcs_planner.autopilots import quirks_named
 from gcs_planner.commands.params import _by_name
 from gcs_planner.commands.signing_setup import _heartbeat_with
 from gcs_planner.core.errors import UserError
+from gcs_planner.flight.ops import _state_of
 from gcs_planner.mavlink import params as params_module
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandTimeoutError
@@ -206,3 +208,12 @@ def test_a_vehicle_that_acks_early_holds_a_truncated_list_and_is_said_so():
     text = _describe(sent, held, quirks_named("ardupilot"), None)
     assert text.startswith("the vehicle now holds only the first 1 of this upload's 4 items")
     assert "mixed" in _describe(sent, [sent[0], _waypoint(1, z=99.0)], quirks_named("ardupilot"), None)
+
+
+def test_a_vehicle_that_gives_up_its_climb_is_named_with_its_own_words():
+    """PX4 SIH (2026-12-06) detected a landing 0.8 m up and disarmed; the error only said the
+    vehicle 'did not reach take-off altitude in time'."""
+    link = SimpleNamespace(vehicles={3: SimpleNamespace(armed=False), 4: SimpleNamespace(armed=True)})
+    status = SimpleNamespace(reason=lambda s: {3: "Disarmed by landing"}.get(s, ""))
+    assert _state_of(link, status, 3) == "; sysid 3 disarmed: Disarmed by landing"
+    assert _state_of(link, status, 4) == ""

@@ -241,8 +241,20 @@ async def take_off_all(
         for task in climbs:
             task.cancel()
         seen = {s: status.tracks[s].rel_alt_m for s in late()}
-        raise UserError(f"sysid {late()} did not reach take-off altitude in time (relative altitude {seen})")
+        raise UserError(
+            f"sysid {late()} did not reach take-off altitude in time (relative altitude {seen})"
+            + "".join(_state_of(link, status, s) for s in late())
+        )
     await asyncio.gather(*climbs)
+
+
+def _state_of(link: MavlinkLink, status: VehicleStatus, sysid: int) -> str:
+    """'; sysid N disarmed: <its newest text>' for a vehicle that gave up its climb (PX4 SIH once
+    detected a landing 0.8 m up and disarmed), else its newest text, if any."""
+    info = link.vehicles.get(sysid)
+    disarmed = " disarmed" if info is not None and not info.armed else ""
+    text = status.reason(sysid)
+    return f"; sysid {sysid}{disarmed}: {text}" if disarmed or text else ""
 
 
 def accel_lead_s(vp, accel_mps2: float, jerk_mps3: float = math.inf, latency_s: float = 0.0) -> float:

@@ -99,9 +99,8 @@ def _check_storable(mf: MissionFile, path: Path) -> None:
     refused when read back, a WPL writes 0: a waypoint on the ground)."""
     if mf.home is not None and not all(math.isfinite(v) for v in mf.home):
         raise MissionFileError(f"{path}: home {mf.home} cannot be stored in a mission file; nothing written")
-    lists = [("mission", i, it) for i, it in enumerate(mf.mission)]
-    lists += [("fence", i, it) for i, it in enumerate(mf.fence)] + [
-        ("rally", i, it) for i, it in enumerate(mf.rally)
+    lists = [
+        (name, i, it) for name in ("mission", "fence", "rally") for i, it in enumerate(getattr(mf, name))
     ]
     if mf.home_item is not None:
         lists.append(("home", 0, mf.home_item))
@@ -113,8 +112,8 @@ def _check_storable(mf: MissionFile, path: Path) -> None:
             value = getattr(it, key)
             if math.isinf(value) or (math.isnan(value) and key == "z" and altitude_kept):
                 raise MissionFileError(
-                    f"{path}: {name} item {i}: {key} = {value} cannot be stored in a mission file"
-                    " (the vehicle holds it so); nothing written"
+                    f"{path}: {name} item {i}: {key} = {value} cannot be stored in a mission file;"
+                    " nothing written"
                 )
 
 
