@@ -307,8 +307,16 @@ def test_the_client_names_the_vehicle_and_how_many_are_missing():
         run(download_params(vehicle, 1, timeout_s=4.0), lockstep=True)
     silent = ScriptedVehicle(5, answers_list=lambda i: False, answers_read=False)
     silent.send = lambda msg: None
-    with pytest.raises(UserError, match="vehicle 1 component 1: no PARAM_VALUE within 3 s"):
+    with pytest.raises(
+        UserError, match=r"vehicle 1 component 1: no PARAM_VALUE of its list within 3 s of \S+$"
+    ):
         run(download_params(silent, 1, timeout_s=3.0), lockstep=True)
+    # a vehicle whose every PARAM_VALUE says param_count 0 answered, but with no list: said so
+    empty = ScriptedVehicle(0, answers_list=lambda i: True)
+    with pytest.raises(
+        UserError, match=r"within 3 s of PARAM_REQUEST_LIST \(\d+ outside any list: param_count 0"
+    ):
+        run(download_params(empty, 1, timeout_s=3.0), lockstep=True)
 
 
 # ----------------------------------------------------------------- values and file formats

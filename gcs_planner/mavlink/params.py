@@ -170,14 +170,16 @@ async def download_params(
     link.check_target(sysid)
     got: dict[int, Param] = {}
     count: int | None = None
+    outside = 0  # PARAM_VALUEs that are no entry of a list
     arrived = asyncio.Event()
 
     def on_frame(msg, raw: bytes, t_s: float) -> None:
-        nonlocal count
+        nonlocal count, outside
         if msg.get_type() != "PARAM_VALUE" or msg.get_srcComponent() != compid:
             return
         total, index = msg.param_count, msg.param_index
         if not (0 < total < 65535 and 0 <= index < total):
+            outside += 1
             return  # _HASH_CHECK, a PARAM_SET's echo: not an entry of the list
         if total != count:  # the first, or the vehicle's list changed: keep what still fits
             count = total
@@ -193,9 +195,19 @@ async def download_params(
     unsubscribe = link.subscribe(on_frame, sysid=sysid)
     try:
         await _collect(link, sysid, compid, got, lambda: count, arrived, timeout_s)
+    except _NoList:
+        heard = (
+            f" ({outside} outside any list: param_count 0 or 65535, or an index past it)" if outside else ""
+        )
+        raise UserError(f"vehicle {sysid} component {compid}: no PARAM_VALUE of its list within"
+                        f" {timeout_s:g} s of PARAM_REQUEST_LIST{heard}") from None  # fmt: skip
     finally:
         unsubscribe()
     return [got[i] for i in range(len(got))]
+
+
+class _NoList(Exception):
+    """No PARAM_VALUE that is an entry of a list came (download_params words the error)."""
 
 
 async def _collect(
@@ -208,7 +220,7 @@ async def _collect(
     timeout_s: float,
 ) -> None:
     """Ask for the list, then for what is missing, until every index arrived or ``timeout_s``
-    passed without a new one."""
+    passed without a new one (_NoList: without any entry of a list at all)."""
     request_list = mavlink.MAVLink_param_request_list_message(sysid, compid)
     link.send(request_list)
     started = last_new = now_s()
@@ -231,8 +243,7 @@ async def _collect(
         count = count_of()
         if now_s() - last_new >= timeout_s:
             if count is None:
-                raise UserError(f"vehicle {sysid} component {compid}: no PARAM_VALUE within {timeout_s:g} s"
-                                " of PARAM_REQUEST_LIST")  # fmt: skip
+                raise _NoList
             first = min(set(range(count)) - got.keys())
             raise UserError(f"vehicle {sysid}: {count - len(got)} of {count} parameters missing (first:"
                             f" index {first}) after {timeout_s:g} s without a new one")  # fmt: skip
