@@ -7,7 +7,10 @@ at the first incomplete or corrupt record, ``Flight.truncated`` is set and
 result as an indexed read. Our writer ends the file with a footer without summary after every
 flush (mcap_writer) and with the summary only at close, so a log of ours that ends in a
 summary-less footer is one whose writer did not close it: ``truncated`` too (another writer's
-summary-less file is complete).
+summary-less file is complete). Damage inside the file is skipped and counted, not read: a chunk
+whose content fails the CRC its writer recorded (``Flight.damaged_chunks``), and messages whose log
+time is more than MAX_SPREAD_S from the log's median frame time (``Flight.misplaced_messages``: one
+flipped bit put a frame in 1970 or past 2^63 ns, and replay slept for decades or ran out of memory).
 
 Positions, ground speed and mission progress are decoded from the raw frames (the lossless
 channel) with pymavlink's own payload structs, so they do not depend on the JSON channels; the
@@ -27,6 +30,7 @@ import logging
 import math
 import os
 import struct
+import zlib
 from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,7 +39,7 @@ import numpy as np
 import zstandard
 from mcap.opcode import Opcode
 from mcap.records import Attachment, Channel, Chunk, Footer, Header, Message, Metadata
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import Origin
@@ -98,6 +102,8 @@ class Flight:
     recovered_messages: int = 0
     truncated: bool = False
     error: str | None = None
+    damaged_chunks: int = 0
+    misplaced_messages: int = 0
     _json: dict[tuple[int, str], list[tuple[int, bytes]]] = field(default_factory=dict, repr=False)
     _by_sysid: dict[int, list[RawFrame]] | None = field(default=None, repr=False)
 
@@ -213,6 +219,7 @@ class Flight:
 
 
 GCS_DEFAULT_SYSID = 255
+MAX_SPREAD_S = 30 * 86_400.0  # a message this far from the log's median frame time is damage [s]
 BOOT_RATE_MIN_SPAN_S = 1.0  # vehicle time (time_boot_ms) a vehicle's clock rate is estimated over [s]
 BOOT_RATE_REAL_TIME = 0.05  # an estimate within 5 % of 1 is real time (link jitter, clock drift)
 
@@ -265,13 +272,16 @@ def read_flight(path: str | Path) -> Flight:
                 if not isinstance(record, Chunk):
                     collector.record(record)
                     continue
-                rows = _chunk_messages(record)
-                if rows is None:  # not only messages inside (another writer): the generic path
-                    for inner in breakup_chunk(record):
-                        collector.record(inner)
-                else:
-                    for channel_id, log_time, data in rows:
-                        collector.message(channel_id, log_time, data)
+                try:
+                    rows = _chunk_messages(record)
+                    inner = breakup_chunk(record, validate_crc=True) if rows is None else []
+                except (CRCValidationError, zstandard.ZstdError, struct.error):
+                    flight.damaged_chunks += 1
+                    continue
+                for channel_id, log_time, data in rows or []:
+                    collector.message(channel_id, log_time, data)
+                for each in inner:  # not only messages inside (another writer): the generic path
+                    collector.record(each)
         except Exception as exc:  # noqa: BLE001 - a cut tail raises EndOfFile, struct, zstd or CRC errors
             flight.error = f"{type(exc).__name__}: {exc}"
     flight.truncated = not collector.complete or flight.error is not None
@@ -279,11 +289,30 @@ def read_flight(path: str | Path) -> Flight:
         log.info(
             "%s: truncated log; recovered %d messages (%s)", path, flight.recovered_messages, flight.error
         )
+    _drop_misplaced(flight, collector)
     flight.frames.sort(key=lambda f: f.t_ns)
     flight._json = dict(collector.json_rows)
     _read_attachments(flight)
     _decode_positions(flight)
     return flight
+
+
+def _drop_misplaced(flight: Flight, collector: _Collector) -> None:
+    """Leave out frames, JSON messages and events more than MAX_SPREAD_S from the median frame time."""
+    if not flight.frames:
+        return
+    times = sorted(f.t_ns for f in flight.frames)
+    middle, spread = times[len(times) // 2], int(MAX_SPREAD_S * 1e9)
+    frames = [f for f in flight.frames if abs(f.t_ns - middle) <= spread]
+    dropped = len(flight.frames) - len(frames)
+    flight.frames = frames
+    for key, rows in collector.json_rows.items():
+        kept = [r for r in rows if abs(r[0] - middle) <= spread]
+        dropped += len(rows) - len(kept)
+        collector.json_rows[key] = kept
+    events = [e for e in flight.events if abs(e[0] - middle * 1e-9) <= MAX_SPREAD_S]
+    flight.misplaced_messages = dropped + len(flight.events) - len(events)
+    flight.events = events
 
 
 def _read_attachments(flight: Flight) -> None:
@@ -366,6 +395,8 @@ def _chunk_messages(chunk: Chunk) -> list[tuple[int, int, bytes]] | None:
         data = chunk.data
     else:
         return None
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:  # 0: none recorded
+        raise CRCValidationError(expected=chunk.uncompressed_crc, actual=zlib.crc32(data), record=chunk)
     rows = []
     append = rows.append
     record_head, message_head = _RECORD_HEAD.unpack_from, _MESSAGE_HEAD.unpack_from

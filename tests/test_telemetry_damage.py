@@ -1,0 +1,70 @@
+"""Damage inside a flight log (not a cut tail): a chunk whose bytes changed, a message at a time
+no flight has. Found by flipping bits in a real `demo` log (2026-12-06): one flip in 40 crashed
+`replay` (a log time past 2^63 ns), six replayed altered frames as if intact, and a frame dated
+1970 made `--rrd` ask for 13 GiB and `--to` wait for decades.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from telemetry_frames import ORIGIN, flight_frames
+
+from gcs_planner.cli import main
+from gcs_planner.telemetry import FlightLogger
+from gcs_planner.telemetry.reader import read_flight
+
+CHUNK = 0x06  # MCAP opcode
+
+
+def _log(path: Path, frames, flush_every: int = 20) -> None:
+    with FlightLogger(path, ORIGIN) as logger:
+        for i, (msg, raw, t_s) in enumerate(frames):
+            logger.on_frame(msg, raw, t_s)
+            if i % flush_every == flush_every - 1:
+                logger.flush()  # several chunks
+
+
+def _records(data: bytes):
+    """(offset, opcode, length) of each top-level record after the magic."""
+    pos = 8
+    while pos + 9 <= len(data) - 8:
+        length = int.from_bytes(data[pos + 1 : pos + 9], "little")
+        yield pos, data[pos], length
+        pos += 9 + length
+
+
+def test_a_chunk_whose_bytes_changed_is_left_out_and_the_rest_is_read(tmp_path):
+    frames = flight_frames([1, 2], samples=40)
+    path = tmp_path / "flight.mcap"
+    _log(path, frames)
+    data = bytearray(path.read_bytes())
+    chunks = [(pos, length) for pos, op, length in _records(bytes(data)) if op == CHUNK]
+    assert len(chunks) >= 3
+    pos, length = chunks[1]
+    data[pos + 9 + length - 5] ^= 0x10  # inside the second chunk's compressed records
+    path.write_bytes(bytes(data))
+    flight = read_flight(path)
+    assert flight.damaged_chunks == 1
+    originals = {raw for _, raw, _ in frames}
+    assert all(f.data in originals for f in flight.frames)  # nothing altered gets through
+    assert frames[-1][1] in {f.data for f in flight.frames}  # the chunks after it are read
+    out = tmp_path / "out.rrd"
+    assert main(["replay", str(path), "--rrd", str(out)]) == 0 and out.stat().st_size > 0
+
+
+def test_messages_at_an_impossible_time_are_left_out(tmp_path, capsys):
+    frames = flight_frames([1, 2], samples=40)
+    position = next(f for f in frames if f[0].get_type() == "GLOBAL_POSITION_INT")
+    damaged = [*frames[:50], (position[0], position[1], 1.0), *frames[50:], (position[0], position[1], 9.3e9)]
+    path = tmp_path / "flight.mcap"
+    _log(path, damaged)  # 1970, and past 2^63 ns
+    flight = read_flight(path)
+    assert flight.misplaced_messages == 4  # each frame's raw and JSON records
+    assert [f.data for f in flight.frames] == [raw for _, raw, _ in frames]
+    assert set(flight.positions) == {1, 2}
+    ends, _ = flight.link_loss(1)
+    assert len(ends) < 10  # one bin a second over the 4 s flight, not one for each second since 1970
+    out = tmp_path / "out.rrd"
+    assert main(["replay", str(path), "--rrd", str(out)]) == 0
+    assert "4 messages at an impossible time left out" in capsys.readouterr().out
