@@ -44,3 +44,26 @@ def test_a_stream_keeps_a_frame_cut_between_reads_for_the_next():
     framer = StreamFramer()
     assert framer.feed(V2 + V2_NEXT[:7]) == ([V2], 0)
     assert framer.feed(V2_NEXT[7:] + SIGNED) == ([V2_NEXT, SIGNED], 0)
+
+
+def _unknown_id() -> bytes:
+    """A MAVLink 2 frame of a message id no dialect has: its CRC cannot be checked, so it passes."""
+    frame = bytearray(_v2(3))
+    frame[7:10] = (0xFFFFF0).to_bytes(3, "little")
+    return bytes(frame)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 4096])
+def test_a_stray_start_byte_in_a_stream_costs_no_frame(chunk):
+    """Line noise of one 0xFD before each frame: its 'length' swallowed the real frame behind it,
+    so no frame ever came through (a TCP peer, 2026-12-06). A start byte whose frame fails its CRC
+    now gives up only itself and the scan resumes at the next byte, as pymavlink's parser does."""
+    sent = [V2, V1, SIGNED, _unknown_id(), V2_NEXT]
+    stream = b"".join(b"\xfd" + raw for raw in sent) + b"\xfe" + V2 + bytes(300)
+    framer = StreamFramer()
+    got, junk = [], 0
+    for i in range(0, len(stream), chunk):
+        out, skipped = framer.feed(stream[i : i + chunk])
+        got += out
+        junk += skipped
+    assert got == [*sent, V2] and junk >= len(sent) + 1

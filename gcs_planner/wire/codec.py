@@ -28,7 +28,7 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["Packer", "decode", "encode", "fields", "frame", "intact", "packer"]
+__all__ = ["Packer", "crc_fails", "decode", "encode", "fields", "frame", "intact", "packer"]
 
 _HEADER = struct.Struct("<BBBBBBBHB")  # magic, len, incompat, compat, seq, sysid, compid, msgid lo16, hi8
 _HEADER_LEN = 10
@@ -128,6 +128,21 @@ def intact(raw: bytes) -> bool:
     if crc_extra is None or len(raw) != end + 2 + (_SIGNATURE_LEN if raw[2] & _SIGNED else 0):
         return False
     return _mcrf4xx(crc_extra, _mcrf4xx(raw[1:end])) == raw[end] | raw[end + 1] << 8
+
+
+def crc_fails(raw: bytes) -> bool:
+    """``raw``, a MAVLink 1 or 2 frame cut by its length fields, cannot be one: an incompatibility
+    flag MAVLink 2 does not define, or a dialect message's CRC that does not match (False where the
+    CRC cannot be checked: an unknown message id)."""
+    v2 = raw[0] == _V2_MAGIC
+    if v2 and raw[2] & ~_SIGNED:
+        return True
+    header = _HEADER_LEN if v2 else 6
+    crc_extra = _crc_extra_of(raw[7] | raw[8] << 8 | raw[9] << 16 if v2 else raw[5])
+    if crc_extra is None:
+        return False
+    end = header + raw[1]
+    return _mcrf4xx(crc_extra, _mcrf4xx(raw[1:end])) != raw[end] | raw[end + 1] << 8
 
 
 def fields(raw: bytes, wire: struct.Struct) -> tuple:

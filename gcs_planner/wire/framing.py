@@ -6,7 +6,10 @@ loses whole, and MAVLink senders put whole frames in one (MAVProxy, QGC, ArduPil
 output). This is a choice, stricter than ArduPilot: ArduPilot feeds a UDP port's bytes into the
 byte-stream parser of its channel (``GCS_MAVLINK::update_receive`` -> ``mavlink_parse_char``), so
 there a cut frame costs the frames after it until the parser resynchronises.
-Serial: a byte stream, so :class:`StreamFramer` keeps the incomplete tail for the next read.
+Serial and TCP: a byte stream, so :class:`StreamFramer` keeps the incomplete tail for the next
+read, and a candidate frame whose CRC fails (a stray start byte in line noise, whose "length"
+swallowed the real frames after it) gives up only its start byte: the scan resumes at the next
+byte, as pymavlink's robust parser does, so one noise byte costs no frame.
 
 A frame is returned by its length fields only (MAVLink 2: 10-byte header + payload + CRC + 13 if
 signed; MAVLink 1: 6 + payload + 2); the CRC, the message id and the signature are the decoder's
@@ -15,6 +18,10 @@ per run, as pymavlink's robust parser counts them.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
+
+from gcs_planner.wire.codec import crc_fails
 
 __all__ = ["StreamFramer", "frames"]
 
@@ -34,8 +41,11 @@ def _frame_length(data: bytes | bytearray, i: int) -> int | None:
     return 8 + data[i + 1]
 
 
-def split(data: bytes | bytearray) -> tuple[list[bytes], int, int]:
-    """(whole frames, runs of junk skipped, offset where an incomplete frame starts or len(data))."""
+def split(
+    data: bytes | bytearray, rejects: Callable[[bytes], bool] | None = None
+) -> tuple[list[bytes], int, int]:
+    """(whole frames, runs of junk skipped, offset where an incomplete frame starts or len(data));
+    a frame ``rejects`` refuses gives up only its start byte (junk) and the scan goes on after it."""
     out: list[bytes] = []
     junk = 0
     i, n = 0, len(data)
@@ -48,7 +58,12 @@ def split(data: bytes | bytearray) -> tuple[list[bytes], int, int]:
         length = _frame_length(data, i)
         if length is None or i + length > n:
             return out, junk, i
-        out.append(bytes(data[i : i + length]))
+        raw = bytes(data[i : i + length])
+        if rejects is not None and rejects(raw):
+            junk += 1
+            i += 1
+            continue
+        out.append(raw)
         i += length
     return out, junk, n
 
@@ -71,7 +86,7 @@ class StreamFramer:
 
     def feed(self, data: bytes) -> tuple[list[bytes], int]:
         self._pending += data
-        out, junk, end = split(self._pending)
+        out, junk, end = split(self._pending, rejects=crc_fails)
         del self._pending[:end]
         if len(self._pending) > self.MAX_PENDING:  # cannot happen with the length fields above
             self._pending.clear()
