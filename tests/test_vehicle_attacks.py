@@ -25,7 +25,7 @@ from gcs_planner.mavlink import params as params_module
 from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import CommandTimeoutError
 from gcs_planner.mavlink.link import MavlinkLink
-from gcs_planner.mavlink.mission import _describe
+from gcs_planner.mavlink.mission import MissionClient, _describe
 from gcs_planner.mavlink.params import Param, download_params
 from gcs_planner.mavlink.statustext import MAX_OPEN, TextAssembler
 from gcs_planner.missions.files import save_mission_file
@@ -217,3 +217,46 @@ def test_a_vehicle_that_gives_up_its_climb_is_named_with_its_own_words():
     status = SimpleNamespace(reason=lambda s: {3: "Disarmed by landing"}.get(s, ""))
     assert _state_of(link, status, 3) == "; sysid 3 disarmed: Disarmed by landing"
     assert _state_of(link, status, 4) == ""
+
+
+def test_a_download_across_a_tcp_reconnect_is_made_again_from_the_start():
+    """A SITL that restarts mid-download with another list: the link reconnected silently and the
+    file held item 0 of the old list and items 1-2 of the new one (exit 0)."""
+    lists = [[10, 11, 12], [20, 21, 22]]  # the x of each item: the old list, then the new one
+
+    async def main():
+        connections = 0
+
+        async def vehicle(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
+            nonlocal connections
+            mine, connections = connections, connections + 1
+            held = lists[min(mine, 1)]
+            mav, parser = mavlink.MAVLink(None, 1, 1), mavlink.MAVLink(None)
+            parser.robust_parsing = True
+            writer.write(mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3).pack(mav))
+            while data := await reader.read(4096):
+                for m in parser.parse_buffer(data) or []:
+                    if m.get_type() == "MISSION_REQUEST_LIST":
+                        writer.write(mavlink.MAVLink_mission_count_message(255, 190, len(held), 0).pack(mav))
+                    elif m.get_type() == "MISSION_REQUEST_INT":
+                        item = mavlink.MAVLink_mission_item_int_message(
+                            255, 190, m.seq, 3, 16, 0, 1, 0, 0, 0, 0, held[m.seq], 85455940, 20.0, 0
+                        )
+                        writer.write(item.pack(mav))
+                        if mine == 0 and m.seq == 0:  # restarts after its first item
+                            await writer.drain()
+                            writer.close()
+                            return
+                await writer.drain()
+
+        server = await asyncio.start_server(vehicle, "127.0.0.1", 0)
+        port = server.sockets[0].getsockname()[1]
+        link = await MavlinkLink.open(f"tcp:127.0.0.1:{port}", heartbeat_period_s=0)
+        try:
+            items = await MissionClient(link, 1).download()
+        finally:
+            await link.close()
+            server.close()
+        assert [it.x for it in items] == lists[1] and link.reconnects == 1
+
+    asyncio.run(asyncio.wait_for(main(), OUTER_S))

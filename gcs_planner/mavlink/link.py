@@ -318,6 +318,11 @@ class MavlinkLink:
         return self._transport.get_extra_info("sockname")[:2]
 
     @property
+    def reconnects(self) -> int:
+        """How often a TCP connection to a vehicle was made again after the vehicle closed it."""
+        return sum(max(0, getattr(t, "connections", 1) - 1) for t in self._endpoints)
+
+    @property
     def local_addresses(self) -> list[Address]:
         """Every endpoint's own address, in the order opened."""
         return [t.get_extra_info("sockname")[:2] for t in self._endpoints]

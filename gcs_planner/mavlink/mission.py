@@ -41,6 +41,7 @@ Choices:
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import weakref
 from collections.abc import Callable, Sequence
@@ -58,6 +59,7 @@ from gcs_planner.mavlink.errors import (
     CommandTimeoutError,
     MissionError,
     MissionInputError,
+    MissionProtocolError,
     MissionRejectedError,
     VerifyError,
     mission_type_name,
@@ -85,6 +87,8 @@ _REQUESTS = (mavlink.MAVLINK_MSG_ID_MISSION_REQUEST_INT, mavlink.MAVLINK_MSG_ID_
 _REQUEST_FIELDS = mavlink.MAVLink_mission_request_int_message.unpacker  # seq, targets, type: both
 _ITEM_INT = codec.packer(mavlink.MAVLink_mission_item_int_message)
 T = TypeVar("T")
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -199,10 +203,25 @@ class MissionClient:
     async def download_with_id(
         self, mission_type: int = MissionType.MISSION
     ) -> tuple[list[MissionItem], int]:
-        """(items, opaque_id from MISSION_COUNT; 0 if unsupported)."""
-        outcome = await self._run(self._transfer(DownloadTransfer, mission_type=mission_type))
-        if outcome.error is not None:
-            raise outcome.error
+        """(items, opaque_id from MISSION_COUNT; 0 if unsupported). A download during which the
+        link had to reconnect (a SITL restarted, a vehicle rebooted) may hold items of two lists: it
+        is made again from the start, once; never such a list."""
+        for _ in range(2):
+            reconnects = self.link.reconnects
+            outcome = await self._run(self._transfer(DownloadTransfer, mission_type=mission_type))
+            if outcome.error is not None:
+                raise outcome.error
+            if self.link.reconnects == reconnects:
+                break
+            log.warning("vehicle %d: the connection was made again during the download: downloading again",
+                        self.sysid)  # fmt: skip
+        else:
+            raise MissionProtocolError(
+                f"vehicle {self.sysid}: the connection was lost and made again during two"
+                f" {mission_type_name(mission_type)} downloads, so their items may come from two lists",
+                sysid=self.sysid,
+                mission_type=mission_type,
+            )
         return list(outcome.items or []), outcome.opaque_id
 
     async def clear(self, mission_type: int = MissionType.MISSION, *, force: bool = False) -> list[str]:

@@ -76,11 +76,13 @@ class TcpClient(asyncio.Protocol):
         self.framer = StreamFramer()
         self.transport: asyncio.Transport | None = None
         self.closed = False  # closed by the link
+        self.connections = 0  # 1 once connected, more after each reconnect
         self._retry: asyncio.Task | None = None
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         self.transport = transport  # type: ignore[assignment]
         self.framer = StreamFramer()
+        self.connections += 1
 
     def data_received(self, data: bytes) -> None:
         found, junk = self.framer.feed(data)
