@@ -28,3 +28,53 @@ def test_watch_without_a_vehicle_is_one_line(tmp_path, capsys):
     watch.FIRST_POSITION_TIMEOUT_S = 0.5
     assert main(["watch", "--connect", "udpout:127.0.0.1:9", "-o", str(tmp_path), "--count", "1"]) == 2
     assert "no vehicle heartbeat or position report" in capsys.readouterr().err
+
+
+def test_watch_logs_from_the_start_when_the_vehicle_never_acks_stream_requests(tmp_path, capsys):
+    """A vehicle (or a `replay --to` stream) that sends but never ACKs SET_MESSAGE_INTERVAL: the
+    stream requests, 6 s a message, came before the logging, so `--duration 3` ran 49 s and a
+    vehicle gone by then left nothing. They now run beside it."""
+    import socket
+    import threading
+
+    from ports import free_port_run
+    from pymavlink.dialects.v20 import ardupilotmega as mavlink
+
+    port = free_port_run(1)
+    stop = threading.Event()
+
+    def vehicle() -> None:  # 10 Hz for at most 8 s, never answering anything
+        mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            for k in range(80):
+                if stop.wait(0.1):
+                    return
+                msgs = [
+                    mavlink.MAVLink_global_position_int_message(
+                        k * 100, 473977420 + k, 85455940, 520000, 32000, 0, 0, 0, 0
+                    )
+                ]
+                if k % 10 == 0:
+                    msgs.append(mavlink.MAVLink_heartbeat_message(2, 3, 0, 0, 4, 3))
+                for msg in msgs:
+                    sock.sendto(msg.pack(mav), ("127.0.0.1", port))
+
+    thread = threading.Thread(target=vehicle, daemon=True)
+    thread.start()
+    try:
+        code = main(
+            [
+                "watch",
+                "--connect",
+                f"udpin:127.0.0.1:{port}",
+                "-o",
+                str(tmp_path),
+                "--duration",
+                "2",
+            ]
+        )
+    finally:
+        stop.set()
+        thread.join()
+    assert code == 0
+    assert len(read_flight(tmp_path / "watch.mcap").positions[1]) >= 5

@@ -77,14 +77,19 @@ async def _watch(args: argparse.Namespace, mcap_path: Path, origin: Origin | Non
     from gcs_planner.telemetry.rerun_views import LiveRerunLogger
 
     link = await open_link(args)
+    streams: asyncio.Task | None = None
     try:
         heartbeat = await link.wait_for(is_autopilot_heartbeat, FIRST_POSITION_TIMEOUT_S)
-        await request_streams(link, [heartbeat.get_srcSystem()])  # ArduPilot streams what it is asked for
+        # ArduPilot streams what it is asked for. Asked beside the logging, not before it: a vehicle
+        # that never ACKs costs 6 s a message, and `--duration 3` once ran 49 s and logged the last 3
+        streams = asyncio.create_task(request_streams(link, [heartbeat.get_srcSystem()]))
         first = await link.wait_for(
             lambda m: m.get_type() == "GLOBAL_POSITION_INT" and not reports_no_fix(m),
             FIRST_POSITION_TIMEOUT_S,
         )
     except TimeoutError:
+        if streams is not None:
+            streams.cancel()
         await link.close()
         raise UserError(
             f"no vehicle heartbeat or position report on {' '.join(args.connect)}"
@@ -112,5 +117,6 @@ async def _watch(args: argparse.Namespace, mcap_path: Path, origin: Origin | Non
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(done.wait(), args.duration)
     finally:
+        streams.cancel()
         await link.close()
     return seen[0]
