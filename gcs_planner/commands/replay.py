@@ -57,8 +57,11 @@ def run(args: argparse.Namespace) -> int:
         why = f" ({flight.error})" if flight.error else ""
         raise UserError(f"flight log {args.flight!r}: no MAVLink frames in it{why}")
     note = f" (truncated log: recovered {flight.recovered_messages} messages)" if flight.truncated else ""
-    damage = [f"{n} {what}" for n, what in ((flight.damaged_chunks, "chunks failing their CRC"),
-              (flight.misplaced_messages, "messages at an impossible time")) if n]  # fmt: skip
+    damage = []
+    if flight.damaged_chunks:
+        damage.append(f"{flight.damaged_chunks} chunks failing their CRC")
+    if flight.misplaced_messages:
+        damage.append(f"{flight.misplaced_messages} messages at an impossible time")
     if damage:
         note += f" (damaged log: {' and '.join(damage)} left out)"
     gcs = flight.gcs_sysids

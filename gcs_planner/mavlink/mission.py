@@ -213,8 +213,7 @@ class MissionClient:
                 raise outcome.error
             if self.link.reconnects == reconnects:
                 break
-            log.warning("vehicle %d: the connection was made again during the download: downloading again",
-                        self.sysid)  # fmt: skip
+            log.warning("vehicle %d: the connection was made again during the download: again", self.sysid)
         else:
             raise MissionProtocolError(
                 f"vehicle {self.sysid}: the connection was lost and made again during two"
