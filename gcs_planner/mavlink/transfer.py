@@ -169,6 +169,10 @@ class Timing:
     # None: as long as its autopilot may take (AutopilotQuirks.verdict_after_ack_s)
     verdict_s: float | None = None
 
+    def bound_s(self, entries: int) -> float:
+        """The overall deadline of a transfer of ``entries`` items [s] (module docstring)."""
+        return self.deadline_base_s + self.deadline_per_item_s * entries
+
     def __post_init__(self) -> None:
         if self.window < 1:
             raise ValueError(f"Timing.window is {self.window}: at least one item must be in flight")
@@ -400,7 +404,7 @@ class UploadTransfer(Transfer):
     @property
     def give_up_after_s(self) -> float:
         """The overall deadline: Timing.deadline_base_s + deadline_per_item_s per item [s]."""
-        return self.timing.deadline_base_s + self.timing.deadline_per_item_s * len(self.items)
+        return self.timing.bound_s(len(self.items))
 
     def on_message(self, msg: mavlink.MAVLink_message, now_s: float) -> list[mavlink.MAVLink_message]:
         out = super().on_message(msg, now_s)
@@ -661,9 +665,7 @@ class DownloadTransfer(Transfer):
                 return []  # duplicate COUNT
             self._rtt_sample(now_s - self._requested_at)
             self._count, self._opaque_id = msg.count, getattr(msg, "opaque_id", 0)
-            self._give_up_s = (
-                now_s + self.timing.deadline_base_s + self.timing.deadline_per_item_s * self._count
-            )
+            self._give_up_s = now_s + self.timing.bound_s(self._count)
             if self._count == 0:
                 self._finish(None, items=[], opaque_id=self._opaque_id)
                 return [self._ack(MissionResult.ACCEPTED)]
@@ -706,7 +708,7 @@ class DownloadTransfer(Transfer):
             self.deadline_s = now_s + self.timing.count_retry_s
             return [self._request_list()]
         if now_s >= self._give_up_s:
-            limit_s = self.timing.deadline_base_s + self.timing.deadline_per_item_s * self._count
+            limit_s = self.timing.bound_s(self._count)
             return self._fail_timeout(f"{len(self._items)} of {self._count} items in {limit_s:g} s")
         if self._retries >= self.timing.download_retries:
             return self._fail_timeout(

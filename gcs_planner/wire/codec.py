@@ -127,7 +127,7 @@ def intact(raw: bytes) -> bool:
     end = _HEADER_LEN + raw[1]
     if crc_extra is None or len(raw) != end + 2 + (_SIGNATURE_LEN if raw[2] & _SIGNED else 0):
         return False
-    return _mcrf4xx(crc_extra, _mcrf4xx(raw[1:end])) == raw[end] | raw[end + 1] << 8
+    return _crc_matches(raw, end, crc_extra)
 
 
 def crc_fails(raw: bytes) -> bool:
@@ -141,8 +141,12 @@ def crc_fails(raw: bytes) -> bool:
     crc_extra = _crc_extra_of(raw[7] | raw[8] << 8 | raw[9] << 16 if v2 else raw[5])
     if crc_extra is None:
         return False
-    end = header + raw[1]
-    return _mcrf4xx(crc_extra, _mcrf4xx(raw[1:end])) != raw[end] | raw[end + 1] << 8
+    return not _crc_matches(raw, header + raw[1], crc_extra)
+
+
+def _crc_matches(raw: bytes, end: int, crc_extra: bytes) -> bool:
+    """The CRC after the payload (which ends at ``end``) is that of the header and payload."""
+    return _mcrf4xx(crc_extra, _mcrf4xx(raw[1:end])) == raw[end] | raw[end + 1] << 8
 
 
 def fields(raw: bytes, wire: struct.Struct) -> tuple:
