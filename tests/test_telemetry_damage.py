@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from telemetry_frames import ORIGIN, flight_frames
 
 from gcs_planner.cli import main
@@ -68,3 +69,20 @@ def test_messages_at_an_impossible_time_are_left_out(tmp_path, capsys):
     out = tmp_path / "out.rrd"
     assert main(["replay", str(path), "--rrd", str(out)]) == 0
     assert "4 messages at an impossible time left out" in capsys.readouterr().out
+
+
+def test_a_position_past_a_pole_is_no_position(tmp_path):
+    """A GLOBAL_POSITION_INT at the int32 extremes (+-214 deg, a valid frame all the same) is not
+    on any track: a map or a conformance check would read it as a jump across the globe."""
+    frames = flight_frames([1], samples=20)
+    position = next(f for f in frames if f[0].get_type() == "GLOBAL_POSITION_INT")
+    bogus = mavlink.MAVLink_global_position_int_message(0, 2**31 - 1, -(2**31), 0, 0, 0, 0, 0, 0)
+    raw = bytes(bogus.pack(mavlink.MAVLink(None, srcSystem=1, srcComponent=1)))
+    path = tmp_path / "flight.mcap"
+    _log(
+        path,
+        [*frames[:5], (mavlink.MAVLink(None).decode(bytearray(raw)), raw, position[2] + 0.05), *frames[5:]],
+    )
+    track = read_flight(path).positions[1]
+    assert len(track.t_s) == 20
+    assert abs(track.lat_deg).max() < 90 and abs(track.lon_deg).max() < 180

@@ -22,7 +22,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.lockstep import now_s
 from gcs_planner.mavlink.command import COMMAND_RETRIES, COMMAND_RETRY_S, CommandClient
-from gcs_planner.mavlink.errors import CommandError, MavlinkError
+from gcs_planner.mavlink.errors import CommandError, CommandTimeoutError, MavlinkError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.wire.enums import CommandResult
@@ -65,6 +65,9 @@ async def request_streams(
         for message_id, hz in rates.items():
             try:
                 await command.set_message_interval(message_id, hz)
+            except CommandTimeoutError as exc:  # deaf to commands: asking for each stream costs the same
+                refused.update(dict.fromkeys(set(rates) - set(refused), exc))
+                break
             except MavlinkError as exc:
                 refused[message_id] = exc
         deadline = now_s() + STREAM_WAIT_S  # streamed anyway (PX4 refuses some it always sends)?

@@ -45,7 +45,7 @@ from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import Origin
 from gcs_planner.core.validation import load_json
 from gcs_planner.model.plan import Plan
-from gcs_planner.wire.units import no_fix
+from gcs_planner.wire.units import no_fix, off_the_globe
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
@@ -449,7 +449,7 @@ def _decode_positions(flight: Flight) -> None:
     for sysid, r in rows.items():
         # columns: t_ns, time_boot_ms, lat, lon, alt, relative_alt, vx, vy, vz, hdg
         a = np.asarray(r, dtype=np.int64)
-        a = a[~no_fix(a[:, 2] * 1e-7, a[:, 3] * 1e-7)]  # reports before the vehicle had a position
+        a = a[~(no_fix(a[:, 2] * 1e-7, a[:, 3] * 1e-7) | off_the_globe(a[:, 2], a[:, 3]))]  # no position
         if not len(a):
             continue
         hdg = a[:, 9].astype(float)

@@ -9,7 +9,7 @@ import math
 
 __all__ = [
     "NO_FIX_DEG", "SPEED_AIRSPEED", "SPEED_GROUNDSPEED", "e7", "half_away", "impossible_position", "no_fix",
-    "reports_no_fix",
+    "off_the_globe", "reports_no_fix",
 ]  # fmt: skip
 
 SPEED_AIRSPEED, SPEED_GROUNDSPEED = 0.0, 1.0  # MAV_CMD_DO_CHANGE_SPEED param1
@@ -41,4 +41,9 @@ def reports_no_fix(msg) -> bool:
 
 def impossible_position(msg) -> bool:
     """A GLOBAL_POSITION_INT past a pole or the antimeridian (a valid int32 all the same)."""
-    return not (abs(msg.lat) <= 900_000_000 and abs(msg.lon) <= 1_800_000_000)
+    return bool(off_the_globe(msg.lat, msg.lon))
+
+
+def off_the_globe(lat_e7, lon_e7):
+    """Where degE7 latitudes and longitudes (ints or numpy arrays) are past a pole or the antimeridian."""
+    return (abs(lat_e7) > 900_000_000) | (abs(lon_e7) > 1_800_000_000)
