@@ -8,12 +8,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
 from telemetry_frames import ORIGIN, flight_frames
 
 from gcs_planner.cli import main
 from gcs_planner.telemetry import FlightLogger
 from gcs_planner.telemetry.reader import read_flight
+from gcs_planner.telemetry.replay import MAX_GAP_S, long_gaps, paced
 
 CHUNK = 0x06  # MCAP opcode
 
@@ -86,3 +88,28 @@ def test_a_position_past_a_pole_is_no_position(tmp_path):
     track = read_flight(path).positions[1]
     assert len(track.t_s) == 20
     assert abs(track.lat_deg).max() < 90 and abs(track.lon_deg).max() < 180
+
+
+def test_a_long_silence_is_cut_on_replay_and_said_so(tmp_path, capsys):
+    """One frame three hours after the rest (within the log's 30 days, so kept): a paced replay
+    waits MAX_GAP_S there, not three hours."""
+    frames = flight_frames([1, 2], samples=40)
+    text = frames[0]  # a STATUSTEXT: no time_boot_ms to move with it
+    late = (text[0], text[1], frames[-1][2] + 3 * 3600.0)
+    path = tmp_path / "flight.mcap"
+    _log(path, [*frames, late])
+    flight = read_flight(path)
+    now, sleeps = [0.0], []
+
+    def sleep(dt: float) -> None:
+        sleeps.append(dt)
+        now[0] += dt
+
+    sent = list(paced(flight, 1.0, sleep=sleep, clock=lambda: now[0]))
+    assert len(sent) == len(flight.vehicle_frames)
+    assert sum(sleeps) == pytest.approx(frames[-1][2] - frames[0][2] + MAX_GAP_S, abs=0.01)
+    assert long_gaps(flight, 1.0) == [pytest.approx(3 * 3600.0, abs=0.01)]
+    assert (
+        main(["replay", str(path), "--to", "udpout:127.0.0.1:9", "--speed", "1000", "--max-gap", "0.2"]) == 0
+    )
+    assert "1 silences over 0.2 s cut to it (longest 11 s; --max-gap S)" in capsys.readouterr().out

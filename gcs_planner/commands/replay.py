@@ -6,7 +6,8 @@
 
 MAVLink replay re-emits every recorded frame byte for byte with its flight-time timing (the
 log's receive times x its clock rate) divided by --speed, so QGroundControl or MAVProxy
-listening on that port sees the flight again. Truncated logs (a killed recorder) are replayed up
+listening on that port sees the flight again; a silence longer than --max-gap seconds is cut to it
+(and said so). Truncated logs (a killed recorder) are replayed up
 to their last complete chunk. On Linux without a display (neither DISPLAY nor WAYLAND_DISPLAY
 set) --viewer is refused before anything is read or
 spawned: a spawned viewer there waits for a display that never comes.
@@ -22,7 +23,13 @@ from gcs_planner.commands.progress import progress_bar
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.validation import number_flag, output_file
 from gcs_planner.telemetry.reader import read_flight
-from gcs_planner.telemetry.replay import parse_udp_url, replay_to_mavlink, replay_to_rerun_live
+from gcs_planner.telemetry.replay import (
+    MAX_GAP_S,
+    long_gaps,
+    parse_udp_url,
+    replay_to_mavlink,
+    replay_to_rerun_live,
+)
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
@@ -37,6 +44,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         type=number_flag(0, 1000),
         default=1.0,
         help="replay speed for --to / --viewer, times the pace the vehicles flew (1: as flown; 0 = max) [1]",
+    )
+    p.add_argument(
+        "--max-gap",
+        type=number_flag(0, 1e9, lo_open=True),
+        default=MAX_GAP_S,
+        metavar="S",
+        help=f"--to / --viewer: a silence in the log over S seconds of replay is cut to S [{MAX_GAP_S:g}]",
     )
 
 
@@ -67,8 +81,12 @@ def run(args: argparse.Namespace) -> int:
     gcs = flight.gcs_sysids
     kept = f"; ground station {gcs}: frames kept, not replayed" if gcs else ""
     print(f"{args.flight}: {len(flight.vehicle_frames)} frames from vehicles {flight.sysids}{kept}{note}")
+    gaps = long_gaps(flight, args.speed, args.max_gap) if args.to or args.viewer else []
+    if gaps:
+        longest = f"{gaps[0]:.0f} s"
+        print(f"{len(gaps)} silences over {args.max_gap:g} s cut to it (longest {longest}; --max-gap S)")
     if args.rrd or args.viewer:
-        _to_rerun(flight, args.rrd, args.viewer, args.speed)
+        _to_rerun(flight, args.rrd, args.viewer, args.speed, args.max_gap)
     if args.to:
         with progress_bar(len(flight.vehicle_frames), f"replaying to {args.to}") as bar:
 
@@ -77,7 +95,9 @@ def run(args: argparse.Namespace) -> int:
                 bar.refresh()
 
             start = time.monotonic()
-            sent = replay_to_mavlink(flight, args.to, speed=args.speed, progress=progress)
+            sent = replay_to_mavlink(
+                flight, args.to, speed=args.speed, progress=progress, max_gap_s=args.max_gap
+            )
         print(f"sent {sent} frames to {args.to} in {time.monotonic() - start:.1f} s")
     return 0
 
@@ -95,7 +115,7 @@ def _check_mcap(path: str) -> None:
         raise UserError(f"flight log {path!r} is not an MCAP file (it does not start with the MCAP magic)")
 
 
-def _to_rerun(flight, rrd_path: str | None, viewer: bool, speed: float) -> None:
+def _to_rerun(flight, rrd_path: str | None, viewer: bool, speed: float, max_gap_s: float) -> None:
     import rerun as rr
 
     from gcs_planner.telemetry.rerun_views import (
@@ -118,7 +138,7 @@ def _to_rerun(flight, rrd_path: str | None, viewer: bool, speed: float) -> None:
         except Exception as exc:  # noqa: BLE001 - no viewer binary / no display
             raise UserError(f"cannot start the Rerun viewer ({exc}); use --rrd FILE instead") from None
         if speed > 0:
-            replay_to_rerun_live(flight, rec, speed)
+            replay_to_rerun_live(flight, rec, speed, max_gap_s)
         else:
             log_flight_to_rerun(flight, rec=rec)
         rec.flush()

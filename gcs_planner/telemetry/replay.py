@@ -7,7 +7,9 @@ Frames are sent from one UDP socket, like a single router carrying all vehicles;
 station's own frames are not replayed. The schedule is absolute (frame k at start +
 max((t_k - t_0) / speed, k / max_rate)), so sleep overshoot never accumulates, and never faster
 than ``max_rate`` frames per second (default MAX_RATE_HZ): unpaced, 23,894 frames went out in
-0.1 s and a loopback receiver got 15,401 of them.
+0.1 s and a loopback receiver got 15,401 of them. A silence longer than ``max_gap_s`` of replay
+time (default MAX_GAP_S: a link lost and found again, two flights in one log) is cut to it: a log
+with one frame three hours late would otherwise hold the replay three hours.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ import socket
 import time
 from collections.abc import Callable, Iterator
 
+import numpy as np
+
 from gcs_planner.core.errors import UserError
 from gcs_planner.core.geo import Origin
 from gcs_planner.telemetry.reader import Flight, RawFrame
@@ -26,9 +30,13 @@ from gcs_planner.telemetry.reader import Flight, RawFrame
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["MAX_RATE_HZ", "parse_udp_url", "paced", "replay_to_mavlink", "replay_to_rerun_live"]
+__all__ = [
+    "MAX_GAP_S", "MAX_RATE_HZ", "long_gaps", "parse_udp_url", "paced", "replay_to_mavlink",
+    "replay_to_rerun_live",
+]  # fmt: skip
 
 MAX_RATE_HZ = 2000.0  # frames/s; a GCS's socket buffer (~200 KB) then absorbs a 0.1 s stall
+MAX_GAP_S = 10.0  # [s of replay] longer silences are cut to this (a GCS shows a link loss well before)
 
 
 def parse_udp_url(url: str) -> tuple[str, int]:
@@ -48,6 +56,7 @@ def replay_to_mavlink(
     sleep: Callable[[float], None] = time.sleep,
     clock: Callable[[], float] = time.monotonic,
     max_rate: float = MAX_RATE_HZ,
+    max_gap_s: float = MAX_GAP_S,
 ) -> int:
     """Send the vehicles' raw frames to ``url`` (udpout:HOST:PORT); returns frames sent.
 
@@ -57,7 +66,7 @@ def replay_to_mavlink(
     frames = flight.vehicle_frames
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
         sock.connect((host, port))
-        for k, frame in enumerate(paced(flight, speed, sleep, clock, max_rate)):
+        for k, frame in enumerate(paced(flight, speed, sleep, clock, max_rate, max_gap_s)):
             with contextlib.suppress(ConnectionRefusedError):  # nobody listening yet: keep going
                 sock.send(frame.data)
             if progress is not None and k % 100 == 0:
@@ -73,27 +82,43 @@ def paced(
     sleep: Callable[[float], None] = time.sleep,
     clock: Callable[[], float] = time.monotonic,
     max_rate: float = math.inf,
+    max_gap_s: float = MAX_GAP_S,
 ) -> Iterator[RawFrame]:
     """The vehicles' frames (a ground station's are not replayed), frame k yielded at
-    start + max((t_k - t_0) x clock_rate / speed, k / max_rate): ``speed`` 1 replays at the pace
-    the vehicles flew (a log of a 10x SITL as slowly as it was flown, in flight time); speed 0 or
+    start + max(s_k, k / max_rate), s_k its ``schedule_s``: ``speed`` 1 replays at the pace the
+    vehicles flew (a log of a 10x SITL as slowly as it was flown, in flight time); speed 0 or
     inf: no recorded timing."""
     frames = flight.vehicle_frames
     if not frames:
         return
-    realtime = speed > 0 and math.isfinite(speed)
-    scale = flight.clock_rate * 1e-9 / speed if realtime else 0.0  # s of replay per ns of receive time
-    t0_ns = frames[0].t_ns
+    schedule = _schedule_s(flight, speed, max_gap_s)
     start = clock()
     for k, frame in enumerate(frames):
-        due = max((frame.t_ns - t0_ns) * scale, k / max_rate)
+        due = max(schedule[k], k / max_rate)
         delay = start + due - clock()
         if delay > 0:
             sleep(delay)
         yield frame
 
 
-def replay_to_rerun_live(flight: Flight, rec, speed: float = 1.0) -> int:
+def _schedule_s(flight: Flight, speed: float, max_gap_s: float) -> np.ndarray:
+    """Replay time of each vehicle frame from the first: (t_k - t_0) x clock_rate / speed, each
+    silence longer than ``max_gap_s`` cut to it; zeros when ``speed`` is 0 or inf."""
+    t_ns = np.fromiter((f.t_ns for f in flight.vehicle_frames), dtype=np.int64)
+    if not (speed > 0 and math.isfinite(speed)):
+        return np.zeros(len(t_ns))
+    gaps = np.diff(t_ns - t_ns[:1]) * (flight.clock_rate * 1e-9 / speed)
+    return np.concatenate([[0.0], np.cumsum(np.minimum(gaps, max_gap_s))])
+
+
+def long_gaps(flight: Flight, speed: float, max_gap_s: float = MAX_GAP_S) -> list[float]:
+    """The silences [s of replay] a replay at ``speed`` cuts to ``max_gap_s``, longest first."""
+    t = _schedule_s(flight, speed, math.inf)
+    gaps = np.diff(t)
+    return sorted(gaps[gaps > max_gap_s].tolist(), reverse=True)
+
+
+def replay_to_rerun_live(flight: Flight, rec, speed: float = 1.0, max_gap_s: float = MAX_GAP_S) -> int:
     """Re-play a log into a live Rerun recording (e.g. a spawned viewer) with timing scaled by speed.
 
     Frames go through LiveRerunLogger exactly as they did while flying, on the timeline of the
@@ -108,7 +133,7 @@ def replay_to_rerun_live(flight: Flight, rec, speed: float = 1.0) -> int:
     live = LiveRerunLogger(rec, origin, flight.start_time_s, flight.clock_rate)
     live.start(flight.plan, scenario_from_text(flight.scenario_text))
     shown = 0
-    for frame in paced(flight, speed):
+    for frame in paced(flight, speed, max_gap_s=max_gap_s):
         try:
             msg = parser.decode(bytearray(frame.data))
         except mavlink.MAVError:
