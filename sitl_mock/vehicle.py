@@ -213,6 +213,9 @@ class MockVehicle:
         if self.flight.ramp_params and self.airframe.kind == "multirotor":  # the ramp it flies
             accel, jerk = self.flight.ramp_params
             self.params.update({accel: self.airframe.accel_mps2, jerk: UNLIMITED_JERK_MPS3})
+        if self.flight.vertical_params and self.airframe.kind == "multirotor":  # the climb it flies
+            up, down = self.flight.vertical_params
+            self.params.update({up: self.airframe.climb_rate_mps, down: self.airframe.sink_rate_mps})
         if self.profile.sysid_enforce_params:  # ArduPilot's defaults: every system id accepted
             for name, value in (("MAV_OPTIONS", 0.0), ("MAV_GCS_SYSID", 255.0), ("MAV_GCS_SYSID_HI", 0.0)):
                 self.params.setdefault(name, value)

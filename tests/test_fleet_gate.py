@@ -91,3 +91,29 @@ def test_the_readme_recipe_sitl_mock_at_the_plans_starts_then_fly_connect_passes
     error = f"sitl-mock: error: --homes {bad} line 1 ({first}): could not convert string to float"
     assert refused.returncode == 2 and refused.stderr.splitlines()[-1].startswith(error), refused.stderr
     assert "Traceback" not in refused.stderr and refused.stderr.count("error:") == 1, refused.stderr
+
+
+@pytest.mark.parametrize(
+    ("profile", "limits"),
+    [("ardupilot", "WP_SPD_(UP is 2.5|DN is 1.5)"), ("px4", "MPC_Z_V_AUTO_(UP is 3|DN is 1.5)")],
+)
+def test_a_plan_climbing_faster_than_the_autopilot_will_is_refused_before_anything_is_sent(
+    tmp_path, capsys, profile, limits
+):
+    """swarm_small climbs and descends its 20-degree legs at up to 3-3.4 m/s; stock ArduCopter
+    climbs at most 2.5 m/s in a mission and descends 1.5 m/s (PX4: 3 and 1.5), slowing over ground
+    to keep to them (ArduCopter SITL flew four of five vehicles 18-31 s late). Stock mocks, which
+    fly the same limits, are refused in one line before anything is sent."""
+    scenario = Path(__file__).resolve().parents[1] / "missions" / "swarm_small.toml"
+    plan = plan_scenario(load_scenario(scenario))
+    plan.save(tmp_path / "plan.json")
+    homes = [{"home": s.home, "profile": profile} for s in starts(plan.vehicles, plan.origin)]
+    with sitl_mock.MockFleet(vehicles=homes, speedup=10, flight=FAST) as fleet:
+        argv = ["fly", str(scenario), "--plan", str(tmp_path / "plan.json"), *connect_args(fleet),
+                "--speedup", "10", "-o", str(tmp_path / "out")]  # fmt: skip
+        assert main(argv) == 2
+        assert nothing_armed_or_uploaded(fleet)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    line = rf"\(sysid \d\): {limits} m/s, but the plan (climbs|descends) at up to [23]\.\d\d m/s; raise it"
+    assert re.search(line, err[0]), err[0]

@@ -64,6 +64,9 @@ class AutopilotQuirks:
     # parameters of its waypoint navigation's acceleration and jerk limits, with their unit scale
     # to m/s^2 and m/s^3 (None: not known): a route starts from the hover on this S-curve ramp
     ramp_params: tuple[str, str, float] | None = None
+    # parameters of its climb and descent speed in missions [m/s] (None: not known): a plan that
+    # climbs or descends faster is flown late (flight/limits.py)
+    vertical_params: tuple[str, str] | None = None
     start_latency_s: float = 0.0  # from MISSION_START to moving along the route [s] (measured)
     takeoff_level_off_m: float = 0.0  # its take-off ends this far below the target altitude [m]
     params_bytewise: bool = False  # PARAM_VALUE integers sent bytewise, not cast to float (MAVProxy)

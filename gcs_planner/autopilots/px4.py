@@ -47,6 +47,7 @@ FAMILY = Px4(
     verdict_after_ack_s=1.0,
     rejection_texts=("mission rejected", "mission invalid"),
     ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO", 1.0),  # mc_pos_control / FlightTaskAuto
+    vertical_params=("MPC_Z_V_AUTO_UP", "MPC_Z_V_AUTO_DN"),  # mc_pos_control, in missions
     # SIH v1.15.4 multicopters pass 1 and 5 m/s 0.4-1.0 s after the MPC_ACC_HOR / MPC_JERK_AUTO
     # S-curve from MISSION_START would, and cruise ~1 s further behind it: the route start lead
     # left them 1.0-1.4 s late 8-12 s into the route at 0.7 s (two four-vehicle flights,

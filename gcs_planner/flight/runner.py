@@ -33,7 +33,14 @@ from gcs_planner.core.errors import UserError
 from gcs_planner.core.fleet_ids import id_runs, network_of
 from gcs_planner.core.lockstep import check_loop, now_s, unix_s
 from gcs_planner.flight.clock_check import MIN_SPAN_S, ClockRate
-from gcs_planner.flight.limits import FlightLimits, check_limits, read_limits, read_ramps
+from gcs_planner.flight.limits import (
+    FlightLimits,
+    check_limits,
+    check_vertical,
+    read_limits,
+    read_ramps,
+    read_vertical,
+)
 from gcs_planner.flight.ops import (
     TrackRecorder,
     boot_clock,
@@ -266,8 +273,10 @@ class Flight:
         await request_streams(link, self.sysids)
         self.limits = await read_limits(link, self.sysids, self.quirks)
         self.ramps = {} if self.vehicles.simulated else await read_ramps(link, self.sysids, self.quirks)
+        vertical = {} if self.vehicles.simulated else await read_vertical(link, self.sysids, self.quirks)
         try:
             check_limits(self.plan.vehicles, self.limits, strategy.speed_factor)
+            check_vertical(self.plan.vehicles, vertical, strategy.speed_factor)
         except UserError as exc:
             raise UserError(f"{exc} ({strategy.limit_hint})" if strategy.limit_hint else str(exc)) from None
         await self._check_starts()
