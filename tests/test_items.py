@@ -268,3 +268,45 @@ def test_rally_points():
     plan = plan_scenario(sc)
     own = scenario_rally_items(sc, plan.vehicles[1])  # one vehicle's upload: its own start only
     assert len(own) == 1 and (own[0].x, own[0].y, own[0].z) == (rally[1].x, rally[1].y, rally[1].z)
+
+
+def _shallow_arc_plan(turn_deg: float, vehicle_type: str = "multirotor") -> VehiclePlan:
+    """Two 100 m legs joined by a Dubins arc of radius 15 m kept as its start, middle and end."""
+    r, half = 15.0, math.radians(turn_deg) / 2
+    a0 = np.array([0.0, 0.0])
+    arc_start = a0 + [100.0, 0.0]
+    centre = arc_start + [0.0, r]
+    angles = np.array([-math.pi / 2, -math.pi / 2 + half, -math.pi / 2 + 2 * half])
+    arc = centre + r * np.c_[np.cos(angles), np.sin(angles)]
+    end = arc[-1] + 100.0 * np.array([math.cos(2 * half), math.sin(2 * half)])
+    xy = np.vstack([a0, arc, end])
+    wps = np.c_[xy, np.full(len(xy), 30.0)]
+    seg = np.linalg.norm(np.diff(wps, axis=0), axis=1)
+    times = np.concatenate([[0.0], np.cumsum(seg / 10.0)])
+    speeds = np.r_[0.0, np.full(len(seg), 10.0)]
+    return vehicle_plan(waypoints=wps, times_s=times, speeds_mps=speeds, path=wps, path_times_s=times,
+                        vehicle_type=vehicle_type, turn_radius_m=r)  # fmt: skip
+
+
+def _route(items) -> np.ndarray:
+    """ENU of the waypoints after the take-off."""
+    nav = [it for it in items if it.command == mavlink.MAV_CMD_NAV_WAYPOINT]
+    return np.array([geodetic_to_enu(it.x * 1e-7, it.y * 1e-7, it.z, ORIGIN)[:2] for it in nav])
+
+
+def test_a_shallow_arc_is_one_corner_where_its_straight_legs_meet():
+    """A 5-degree arc (two 0.65 m legs): ArduCopter SITL slowed to ~1 m/s at each such waypoint
+    to be able to stop at the next; the mission turns once, at the legs' meeting point."""
+    vp = _shallow_arc_plan(5.0)
+    route = _route(plan_to_items(vp, ORIGIN, "px4"))
+    assert len(route) == 2  # the corner and the end; the arc's three points are one
+    corner = route[0]
+    assert corner[1] == pytest.approx(0.0, abs=0.01)  # on the first leg's line (y = 0) ...
+    assert corner[0] == pytest.approx(
+        100.0 + 15.0 * math.tan(math.radians(2.5)), abs=0.01
+    )  # ... where it meets
+    assert np.linalg.norm(route[-1] - vp.waypoints[-1, :2]) < 0.01
+    wide = _route(plan_to_items(_shallow_arc_plan(60.0), ORIGIN, "px4"))
+    assert len(wide) == 4  # a 60-degree arc's corner is 2 m off its middle: the arc stays
+    plane = _route(plan_to_items(_shallow_arc_plan(5.0, "fixed_wing"), ORIGIN, "px4"))
+    assert len(plane) == 4  # a fixed wing flies its own turns (L1)

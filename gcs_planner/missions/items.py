@@ -32,6 +32,12 @@ Choices where MAVLink or the autopilots leave room (all documented here, nowhere
 - Waypoints: param2 = the plan's acceptance radius [m], param3 = 0 (pass through, no orbit),
   param4 (yaw) = 0; ArduCopter ignores it and PX4's default MIS_YAWMODE points the nose at the
   next waypoint. NaN is never emitted, so a downloaded list compares equal to the uploaded one.
+- Corners (multirotors): a run of legs shorter than ``CORNER_LEG_M`` between two longer ones (a
+  Dubins arc of a few degrees, kept by the planner as its start, middle and end, 0.6-2.4 m apart)
+  becomes one waypoint where the longer legs' lines meet, when that point is within
+  ``CORNER_DEV_M`` of the run's middle point: ArduCopter slows at every waypoint to be able to
+  stop at the next one, and on SITL such 1 m legs took a 10 m/s copter down to 0.3-1.3 m/s at each
+  corner; at the meeting point the autopilot turns once, rounding it as it rounds any corner.
 - Dwell: a zero-length leg in the plan (the same point twice, later in time) is a wait; it becomes
   the hold time (param1) of the previous waypoint, or NAV_LOITER_TIME for a fixed wing, which
   cannot hover.
@@ -86,6 +92,8 @@ MIN_TAKEOFF_ALT_M = 1.0
 FIXED_WING_TAKEOFF_PITCH_DEG = 15.0
 SPEED_TOLERANCE_MPS = 0.05
 DWELL_LEG_M = 0.01  # a leg shorter than this is a wait, not a move
+CORNER_LEG_M = 10.0  # a multirotor's legs shorter than this between longer ones are one corner
+CORNER_DEV_M = 1.0  # ... where the corner point is this near the planned path
 
 REL = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 NO_FRAME = mavlink.MAV_FRAME_MISSION
@@ -122,9 +130,12 @@ def plan_to_items(
             f"vehicle {vp.vehicle_id}: waypoints must be a non-empty (N, 3) array of finite metres",
             field="waypoints",
         )
+    fixed_wing = vp.vehicle_type == "fixed_wing"
+    if not fixed_wing:
+        vp = replace(vp, **_corners(vp))
+        wps = vp.waypoints
     lat, lon, _ = enu_to_geodetic(wps[:, 0], wps[:, 1], wps[:, 2], origin)
     lat_e7, lon_e7 = deg_to_e7(lat).tolist(), deg_to_e7(lon).tolist()  # python ints
-    fixed_wing = vp.vehicle_type == "fixed_wing"
 
     amsl = vp.altitude_frame == "amsl"  # altitudes above sea level, not above each vehicle's home
     frame, z0 = (mavlink.MAV_FRAME_GLOBAL, origin.alt_m) if amsl else (REL, 0.0)
@@ -175,6 +186,56 @@ def plan_to_items(
     items = [_renumbered(item, i, current=int(i == 0)) for i, item in enumerate(items)]
     validate_items(items)
     return items
+
+
+def _corners(vp: VehiclePlan) -> dict[str, np.ndarray]:
+    """The waypoints, times and speeds with each run of short legs between two longer ones made
+    one corner (module docstring, Corners); the first and last waypoints stay."""
+    wps, times = vp.waypoints, vp.times_s
+    leg_m = np.linalg.norm(np.diff(wps, axis=0), axis=1)
+    short = (leg_m >= DWELL_LEG_M) & (leg_m < CORNER_LEG_M)
+    long = leg_m >= CORNER_LEG_M
+    points, at_s = wps.copy(), times.astype(float).copy()
+    dropped: set[int] = set()
+    k = 1
+    while k < len(leg_m):
+        if not (short[k] and long[k - 1]):
+            k += 1
+            continue
+        j = k
+        while j < len(leg_m) and short[j]:
+            j += 1
+        if j < len(leg_m) and long[j]:  # points k..j joined by short legs, long legs either side
+            corner = _corner_point(wps[k - 1 : j + 2])
+            if corner is not None:
+                points[k], at_s[k] = corner, 0.5 * (times[k] + times[j])
+                dropped.update(range(k + 1, j + 1))
+        k = j + 1
+    keep = [i for i in range(len(wps)) if i not in dropped]
+    return {"waypoints": points[keep], "times_s": at_s[keep], "speeds_mps": vp.speeds_mps[keep]}
+
+
+def _corner_point(run: np.ndarray) -> np.ndarray | None:
+    """The one waypoint for ``run`` (the long leg's start, the short legs' points, the next long
+    leg's end): where the long legs' horizontal lines meet, at the height of the run's middle,
+    if that is within CORNER_DEV_M of the middle; else None (keep the run)."""
+    a, b, c, d = run[0, :2], run[1, :2], run[-2, :2], run[-1, :2]
+    inner = run[1:-1]
+    middle = (
+        inner[len(inner) // 2]
+        if len(inner) % 2
+        else 0.5 * (inner[len(inner) // 2 - 1] + inner[len(inner) // 2])
+    )
+    u, v = b - a, d - c
+    cross = u[0] * v[1] - u[1] * v[0]
+    if abs(cross) <= 1e-9 * np.linalg.norm(u) * np.linalg.norm(v):  # no turn: a straight run
+        at = middle[:2]
+    else:
+        w = c - a
+        at = a + (w[0] * v[1] - w[1] * v[0]) / cross * u
+    if np.linalg.norm(at - middle[:2]) > CORNER_DEV_M:
+        return None
+    return np.array([at[0], at[1], middle[2]])
 
 
 def _home_item(origin: Origin) -> MissionItem:
