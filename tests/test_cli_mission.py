@@ -394,3 +394,24 @@ def test_a_rejected_upload_says_what_an_ardupilot_vehicle_now_holds(tmp_path, ca
         assert err.count("\n") == 1 and "Traceback" not in err
         back = one.call(lambda: one.vehicle(1).mission_server.items())
         assert len(back) == len(items) and back[1].z == pytest.approx(items[1].z, abs=0.01)  # the old item 1
+
+
+def test_a_fleet_upload_with_verify_says_each_list_was_verified(fleet, tmp_path, capsys):
+    plan_path = make_plan(tmp_path, sysids=(1, 2))
+    argv = [
+        "upload",
+        "--connect",
+        url(fleet, 1),
+        "--connect",
+        url(fleet, 2),
+        "--sysid",
+        "all",
+        str(plan_path),
+    ]
+    assert main([*argv, "--verify", "--force"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    header = next(i for i, line in enumerate(lines) if line.split()[:2] == ["sysid", "list"])
+    rows = [line.split() for line in lines[header:]]
+    assert rows[0][-1] == "verified" and [r[-1] for r in rows[1:] if r[0] in ("1", "2")] == ["yes", "yes"]
+    assert main([*argv, "--force"]) == 0
+    assert "verified" not in capsys.readouterr().out

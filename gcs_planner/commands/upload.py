@@ -290,8 +290,10 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int], source: Uplo
         uploaded = [s for s in sysids if all(per[s].ok for per in results.values())]
         families = {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in uploaded}
         ceilings = await asyncio.gather(*(_set_ceiling(link, s, families[s], source) for s in uploaded))
+    verified = f" {'verified':>8}" if args.verify else ""  # a list that reads back unequal fails
     print(
         f"{'sysid':>5} {'list':<8} {'items':>6} {'result':<10} {'tries':>5} {'opaque_id':>10} {'time_s':>7}"
+        + verified
     )
     failures = []
     for line in filter(None, ceilings):
@@ -303,7 +305,7 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int], source: Uplo
             count = len(by_type[mission_type][sysid])
             verdict = "ACCEPTED" if r.ok else outcome_word(r.error)
             row = f"{sysid:>5} {name:<8} {count:>6} {verdict:<10} {r.attempts:>5} {r.opaque_id:>10}"
-            print(f"{row} {r.elapsed_s:>7.2f}")
+            print(f"{row} {r.elapsed_s:>7.2f}" + (f" {'yes' if r.ok else '-':>8}" if args.verify else ""))
             if not r.ok:
                 failures.append(f"vehicle {sysid} {name}: {r.error}")
     if failures:
