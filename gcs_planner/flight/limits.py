@@ -37,6 +37,7 @@ log = logging.getLogger(__name__)
 
 G_MPS2 = 9.80665
 MOVING_MPS = 0.5  # a path step slower than this over ground is a take-off or a landing, not a leg
+MIN_STEP_S = 0.05  # shorter path steps are left out: plan.json's rounding (0.1 mm) is noise over them
 
 
 @dataclass(frozen=True)
@@ -134,10 +135,10 @@ async def read_vertical(
 def planned_vertical_mps(vp: VehiclePlan) -> tuple[float, float]:
     """The steepest planned climb and descent rates [m/s, both >= 0] along the route: dz / dt
     between path samples where the vehicle also moves over ground (its take-off and landing are
-    flown at the autopilot's own rates)."""
+    flown at the autopilot's own rates) and that last at least MIN_STEP_S."""
     step = np.diff(vp.path, axis=0)
     dt = np.diff(vp.path_times_s)
-    moving = (dt > 0.0) & (np.hypot(step[:, 0], step[:, 1]) > MOVING_MPS * np.maximum(dt, 0.0))
+    moving = (dt >= MIN_STEP_S) & (np.hypot(step[:, 0], step[:, 1]) > MOVING_MPS * dt)
     vz = step[moving, 2] / dt[moving]
     return max(float(vz.max(initial=0.0)), 0.0), max(-float(vz.min(initial=0.0)), 0.0)
 

@@ -208,6 +208,7 @@ class Flight:
         self.logger: FlightLogger | None = None
         self.status: VehicleStatus | None = None
         self.quirks: dict[int, AutopilotQuirks] = {}
+        self.commanded = False  # anything beyond stream requests sent: the pre-flight checks passed
         self.limits: dict[int, FlightLimits] = {}
         self.ramps: dict[int, tuple[float, float]] = {}  # sysid: waypoint acceleration, jerk
         self.missions: dict[int, list] = {}  # the first missions' items
@@ -280,6 +281,7 @@ class Flight:
         except UserError as exc:
             raise UserError(f"{exc} ({strategy.limit_hint})" if strategy.limit_hint else str(exc)) from None
         await self._check_starts()
+        self.commanded = True
         await strategy.prepare(self)
         if not await self._upload():
             return
@@ -389,13 +391,14 @@ class Flight:
 
     async def _end(self) -> None:
         """Send airborne vehicles home after a failure or an unfinished flight (nothing after a
-        finished one), log it, close the link."""
-        sent_home = bool(self.quirks) and (self.aborted is not None or not self.strategy.done(self))
+        finished one, nor after a refusal before anything was commanded: a vehicle the pre-flight
+        checks refused is left as it was), log it, close the link."""
+        sent_home = self.commanded and (self.aborted is not None or not self.strategy.done(self))
         if sent_home:
             self.end_states = await asyncio.shield(safe_end(self.link, self.status, self.quirks))
             if self.signals.received is not None:
                 await self._until_landed()
-        elif self.quirks:  # every mission done: command nothing, say where each vehicle ended
+        elif self.commanded:  # every mission done: command nothing, say where each vehicle ended
             landing = {vp.sysid for vp in self.plan.vehicles if vp.final_action == "land"}
             try:
                 await self._until_disarmed(landing, LANDING_WAIT_S)
