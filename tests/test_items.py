@@ -310,3 +310,10 @@ def test_a_shallow_arc_is_one_corner_where_its_straight_legs_meet():
     assert len(wide) == 4  # a 60-degree arc's corner is 2 m off its middle: the arc stays
     plane = _route(plan_to_items(_shallow_arc_plan(5.0, "fixed_wing"), ORIGIN, "px4"))
     assert len(plane) == 4  # a fixed wing flies its own turns (L1)
+
+
+def test_a_shallow_arc_with_a_speed_change_keeps_its_waypoints():
+    """A 4-D plan slows on an arc: merging it would drop the DO_CHANGE_SPEED of its legs."""
+    vp = _shallow_arc_plan(5.0)
+    vp = replace(vp, speeds_mps=np.r_[0.0, 10.0, 6.0, 6.0, 10.0])
+    assert len(_route(plan_to_items(vp, ORIGIN, "px4"))) == 4

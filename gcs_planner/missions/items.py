@@ -32,9 +32,9 @@ Choices where MAVLink or the autopilots leave room (all documented here, nowhere
 - Waypoints: param2 = the plan's acceptance radius [m], param3 = 0 (pass through, no orbit),
   param4 (yaw) = 0; ArduCopter ignores it and PX4's default MIS_YAWMODE points the nose at the
   next waypoint. NaN is never emitted, so a downloaded list compares equal to the uploaded one.
-- Corners (multirotors): a run of legs shorter than ``CORNER_LEG_M`` between two longer ones (a
-  Dubins arc of a few degrees, kept by the planner as its start, middle and end, 0.6-2.4 m apart)
-  becomes one waypoint where the longer legs' lines meet, when that point is within
+- Corners (multirotors): a run of legs shorter than ``CORNER_LEG_M`` between two longer ones, all
+  at one speed (a Dubins arc of a few degrees, kept by the planner as its start, middle and end,
+  0.6-2.4 m apart) becomes one waypoint where the longer legs' lines meet, when that point is within
   ``CORNER_DEV_M`` of the run's middle point: ArduCopter slows at every waypoint to be able to
   stop at the next one, and on SITL such 1 m legs took a 10 m/s copter down to 0.3-1.3 m/s at each
   corner; at the meeting point the autopilot turns once, rounding it as it rounds any corner.
@@ -205,7 +205,8 @@ def _corners(vp: VehiclePlan) -> dict[str, np.ndarray]:
         j = k
         while j < len(leg_m) and short[j]:
             j += 1
-        if j < len(leg_m) and long[j]:  # points k..j joined by short legs, long legs either side
+        one_speed = np.ptp(vp.speeds_mps[k : j + 2]) <= SPEED_TOLERANCE_MPS  # no speed change lost
+        if j < len(leg_m) and long[j] and one_speed:  # points k..j: short legs, long legs either side
             corner = _corner_point(wps[k - 1 : j + 2])
             if corner is not None:
                 points[k], at_s[k] = corner, 0.5 * (times[k] + times[j])
