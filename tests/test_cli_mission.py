@@ -415,3 +415,18 @@ def test_a_fleet_upload_with_verify_says_each_list_was_verified(fleet, tmp_path,
     assert rows[0][-1] == "verified" and [r[-1] for r in rows[1:] if r[0] in ("1", "2")] == ["yes", "yes"]
     assert main([*argv, "--force"]) == 0
     assert "verified" not in capsys.readouterr().out
+
+
+def test_clear_takes_a_list_of_vehicles_and_refuses_all(fleet, tmp_path, capsys):
+    plan_path = make_plan(tmp_path, sysids=(1, 2))
+    connects = ["--connect", url(fleet, 1), "--connect", url(fleet, 2)]
+    assert main(["upload", *connects, "--sysid", "1,2", str(plan_path), "--force"]) == 0
+    assert held(fleet, 1) and held(fleet, 2)
+    capsys.readouterr()
+    assert main(["clear", *connects, "--sysid", "1,2", "--type", "all", "--force"]) == 0
+    rows = [line.split() for line in capsys.readouterr().out.splitlines()]
+    assert [r[0] for r in rows if r[-2:-1] == ["CLEARED"]] == ["1", "2"], rows
+    assert len(held(fleet, 1)) <= 1 and not held(fleet, 2)  # ArduPilot keeps its home at seq 0
+    assert main(["clear", *connects, "--sysid", "all"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "give them as a list" in err

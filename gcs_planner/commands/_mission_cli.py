@@ -37,10 +37,12 @@ HEARTBEAT_TIMEOUT_S = 5.0
 SIGNING_ENV = "GCS_PLANNER_SIGNING_PASSPHRASE"  # keeps the passphrase out of shell history
 
 
-def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) -> None:
+def add_connection_arguments(
+    p: argparse.ArgumentParser, fleet: bool = False, all_of: str | None = None
+) -> None:
     """--connect (repeatable), --sysid, --compid, --autopilot, --heartbeat-timeout.
 
-    fleet: --sysid also takes a list "1,2,5" or "all" (every vehicle of plan.json).
+    fleet: --sysid also takes a list "1,2,5" or, where ``all_of`` says what it means, "all".
     """
     p.add_argument(
         "--connect",
@@ -56,7 +58,7 @@ def add_connection_arguments(p: argparse.ArgumentParser, fleet: bool = False) ->
             "--sysid",
             required=True,
             type=_sysids,
-            help="target system id (1..255), a list 1,2,5, or 'all' (every vehicle in plan.json); a"
+            help=f"target system id (1..255), a list 1,2,5{f', or all ({all_of})' if all_of else ''}; a"
             " fleet id over 255 is network x 256 + sysid, with one --connect per network in order",
         )
     else:

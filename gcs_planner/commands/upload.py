@@ -59,7 +59,7 @@ if TYPE_CHECKING:  # numpy-backed: loaded only with a plan.json
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    add_connection_arguments(p, fleet=True)
+    add_connection_arguments(p, fleet=True, all_of="every vehicle in plan.json")
     p.add_argument("file", metavar="FILE", help="mission: .plan, .waypoints/.txt (QGC WPL 110) or plan.json")
     p.add_argument("--vehicle", help="vehicle id in plan.json [the one with --sysid]")
     p.add_argument("--scenario", help="scenario file whose fence and rally points to upload too")
