@@ -121,3 +121,9 @@ def test_a_plan_climbing_faster_than_the_autopilot_will_is_refused_before_anythi
     assert len(err) == 1 and "Traceback" not in err[0] and "safe end" not in err[0], err  # nothing to end
     line = rf"\(sysid \d\): {limits} m/s, but the plan (climbs|descends) at up to [23]\.\d\d m/s; raise it"
     assert re.search(line, err[0]), err[0]
+    assert main(["fly", str(scenario), "--plan", str(tmp_path / "plan.json"), "--homes"]) == 0
+    homes = capsys.readouterr()  # what to start a SITL with: the homes on stdout, the limits on stderr
+    assert len(homes.out.splitlines()) == len(plan.vehicles)
+    assert re.search(r"descends at up to 2\.\d\d m/s \(uav\d\); set WP_SPD_UP / WP_SPD_DN", homes.err), (
+        homes.err
+    )

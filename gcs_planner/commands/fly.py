@@ -17,7 +17,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from gcs_planner.autopilots import Conventions
+from gcs_planner.autopilots import ARDUCOPTER, PX4, Conventions
 from gcs_planner.commands import fly_coalition
 from gcs_planner.commands._mission_cli import add_in_flight_argument
 from gcs_planner.commands._viewer import check_display, live_recording
@@ -36,6 +36,7 @@ from gcs_planner.core.validation import (
     output_dir,
 )
 from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_summary, fly, networks
+from gcs_planner.flight.limits import planned_vertical_mps
 from gcs_planner.flight.starts import format_homes, starts
 from gcs_planner.flight.vehicles import ConnectedVehicles, mock_vehicles
 from gcs_planner.mavlink.transfer import Timing
@@ -182,6 +183,26 @@ def check_feasible(plan: Plan, allow: bool) -> None:
     print(f"warning: {what}; flying anyway (--allow-infeasible)")
 
 
+def _climb_notes(plan: Plan) -> None:
+    """One line on stderr (stdout is `sitl-mock --homes`' input): the fastest climb and descent of
+    the plan's multirotors, which their autopilots' mission limits must allow (`fly` checks them:
+    flight/limits.py; stock ArduCopter allows 2.5 / 1.5 m/s, PX4 3 / 1.5), so that a SITL for a
+    steeper plan is started with them raised."""
+    rates = [
+        (planned_vertical_mps(vp), vp.vehicle_id) for vp in plan.vehicles if vp.vehicle_type == "multirotor"
+    ]
+    if not rates or max(max(r) for r, _ in rates) <= 0.0:
+        return
+    (climb, _), up_by = max(rates, key=lambda r: r[0][0])
+    (_, descent), down_by = max(rates, key=lambda r: r[0][1])
+    names = " or ".join(f"{' / '.join(f.vertical_params)} ({f.name})" for f in (ARDUCOPTER, PX4))
+    print(
+        f"note: the plan climbs at up to {climb:.2f} m/s ({up_by}) and descends at up to {descent:.2f} m/s"
+        f" ({down_by}); set {names} to at least that (fly checks them)",
+        file=sys.stderr,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     out = output_dir(args.out, "-o")
     if args.live:
@@ -192,6 +213,7 @@ def run(args: argparse.Namespace) -> int:
     plan = _plan_file(args.plan, scenario) if args.plan else plan_with_progress(scenario, args.seed)
     if args.homes:
         print(format_homes(starts(plan.vehicles, plan.origin), None))
+        _climb_notes(plan)
         return 0
     drift = _drift(args.drift, [v.sysid for v in plan.vehicles])
     check_flight(plan)  # every mission, before anything is written or sent
