@@ -85,7 +85,7 @@ def paced(
     max_gap_s: float = MAX_GAP_S,
 ) -> Iterator[RawFrame]:
     """The vehicles' frames (a ground station's are not replayed), frame k yielded at
-    start + max(s_k, k / max_rate), s_k its ``schedule_s``: ``speed`` 1 replays at the pace the
+    start + max(s_k, k / max_rate), s_k its time in ``_schedule_s``: ``speed`` 1 replays at the pace the
     vehicles flew (a log of a 10x SITL as slowly as it was flown, in flight time); speed 0 or
     inf: no recorded timing."""
     frames = flight.vehicle_frames
@@ -107,7 +107,7 @@ def _schedule_s(flight: Flight, speed: float, max_gap_s: float) -> np.ndarray:
     t_ns = np.fromiter((f.t_ns for f in flight.vehicle_frames), dtype=np.int64)
     if not (speed > 0 and math.isfinite(speed)):
         return np.zeros(len(t_ns))
-    gaps = np.diff(t_ns - t_ns[:1]) * (flight.clock_rate * 1e-9 / speed)
+    gaps = np.diff(t_ns) * (flight.clock_rate * 1e-9 / speed)
     return np.concatenate([[0.0], np.cumsum(np.minimum(gaps, max_gap_s))])
 
 
