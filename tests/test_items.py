@@ -270,9 +270,9 @@ def test_rally_points():
     assert len(own) == 1 and (own[0].x, own[0].y, own[0].z) == (rally[1].x, rally[1].y, rally[1].z)
 
 
-def _shallow_arc_plan(turn_deg: float, vehicle_type: str = "multirotor") -> VehiclePlan:
-    """Two 100 m legs joined by a Dubins arc of radius 15 m kept as its start, middle and end."""
-    r, half = 15.0, math.radians(turn_deg) / 2
+def _shallow_arc_plan(turn_deg: float, vehicle_type: str = "multirotor", r: float = 15.0) -> VehiclePlan:
+    """Two 100 m legs joined by a Dubins arc of radius ``r`` kept as its start, middle and end."""
+    half = math.radians(turn_deg) / 2
     a0 = np.array([0.0, 0.0])
     arc_start = a0 + [100.0, 0.0]
     centre = arc_start + [0.0, r]
@@ -306,8 +306,9 @@ def test_a_shallow_arc_is_one_corner_where_its_straight_legs_meet():
         100.0 + 15.0 * math.tan(math.radians(2.5)), abs=0.01
     )  # ... where it meets
     assert np.linalg.norm(route[-1] - vp.waypoints[-1, :2]) < 0.01
-    wide = _route(plan_to_items(_shallow_arc_plan(60.0), ORIGIN, "px4"))
-    assert len(wide) == 4  # a 60-degree arc's corner is 2 m off its middle: the arc stays
+    assert len(_route(plan_to_items(_shallow_arc_plan(48.0), ORIGIN, "px4"))) == 2  # 2 m off: one corner
+    wide = _route(plan_to_items(_shallow_arc_plan(90.0, r=10.0), ORIGIN, "px4"))
+    assert len(wide) == 4  # a 90-degree arc of 10 m (7.7 m legs): its corner is 4.1 m off, the arc stays
     plane = _route(plan_to_items(_shallow_arc_plan(5.0, "fixed_wing"), ORIGIN, "px4"))
     assert len(plane) == 4  # a fixed wing flies its own turns (L1)
 

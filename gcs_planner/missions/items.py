@@ -93,7 +93,7 @@ FIXED_WING_TAKEOFF_PITCH_DEG = 15.0
 SPEED_TOLERANCE_MPS = 0.05
 DWELL_LEG_M = 0.01  # a leg shorter than this is a wait, not a move
 CORNER_LEG_M = 10.0  # a multirotor's legs shorter than this between longer ones are one corner
-CORNER_DEV_M = 1.0  # ... where the corner point is this near the planned path
+CORNER_DEV_M = 3.0  # ... where the corner point is this near the planned path
 
 REL = mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 NO_FRAME = mavlink.MAV_FRAME_MISSION
