@@ -185,9 +185,8 @@ def check_feasible(plan: Plan, allow: bool) -> None:
 
 def _climb_notes(plan: Plan) -> None:
     """One line on stderr (stdout is `sitl-mock --homes`' input): the fastest climb and descent of
-    the plan's multirotors, which their autopilots' mission limits must allow (`fly` checks them:
-    flight/limits.py; stock ArduCopter allows 2.5 / 1.5 m/s, PX4 3 / 1.5), so that a SITL for a
-    steeper plan is started with them raised."""
+    the plan's multirotors, which their autopilots' mission limits must allow (flight/limits.py),
+    so that a SITL for a steeper plan is started with them raised."""
     rates = [
         (planned_vertical_mps(vp), vp.vehicle_id) for vp in plan.vehicles if vp.vehicle_type == "multirotor"
     ]
