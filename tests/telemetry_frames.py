@@ -102,3 +102,18 @@ def flight_frames(
                 add(s, msg, t + 1e-3 * s + 1e-4 * i)
     out.sort(key=lambda row: row[2])  # receive order
     return out
+
+
+class FakeClock:
+    """A clock for paced replay that moves only when slept on; ``sleeps`` records each sleep."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+        self.sleeps: list[float] = []
+
+    def sleep(self, dt: float) -> None:
+        self.sleeps.append(dt)
+        self.now += dt
+
+    def __call__(self) -> float:
+        return self.now

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink
-from telemetry_frames import ORIGIN, flight_frames
+from telemetry_frames import ORIGIN, FakeClock, flight_frames
 
 from gcs_planner.cli import main
 from gcs_planner.telemetry import FlightLogger
@@ -99,15 +99,10 @@ def test_a_long_silence_is_cut_on_replay_and_said_so(tmp_path, capsys):
     path = tmp_path / "flight.mcap"
     _log(path, [*frames, late])
     flight = read_flight(path)
-    now, sleeps = [0.0], []
-
-    def sleep(dt: float) -> None:
-        sleeps.append(dt)
-        now[0] += dt
-
-    sent = list(paced(flight, 1.0, sleep=sleep, clock=lambda: now[0]))
+    clock = FakeClock()
+    sent = list(paced(flight, 1.0, sleep=clock.sleep, clock=clock))
     assert len(sent) == len(flight.vehicle_frames)
-    assert sum(sleeps) == pytest.approx(frames[-1][2] - frames[0][2] + MAX_GAP_S, abs=0.01)
+    assert sum(clock.sleeps) == pytest.approx(frames[-1][2] - frames[0][2] + MAX_GAP_S, abs=0.01)
     assert long_gaps(flight, 1.0) == [pytest.approx(3 * 3600.0, abs=0.01)]
     assert (
         main(["replay", str(path), "--to", "udpout:127.0.0.1:9", "--speed", "1000", "--max-gap", "0.2"]) == 0

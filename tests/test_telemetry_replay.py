@@ -9,7 +9,7 @@ import threading
 import time
 
 import pytest
-from telemetry_frames import ORIGIN, SCENARIO_TEXT, flight_frames, make_plan
+from telemetry_frames import ORIGIN, SCENARIO_TEXT, FakeClock, flight_frames, make_plan
 
 from gcs_planner.cli import main
 from gcs_planner.core.errors import UserError
@@ -60,15 +60,9 @@ def test_replay_to_pymavlink_listener_is_byte_identical_and_timed(flight_path):
 
 def test_replay_schedule_scales_with_speed(flight_path):
     flight = read_flight(flight_path)
-    now = [0.0]
-    sleeps: list[float] = []
-
-    def sleep(dt: float) -> None:
-        sleeps.append(dt)
-        now[0] += dt
-
-    replay_to_mavlink(flight, "udpout:127.0.0.1:9", speed=4.0, sleep=sleep, clock=lambda: now[0])
-    assert sum(sleeps) == pytest.approx((flight.end_time_s - flight.start_time_s) / 4.0, rel=1e-6)
+    clock = FakeClock()
+    replay_to_mavlink(flight, "udpout:127.0.0.1:9", speed=4.0, sleep=clock.sleep, clock=clock)
+    assert sum(clock.sleeps) == pytest.approx((flight.end_time_s - flight.start_time_s) / 4.0, rel=1e-6)
 
 
 def test_replay_paces_by_flight_time_for_a_log_flown_faster_than_real_time(tmp_path):
@@ -81,15 +75,10 @@ def test_replay_paces_by_flight_time_for_a_log_flown_faster_than_real_time(tmp_p
         for msg, raw, t_s in flight_frames([1], samples=20):
             logger.on_frame(msg, raw, t_s)
     flight = read_flight(path)
-    now, sleeps = [0.0], []
-
-    def sleep(dt: float) -> None:
-        sleeps.append(dt)
-        now[0] += dt
-
-    frames = list(paced(flight, 1.0, sleep=sleep, clock=lambda: now[0]))
+    clock = FakeClock()
+    frames = list(paced(flight, 1.0, sleep=clock.sleep, clock=clock))
     span_s = (frames[-1].t_ns - frames[0].t_ns) * 1e-9
-    assert span_s > 0 and sum(sleeps) == pytest.approx(10.0 * span_s, rel=1e-6)
+    assert span_s > 0 and sum(clock.sleeps) == pytest.approx(10.0 * span_s, rel=1e-6)
 
 
 def test_bad_udp_url_is_a_user_error():
@@ -187,24 +176,17 @@ def test_ground_station_frames_are_kept_but_never_replayed(tmp_path):
     flight = _with_ground_station(tmp_path)
     assert flight.sysids == [1, 2, 3] and flight.gcs_sysids == [255]
     assert any(f.sysid == 255 for f in flight.frames)  # kept in the log
-    sent = []
-    now = [0.0]
-    for frame in paced(flight, 0.0, sleep=lambda dt: now.__setitem__(0, now[0] + dt), clock=lambda: now[0]):
-        sent.append(frame)
+    clock = FakeClock()
+    sent = list(paced(flight, 0.0, sleep=clock.sleep, clock=clock))
     assert sent == [f for f in flight.frames if f.sysid != 255] and sent
 
 
 def test_unpaced_replay_is_capped_and_loses_nothing_on_loopback(tmp_path):
     flight = _with_ground_station(tmp_path, n_vehicle_samples=50)  # fits a default socket buffer
-    now, sleeps = [0.0], []
-
-    def sleep(dt: float) -> None:
-        sleeps.append(dt)
-        now[0] += dt
-
-    replay_to_mavlink(flight, "udpout:127.0.0.1:9", speed=0.0, sleep=sleep, clock=lambda: now[0])
+    clock = FakeClock()
+    replay_to_mavlink(flight, "udpout:127.0.0.1:9", speed=0.0, sleep=clock.sleep, clock=clock)
     n = len(flight.vehicle_frames)
-    assert now[0] == pytest.approx((n - 1) / MAX_RATE_HZ)  # speed 0: as fast as the cap allows
+    assert clock.now == pytest.approx((n - 1) / MAX_RATE_HZ)  # speed 0: as fast as the cap allows
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     sock.settimeout(5.0)
