@@ -17,7 +17,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,24 +55,37 @@ class VerticalLimits:
     descent_mps: float
 
 
+async def _read_each(
+    link: MavlinkLink, sysids: Sequence[int], names_of: Callable[[int], Sequence[str] | None]
+) -> dict[int, tuple[float | None, ...]]:
+    """Each vehicle's values of the parameters ``names_of(sysid)``, in order (None: no answer), for
+    those it names any for; every read at once."""
+    asked = [s for s in sysids if names_of(s)]
+    found = await asyncio.gather(
+        *(asyncio.gather(*(read_param(link, s, n) for n in names_of(s))) for s in asked)
+    )
+    return {s: tuple(values) for s, values in zip(asked, found, strict=True)}
+
+
+def _all_answered(sysid: int, names: Sequence[str], values: Sequence[float | None], unchecked: str) -> bool:
+    """Whether every parameter answered; if not, say which did not (another firmware generation)."""
+    missing = [n for n, v in zip(names, values, strict=True) if v is None]
+    if missing:
+        log.warning("sysid %d: no value for %s; its %s not checked", sysid, missing, unchecked)
+    return not missing
+
+
 async def read_limits(
     link: MavlinkLink, sysids: Sequence[int], quirks: dict[int, AutopilotQuirks]
 ) -> dict[int, FlightLimits]:
     """Each vehicle's limits, where its autopilot has them; a vehicle that does not answer for one
-    of the parameters (another firmware generation) is logged and left unchecked."""
-
-    async def one(sysid: int) -> FlightLimits | None:
-        names = quirks[sysid].flight_limits
-        values = await asyncio.gather(*(read_param(link, sysid, n) for n in names))
-        if None in values:
-            missing = [n for n, v in zip(names, values, strict=True) if v is None]
-            log.warning("sysid %d: no value for %s; its speed range is not checked", sysid, missing)
-            return None
-        return FlightLimits(names, *values)
-
-    asked = [s for s in sysids if quirks[s].flight_limits is not None]
-    found = await asyncio.gather(*(one(s) for s in asked))
-    return {s: lim for s, lim in zip(asked, found, strict=True) if lim is not None}
+    of the parameters is logged and left unchecked."""
+    found = await _read_each(link, sysids, lambda s: quirks[s].flight_limits)
+    return {
+        s: FlightLimits(quirks[s].flight_limits, *values)
+        for s, values in found.items()
+        if _all_answered(s, quirks[s].flight_limits, values, "speed range is")
+    }
 
 
 async def read_l1_params(
@@ -81,15 +94,10 @@ async def read_l1_params(
     """The period [s] of each plane's L1 waypoint guidance and its roll controller's time constant
     [s] (``AutopilotQuirks.l1_params``), for the vehicles whose autopilot has them and answers
     with a positive period."""
-
-    async def one(sysid: int) -> tuple[float | None, ...]:
-        return tuple(await asyncio.gather(*(read_param(link, sysid, n) for n in quirks[sysid].l1_params)))
-
-    asked = [s for s in sysids if quirks[s].l1_params is not None]
-    found = await asyncio.gather(*(one(s) for s in asked))
+    found = await _read_each(link, sysids, lambda s: quirks[s].l1_params)
     return {
         s: (float(period), float(tau or 0.0))
-        for s, (period, tau) in zip(asked, found, strict=True)
+        for s, (period, tau) in found.items()
         if period is not None and period > 0.0
     }
 
@@ -99,16 +107,10 @@ async def read_ramps(
 ) -> dict[int, tuple[float, float]]:
     """Each vehicle's waypoint acceleration [m/s^2] and jerk [m/s^3] limits
     (``AutopilotQuirks.ramp_params``), for those whose autopilot has them and answers both."""
-
-    async def one(sysid: int) -> tuple[float | None, ...]:
-        accel, jerk, _ = quirks[sysid].ramp_params
-        return tuple(await asyncio.gather(read_param(link, sysid, accel), read_param(link, sysid, jerk)))
-
-    asked = [s for s in sysids if quirks[s].ramp_params is not None]
-    found = await asyncio.gather(*(one(s) for s in asked))
+    found = await _read_each(link, sysids, lambda s: quirks[s].ramp_params and quirks[s].ramp_params[:2])
     return {
         s: (accel * quirks[s].ramp_params[2], jerk * quirks[s].ramp_params[2])
-        for s, (accel, jerk) in zip(asked, found, strict=True)
+        for s, (accel, jerk) in found.items()
         if accel and jerk and accel > 0 and jerk > 0
     }
 
@@ -117,19 +119,13 @@ async def read_vertical(
     link: MavlinkLink, sysids: Sequence[int], quirks: dict[int, AutopilotQuirks]
 ) -> dict[int, VerticalLimits]:
     """Each vehicle's mission climb and descent speeds (``AutopilotQuirks.vertical_params``), for
-    those whose autopilot has them and answers both (another firmware generation: unchecked)."""
-
-    async def one(sysid: int) -> VerticalLimits | None:
-        names = quirks[sysid].vertical_params
-        climb, descent = await asyncio.gather(*(read_param(link, sysid, n) for n in names))
-        if climb is None or descent is None:
-            log.warning("sysid %d: no value for %s; its climb and descent are not checked", sysid, names)
-            return None
-        return VerticalLimits(names, climb, descent)
-
-    asked = [s for s in sysids if quirks[s].vertical_params is not None]
-    found = await asyncio.gather(*(one(s) for s in asked))
-    return {s: lim for s, lim in zip(asked, found, strict=True) if lim is not None}
+    those whose autopilot has them and answers both (else logged and left unchecked)."""
+    found = await _read_each(link, sysids, lambda s: quirks[s].vertical_params)
+    return {
+        s: VerticalLimits(quirks[s].vertical_params, *values)
+        for s, values in found.items()
+        if _all_answered(s, quirks[s].vertical_params, values, "climb and descent are")
+    }
 
 
 def planned_vertical_mps(vp: VehiclePlan) -> tuple[float, float]:
