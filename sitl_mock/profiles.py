@@ -86,10 +86,11 @@ class FlightRules:
         (ArduCopter AC_WPNav WP_ACC / WP_JERK, PX4 MPC_ACC_HOR / MPC_JERK_AUTO); the mock serves
         its airframe's acceleration and a jerk it never limits (it ramps linearly), which is
         what it flies.
-    vertical_params: the names of the climb and descent speeds [m/s] of its missions (ArduCopter
-        AC_WPNav.cpp WP_SPD_UP / WP_SPD_DN, defaults 2.5 / 1.5; PX4 multicopter_autonomous_params.c
-        MPC_Z_V_AUTO_UP / _DN, 3 / 1.5); the mock serves its airframe's climb and sink rates, which
-        it flies (sitl_mock.flight: slower over ground along a leg steeper than they allow).
+    vertical_params: the names of the climb and descent speeds [m/s] of its missions and their
+        defaults, ``stock_vertical_mps`` (ArduCopter AC_WPNav.cpp WP_SPD_UP / WP_SPD_DN, 2.5 / 1.5;
+        PX4 multicopter_autonomous_params.c MPC_Z_V_AUTO_UP / _DN, 3 / 1.5): a multirotor without
+        an airframe of its own climbs and sinks at the defaults; the mock serves the rates it flies
+        (sitl_mock.flight: slower over ground along a leg steeper than they allow).
     """
 
     name: str
@@ -113,6 +114,7 @@ class FlightRules:
     landed_disarm_s: float = 0.0
     ramp_params: tuple[str, str] | None = None
     vertical_params: tuple[str, str] | None = None
+    stock_vertical_mps: tuple[float, float] | None = None
 
 
 ARDUCOPTER_FLIGHT = FlightRules(
@@ -127,6 +129,7 @@ ARDUCOPTER_FLIGHT = FlightRules(
     final_land_disarms=True,
     ramp_params=("WP_ACC", "WP_JERK"),
     vertical_params=("WP_SPD_UP", "WP_SPD_DN"),
+    stock_vertical_mps=(2.5, 1.5),
 )
 ARDUPLANE_FLIGHT = FlightRules(
     name="ArduPlane",
@@ -158,6 +161,7 @@ PX4_FLIGHT = FlightRules(
     landed_disarm_s=2.0,
     ramp_params=("MPC_ACC_HOR", "MPC_JERK_AUTO"),
     vertical_params=("MPC_Z_V_AUTO_UP", "MPC_Z_V_AUTO_DN"),
+    stock_vertical_mps=(3.0, 1.5),
 )
 
 

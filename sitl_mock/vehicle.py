@@ -166,7 +166,8 @@ class MockVehicle:
         self.sysid = sysid
         self.profile = PROFILES[profile]
         self.vehicle_type = vehicle_type
-        self.airframe = airframe or AIRFRAMES[vehicle_type]
+        self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
+        self.airframe = airframe or self._stock_airframe(vehicle_type)
         self.home = home
         self.host, self.port = host, port
         self.persist_mission = persist_mission
@@ -178,7 +179,6 @@ class MockVehicle:
         self.link = VehicleLink(
             sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer, signing_key
         )
-        self.flight = replace(self.profile.flight[vehicle_type], **(flight or {}))  # tests may turn rules off
         self._init_params()
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
         self.intervals: dict[int, float] = {}  # message id -> requested interval [s of vehicle time]
@@ -198,6 +198,15 @@ class MockVehicle:
         self._syncing_seq = False
         self._after_ack: Callable[[], None] | None = None  # runs once the COMMAND_ACK is sent
         self._dispatch, self._commands = self._handlers()
+
+    def _stock_airframe(self, vehicle_type: str) -> Airframe:
+        """The airframe of a vehicle not tuned to a plan: its type's, climbing and sinking at its
+        autopilot's stock mission rates where the rules have them (``FlightRules.vertical_params``)."""
+        base = AIRFRAMES[vehicle_type]
+        if self.flight.stock_vertical_mps is None or base.kind != "multirotor":
+            return base
+        climb, sink = self.flight.stock_vertical_mps
+        return replace(base, climb_rate_mps=climb, sink_rate_mps=sink)
 
     def _init_params(self) -> None:
         """The parameters it serves (``params``, name -> value; ``param_types``, name -> MAV_PARAM_TYPE,

@@ -117,6 +117,12 @@ def test_a_plan_climbing_faster_than_the_autopilot_will_is_refused_before_anythi
                 "--speedup", "10", "-o", str(tmp_path / "out")]  # fmt: skip
         assert main(argv) == 2
         assert nothing_armed_or_uploaded(fleet)
+        stock = {
+            "ardupilot": {"WP_SPD_UP": 2.5, "WP_SPD_DN": 1.5},
+            "px4": {"MPC_Z_V_AUTO_UP": 3.0, "MPC_Z_V_AUTO_DN": 1.5},
+        }
+        served = fleet.call(lambda: {n: fleet.vehicle(1).params[n] for n in stock[profile]})
+        assert served == stock[profile]  # the autopilots' defaults, which the mock flies
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "Traceback" not in err[0] and "safe end" not in err[0], err  # nothing to end
     line = rf"\(sysid \d\): {limits} m/s, but the plan (climbs|descends) at up to [23]\.\d\d m/s; raise it"
