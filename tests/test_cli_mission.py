@@ -430,3 +430,61 @@ def test_clear_takes_a_list_of_vehicles_and_refuses_all(fleet, tmp_path, capsys)
     assert main(["clear", *connects, "--sysid", "all"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "give them as a list" in err
+
+
+def rows_by_sysid(out: str) -> dict[str, list[str]]:
+    return {r[0]: r for r in (line.split() for line in out.splitlines()) if r and r[0].isdigit()}
+
+
+def test_download_and_start_take_a_fleet(fleet, tmp_path, capsys):
+    """download --sysid 1,2 writes one file a vehicle ({sysid} in FILE), each what that vehicle
+    holds; start --sysid 1,2 arms both and starts both."""
+    plan_path = make_plan(tmp_path, sysids=(1, 2))
+    connects = ["--connect", url(fleet, 1), "--connect", url(fleet, 2)]
+    assert main(["upload", *connects, "--sysid", "1,2", str(plan_path), "--force"]) == 0
+    capsys.readouterr()
+    assert main(["download", *connects, "--sysid", "1,2", str(tmp_path / "back_{sysid}.plan")]) == 0
+    rows = rows_by_sysid(capsys.readouterr().out)
+    assert rows["1"][1] == "ardupilot" and rows["2"][1] == "px4", rows
+    assert rows["1"][-2:] == ["OK", str(tmp_path / "back_1.plan")] and rows["2"][-2] == "OK"
+    plan = Plan.load(plan_path)
+    ardupilot = load_mission_file(tmp_path / "back_1.plan").items("ardupilot")
+    sent = plan_to_items(plan.vehicles[0], ORIGIN, "ardupilot")
+    assert compare_items(sent, ardupilot, readback.ARDUCOPTER, skip_home=True) is None
+    px4 = load_mission_file(tmp_path / "back_2.plan", autopilot="px4").items("px4")
+    assert px4 == in_file_frames([readback.PX4(it) for it in plan_to_items(plan.vehicles[1], ORIGIN, "px4")])
+
+    assert main(["start", *connects, "--sysid", "1,2"]) == 0
+    rows = rows_by_sysid(capsys.readouterr().out)
+    assert [rows[s][1:3] for s in ("1", "2")] == [["OK", "OK"], ["OK", "OK"]], rows
+    for sysid in (1, 2):
+        state = fleet.call(lambda s=sysid: fleet.vehicle(s).state)
+        assert state.armed and state.mode in ("AUTO", "MISSION"), (sysid, state.mode)
+
+
+def test_a_fleet_download_needs_a_file_a_vehicle_and_start_all_needs_a_plan(tmp_path, capsys):
+    """Refused in one line before any vehicle is asked (no vehicle listens on the URL)."""
+    argv = ["--connect", "udpout:127.0.0.1:9", "--heartbeat-timeout", "0.1"]
+    assert main(["download", *argv, "--sysid", "1,2", str(tmp_path / "fleet.plan")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "{sysid}" in err and not (tmp_path / "fleet.plan").exists()
+    assert main(["start", *argv, "--sysid", "all"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "plan.json" in err
+
+
+def test_a_fleet_start_with_a_vehicle_that_will_not_arm_starts_none(tmp_path, capsys):
+    """One vehicle's pre-arm checks never pass: no vehicle starts, and the one that armed is
+    disarmed again; the last line names the vehicle and its reason."""
+    sitl_mock = pytest.importorskip("sitl_mock")
+    vehicles = [{"flight": {"arm_ready_s": 1e9}}, {"flight": {"arm_ready_s": 0.0}}]
+    with sitl_mock.MockFleet(vehicles=vehicles, home=ORIGIN, speedup=20.0) as f:
+        connects = ["--connect", url(f, 1), "--connect", url(f, 2)]
+        assert main(["start", *connects, "--sysid", "1,2", "--arm-timeout", "3"]) == 2
+        captured = capsys.readouterr()
+        states = [f.call(lambda s=s: f.vehicle(s).state) for s in (1, 2)]
+    rows = rows_by_sysid(captured.out)
+    assert rows["1"][1:3] == ["FAILED", "-"] and rows["2"][2] == "-", rows
+    last = captured.err.strip().splitlines()[-1]
+    assert "1 of 2 vehicles did not arm, none started" in last and "vehicle 1 could not arm" in last, last
+    assert not any(s.armed for s in states) and not any(s.mode == "AUTO" for s in states)

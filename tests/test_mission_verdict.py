@@ -108,3 +108,26 @@ def test_arduplane_refuses_to_arm_with_do_land_start_unless_rtl_autoland(tmp_pat
         assert main(["start", *argv, str(mission), "--arm-timeout", "1"]) == 2
         assert "DO_LAND_START set and RTL_AUTOLAND disable" in capsys.readouterr().err
         assert not plane.call(lambda: plane.vehicle(1).state.armed)
+
+
+def test_a_fleet_start_disarms_the_vehicle_that_refuses_and_says_which_fly(tmp_path, capsys):
+    items = px4_items()
+    bad, good = tmp_path / "bad.waypoints", tmp_path / "good.waypoints"
+    bad.write_text(dumps_wpl([items[1], items[2], *items]))  # a waypoint before the NAV_TAKEOFF
+    good.write_text(dumps_wpl([items[1], *items]))
+    with sitl_mock.MockFleet(
+        count=2, profile="px4", home=ORIGIN, speedup=20.0, flight={"arm_ready_s": 0}
+    ) as f:
+        connects = [a for s in (1, 2) for a in ("--connect", "udpout:{}:{}".format(*f.vehicle(s).address))]
+        assert main(["upload", *connects, "--sysid", "1", str(bad)]) == 2
+        assert main(["upload", *connects, "--sysid", "2", str(good)]) == 0
+        capsys.readouterr()
+        assert main(["start", *connects, "--sysid", "1,2"]) == 2
+        captured = capsys.readouterr()
+        armed = [f.call(lambda s=s: f.vehicle(s).state.armed) for s in (1, 2)]
+    rows = [line.split() for line in captured.out.splitlines() if line[:5].strip() in ("1", "2")]
+    assert rows == [["1", "OK", "REFUSED"], ["2", "OK", "OK"]], captured.out
+    last = captured.err.strip().splitlines()[-1]
+    assert "1 of 2 vehicles refused the start; 2 fly their missions" in last and "disarmed it again" in last
+    assert "Disarming" not in last, last  # its own words, not those of the disarm that followed
+    assert armed == [False, True]

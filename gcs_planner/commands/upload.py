@@ -41,7 +41,9 @@ from gcs_planner.core.fleet_ids import network_of
 from gcs_planner.core.validation import number_flag
 from gcs_planner.mavlink.errors import MissionRejectedError
 from gcs_planner.mavlink.fleet import DEFAULT_WORKERS, upload_fleet
+from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
+from gcs_planner.mavlink.networks import NetworkLinks
 from gcs_planner.mavlink.params import set_param
 from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.missions.files import (
@@ -265,31 +267,40 @@ async def _set_ceiling(link, sysid: int, family: AutopilotQuirks, source: Upload
 
 async def _upload_many(args: argparse.Namespace, sysids: list[int], source: UploadSource) -> int:
     async with fleet_link(args, sysids) as link:
-        by_type: dict[MissionType, dict[int, list[MissionItem]]] = {}
-        for sysid in sysids:
-            check_not_flying_mission(link, sysid, args.force, "an upload")
-            autopilot = autopilot_of(
-                link.vehicles[sysid].autopilot, link.vehicles[sysid].mav_type, args.autopilot
+        await upload_fleet_on(link, args, sysids, source)
+    return 0
+
+
+async def upload_fleet_on(
+    link: MavlinkLink | NetworkLinks, args: argparse.Namespace, sysids: list[int], source: UploadSource
+) -> None:
+    """Upload FILE to every vehicle of ``sysids`` over ``link`` (--workers at once, --retries each);
+    print one row per vehicle and list; UserError naming the first failure."""
+    by_type: dict[MissionType, dict[int, list[MissionItem]]] = {}
+    for sysid in sysids:
+        check_not_flying_mission(link, sysid, args.force, "an upload")
+        autopilot = autopilot_of(
+            link.vehicles[sysid].autopilot, link.vehicles[sysid].mav_type, args.autopilot
+        )
+        for mission_type, items in prepare(args, autopilot, sysid, source):
+            by_type.setdefault(mission_type, {})[sysid] = items
+    results = {}
+    with progress_bar(sum(len(m) for m in by_type.values()), "uploading", unit="list") as bar:
+        for mission_type, missions in by_type.items():
+            results[mission_type] = await upload_fleet(
+                link,
+                missions,
+                workers=args.workers,
+                retries=args.retries,
+                progress=lambda done, total, result: bar.update(1),
+                mission_type=mission_type,
+                compid=args.compid,
+                verify=args.verify,
+                timing=Timing(window=args.in_flight),
             )
-            for mission_type, items in prepare(args, autopilot, sysid, source):
-                by_type.setdefault(mission_type, {})[sysid] = items
-        results = {}
-        with progress_bar(sum(len(m) for m in by_type.values()), "uploading", unit="list") as bar:
-            for mission_type, missions in by_type.items():
-                results[mission_type] = await upload_fleet(
-                    link,
-                    missions,
-                    workers=args.workers,
-                    retries=args.retries,
-                    progress=lambda done, total, result: bar.update(1),
-                    mission_type=mission_type,
-                    compid=args.compid,
-                    verify=args.verify,
-                    timing=Timing(window=args.in_flight),
-                )
-        uploaded = [s for s in sysids if all(per[s].ok for per in results.values())]
-        families = {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in uploaded}
-        ceilings = await asyncio.gather(*(_set_ceiling(link, s, families[s], source) for s in uploaded))
+    uploaded = [s for s in sysids if all(per[s].ok for per in results.values())]
+    families = {s: quirks_for(link.vehicles[s].autopilot, link.vehicles[s].mav_type) for s in uploaded}
+    ceilings = await asyncio.gather(*(_set_ceiling(link, s, families[s], source) for s in uploaded))
     verified = f" {'verified':>8}" if args.verify else ""  # a list that reads back unequal fails
     print(
         f"{'sysid':>5} {'list':<8} {'items':>6} {'result':<10} {'tries':>5} {'opaque_id':>10} {'time_s':>7}"
@@ -312,4 +323,3 @@ async def _upload_many(args: argparse.Namespace, sysids: list[int], source: Uplo
         raise UserError(
             f"{len(failures)} of {sum(len(m) for m in results.values())} uploads failed; {failures[0]}"
         )
-    return 0

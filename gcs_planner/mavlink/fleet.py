@@ -14,7 +14,7 @@ Choices:
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 from gcs_planner.autopilots import quirks_for
@@ -24,13 +24,13 @@ from gcs_planner.mavlink.command import CommandClient
 from gcs_planner.mavlink.errors import BusyError, MavlinkError, MissionError, MissionTimeoutError, VerifyError
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.mission import MissionClient
-from gcs_planner.mavlink.preflight import arm_when_ready
+from gcs_planner.mavlink.preflight import arm_when_ready, start_or_disarm
 from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.wire.enums import MissionResult
 from gcs_planner.wire.types import MissionItem, MissionType
 
-__all__ = ["DEFAULT_WORKERS", "VehicleResult", "retryable", "start_fleet", "upload_fleet"]
+__all__ = ["DEFAULT_WORKERS", "StartResult", "VehicleResult", "retryable", "start_fleet", "upload_fleet"]
 
 DEFAULT_WORKERS = 8
 RETRYABLE_FAILURES: tuple[type[MavlinkError], ...] = (MissionTimeoutError, BusyError, VerifyError)
@@ -126,6 +126,17 @@ async def upload_fleet(
     return {sysid: results[sysid] for sysid in missions}
 
 
+@dataclass(frozen=True)
+class StartResult:
+    """One vehicle's part in ``start_fleet``: why it did not arm (``arm_error``) or refused the
+    start (``start_error``, then disarmed again); ``ok`` when it flies its mission."""
+
+    sysid: int
+    ok: bool
+    arm_error: UserError | None = None
+    start_error: UserError | None = None
+
+
 async def start_fleet(
     link: MavlinkLink,
     sysids: Sequence[int],
@@ -134,37 +145,51 @@ async def start_fleet(
     compid: int = 1,
     workers: int = DEFAULT_WORKERS,
     arm_timeout_s: float = 120.0,
-) -> dict[int, VehicleResult]:
-    """Arm (optional, once each vehicle's pre-arm checks pass) and MISSION_START(0, 0) every vehicle.
+    waiting: Callable[[int, str], None] | None = None,
+) -> dict[int, StartResult]:
+    """Arm every vehicle (once its pre-arm checks pass; ``waiting(sysid, reason)`` meanwhile), and
+    only when all are armed MISSION_START(0, 0) each; ``workers`` vehicles at a time.
 
     ArduCopter is put in GUIDED before arming (it refuses to arm in AUTO); MISSION_START then
-    switches it to AUTO. Each command has CommandClient's retries.
+    switches it to AUTO. A vehicle that will not arm starts none, and those armed are disarmed
+    again; one that disarmed itself while the others armed (ArduCopter's DISARM_DELAY) is armed
+    again; one that refuses the start is disarmed (preflight.start_or_disarm).
     """
     gate = asyncio.Semaphore(workers)
     status = VehicleStatus(link, list(sysids))
+    commands = {s: CommandClient(link, s, compid) for s in sysids}
 
-    async def one(sysid: int) -> VehicleResult:
-        async with gate:
-            t0 = now_s()
-            command = CommandClient(link, sysid, compid)
-            try:
-                link.check_target(sysid)
-                if arm:
-                    info = link.vehicles.get(sysid)
-                    mode = None if info is None else quirks_for(info.autopilot, info.mav_type).start_arm_mode
-                    if mode is not None:
-                        await command.set_mode(mode)
-                    await arm_when_ready(link, status, sysid, arm_timeout_s)
-                await command.mission_start()
-            except MavlinkError as exc:
-                return VehicleResult(sysid, False, 1, now_s() - t0, error=exc)
-            except UserError as exc:  # not ready to arm in time
-                error = MavlinkError(str(exc))
-                return VehicleResult(sysid, False, 1, now_s() - t0, error=error)
-            return VehicleResult(sysid, True, 1, now_s() - t0)
+    async def arm_one(sysid: int) -> None:
+        link.check_target(sysid)
+        info = link.vehicles.get(sysid)
+        mode = None if info is None else quirks_for(info.autopilot, info.mav_type).start_arm_mode
+        if mode is not None:
+            await commands[sysid].set_mode(mode)
+        await arm_when_ready(link, status, sysid, arm_timeout_s, waiting=waiting)
+
+    async def each(
+        step: Callable[[int], Awaitable[None]], which: Sequence[int]
+    ) -> dict[int, UserError | None]:
+        async def one(sysid: int) -> UserError | None:
+            async with gate:
+                try:
+                    await step(sysid)
+                except UserError as exc:  # MavlinkError included
+                    return exc
+                return None
+
+        return dict(zip(which, await asyncio.gather(*(one(s) for s in which)), strict=True))
 
     try:
-        done = await asyncio.gather(*(one(s) for s in sysids))
+        arm_errors: dict[int, UserError | None] = dict.fromkeys(sysids)
+        if arm:
+            arm_errors = await each(arm_one, sysids)
+            if not any(arm_errors.values()):
+                arm_errors.update(await each(arm_one, [s for s in sysids if not link.vehicles[s].armed]))
+        if any(arm_errors.values()):
+            await asyncio.gather(*(commands[s].disarm() for s in sysids if arm_errors[s] is None))
+            return {s: StartResult(s, False, arm_error=arm_errors[s]) for s in sysids}
+        start_errors = await each(lambda s: start_or_disarm(commands[s], status, arm), sysids)
     finally:
         status.close()
-    return {r.sysid: r for r in done}
+    return {s: StartResult(s, start_errors[s] is None, start_error=start_errors[s]) for s in sysids}

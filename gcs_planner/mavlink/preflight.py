@@ -9,6 +9,8 @@ Choices:
   and it is unhealthy, wait; then arm. An arming refusal (FAILED, TEMPORARILY_REJECTED, DENIED) is
   retried every ``ARM_RETRY_S`` until the deadline (ArduCopter refuses for ~40-45 s after boot,
   "Arm: Need Position Estimate"); the error names the autopilot's own last STATUSTEXT.
+- Start: a vehicle that refuses MISSION_START (PX4 with a mission its check rejected) and was armed
+  for it is disarmed again, never left armed on the ground; the error carries its own words.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.vehicle_status import VehicleStatus
 from gcs_planner.wire.enums import CommandResult
 
-__all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "request_streams"]
+__all__ = ["ARM_RETRY_S", "FLIGHT_STREAMS", "arm_when_ready", "request_streams", "start_or_disarm"]
 
 log = logging.getLogger(__name__)
 
@@ -123,3 +125,20 @@ async def arm_when_ready(
         if waiting is not None:
             waiting(sysid, reason)
         await asyncio.sleep(min(ARM_RETRY_S / time_scale, max(0.0, deadline - loop.time())))
+
+
+async def start_or_disarm(command: CommandClient, status: VehicleStatus, armed_here: bool) -> None:
+    """MISSION_START(0, 0); on a refusal, disarm a vehicle armed for it (``armed_here``) and raise
+    UserError with the vehicle's own words (module docstring)."""
+    sysid = command.sysid
+    texts_before = status.tracks[sysid].text_count
+    try:
+        await command.mission_start(0, 0)
+    except UserError as exc:
+        reason = status.reason(sysid, texts_before)  # before the disarm: not its "Disarming motors"
+        disarmed = ""
+        if armed_here:
+            await command.disarm()
+            disarmed = "; disarmed it again"
+        said = f" (it said {reason!r})" if reason else ""
+        raise UserError(f"vehicle {sysid} refused the mission start: {exc}{said}{disarmed}") from exc
