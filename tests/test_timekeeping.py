@@ -39,3 +39,13 @@ def test_progress_never_jumps_back_to_an_earlier_crossing():
     keeper.along_track_error_m(1, 30.0, np.array([50.0, 50.0, 20.0]))
     # (50, 0) lies on the first leg and on the last one; progress must stay on the last
     assert keeper.along_track_error_m(1, 35.0, np.array([50.0, 0.0, 20.0])) == pytest.approx(0.0)
+
+
+def test_no_command_while_the_start_ramp_lasts():
+    """A route started early by its ramp's loss is ahead of the plan on its ramp by design: the
+    keeper leaves it alone until ``settle_s`` after the planned start, then corrects as usual."""
+    keeper = ScheduleKeeper(horizon_s=2.0)
+    keeper.add(_route(speed=10.0), settle_s=3.0)
+    assert keeper.speed_command(1, -1.0, np.array([5.0, 0.0, 20.0])) is None  # 5 m ahead, before the start
+    assert keeper.speed_command(1, 2.9, np.array([20.0, 0.0, 20.0])) is None  # 9 m behind, still on its ramp
+    assert keeper.speed_command(1, 3.1, np.array([27.0, 0.0, 20.0])) == pytest.approx(12.0)  # 4 m behind

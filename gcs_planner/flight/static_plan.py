@@ -33,6 +33,7 @@ from gcs_planner.flight.ops import accel_lead_s, build_missions, wait_until_done
 from gcs_planner.flight.runner import Flight, RunOptions, networks, run_flight
 from gcs_planner.flight.timekeeping import ScheduleKeeper
 from gcs_planner.flight.vehicles import VehicleSource
+from gcs_planner.geometry.ramp import ramp_loss_s
 from gcs_planner.mavlink.fleet import VehicleResult
 from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.missions.items import AUTOPILOTS
@@ -185,7 +186,8 @@ class StaticPlan:
         if self.options.keep_schedule:
             keeper = ScheduleKeeper()
             for vp in self.plan.vehicles:
-                keeper.add(vp)
+                ramp_s = ramp_loss_s(vp.first_leg_speed_mps, *_ramp(flight, vp.sysid))  # >= where it ends
+                keeper.add(vp, settle_s=ramp_s)
             for sysid, lim in flight.limits.items():
                 keeper.limit(sysid, lim.min_mps, lim.max_mps)
         await wait_until_done(

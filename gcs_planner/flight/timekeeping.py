@@ -8,13 +8,18 @@ path the vehicle is, compares that with where the plan says it should be at this
 commands a ground speed (MAV_CMD_DO_CHANGE_SPEED, param1 = 1 ground speed) that removes the
 along-track error over ``horizon_s``.
 
-Choices: progress is the arc length of the nearest planned-path point, searched only ahead of the
-last progress (paths may cross themselves); the commanded speed is clamped to
-[``min_factor``, ``max_factor``] x the planned speed there, and to the vehicle's own speed range
-where it has one (``limit``: ArduPlane refuses an airspeed outside it and keeps the old one); a
-new command is sent only when it
-differs from the last by more than ``deadband_mps`` (set-points are periodic, so a lost one is
-replaced by the next rather than retried).
+Choices: no command while a route's start ramp lasts (``settle_s`` after its planned start): the
+route starts early by its ramp's loss (flight.ops.accel_lead_s), so on the ramp the vehicle is
+first ahead of the plan and then behind it by design. Reacting to that slowed ArduCopter SITL to
+6.5 m/s on its ramp, then pushed it to 11 m/s, and the 7 m/s asked when it overshot froze the next
+68.9 m leg at 7-7.7 m/s (AC_WPNav plans each leg's S-curve at the speed asked when the leg is
+loaded): 3.2 s late (docs/real-autopilots.md). Progress is the arc length of the nearest
+planned-path point, searched only ahead of the last progress (paths may cross themselves); the
+commanded speed is clamped to [``min_factor``, ``max_factor``] x the planned speed there, and to
+the vehicle's own speed range where it has one (``limit``: ArduPlane refuses an airspeed outside
+it and keeps the old one); a new command is sent only when it differs from the last by more than
+``deadband_mps`` (set-points are periodic, so a lost one is replaced by the next rather than
+retried).
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ class _Route:
     times_s: np.ndarray
     arc_m: np.ndarray
     speed_mps: np.ndarray
+    quiet_until_s: float  # route time before which no command is sent (the start ramp)
     index: int = 0
     last_command_mps: float = float("nan")
 
@@ -55,12 +61,14 @@ class ScheduleKeeper:
         """Keep the vehicle's commands within [lo_mps, hi_mps] (its autopilot's speed range)."""
         self.ranges[sysid] = (lo_mps, hi_mps)
 
-    def add(self, vp: VehiclePlan) -> None:
+    def add(self, vp: VehiclePlan, settle_s: float = 0.0) -> None:
+        """Keep ``vp`` to its timing, from ``settle_s`` after its planned start (its start ramp)."""
         seg = np.linalg.norm(np.diff(vp.path, axis=0), axis=1)
         arc = np.concatenate([[0.0], np.cumsum(seg)])
         dt = np.diff(vp.path_times_s)
         speed = np.divide(seg, dt, out=np.zeros_like(seg), where=dt > 1e-9)
-        self.routes[vp.sysid] = _Route(vp.path, vp.path_times_s, arc, np.concatenate([speed, speed[-1:]]))
+        speeds = np.concatenate([speed, speed[-1:]])
+        self.routes[vp.sysid] = _Route(vp.path, vp.path_times_s, arc, speeds, float(vp.times_s[0]) + settle_s)
 
     def along_track_error_m(self, sysid: int, t_s: float, position: np.ndarray) -> float:
         """Planned minus flown arc length [m] at route time ``t_s`` (positive: behind schedule)."""
@@ -87,7 +95,9 @@ class ScheduleKeeper:
     def speed_command(self, sysid: int, t_s: float, position: np.ndarray) -> float | None:
         """Ground speed [m/s] to command now, or None when the last command still stands."""
         route = self.routes[sysid]
-        error_m = self.along_track_error_m(sysid, t_s, position)
+        error_m = self.along_track_error_m(sysid, t_s, position)  # (keeps the progress search moving)
+        if t_s < route.quiet_until_s:
+            return None
         nominal = float(route.speed_mps[route.index])
         if nominal <= 0.0:
             return None
