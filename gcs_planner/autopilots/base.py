@@ -67,6 +67,10 @@ class AutopilotQuirks:
     # parameters of its climb and descent speed in missions [m/s] (None: not known): a plan that
     # climbs or descends faster is flown late (flight/limits.py)
     vertical_params: tuple[str, str] | None = None
+    # the rest of the parameters of ArduCopter's S-curve legs (geometry/scurve.py), [vertical
+    # acceleration m/s^2, waypoint radius m, corner acceleration m/s^2, attitude input time
+    # constant s] (None: the autopilot does not fly its legs that way)
+    waypoint_nav_params: tuple[str, str, str, str] | None = None
     start_latency_s: float = 0.0  # from MISSION_START to moving along the route [s] (measured)
     takeoff_level_off_m: float = 0.0  # its take-off ends this far below the target altitude [m]
     params_bytewise: bool = False  # PARAM_VALUE integers sent bytewise, not cast to float (MAVProxy)

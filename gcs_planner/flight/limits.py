@@ -10,6 +10,12 @@ SITL with stock parameters, swarm_small's 20-degree legs at 10 m/s were flown at
 of five vehicles ended 18-31 s late (docs/real-autopilots.md). A flight therefore reads those
 parameters before anything is uploaded, refuses a plan outside them in one line, and clips
 schedule keeping to a plane's range (timekeeping.ScheduleKeeper).
+
+ArduCopter also plans each leg's speed from rest over half the leg (geometry/scurve.py): at stock
+WP_ACC 2.5 / WP_JERK 1 a leg under ~65 m never reaches 10 m/s, and schedule keeping cannot make it
+up (SITL's copter tops out at 10.3 m/s). Its legs are flown in advance on that model, the flown
+track judged as conformance judges a real one, and a plan that would end up later than the
+schedule bound is refused, with the WP_ACC / WP_JERK that would fly it on time.
 """
 
 from __future__ import annotations
@@ -18,19 +24,30 @@ import asyncio
 import logging
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from gcs_planner.autopilots import AutopilotQuirks
 from gcs_planner.core.errors import UserError
+from gcs_planner.geometry.ramp import ramp_loss_s
+from gcs_planner.geometry.scurve import WaypointNav, fly_legs
 from gcs_planner.mavlink.link import MavlinkLink
 from gcs_planner.mavlink.params import read_param
+from gcs_planner.missions.items import mission_waypoints
 from gcs_planner.model.plan import VehiclePlan
+from gcs_planner.safety.conformance import (
+    SCHEDULE_STEP_S,
+    Track,
+    route_acceptance_m,
+    route_window,
+    schedule_errors_s,
+)
 
 __all__ = [
-    "FlightLimits", "VerticalLimits", "check_limits", "check_vertical", "planned_vertical_mps",
-    "read_l1_params", "read_limits", "read_ramps", "read_vertical",
+    "FlightLimits", "VerticalLimits", "check_limits", "check_vertical", "check_waypoint_timing",
+    "planned_vertical_mps", "predicted_errors_s", "read_l1_params", "read_limits", "read_ramps",
+    "read_vertical", "read_waypoint_nav",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -38,6 +55,10 @@ log = logging.getLogger(__name__)
 G_MPS2 = 9.80665
 MOVING_MPS = 0.5  # a path step slower than this over ground is a take-off or a landing, not a leg
 MIN_STEP_S = 0.05  # shorter path steps are left out: plan.json's rounding (0.1 mm) is noise over them
+TELEMETRY_STEP = 10  # a flown-in-advance track is judged at 10 Hz, as GLOBAL_POSITION_INT comes
+RAMP_TRIES = ((3.5, 2.0), (5.0, 3.0), (5.0, 5.0), (6.0, 8.0))  # WP_ACC, WP_JERK offered, in order
+NEAR_PATH_M = 15.0  # a flown point this far beyond the acceptance radius still counts as passing
+RAMP_MARGIN_S = 0.5  # an offered WP_ACC / WP_JERK keeps the prediction this far inside the bound
 
 
 @dataclass(frozen=True)
@@ -183,3 +204,76 @@ def check_limits(plans: Sequence[VehiclePlan], limits: dict[int, FlightLimits], 
                     f"{who}: {name_roll} is {lim.roll_deg:g} deg, but turns of {vp.turn_radius_m:g} m at"
                     f" {hi:g} m/s need {bank:.1f} deg"
                 )
+
+
+async def read_waypoint_nav(
+    link: MavlinkLink,
+    sysids: Sequence[int],
+    quirks: dict[int, AutopilotQuirks],
+    ramps: dict[int, tuple[float, float]],
+    vertical: dict[int, VerticalLimits],
+) -> dict[int, WaypointNav]:
+    """The leg parameters of each vehicle that flies ArduCopter's S-curve legs and answered for its
+    ramp and climb (``ramps``, ``vertical``); one of the others unanswered keeps its stock value."""
+    asked = [s for s in sysids if quirks[s].waypoint_nav_params and s in ramps and s in vertical]
+    found = await _read_each(link, asked, lambda s: quirks[s].waypoint_nav_params)
+    stock = WaypointNav()
+    navs = {}
+    for s, (accel_z, radius, corner, input_tc) in found.items():
+        navs[s] = WaypointNav(
+            *ramps[s], vertical[s].climb_mps, vertical[s].descent_mps,
+            stock.accel_z_mps2 if accel_z is None else accel_z,
+            stock.radius_m if radius is None else radius,
+            stock.corner_accel_mps2 if corner is None else corner,
+            stock.input_tc_s if input_tc is None else input_tc,
+        )  # fmt: skip
+    return navs
+
+
+def predicted_errors_s(vp: VehiclePlan, nav: WaypointNav) -> np.ndarray:
+    """The along-track time errors [s, + late] of ``vp``'s mission flown on ArduCopter's S-curve
+    legs (geometry.scurve), judged as conformance judges a flown track (schedule_errors_s, one a
+    SCHEDULE_STEP_S of route time): started early by its ramp's loss (flight.ops.accel_lead_s),
+    reported at 10 Hz."""
+    route = mission_waypoints(vp)
+    times, positions = fly_legs(route["waypoints"], route["speeds_mps"], nav)
+    ramp = (nav.accel_mps2, nav.jerk_mps3)
+    track = Track(times[::TELEMETRY_STEP], positions[::TELEMETRY_STEP])
+    accept = route_acceptance_m(vp, None)
+    window = route_window(track, vp.path, accept)
+    route_t0_s = ramp_loss_s(vp.first_leg_speed_mps, *ramp) - float(vp.times_s[0])
+    flown = Track(track.times_s[window], track.positions[window])
+    return np.nan_to_num(schedule_errors_s(flown, vp, route_t0_s, accept + NEAR_PATH_M, ramp, accept))
+
+
+def check_waypoint_timing(plans: Sequence[VehiclePlan], navs: dict[int, WaypointNav], bound_s: float) -> None:
+    """UserError naming WP_ACC and WP_JERK when a multirotor flying ArduCopter's S-curve legs would
+    end up later than ``bound_s`` behind its plan (module docstring), with values that would not."""
+    for vp in plans:
+        nav = navs.get(vp.sysid)
+        if nav is None or vp.vehicle_type != "multirotor":
+            continue
+        errors = predicted_errors_s(vp, nav)
+        if errors.max(initial=0.0) > bound_s:
+            over_s = int(np.argmax(errors > bound_s)) * SCHEDULE_STEP_S
+            raise UserError(
+                f"vehicle {vp.vehicle_id} (sysid {vp.sysid}): with WP_ACC {nav.accel_mps2:g} and WP_JERK"
+                f" {nav.jerk_mps3:g} its short legs never reach their speed (ArduCopter plans each from rest"
+                f" over half its length): over the {bound_s:g} s bound {over_s:.0f} s into its route, up to"
+                f" {errors.max():.1f} s late; {_faster_ramp(vp, nav, bound_s)}"
+            )
+
+
+def _faster_ramp(vp: VehiclePlan, nav: WaypointNav, bound_s: float) -> str:
+    """What to do: the first of RAMP_TRIES (no lower than now) that flies ``vp`` on time, or plan anew."""
+    for accel, jerk in RAMP_TRIES:
+        if accel >= nav.accel_mps2 and jerk >= nav.jerk_mps3:
+            late_s = np.nan_to_num(
+                predicted_errors_s(vp, replace(nav, accel_mps2=accel, jerk_mps3=jerk))
+            ).max()
+            if late_s <= bound_s - RAMP_MARGIN_S:
+                values = f"WP_ACC {accel:g} and WP_JERK {jerk:g}"
+                return (
+                    f"{values} predict {late_s:.1f} s: set them (gcs-planner params set) or plan longer legs"
+                )
+    return "plan longer or slower legs"

@@ -37,9 +37,11 @@ from gcs_planner.flight.limits import (
     FlightLimits,
     check_limits,
     check_vertical,
+    check_waypoint_timing,
     read_limits,
     read_ramps,
     read_vertical,
+    read_waypoint_nav,
 )
 from gcs_planner.flight.ops import (
     TrackRecorder,
@@ -107,6 +109,7 @@ class FlightStrategy(Protocol):
     start_bound_m: float  # the pre-flight gate's loosest bound (0: each vehicle's own)
     speed_factor: float  # missions may fly up to this x the planned top speed (the limits check)
     limit_hint: str  # what to do when a vehicle's limits refuse the plan ("": nothing to add)
+    schedule_bound_s: float  # the along-track time error a vehicle may fly [s] (inf: not judged on it)
     climb_into_route: bool  # fixed wings start their route as soon as they are up
 
     def check(self, vehicles: VehicleSource) -> None:
@@ -275,9 +278,11 @@ class Flight:
         self.limits = await read_limits(link, self.sysids, self.quirks)
         self.ramps = {} if self.vehicles.simulated else await read_ramps(link, self.sysids, self.quirks)
         vertical = {} if self.vehicles.simulated else await read_vertical(link, self.sysids, self.quirks)
+        navs = await read_waypoint_nav(link, self.sysids, self.quirks, self.ramps, vertical)
         try:
             check_limits(self.plan.vehicles, self.limits, strategy.speed_factor)
             check_vertical(self.plan.vehicles, vertical, strategy.speed_factor)
+            check_waypoint_timing(self.plan.vehicles, navs, strategy.schedule_bound_s)
         except UserError as exc:
             raise UserError(f"{exc} ({strategy.limit_hint})" if strategy.limit_hint else str(exc)) from None
         await self._check_starts()

@@ -153,6 +153,7 @@ class StaticPlan:
 
     def __init__(self, scenario: Scenario, plan: Plan, options: FlyOptions) -> None:
         self.scenario, self.plan, self.options = scenario, plan, options
+        self.schedule_bound_s = options.max_schedule_error_s
 
     def check(self, vehicles: VehicleSource) -> None:
         check_flight(self.plan)

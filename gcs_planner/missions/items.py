@@ -78,6 +78,7 @@ __all__ = [
     "deg_to_e7",
     "e7",
     "half_away",
+    "mission_waypoints",
     "plan_to_items",
     "rally_items",
     "round_half_away",
@@ -131,9 +132,8 @@ def plan_to_items(
             field="waypoints",
         )
     fixed_wing = vp.vehicle_type == "fixed_wing"
-    if not fixed_wing:
-        vp = replace(vp, **_corners(vp))
-        wps = vp.waypoints
+    vp = replace(vp, **mission_waypoints(vp))
+    wps = vp.waypoints
     lat, lon, _ = enu_to_geodetic(wps[:, 0], wps[:, 1], wps[:, 2], origin)
     lat_e7, lon_e7 = deg_to_e7(lat).tolist(), deg_to_e7(lon).tolist()  # python ints
 
@@ -186,6 +186,14 @@ def plan_to_items(
     items = [_renumbered(item, i, current=int(i == 0)) for i, item in enumerate(items)]
     validate_items(items)
     return items
+
+
+def mission_waypoints(vp: VehiclePlan) -> dict[str, np.ndarray]:
+    """The waypoints, times and speeds ``vp``'s mission holds: a multirotor's runs of short legs
+    made corners (module docstring, Corners), a fixed wing's as planned."""
+    if vp.vehicle_type == "fixed_wing":
+        return {"waypoints": vp.waypoints, "times_s": vp.times_s, "speeds_mps": vp.speeds_mps}
+    return _corners(vp)
 
 
 def _corners(vp: VehiclePlan) -> dict[str, np.ndarray]:

@@ -282,6 +282,7 @@ class CoalitionRun(ABC):
     speed_factor = LEG_SPEED_FACTOR  # live legs fly up to this x cruise
     limit_hint = "missions/coalition_sitl.toml is the paper scenario sized for SITL's stock plane"
     climb_into_route = False  # every plane loiters up until all routes start at once
+    schedule_bound_s = math.inf  # judged on its strikes' arrival times instead
 
     def _simulate(self, scenario: Scenario, options: HilOptions) -> int:
         """Run the event simulation; its awards to fly and the window. The seed used."""
