@@ -153,3 +153,7 @@ def test_a_plan_whose_short_legs_arducopter_flies_late_is_refused_before_anythin
     assert len(err) == 1 and "Traceback" not in err[0], err
     assert re.search(r"with WP_ACC 2\.5 and WP_JERK 1 its short legs never reach their speed", err[0]), err[0]
     assert re.search(r"WP_ACC [\d.]+ and WP_JERK [\d.]+ predict \d\.\d s", err[0]), err[0]
+    assert main(["fly", str(scenario), "--homes"]) == 0  # what to start a SITL fleet with
+    note = capsys.readouterr().err
+    stock = r"stock WP_ACC 2\.5 / WP_JERK 1 the plan's short legs put uav\d \d\.\d s late \(bound 3 s\)"
+    assert re.search(stock + r"; set WP_ACC [\d.]+ and WP_JERK [\d.]+ \(fly checks them\)", note), note

@@ -37,6 +37,6 @@ FAMILY = ArduCopter(
     stores_as_received=frozenset({0, 2}),  # MissionItemProtocol_Waypoints / _Rally replace_item
     ramp_params=("WP_ACC", "WP_JERK", 1.0),  # AC_WPNav (4.7+; WPNAV_ACCEL [cm/s^2] before)
     vertical_params=("WP_SPD_UP", "WP_SPD_DN"),  # AC_WPNav (4.7+; WPNAV_SPEED_UP / _DN [cm/s] before)
-    waypoint_nav_params=("WP_ACC_Z", "WP_RADIUS_M", "WP_ACC_C", "ATC_INPUT_TC"),  # AC_WPNav, AC_Attitude
+    waypoint_nav_params=("WP_ACC_Z", "WP_RADIUS_M", "WP_ACC_CNR", "ATC_INPUT_TC"),  # AC_WPNav, AC_Attitude
     start_latency_s=1.0,  # SITL copters move ~0.5-1 s after MISSION_START (docs/real-autopilots.md)
 )

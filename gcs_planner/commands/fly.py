@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from tqdm import tqdm
@@ -36,9 +37,10 @@ from gcs_planner.core.validation import (
     output_dir,
 )
 from gcs_planner.flight import FlyOptions, check_flight, check_networks, end_summary, fly, networks
-from gcs_planner.flight.limits import planned_vertical_mps
+from gcs_planner.flight.limits import faster_ramp, planned_vertical_mps, predicted_errors_s
 from gcs_planner.flight.starts import format_homes, starts
 from gcs_planner.flight.vehicles import ConnectedVehicles, mock_vehicles
+from gcs_planner.geometry.scurve import WaypointNav
 from gcs_planner.mavlink.transfer import Timing
 from gcs_planner.model.plan import Plan
 from gcs_planner.model.scenario import Scenario
@@ -202,6 +204,28 @@ def _climb_notes(plan: Plan) -> None:
     )
 
 
+def _ramp_note(plan: Plan, bound_s: float) -> None:
+    """One line on stderr when ArduCopter's stock WP_ACC / WP_JERK would fly a multirotor later than
+    ``bound_s`` (flight.limits.check_waypoint_timing), naming the values that would not."""
+    copters = [vp for vp in plan.vehicles if vp.vehicle_type == "multirotor"]
+    climb = max((max(planned_vertical_mps(vp)) for vp in copters), default=0.0)
+    stock = WaypointNav()
+    nav = replace(stock, climb_mps=max(stock.climb_mps, climb), descent_mps=max(stock.descent_mps, climb))
+    late = [(predicted_errors_s(vp, nav).max(initial=0.0), vp.vehicle_id) for vp in copters]
+    if not late or max(late)[0] <= bound_s:
+        return
+    worst_s, worst_by = max(late)
+    found = faster_ramp(copters, nav, bound_s)
+    what = (
+        "plan longer or slower legs" if found is None else f"set WP_ACC {found[0]:g} and WP_JERK {found[1]:g}"
+    )
+    print(
+        f"note: at ArduCopter's stock WP_ACC {stock.accel_mps2:g} / WP_JERK {stock.jerk_mps3:g} the plan's"
+        f" short legs put {worst_by} {worst_s:.1f} s late (bound {bound_s:g} s); {what} (fly checks them)",
+        file=sys.stderr,
+    )
+
+
 def run(args: argparse.Namespace) -> int:
     out = output_dir(args.out, "-o")
     if args.live:
@@ -213,6 +237,7 @@ def run(args: argparse.Namespace) -> int:
     if args.homes:
         print(format_homes(starts(plan.vehicles, plan.origin), None))
         _climb_notes(plan)
+        _ramp_note(plan, args.max_schedule_error)
         return 0
     drift = _drift(args.drift, [v.sysid for v in plan.vehicles])
     check_flight(plan)  # every mission, before anything is written or sent

@@ -46,8 +46,8 @@ from gcs_planner.safety.conformance import (
 
 __all__ = [
     "FlightLimits", "VerticalLimits", "check_limits", "check_vertical", "check_waypoint_timing",
-    "planned_vertical_mps", "predicted_errors_s", "read_l1_params", "read_limits", "read_ramps",
-    "read_vertical", "read_waypoint_nav",
+    "faster_ramp", "planned_vertical_mps", "predicted_errors_s", "read_l1_params", "read_limits",
+    "read_ramps", "read_vertical", "read_waypoint_nav",
 ]  # fmt: skip
 
 log = logging.getLogger(__name__)
@@ -264,16 +264,24 @@ def check_waypoint_timing(plans: Sequence[VehiclePlan], navs: dict[int, Waypoint
             )
 
 
-def _faster_ramp(vp: VehiclePlan, nav: WaypointNav, bound_s: float) -> str:
-    """What to do: the first of RAMP_TRIES (no lower than now) that flies ``vp`` on time, or plan anew."""
+def faster_ramp(
+    plans: Sequence[VehiclePlan], nav: WaypointNav, bound_s: float
+) -> tuple[float, float, float] | None:
+    """The first of RAMP_TRIES (none below ``nav``'s) that flies every plan within ``bound_s`` less
+    RAMP_MARGIN_S: (WP_ACC, WP_JERK, the worst lateness it predicts [s]); None if none does."""
     for accel, jerk in RAMP_TRIES:
         if accel >= nav.accel_mps2 and jerk >= nav.jerk_mps3:
-            late_s = np.nan_to_num(
-                predicted_errors_s(vp, replace(nav, accel_mps2=accel, jerk_mps3=jerk))
-            ).max()
+            faster = replace(nav, accel_mps2=accel, jerk_mps3=jerk)
+            late_s = max(predicted_errors_s(vp, faster).max(initial=0.0) for vp in plans)
             if late_s <= bound_s - RAMP_MARGIN_S:
-                values = f"WP_ACC {accel:g} and WP_JERK {jerk:g}"
-                return (
-                    f"{values} predict {late_s:.1f} s: set them (gcs-planner params set) or plan longer legs"
-                )
-    return "plan longer or slower legs"
+                return accel, jerk, late_s
+    return None
+
+
+def _faster_ramp(vp: VehiclePlan, nav: WaypointNav, bound_s: float) -> str:
+    """What to do about ``vp``: the ramp that flies it on time (faster_ramp), or plan anew."""
+    found = faster_ramp([vp], nav, bound_s)
+    if found is None:
+        return "plan longer or slower legs"
+    accel, jerk, late_s = found
+    return f"WP_ACC {accel:g} and WP_JERK {jerk:g} predict {late_s:.1f} s: set them or plan longer legs"

@@ -8,7 +8,7 @@ short to reach its speed within its first half peaks lower. A climbing or descen
 speed and acceleration whose horizontal and vertical parts keep WP_SPD, WP_SPD_UP / _DN, WP_ACC and
 WP_ACC_Z (``kinematic_limit``). The next leg starts once this one is braking and has no longer to
 run than the next one's ramp, and only when the turn's midpoint lies within WP_RADIUS_M of the
-waypoint, below both legs' speeds and within the corner (WP_ACC_C, 2 WP_ACC by default) and
+waypoint, below both legs' speeds and within the corner (WP_ACC_CNR, 2 WP_ACC by default) and
 vertical accelerations (``advance_target_along_track``); the two legs' motions then add up.
 
 Checked against ArduCopter SITL 4.8.0-dev (docs/real-autopilots.md, "Verified by hand"): on legs of
@@ -39,7 +39,7 @@ class WaypointNav:
     descent_mps: float = 1.5  # WP_SPD_DN
     accel_z_mps2: float = 1.0  # WP_ACC_Z
     radius_m: float = 2.0  # WP_RADIUS_M
-    corner_accel_mps2: float = 0.0  # WP_ACC_C (0: twice WP_ACC)
+    corner_accel_mps2: float = 0.0  # WP_ACC_CNR (0: twice WP_ACC)
     input_tc_s: float = 0.15  # ATC_INPUT_TC
 
     @property
