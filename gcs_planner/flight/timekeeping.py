@@ -10,16 +10,14 @@ along-track error over ``horizon_s``.
 
 Choices: no command while a route's start ramp lasts (``settle_s`` after its planned start): the
 route starts early by its ramp's loss (flight.ops.accel_lead_s), so on the ramp the vehicle is
-first ahead of the plan and then behind it by design. Reacting to that slowed ArduCopter SITL to
-6.5 m/s on its ramp, then pushed it to 11 m/s, and the 7 m/s asked when it overshot froze the next
-68.9 m leg at 7-7.7 m/s (AC_WPNav plans each leg's S-curve at the speed asked when the leg is
-loaded): 3.2 s late (docs/real-autopilots.md). Progress is the arc length of the nearest
-planned-path point, searched only ahead of the last progress (paths may cross themselves); the
-commanded speed is clamped to [``min_factor``, ``max_factor``] x the planned speed there, and to
-the vehicle's own speed range where it has one (``limit``: ArduPlane refuses an airspeed outside
-it and keeps the old one); a new command is sent only when it differs from the last by more than
-``deadband_mps`` (set-points are periodic, so a lost one is replaced by the next rather than
-retried).
+first ahead of the plan and then behind it by design; correcting that made ArduCopter overshoot
+into a slow-down that its next leg kept to its end (docs/real-autopilots.md). Progress is the
+arc length of the nearest planned-path point, searched only ahead of the last progress (paths may
+cross themselves); the commanded speed is clamped to [``min_factor``, ``max_factor``] x the
+planned speed there, and to the vehicle's own speed range where it has one (``limit``: ArduPlane
+refuses an airspeed outside it and keeps the old one); a new command is sent only when it differs
+from the last by more than ``deadband_mps`` (set-points are periodic, so a lost one is replaced
+by the next rather than retried).
 """
 
 from __future__ import annotations

@@ -11,10 +11,8 @@ run than the next one's ramp, and only when the turn's midpoint lies within WP_R
 waypoint, below both legs' speeds and within the corner (WP_ACC_CNR, 2 WP_ACC by default) and
 vertical accelerations (``advance_target_along_track``); the two legs' motions then add up.
 
-Checked against ArduCopter SITL 4.8.0-dev (docs/real-autopilots.md, "Verified by hand"): on legs of
-20-160 m with 20- and 60-degree turns, at WP_ACC / WP_JERK 2.5 / 1 and 5 / 5, the time from one
-waypoint to the next came out within 0.16 s of SITL's. The vehicle's own lag behind the target,
-and a top speed under WP_SPD (SITL's 10.3 m/s at its 30-degree lean), are not modelled.
+This is the autopilot's target, checked leg by leg against SITL (tests/test_scurve.py); the
+vehicle's lag behind it and a top speed under WP_SPD are not modelled.
 """
 
 from __future__ import annotations
