@@ -19,6 +19,7 @@ import argparse
 import asyncio
 import sys
 import time
+from collections.abc import Awaitable
 
 from gcs_planner.autopilots import Conventions, quirks_for
 from gcs_planner.commands._mission_cli import (
@@ -107,10 +108,10 @@ async def _start(args: argparse.Namespace, source: UploadSource | None) -> int:
             if mode is not None:
                 steps.append((f"mode {mode}", lambda: command.set_mode(mode)))
 
-            timeout_s = args.arm_timeout
-            steps.append(
-                ("arm", lambda: arm_when_ready(link, status, args.sysid, timeout_s, waiting=_say_waiting))
-            )
+            def arm() -> Awaitable[None]:
+                return arm_when_ready(link, status, args.sysid, args.arm_timeout, waiting=_say_waiting)
+
+            steps.append(("arm", arm))
         armed_here = not args.no_arm
         steps.append(("mission start", lambda: start_or_disarm(command, status, armed_here)))
         for name, step in steps:
