@@ -1,15 +1,15 @@
 """ArduCopter's waypoint legs as it flies them: the S-curve of each leg and the hand-over at corners.
 
 ArduCopter (AC_WPNav, AP_Math/SCurve.cpp) plans every straight leg on its own, from rest at its
-start to rest at its end: the speed rises on a jerk-limited ramp (raised-cosine jerk edges of
-``tj`` = WP_JERK pi / (2 snap), snap = WP_JERK pi / (2 ATC_INPUT_TC) / 2), holds, and falls back
-on the mirror ramp (``SCurve::add_segments``: ``calculate_path`` over half the leg), so a leg too
-short to reach its speed within its first half peaks lower. A climbing or descending leg takes the
-speed and acceleration whose horizontal and vertical parts keep WP_SPD, WP_SPD_UP / _DN, WP_ACC and
-WP_ACC_Z (``kinematic_limit``). The next leg starts once this one is braking and has no longer to
-run than the next one's ramp, and only when the turn's midpoint lies within WP_RADIUS_M of the
-waypoint, below both legs' speeds and within the corner (WP_ACC_CNR, 2 WP_ACC by default) and
-vertical accelerations (``advance_target_along_track``); the two legs' motions then add up.
+start to rest at its end: the speed rises on a jerk-limited ramp (raised-cosine jerk edges,
+``WaypointNav.jerk_edge_s``), holds, and falls back on the mirror ramp (``SCurve::add_segments``:
+``calculate_path`` over half the leg), so a leg too short to reach its speed within its first
+half peaks lower. A climbing or descending leg takes the speed and acceleration whose horizontal
+and vertical parts keep WP_SPD, WP_SPD_UP / _DN, WP_ACC and WP_ACC_Z (``kinematic_limit``). The
+next leg starts once this one is braking and has no longer to run than the next one's ramp, and
+only when the turn's midpoint lies within WP_RADIUS_M of the waypoint, below both legs' speeds and
+within the corner (WP_ACC_CNR, 2 WP_ACC by default) and vertical accelerations
+(``advance_target_along_track``); the two legs' motions then add up.
 
 This is the autopilot's target, checked leg by leg against SITL (tests/test_scurve.py); the
 vehicle's lag behind it and a top speed under WP_SPD are not modelled.
@@ -42,9 +42,10 @@ class WaypointNav:
 
     @property
     def jerk_edge_s(self) -> float:
-        """``tj``: how long the jerk takes to rise (AC_WPNav::calc_scurve_jerk_and_snap)."""
-        snap = self.jerk_mps3 * math.pi / (2.0 * max(self.input_tc_s, 0.1)) * 0.5
-        return self.jerk_mps3 * math.pi / (2.0 * snap)
+        """``tj``: how long the jerk takes to rise. AC_WPNav::calc_scurve_jerk_and_snap sets the snap
+        to WP_JERK pi / (2 max(ATC_INPUT_TC, 0.1)) / 2 and tj = WP_JERK pi / (2 snap): twice the
+        time constant, whatever the jerk (the snap's cap by ATC_ACCEL_R_MAX is far above it)."""
+        return 2.0 * max(self.input_tc_s, 0.1)
 
 
 @dataclass
