@@ -132,9 +132,13 @@ class StartResult:
     start (``start_error``, then disarmed again); ``ok`` when it flies its mission."""
 
     sysid: int
-    ok: bool
     arm_error: UserError | None = None
     start_error: UserError | None = None
+    started: bool = True  # False: another vehicle did not arm, so none started
+
+    @property
+    def ok(self) -> bool:
+        return self.started and self.start_error is None
 
 
 async def start_fleet(
@@ -188,8 +192,8 @@ async def start_fleet(
                 arm_errors.update(await each(arm_one, [s for s in sysids if not link.vehicles[s].armed]))
         if any(arm_errors.values()):
             await asyncio.gather(*(commands[s].disarm() for s in sysids if arm_errors[s] is None))
-            return {s: StartResult(s, False, arm_error=arm_errors[s]) for s in sysids}
+            return {s: StartResult(s, arm_error=arm_errors[s], started=False) for s in sysids}
         start_errors = await each(lambda s: start_or_disarm(commands[s], status, arm), sysids)
     finally:
         status.close()
-    return {s: StartResult(s, start_errors[s] is None, start_error=start_errors[s]) for s in sysids}
+    return {s: StartResult(s, start_error=start_errors[s]) for s in sysids}
