@@ -106,6 +106,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--per-network", type=int, default=250, help="vehicles per MAVLink network (one process each) [250]"
     )
+    p.add_argument(
+        "--scurve-legs",
+        action="store_true",
+        help="ArduCopters fly their waypoints as ArduCopter does, each leg an S-curve from rest to rest"
+        " (AC_WPNav / SCurve.cpp), and serve its stock WP_ACC, WP_JERK, WP_ACC_Z, WP_RADIUS_M, WP_ACC_CNR"
+        " and ATC_INPUT_TC (default: the mock's own kinematics at its airframe's acceleration)",
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return p
 
@@ -120,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--per-network must be in 1..254, got {args.per_network}")
     if 0 < args.base_port < 1024:
         parser.error(f"--base-port {args.base_port} is a privileged port: use 0 (ephemeral) or 1024..65535")
+    if args.scurve_legs and (args.profile, args.vehicle_type) != ("ardupilot", "multirotor"):
+        parser.error("--scurve-legs are ArduCopter's: they need --profile ardupilot --type multirotor")
     if args.homes and args.home:
         parser.error("--homes gives each vehicle its home: no --home")
     try:
@@ -131,6 +140,7 @@ def main(argv: list[str] | None = None) -> int:
             host=args.host, faults=faults, rate_hz=args.rate,
             signing_key=key_from_passphrase(args.signing_passphrase) if args.signing_passphrase else None,
             transport="tcp" if args.tcp else "udpclient" if args.out else "udpin", gcs=args.out,
+            flight={"scurve_legs": True} if args.scurve_legs else None,
         )  # fmt: skip
         if args.vehicles > args.per_network:
             if args.tcp or args.out:

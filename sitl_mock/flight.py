@@ -44,6 +44,7 @@ import numpy as np
 
 from sitl_mock.geodesy import wrap_pi
 from sitl_mock.l1 import L1Plane, l1_lateral_accel
+from sitl_mock.wpnav import WaypointNav
 
 __all__ = ["AIRFRAMES", "Airframe", "Arrival", "Guidance", "Kinematics", "climb_run_m"]
 
@@ -55,6 +56,7 @@ K_CIRCLE = 2.0  # loiter circle radial correction gain [-]
 GROUND_TOL_M = 0.05  # touchdown when within this height of the ground
 ALT_TOL_M = 0.5  # takeoff reaches its altitude within this tolerance
 LINE_MIN_H_M = 1.0  # below this horizontal distance to the target a leg is flown as a vertical move
+RESPONSE_TAU_S = 0.8  # TRACK: the airframe's acceleration lags the demand (fitted to ArduCopter SITL)
 
 
 @dataclass(frozen=True)
@@ -123,6 +125,7 @@ class Guidance(IntEnum):
     HOLD = 3  # hold at the target: hover, or circle at loiter radius
     CLIMB = 4  # take off: climb to the target altitude (fixed wing: on the current heading)
     LAND = 5  # go to the target's horizontal position, then descend to the ground
+    TRACK = 6  # fly the row's waypoint navigation (sitl_mock.wpnav: ArduCopter's S-curve legs)
 
 
 class Arrival(IntEnum):
@@ -133,10 +136,11 @@ class Arrival(IntEnum):
     RADIUS_2D = 2  # within the acceptance radius horizontally, or (fixed wing) past the target
     ALTITUDE = 3  # reached the target altitude (takeoff)
     LANDED = 4  # on the ground
+    TRACKED = 5  # the row's waypoint navigation says its destination is reached
 
 
-_IDLE, _GOTO, _PASS, _HOLD, _CLIMB, _LAND = (int(g) for g in Guidance)
-_A_NONE, _A_3D, _A_2D, _A_ALT, _A_LANDED = (int(a) for a in Arrival)
+_IDLE, _GOTO, _PASS, _HOLD, _CLIMB, _LAND, _TRACK = (int(g) for g in Guidance)
+_A_NONE, _A_3D, _A_2D, _A_ALT, _A_LANDED, _A_TRACKED = (int(a) for a in Arrival)
 
 
 class Kinematics:
@@ -175,6 +179,9 @@ class Kinematics:
         self.wind = np.zeros((n, 3))
         self.drift = np.zeros((n, 3))
         self.offset = np.zeros((n, 3))
+        self.wpnav: dict[int, WaypointNav] = {}  # rows that fly ArduCopter's S-curve legs in TRACK
+        self.tracked = np.zeros(n, dtype=bool)  # TRACK: the row's destination is reached
+        self.track_accel = np.zeros((n, 3))  # TRACK: the airframe's acceleration [m/s^2]
 
     # --- commands (per vehicle, from the mission logic) ---------------------------------------
     def command(
@@ -201,9 +208,18 @@ class Kinematics:
         self.mode[i] = mode
         self.target[i] = target
         self.arrival[i] = arrival
+        self.tracked[i] = False
+        if mode != _TRACK:
+            self.track_accel[i] = 0.0
         self.corner_speed[i] = corner_speed_mps
         if accept_radius_m is not None:
             self.accept_r[i] = accept_radius_m
+
+    def set_speed(self, i: int, speed_mps: float) -> None:
+        """Vehicle i's commanded horizontal speed (a DO_CHANGE_SPEED), also to its waypoint navigation."""
+        self.speed_cmd[i] = speed_mps
+        if i in self.wpnav:
+            self.wpnav[i].set_speed(speed_mps)
 
     def place(self, i: int, pos_m: np.ndarray) -> None:
         """Put vehicle i at rest on the ground at ``pos_m`` (reboot, reset)."""
@@ -243,13 +259,15 @@ class Kinematics:
             | ((a == _A_2D) & ((dist_h2 <= r2) | passed))
             | ((a == _A_ALT) & (z >= self.target[:, 2] - ALT_TOL_M))
             | ((a == _A_LANDED) & (z <= self.ground_z + GROUND_TOL_M))
+            | ((a == _A_TRACKED) & self.tracked)
         )
 
     # --- dynamics -----------------------------------------------------------------------------
     def step(self, dt_s: float) -> None:
         """Advance every vehicle by ``dt_s`` seconds."""
         active = self.mode != _IDLE
-        mr = active & ~self.is_fw
+        tracking = self.mode == _TRACK
+        mr = active & ~self.is_fw & ~tracking
         fw = active & self.is_fw
         if mr.any():
             self._step_multirotor(_rows(mr), dt_s)
@@ -260,6 +278,8 @@ class Kinematics:
             self.vel[idle] = 0.0
             self.turn_rate[idle] = 0.0
         air = (self.pos[:, 2] > self.ground_z + GROUND_TOL_M)[:, None]
+        for i in np.flatnonzero(tracking):
+            self._step_tracking(int(i), dt_s, bool(air[i, 0]))
         self.pos += (self.vel + self.wind * air) * dt_s
         if self.drift.any():
             self.offset += self.drift * air * dt_s
@@ -316,6 +336,26 @@ class Kinematics:
         self.roll[m] = -np.arctan(left / G_MPS2)
         self.turn_rate[m] = wrap_pi(psi - old_psi) / dt_s
         self.psi[m] = psi
+
+    def _step_tracking(self, i: int, dt_s: float, airborne: bool) -> None:
+        """Row i follows its waypoint navigation's target: the position controller's acceleration
+        demand, reached with the lag of the airframe's response (RESPONSE_TAU_S)."""
+        nav = self.wpnav[i]
+        wind = self.wind[i] * airborne
+        ground = self.vel[i] + wind
+        nav.update(dt_s, self.pos[i], ground)
+        self.tracked[i] = nav.reached_destination
+        accel = self.track_accel[i]
+        accel += (nav.acceleration(self.pos[i], ground) - accel) * min(1.0, dt_s / RESPONSE_TAU_S)
+        vel = ground + accel * dt_s - wind
+        old_psi = self.psi[i]
+        psi = np.arctan2(vel[1], vel[0]) if np.hypot(vel[0], vel[1]) > 0.3 else old_psi
+        fwd = accel[0] * np.cos(psi) + accel[1] * np.sin(psi)
+        left = accel[1] * np.cos(psi) - accel[0] * np.sin(psi)
+        self.vel[i] = vel
+        self.pitch[i], self.roll[i] = -np.arctan(fwd / G_MPS2), -np.arctan(left / G_MPS2)
+        self.turn_rate[i] = wrap_pi(psi - old_psi) / dt_s
+        self.psi[i] = psi
 
     def _step_fixed_wing(self, m: np.ndarray | slice, dt_s: float) -> None:
         pos, tgt, mode = self.pos[m], self.target[m], self.mode[m]

@@ -282,9 +282,12 @@ class Navigator:
             hold_s = max(item.param1, 0.0)
             passing = af.kind == "fixed_wing" or (hold_s == 0 and self._next_nav_is_waypoint(seq))
             arrival = Arrival.RADIUS_2D if af.kind == "fixed_wing" else Arrival.RADIUS_3D
-            corner = self._corner_speed(seq, target, radius) if passing else np.inf
             self._wait(lambda: self._reached_then(seq, hold_s))
-            kin.command(i, Guidance.PASS if passing else Guidance.GOTO, target, arrival, radius, corner)
+            if i in kin.wpnav:
+                self._track(seq, target, passing)
+            else:
+                corner = self._corner_speed(seq, target, radius) if passing else np.inf
+                kin.command(i, Guidance.PASS if passing else Guidance.GOTO, target, arrival, radius, corner)
         elif cmd == NAV_DELAY:
             self.hold()
             self._after(max(item.param1, 0.0), lambda: self._item_done(seq))
@@ -314,7 +317,7 @@ class Navigator:
             elif round(item.param1) == 0 and not self._airspeed_allowed(item.param2):
                 pass  # outside the plane's airspeed range: ignored (FlightRules.airspeed_range)
             elif item.param2 > 0:
-                kin.speed_cmd[i] = float(np.clip(item.param2, af.min_speed_mps, af.max_speed_mps))
+                kin.set_speed(i, float(np.clip(item.param2, af.min_speed_mps, af.max_speed_mps)))
             self._item_done(seq)
         else:
             self._emit_text(f"Skipping unsupported mission command {cmd}")
@@ -358,6 +361,20 @@ class Navigator:
         self.seq += 1
         self._emit_progress()
         self._execute()
+
+    def _track(self, seq: int, target: np.ndarray, passing: bool) -> None:
+        """Fly to waypoint ``seq`` on the vehicle's S-curve navigation (ArduCopter ModeAuto::wp_start
+        and set_next_wp): from rest where it is unless it has just reached the last destination,
+        and with the next waypoint preloaded when it passes through this one."""
+        kin, i = self.world.kin, self.i
+        nav = kin.wpnav[i]
+        if kin.mode[i] != Guidance.TRACK or not nav.reached_destination:
+            nav.init(kin.pos[i], float(kin.speed_cmd[i]))
+        nav.set_destination(target)
+        if passing:
+            nxt = next(k for k in range(seq + 1, self.last_seq + 1) if self.items[k].command in NAV_COMMANDS)
+            nav.set_destination_next(self._target(nxt))
+        kin.command(i, Guidance.TRACK, target, Arrival.TRACKED)
 
     def _next_nav_is_waypoint(self, seq: int) -> bool:
         for item in self.items[seq + 1 : self.last_seq + 1]:

@@ -124,6 +124,7 @@ class _PlanFleet:
     (fleet ids, gcs_planner.mavlink.networks)."""
 
     simulated = True
+    own_parameters = False  # tuned to the plan: the flight takes accel_mps2
 
     def __init__(self, fleets: list, airframes: dict[int, Airframe], speedup: float | None):
         self.fleets, self.airframes = fleets, airframes
@@ -185,7 +186,11 @@ class MockVehicles(_PlanFleet):
         origin: HomeLike,
         speedup: float | None = None,
         autopilot: str = "ardupilot",
+        scurve_legs: bool = False,
+        params: dict[str, float] | None = None,
     ) -> None:
+        """``scurve_legs``: multirotors fly ArduCopter's S-curve legs (FlightRules.scurve_legs);
+        ``params``: values every vehicle serves instead of its own, as SITL's --defaults file."""
         airframes, specs = {}, []
         for vp in plans:
             frame, run_m = airframe_for(vp), 0.0
@@ -195,10 +200,12 @@ class MockVehicles(_PlanFleet):
             airframes[vp.sysid] = frame
             specs.append(
                 dict(sysid=vp.sysid, home=_home(vp, origin, run_m), vehicle_type=vp.vehicle_type,
-                     profile=autopilot, airframe=frame)
+                     profile=autopilot, airframe=frame, params=params)
             )  # fmt: skip
         networks = _networks(specs)
-        options = dict(home=origin, **_fleet_options(speedup))
+        options = dict(
+            home=origin, flight={"scurve_legs": True} if scurve_legs else None, **_fleet_options(speedup)
+        )
         if speedup is None:
             fleets = [MockFleet(vehicles=n, **options) for n in networks]
         elif len(networks) == 1:
@@ -207,6 +214,7 @@ class MockVehicles(_PlanFleet):
             zero = time.monotonic()
             fleets = [MockFleetProcess(vehicles=n, clock_zero_s=zero, **options) for n in networks]
         super().__init__(fleets, airframes, speedup)
+        self.own_parameters = scurve_legs
 
 
 class MockVehiclesProcess(_PlanFleet):

@@ -91,6 +91,11 @@ class FlightRules:
         PX4 multicopter_autonomous_params.c MPC_Z_V_AUTO_UP / _DN, 3 / 1.5): a multirotor without
         an airframe of its own climbs and sinks at the defaults; the mock serves the rates it flies
         (sitl_mock.flight: slower over ground along a leg steeper than they allow).
+    scurve_legs: a multirotor flies its mission's waypoints as ArduCopter does, each leg an S-curve
+        from rest to rest blended at the corners (sitl_mock.wpnav, from AC_WPNav / SCurve.cpp), and
+        serves ArduCopter's stock WP_ACC, WP_JERK, WP_ACC_Z, WP_RADIUS_M, WP_ACC_CNR and
+        ATC_INPUT_TC, which it flies by (a PARAM_SET changes the legs planned after it). Off by
+        default: the mock's own kinematics, at its airframe's acceleration, fly the waypoints.
     """
 
     name: str
@@ -115,6 +120,7 @@ class FlightRules:
     ramp_params: tuple[str, str] | None = None
     vertical_params: tuple[str, str] | None = None
     stock_vertical_mps: tuple[float, float] | None = None
+    scurve_legs: bool = False
 
 
 ARDUCOPTER_FLIGHT = FlightRules(

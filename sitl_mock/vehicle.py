@@ -51,6 +51,8 @@ from sitl_mock.mission_server import MissionServer
 from sitl_mock.param_server import ParamServer, stock_params
 from sitl_mock.profiles import PROFILES
 from sitl_mock.world import World
+from sitl_mock.wpnav import STOCK_PARAMS as WP_STOCK_PARAMS
+from sitl_mock.wpnav import WaypointNav
 
 __all__ = ["DEFAULT_HOME", "MockVehicle", "VehicleState"]
 
@@ -160,6 +162,7 @@ class MockVehicle:
         flight: dict | None = None,
         transport: str = "udpin",
         gcs: tuple[str, int] | None = None,
+        params: dict[str, float] | None = None,
     ) -> None:
         _check_identity(sysid, profile, vehicle_type, port, transport, gcs)
         self.transport, self.gcs = transport, (None if gcs is None else (gcs[0], gcs[1]))
@@ -180,6 +183,10 @@ class MockVehicle:
             sysid, self._on_message, faults or LinkFaults(), COMPID, self._on_new_peer, signing_key
         )
         self._init_params()
+        for name, value in (params or {}).items():  # as a SITL's --defaults file
+            if name not in self.params:
+                raise ValueError(f"vehicle {sysid} has no parameter {name!r} to set")
+            self.params[name] = float(value)
         self.streams: set[int] | None = set() if self.flight.streams_by_request else None  # None: all
         self.intervals: dict[int, float] = {}  # message id -> requested interval [s of vehicle time]
         self._offered: dict[int, int] = {}  # message id -> times the fleet's stream offered it
@@ -219,7 +226,9 @@ class MockVehicle:
                                ROLL_LIMIT_DEG=math.degrees(af.max_bank_rad),
                                NAVL1_PERIOD=af.l1.period_s if af.l1 else 0.0,
                                RLL2SRV_TCONST=af.l1.roll_tau_s if af.l1 else 0.0)  # fmt: skip
-        if self.flight.ramp_params and self.airframe.kind == "multirotor":  # the ramp it flies
+        if self.scurve_legs:  # ArduCopter's stock values, which its legs fly by
+            self.params.update(WP_STOCK_PARAMS)
+        elif self.flight.ramp_params and self.airframe.kind == "multirotor":  # the ramp it flies
             accel, jerk = self.flight.ramp_params
             self.params.update({accel: self.airframe.accel_mps2, jerk: UNLIMITED_JERK_MPS3})
         if self.flight.vertical_params and self.airframe.kind == "multirotor":  # the climb it flies
@@ -278,7 +287,18 @@ class MockVehicle:
             self.mission_server.home = MissionItem(
                 seq=0, frame=0, command=16, x=round(h.lat_deg * 1e7), y=round(h.lon_deg * 1e7), z=h.alt_m
             )
+        if self.scurve_legs:
+            world.kin.wpnav[index] = WaypointNav(self.params)
         self.boot_sim_s = world.sim_time_s
+
+    @property
+    def scurve_legs(self) -> bool:
+        """Whether it flies ArduCopter's S-curve waypoint legs (FlightRules.scurve_legs)."""
+        return (
+            self.flight.scurve_legs
+            and self.flight.name == "ArduCopter"
+            and self.airframe.kind == "multirotor"
+        )
 
     async def start(self) -> None:
         await self.link.open(self.host, self.port, self.transport, self.gcs)
@@ -679,7 +699,7 @@ class MockVehicle:
         if round(p1) == 0 and not self.airspeed_allowed(p2):
             return CommandResult.FAILED
         af = self.airframe
-        self._world.kin.speed_cmd[self.index] = float(np.clip(p2, af.min_speed_mps, af.max_speed_mps))
+        self._world.kin.set_speed(self.index, float(np.clip(p2, af.min_speed_mps, af.max_speed_mps)))
         return CommandResult.ACCEPTED
 
     def _cmd_land(self, *_: float) -> CommandResult:

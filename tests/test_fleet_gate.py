@@ -135,24 +135,37 @@ def test_a_plan_climbing_faster_than_the_autopilot_will_is_refused_before_anythi
     )
 
 
-def test_a_plan_whose_short_legs_arducopter_flies_late_is_refused_before_anything_is_sent(tmp_path, capsys):
-    """swarm_small on ArduCopters with the climb it needs but stock WP_ACC 2.5 / WP_JERK 1: SITL
+def test_short_legs_arducopter_flies_late_are_refused_and_fly_with_the_values_offered(tmp_path, capsys):
+    """swarm_small on mock ArduCopters that fly their legs as ArduCopter does (``scurve_legs``: the
+    mock's own port of SCurve.cpp) at stock WP_ACC 2.5 / WP_JERK 1, with the climb it needs: SITL
     flew its ~45 m legs at 7.7 m/s and one vehicle 4.0 s late (docs/real-autopilots.md). The
-    parameters are read from the vehicles, the legs flown in advance, and the flight refused."""
+    parameters are read from the vehicles, the legs flown in advance, and the flight refused; the
+    values offered, set over MAVLink (`params set`), fly it."""
     scenario = Path(__file__).resolve().parents[1] / "missions" / "swarm_small.toml"
     plan = plan_scenario(load_scenario(scenario))
     homes = [{"home": s.home} for s in starts(plan.vehicles, plan.origin)]
-    served = {"WP_SPD_UP": 4.0, "WP_SPD_DN": 4.0, "WP_ACC": 2.5, "WP_JERK": 1.0}
-    with sitl_mock.MockFleet(vehicles=homes, speedup=10, flight=FAST) as fleet:
-        fleet.call(lambda: [v.params.update(served) for v in fleet.vehicles])
-        argv = ["fly", str(scenario), *connect_args(fleet), "--speedup", "10", "--max-schedule-error", "2.5",
-                "-o", str(tmp_path / "out")]  # fmt: skip
+    with sitl_mock.MockFleet(vehicles=homes, speedup=10, flight={**FAST, "scurve_legs": True}) as fleet:
+        served = fleet.call(lambda: [(v.params["WP_ACC"], v.params["WP_JERK"]) for v in fleet.vehicles])
+        assert served == [(2.5, 1.0)] * len(homes)  # ArduCopter's stock values, which they fly by
+        fleet.call(lambda: [v.params.update(WP_SPD_UP=4.0, WP_SPD_DN=4.0) for v in fleet.vehicles])
+        argv = ["fly", str(scenario), *connect_args(fleet), "--speedup", "10", "-o", str(tmp_path / "out")]
         assert main(argv) == 2
         assert nothing_armed_or_uploaded(fleet)
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "Traceback" not in err[0], err
-    assert re.search(r"with WP_ACC 2\.5 and WP_JERK 1 its short legs never reach their speed", err[0]), err[0]
-    assert re.search(r"WP_ACC [\d.]+ and WP_JERK [\d.]+ predict \d\.\d s", err[0]), err[0]
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "Traceback" not in err[0], err
+        assert re.search(r"with WP_ACC 2\.5 and WP_JERK 1 its short legs never reach their speed", err[0]), (
+            err[0]
+        )
+        offered = re.search(r"WP_ACC ([\d.]+) and WP_JERK ([\d.]+) predict \d\.\d s", err[0])
+        assert offered, err[0]
+        values = tmp_path / "offered.parm"
+        values.write_text(f"WP_ACC,{offered[1]}\nWP_JERK,{offered[2]}\n")
+        for vehicle, address in zip(fleet.vehicles, connect_args(fleet)[1::2], strict=True):
+            assert (
+                main(["params", "set", str(values), "--connect", address, "--sysid", str(vehicle.sysid)]) == 0
+            )
+        assert main(argv) == 0
+        assert "PASS: 5/5 vehicles conform" in capsys.readouterr().out
     assert main(["fly", str(scenario), "--homes"]) == 0  # what to start a SITL fleet with
     note = capsys.readouterr().err
     stock = r"stock WP_ACC 2\.5 / WP_JERK 1 the plan's short legs put uav\d \d\.\d s late \(bound 3 s\)"

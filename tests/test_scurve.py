@@ -7,28 +7,12 @@ import math
 
 import numpy as np
 import pytest
+from sitl_legs import SITL_LEG_S, inner_leg_times_s, zigzag
 
 from gcs_planner.core.errors import UserError
 from gcs_planner.flight.limits import check_waypoint_timing, predicted_errors_s
 from gcs_planner.geometry.scurve import WaypointNav, fly_legs
 from gcs_planner.model.plan import VehiclePlan
-
-LEGS_M = (150, 20, 30, 45, 60, 70, 90, 120, 160, 150)
-# SITL, one copter at 10 m/s from the hover through LEGS_M, headings alternating by the turn: the
-# time [s] between passing one waypoint and the next (docs/real-autopilots.md, 2026-12-06)
-SITL_LEG_S = {
-    (2.5, 1.0, 20.0): (4.67, 5.49, 6.23, 6.81, 7.14, 9.00, 11.99, 16.00),
-    (5.0, 5.0, 20.0): (2.77, 3.52, 4.56, 5.99, 6.99, 9.00, 12.00, 16.00),
-    (2.5, 1.0, 60.0): (4.64, 5.61, 6.84, 8.15, 9.03, 11.09, 14.07, 18.09),
-}
-
-
-def zigzag(turn_deg: float) -> np.ndarray:
-    points = [np.zeros(3)]
-    for k, length in enumerate(LEGS_M):
-        heading = math.radians(45.0 + (turn_deg / 2.0) * (1 if k % 2 == 0 else -1))
-        points.append(points[-1] + length * np.array([math.sin(heading), math.cos(heading), 0.0]))
-    return np.array(points)
 
 
 @pytest.mark.parametrize(("accel", "jerk", "turn"), list(SITL_LEG_S))
@@ -37,8 +21,7 @@ def test_leg_times_match_arducopter_sitl(accel, jerk, turn):
     ramps (20 m: +2.7 s over L / 10 at stock WP_ACC / WP_JERK), sharp corners wait for the turn."""
     waypoints = zigzag(turn)
     times, positions = fly_legs(waypoints, np.full(len(waypoints), 10.0), WaypointNav(accel, jerk, 4.0, 4.0))
-    passed = [times[int(np.linalg.norm(positions - w, axis=1).argmin())] for w in waypoints[1:]]
-    legs_s = np.diff(passed)[:-1]  # between the run-in's end and the run-out's start
+    legs_s = inner_leg_times_s(times, positions, waypoints)
     assert legs_s == pytest.approx(SITL_LEG_S[(accel, jerk, turn)], abs=0.2)
     assert np.linalg.norm(positions[-1] - waypoints[-1]) < 0.05  # it ends at rest on the last one
 

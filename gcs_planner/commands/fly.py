@@ -11,6 +11,7 @@ mission or breaks a separation, obstacle or cross-track bound. A coalition scena
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 from dataclasses import replace
@@ -48,6 +49,7 @@ from gcs_planner.planning import certify_plan, load_scenario, planner
 from gcs_planner.safety.conformance import MAX_SCHEDULE_ERROR_S, format_report
 
 WORKERS = number_flag(1, 255, whole=True)  # concurrent uploads: at most one per sysid
+MOCK_LEGS = ("tuned", "scurve")  # how mock multirotors fly their waypoints (--mock-legs)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -114,6 +116,21 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="SYSID:EAST:NORTH",
         help="mock fault: navigation drift [m/s] of one vehicle (repeatable)",
     )
+    p.add_argument(
+        "--mock-legs",
+        choices=MOCK_LEGS,
+        default="tuned",
+        help="how the mock multirotors fly their waypoints: 'tuned', the mock's own kinematics at an"
+        " acceleration tuned to the plan, or 'scurve', ArduCopter's S-curve legs at its stock WP_ACC /"
+        " WP_JERK, as SITL flies them (--autopilot ardupilot) [tuned]",
+    )
+    p.add_argument(
+        "--mock-param",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="a parameter every mock vehicle starts with, as a line of SITL's --defaults file (repeatable)",
+    )
 
 
 def build_parser_defaults(scenario: Path, out: str, speedup: float | None) -> argparse.Namespace:
@@ -126,7 +143,8 @@ def build_parser_defaults(scenario: Path, out: str, speedup: float | None) -> ar
 
 def _fly_coalition(args: argparse.Namespace) -> int:
     """A coalition scenario has no plan to upload up front: its awards are flown as they are made."""
-    given = {"--plan": args.plan, "--connect": args.connect, "--drift": args.drift, "--tlog": args.tlog}
+    given = {"--plan": args.plan, "--connect": args.connect, "--drift": args.drift, "--tlog": args.tlog,
+             "--mock-legs": args.mock_legs != "tuned", "--mock-param": args.mock_param}  # fmt: skip
     given["--in-flight"] = args.in_flight != Timing.window  # award uploads keep their own timing
     unsupported = [flag for flag, value in given.items() if value]
     if unsupported:
@@ -158,6 +176,24 @@ def _drift(values: list[str], sysids: list[int]) -> dict[int, tuple[float, float
         for v in (east, north):
             number(v, f"--drift {value!r}: speed", -MAX_SPEED_MPS, MAX_SPEED_MPS)
         out[sysid] = (east, north)
+    return out
+
+
+def _mock_params(args: argparse.Namespace) -> dict[str, float]:
+    """--mock-param NAME=VALUE values, each a finite number; only for the mock fleet."""
+    if args.connect and (args.mock_param or args.mock_legs != "tuned"):
+        raise UserError("--mock-legs and --mock-param set up the mock fleet: not with --connect")
+    if args.mock_legs == "scurve" and args.autopilot != Conventions.ARDUPILOT:
+        raise UserError(f"--mock-legs scurve flies ArduCopter's legs: not with --autopilot {args.autopilot}")
+    out = {}
+    for value in args.mock_param:
+        name, sep, number_text = value.partition("=")
+        try:
+            out[name] = float(number_text)
+        except ValueError:
+            out[name] = math.nan
+        if not (sep and name and math.isfinite(out[name])):
+            raise InputError(f"--mock-param must be NAME=VALUE with a finite number, got {value!r}")
     return out
 
 
@@ -240,22 +276,27 @@ def run(args: argparse.Namespace) -> int:
         _ramp_note(plan, args.max_schedule_error)
         return 0
     drift = _drift(args.drift, [v.sysid for v in plan.vehicles])
+    mock_params = _mock_params(args)
     check_flight(plan)  # every mission, before anything is written or sent
     check_feasible(plan, args.allow_infeasible)
     if args.connect and networks(plan) > 1:
         check_networks(plan, len(args.connect))
     say_ignored_tables(scenario)
+    if args.connect:
+        rate = 1.0 if args.speedup is None else args.speedup  # real vehicles: 1; SITL: its --speedup
+        vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1, speedup=rate)
+    else:
+        try:
+            vehicles = mock_vehicles("mock", plan.vehicles, origin=plan.origin, speedup=args.speedup,
+                                     autopilot=args.autopilot, scurve_legs=args.mock_legs == "scurve",
+                                     params=mock_params)  # fmt: skip
+        except ValueError as exc:
+            raise InputError(f"--mock-param: {exc}") from None
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise UserError(f"-o {str(out)!r}: cannot make the folder: {exc.strerror or exc}") from None
     plan.save(out / "plan.json")
-    if args.connect:
-        rate = 1.0 if args.speedup is None else args.speedup  # real vehicles: 1; SITL: its --speedup
-        vehicles = ConnectedVehicles(args.connect, per_network=networks(plan) > 1, speedup=rate)
-    else:
-        vehicles = mock_vehicles("mock", plan.vehicles, origin=plan.origin, speedup=args.speedup,
-                                 autopilot=args.autopilot)  # fmt: skip
     options = FlyOptions(
         out_dir=out,
         workers=args.workers,

@@ -276,8 +276,9 @@ class Flight:
         self.quirks = vehicle_quirks(link, self.sysids)
         await request_streams(link, self.sysids)
         self.limits = await read_limits(link, self.sysids, self.quirks)
-        self.ramps = {} if self.vehicles.simulated else await read_ramps(link, self.sysids, self.quirks)
-        vertical = {} if self.vehicles.simulated else await read_vertical(link, self.sysids, self.quirks)
+        own = self.vehicles.own_parameters
+        self.ramps = await read_ramps(link, self.sysids, self.quirks) if own else {}
+        vertical = await read_vertical(link, self.sysids, self.quirks) if own else {}
         navs = await read_waypoint_nav(link, self.sysids, self.quirks, self.ramps, vertical)
         try:
             check_limits(self.plan.vehicles, self.limits, strategy.speed_factor)

@@ -172,13 +172,12 @@ class StaticPlan:
             flight.vehicles.set_drift(sysid, *drift)
 
     def leads(self, flight: Flight) -> tuple[float, dict[int, float]]:
-        """Each route starts early by its acceleration lead (flight.ops.accel_lead_s): a mock at its
-        airframe's acceleration; a connected vehicle on the S-curve its own parameters give, after
-        its autopilot's start latency (docs/real-autopilots.md). Route time 0 after the largest."""
-        leads = {}
-        for vp in self.plan.vehicles:
-            latency_s = 0.0 if flight.vehicles.simulated else flight.quirks[vp.sysid].start_latency_s
-            leads[vp.sysid] = accel_lead_s(vp, *_ramp(flight, vp.sysid), latency_s)
+        """Each route starts early by its acceleration lead (flight.ops.accel_lead_s): a mock tuned to
+        the plan at its airframe's acceleration; a vehicle that flies by its own parameters on the
+        S-curve they give, after its autopilot's start latency (docs/real-autopilots.md). Route
+        time 0 after the largest."""
+        leads = {vp.sysid: accel_lead_s(vp, *_ramp(flight, vp.sysid), _latency_s(flight, vp.sysid))
+                 for vp in self.plan.vehicles}  # fmt: skip
         return max(leads.values()), leads
 
     async def fly(self, flight: Flight) -> None:
@@ -187,8 +186,11 @@ class StaticPlan:
         if self.options.keep_schedule:
             keeper = ScheduleKeeper()
             for vp in self.plan.vehicles:
-                ramp_s = ramp_loss_s(vp.first_leg_speed_mps, *_ramp(flight, vp.sysid))  # >= where it ends
-                keeper.add(vp, settle_s=ramp_s)
+                ramp = _ramp(flight, vp.sysid)
+                settle_s = ramp_loss_s(vp.first_leg_speed_mps, *ramp)  # >= where it ends
+                change = (keeper.max_factor - 1.0) * vp.first_leg_speed_mps  # its largest speed change
+                response_s = 2.0 * ramp_loss_s(change, *ramp) + _latency_s(flight, vp.sysid)
+                keeper.add(vp, settle_s, response_s)
             for sysid, lim in flight.limits.items():
                 keeper.limit(sysid, lim.min_mps, lim.max_mps)
         await wait_until_done(
@@ -239,9 +241,15 @@ class StaticPlan:
         )  # fmt: skip
 
 
+def _latency_s(flight: Flight, sysid: int) -> float:
+    """From a command to the vehicle moving by it: its autopilot's, where it flies by its own
+    parameters (AutopilotQuirks.start_latency_s), else none (a mock tuned to the plan)."""
+    return flight.quirks[sysid].start_latency_s if flight.vehicles.own_parameters else 0.0
+
+
 def _ramp(flight: Flight, sysid: int) -> tuple[float, float]:
-    """(acceleration, jerk) of the vehicle's speed ramps: a connected vehicle's own S-curve
-    parameters where it has them (limits.read_ramps), else its airframe's acceleration."""
-    if flight.vehicles.simulated or sysid not in flight.ramps:
+    """(acceleration, jerk) of the vehicle's speed ramps: its own S-curve parameters where it flies
+    by them and has them (limits.read_ramps), else its airframe's acceleration."""
+    if not flight.vehicles.own_parameters or sysid not in flight.ramps:
         return flight.vehicles.accel_mps2(sysid), math.inf
     return flight.ramps[sysid]

@@ -26,11 +26,16 @@ class VehicleSource(Protocol):
     """Vehicles for one flight. ``simulated``: they share one simulated clock (time_boot_ms) that
     runs ``speedup`` times faster than the flight's loop clock; real vehicles run at 1 on their
     own clocks. ``lockstep``: they run in the flight's own event loop, which must then be a
-    gcs_planner.core.lockstep.LockstepLoop (``lockstep.run``), so that one clock serves both sides."""
+    gcs_planner.core.lockstep.LockstepLoop (``lockstep.run``), so that one clock serves both sides.
+    ``own_parameters``: they fly their legs as their autopilot does, by the parameters they serve
+    (real vehicles, SITL, mocks with ArduCopter's S-curve legs): the flight reads those parameters
+    and leads each route's start by the autopilot's measured latency; otherwise (mocks tuned to the
+    plan) it takes ``accel_mps2``."""
 
     simulated: bool
     lockstep: bool
     speedup: float
+    own_parameters: bool
 
     async def __aenter__(self) -> list[list[str]]:
         """Start the vehicles (if this source runs them); the link URLs that reach each network
@@ -64,6 +69,7 @@ class ConnectedVehicles:
     the flight's own loop (a mock fleet a test treats as connected vehicles)."""
 
     simulated = False
+    own_parameters = True
     lag_events = 0
 
     def __init__(
@@ -99,6 +105,7 @@ class MixedVehicles:
     flight where they are."""
 
     simulated = False
+    own_parameters = True
 
     def __init__(self, mock: VehicleSource, connected: ConnectedVehicles, mock_sysids: set[int]) -> None:
         self.mock, self.connected, self.mock_sysids = mock, connected, mock_sysids
