@@ -16,6 +16,9 @@ Models (choices where the brief leaves them open):
   Pass-through waypoints: the vehicle slows to a corner speed ``sqrt(a r / tan(theta / 2))``
   (theta = turn to the next leg, r = acceptance radius; the navigator computes it), so the turn
   under the acceleration limit stays close to the corner, like ArduCopter's corner speed limit.
+- Multirotor in TRACK (``wpnav`` rows: ArduCopter's S-curve legs, sitl_mock.wpnav): the
+  position controller's demand towards the row's target, the acceleration lagging it by
+  ``RESPONSE_TAU_S`` (docs/sitl-mock.md, "ArduCopter's S-curve legs").
 - Fixed wing: constant airspeed (the commanded speed, clamped to [min, max]); heading rate
   limited to ``g tan(max_bank) / v``, which bounds the turn radius below by ``v^2 / (g tan
   max_bank)``; climb/sink rate limited, horizontal speed ``sqrt(v^2 - vz^2)``. Between

@@ -14,12 +14,15 @@ approximation written for the pre-flight check); neither imports the other.
 
 from __future__ import annotations
 
+import logging
 import math
 from enum import Enum
 
 import numpy as np
 
 __all__ = ["SCurve", "kinematic_limit"]
+
+log = logging.getLogger(__name__)
 
 SEG_INIT, SEG_ACCEL_MAX, SEG_ACCEL_END, SEG_SPEED_CHANGE_END, SEG_CONST, SEG_DECEL_END = 0, 4, 7, 14, 15, 22
 SEGMENTS_MAX = 23
@@ -139,10 +142,14 @@ class SCurve:
         )
         self.accel_z_max = abs(accel_z)
         if min(self.snap_max, self.jerk_max, self.accel_max, self.vel_max) <= 0:
-            raise ValueError("SCurve.calculate_track: a zero limit makes a zero-length path")
+            log.warning(
+                "SCurve.calculate_track: a zero limit leaves the leg of zero length, as SCurve.cpp does"
+            )
+            return
         self.add_segments(self.seg_length)
         if not self.valid():
-            raise ValueError("SCurve.calculate_track: invalid path")
+            log.warning("SCurve.calculate_track: invalid path; the leg is dropped, as SCurve.cpp does")
+            self.init()
 
     def set_speed_max(self, speed_xy: float, speed_up: float, speed_down: float) -> None:
         """Re-plan the rest of the leg for a new speed (a DO_CHANGE_SPEED in flight)."""
@@ -164,87 +171,103 @@ class SCurve:
             self.num_segs = self._add_segment(SEG_INIT, 0.0, SegmentType.CONSTANT_JERK, 0.0, 0.0, 0.0, 0.0)
             self.add_segments(p_end)
             return
+        self._start_from_now()
+        self._cut_acceleration(p_end)
+        self._change_speed()
+        self._brake(p_end, v_end)
+        if not self.valid():
+            log.warning("SCurve.set_speed_max: invalid path; the leg is dropped, as SCurve.cpp does")
+            self.init()
 
+    def _start_from_now(self) -> None:
+        """Make room for a speed change: one under way becomes the acceleration, and while cruising
+        the acceleration and speed change end here and now."""
+        seg = self.segment
         if seg[SEG_ACCEL_END].end_time <= self.time <= seg[SEG_SPEED_CHANGE_END].end_time:
-            # in the speed change: it becomes the acceleration, leaving room for another change
             seg[SEG_INIT].hold(seg[SEG_ACCEL_END], seg[SEG_ACCEL_END].end_accel)
             for i in range(SEG_INIT + 1, SEG_ACCEL_END + 1):
                 seg[i].copy_from(seg[i + 7])
             for i in range(SEG_ACCEL_END + 1, SEG_SPEED_CHANGE_END + 1):
                 seg[i].hold(seg[SEG_ACCEL_END])
         elif seg[SEG_SPEED_CHANGE_END].end_time < self.time <= seg[SEG_CONST].end_time:
-            # cruising: the acceleration and speed change end where it is now
             seg[SEG_INIT].hold(seg[SEG_SPEED_CHANGE_END])
             _, _, vt, pt = self.get_jerk_accel_vel_pos_at_time(self.time)
             for i in range(SEG_INIT + 1, SEG_SPEED_CHANGE_END + 1):
                 seg[i].set(self.time, SegmentType.CONSTANT_JERK, 0.0, 0.0, vt, pt)
 
-        accel_max_s = seg[SEG_ACCEL_MAX].end_time - seg[SEG_ACCEL_MAX - 1].end_time
-        if (
+    def _cut_acceleration(self, p_end: float) -> None:
+        """Still in the constant acceleration towards a higher speed: end the ramp as near the new
+        speed as it can, and plan the braking from there."""
+        seg = self.segment
+        if not (
             self.time <= seg[SEG_ACCEL_MAX].end_time
-            and accel_max_s > 0
+            and seg[SEG_ACCEL_MAX].end_time - seg[SEG_ACCEL_MAX - 1].end_time > 0
             and self.vel_max < seg[SEG_ACCEL_END].end_vel
             and seg[SEG_ACCEL_MAX].end_accel > 0
         ):
-            # still in the constant acceleration: stop the ramp as near the new speed as it can
-            v_start = seg[SEG_INIT].end_vel
-            v_min = seg[SEG_ACCEL_END].end_vel - seg[SEG_ACCEL_MAX].end_accel * (
-                seg[SEG_ACCEL_MAX].end_time - max(self.time, seg[SEG_ACCEL_MAX - 1].end_time)
-            )
-            jm, tj, t2, t4, t6 = self.calculate_path(
-                self.snap_max, self.jerk_max, v_start, self.accel_max, max(v_min, self.vel_max), p_end * 0.5
-            )
-            i = self._add_segments_jerk(SEG_INIT + 1, tj, jm, t2)
-            i = self._add_segment_const_jerk(i, t4, 0.0)
-            self._add_segments_jerk(i, tj, -jm, t6)
-            seg[SEG_ACCEL_END].end_accel = 0.0
-            for i in range(SEG_ACCEL_END + 1, SEG_CONST + 1):
-                seg[i].hold(seg[SEG_ACCEL_END])
-            jm, tj, t2, t4, t6 = self.calculate_path(
-                self.snap_max, self.jerk_max, 0.0, self.accel_max, max(v_min, self.vel_max), p_end * 0.5
-            )
-            i = self._add_segments_jerk(SEG_CONST + 1, tj, -jm, t6)
-            i = self._add_segment_const_jerk(i, t4, 0.0)
-            self._add_segments_jerk(i, tj, jm, t2)
-            seg[SEG_DECEL_END].end_accel = 0.0
-            seg[SEG_DECEL_END].end_vel = max(0.0, seg[SEG_DECEL_END].end_vel)
-            self._stretch_cruise(p_end)
+            return
+        v_min = seg[SEG_ACCEL_END].end_vel - seg[SEG_ACCEL_MAX].end_accel * (
+            seg[SEG_ACCEL_MAX].end_time - max(self.time, seg[SEG_ACCEL_MAX - 1].end_time)
+        )
+        speed = max(v_min, self.vel_max)
+        jm, tj, t2, t4, t6 = self.calculate_path(
+            self.snap_max, self.jerk_max, seg[SEG_INIT].end_vel, self.accel_max, speed, p_end * 0.5
+        )
+        i = self._add_segments_jerk(SEG_INIT + 1, tj, jm, t2)
+        i = self._add_segment_const_jerk(i, t4, 0.0)
+        self._add_segments_jerk(i, tj, -jm, t6)
+        seg[SEG_ACCEL_END].end_accel = 0.0
+        for i in range(SEG_ACCEL_END + 1, SEG_CONST + 1):
+            seg[i].hold(seg[SEG_ACCEL_END])
+        jm, tj, t2, t4, t6 = self.calculate_path(
+            self.snap_max, self.jerk_max, 0.0, self.accel_max, speed, p_end * 0.5
+        )
+        i = self._add_segments_jerk(SEG_CONST + 1, tj, -jm, t6)
+        i = self._add_segment_const_jerk(i, t4, 0.0)
+        self._add_segments_jerk(i, tj, jm, t2)
+        seg[SEG_DECEL_END].end_accel = 0.0
+        seg[SEG_DECEL_END].end_vel = max(0.0, seg[SEG_DECEL_END].end_vel)
+        self._stretch_cruise(p_end)
 
+    def _change_speed(self) -> None:
+        """The speed change segments (8-14) from the acceleration's end speed to the new one, where
+        the cruise is long enough for them."""
+        seg = self.segment
         for i in range(SEG_ACCEL_END + 1, SEG_SPEED_CHANGE_END + 1):
             seg[i].hold(seg[SEG_ACCEL_END])
         v_accel_end = seg[SEG_ACCEL_END].end_vel
-        if not math.isclose(self.vel_max, v_accel_end, abs_tol=1e-6):
-            length = seg[SEG_CONST].end_pos - seg[SEG_ACCEL_END].end_pos
-            jm = tj = t2 = t4 = t6 = 0.0
-            # SCurve.cpp writes powf(x, 1/3), an integer 1/3 = 0: the first term is always 1 s
-            jerk_time = min(1.0, self.jerk_max * math.pi / (2 * self.snap_max))
-            if self.vel_max < v_accel_end and jerk_time * 12.0 < length / v_accel_end:
-                jm, tj, t6, t4, t2 = self.calculate_path(
-                    self.snap_max, self.jerk_max, self.vel_max, self.accel_max, v_accel_end, length * 0.5
-                )
-                jm = -jm
-            elif self.vel_max > v_accel_end and length / (jerk_time * 12.0) > v_accel_end:
-                vm = min(self.vel_max, length / (jerk_time * 12.0))
-                jm, tj, t2, t4, t6 = self.calculate_path(
-                    self.snap_max, self.jerk_max, v_accel_end, self.accel_max, vm, length * 0.5
-                )
-            if jm != 0 and min(t2, t4, t6) >= 0:
-                i = self._add_segments_jerk(SEG_ACCEL_END + 1, tj, jm, t2)
-                i = self._add_segment_const_jerk(i, t4, 0.0)
-                self._add_segments_jerk(i, tj, -jm, t6)
-                seg[SEG_SPEED_CHANGE_END].end_accel = 0.0
+        if math.isclose(self.vel_max, v_accel_end, abs_tol=1e-6):
+            return
+        length = seg[SEG_CONST].end_pos - seg[SEG_ACCEL_END].end_pos
+        jm = tj = t2 = t4 = t6 = 0.0
+        # SCurve.cpp writes powf(x, 1/3), an integer 1/3 = 0: the first term is always 1 s
+        jerk_time = min(1.0, self.jerk_max * math.pi / (2 * self.snap_max))
+        if self.vel_max < v_accel_end and jerk_time * 12.0 < length / v_accel_end:
+            jm, tj, t6, t4, t2 = self.calculate_path(
+                self.snap_max, self.jerk_max, self.vel_max, self.accel_max, v_accel_end, length * 0.5
+            )
+            jm = -jm
+        elif self.vel_max > v_accel_end and length / (jerk_time * 12.0) > v_accel_end:
+            vm = min(self.vel_max, length / (jerk_time * 12.0))
+            jm, tj, t2, t4, t6 = self.calculate_path(
+                self.snap_max, self.jerk_max, v_accel_end, self.accel_max, vm, length * 0.5
+            )
+        if jm != 0 and min(t2, t4, t6) >= 0:
+            i = self._add_segments_jerk(SEG_ACCEL_END + 1, tj, jm, t2)
+            i = self._add_segment_const_jerk(i, t4, 0.0)
+            self._add_segments_jerk(i, tj, -jm, t6)
+            seg[SEG_SPEED_CHANGE_END].end_accel = 0.0
 
+    def _brake(self, p_end: float, v_end: float) -> None:
+        """The braking segments from the new cruise speed to ``v_end`` at ``p_end``."""
+        seg = self.segment
         v_end = min(v_end, seg[SEG_SPEED_CHANGE_END].end_vel)
         i = self._add_segment_const_jerk(SEG_CONST, 0.0, 0.0)
         if v_end < seg[SEG_SPEED_CHANGE_END].end_vel:
             jm, tj, t2, t4, t6 = self.calculate_path(
-                self.snap_max,
-                self.jerk_max,
-                v_end,
-                self.accel_max,
-                seg[SEG_CONST].end_vel,
+                self.snap_max, self.jerk_max, v_end, self.accel_max, seg[SEG_CONST].end_vel,
                 p_end - seg[SEG_CONST].end_pos,
-            )
+            )  # fmt: skip
             i = self._add_segments_jerk(i, tj, -jm, t6)
             i = self._add_segment_const_jerk(i, t4, 0.0)
             self._add_segments_jerk(i, tj, jm, t2)
@@ -254,8 +277,6 @@ class SCurve:
         seg[SEG_DECEL_END].end_accel = 0.0
         seg[SEG_DECEL_END].end_vel = max(0.0, seg[SEG_DECEL_END].end_vel)
         self._stretch_cruise(p_end)
-        if not self.valid():
-            raise ValueError("SCurve.set_speed_max: invalid path")
 
     def _stretch_cruise(self, p_end: float) -> None:
         """Lengthen the cruise so that the leg ends at ``p_end`` ("add to constant velocity segment")."""
@@ -294,8 +315,8 @@ class SCurve:
     ) -> tuple[float, float, float, float, float]:
         """(Jm, tj, t2, t4, t6): the jerk and the durations of the S-curve from ``v0`` towards ``vm``
         over ``length`` with snap ``sm`` (raised-cosine edges), jerk ``jm``, acceleration ``am``."""
-        if min(sm, jm, am, vm, length) <= 0:
-            raise ValueError("SCurve.calculate_path: invalid inputs")
+        if min(sm, jm, am, vm, length) <= 0:  # SCurve.cpp flags an internal error and returns zeros
+            return 0.0, 0.0, 0.0, 0.0, 0.0
         if v0 >= vm:
             return 0.0, 0.0, 0.0, 0.0, 0.0
         tj = jm * math.pi / (2 * sm)
@@ -328,7 +349,7 @@ class SCurve:
                 t2 = am / jm - tj  # solution 7
                 t4, t6 = max(_t4(jm, v0, am, vm, length, tj), 0.0), t2
         if not all(math.isfinite(x) and x >= 0 for x in (jm, tj, t2, t4, t6)):
-            raise ValueError("SCurve.calculate_path: invalid outputs")
+            return 0.0, tj, 0.0, 0.0, 0.0  # as SCurve.cpp: no jerk, no segments
         return jm, tj, t2, t4, t6
 
     def _add_segments_jerk(self, index: int, tj: float, jm: float, tcj: float) -> int:

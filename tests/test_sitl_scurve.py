@@ -4,6 +4,8 @@ and AC_WPNav) against ArduCopter SITL, and flown by mock vehicles with ``scurve_
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -160,3 +162,13 @@ def test_bad_mock_options_are_refused_in_one_line_before_anything_is_written(tmp
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0] and "Traceback" not in err[0], err
     assert not out.exists()
+
+
+def test_sitl_mock_scurve_legs_are_arducopter_only():
+    refused = subprocess.run(
+        [sys.executable, "-m", "sitl_mock.cli", "--scurve-legs", "--profile", "px4"],
+        capture_output=True,
+        text=True,
+    )
+    assert refused.returncode == 2 and "--scurve-legs are ArduCopter's" in refused.stderr, refused.stderr
+    assert "Traceback" not in refused.stderr

@@ -187,12 +187,12 @@ def _mock_params(args: argparse.Namespace) -> dict[str, float]:
         raise UserError(f"--mock-legs scurve flies ArduCopter's legs: not with --autopilot {args.autopilot}")
     out = {}
     for value in args.mock_param:
-        name, sep, number_text = value.partition("=")
+        name, _, text = value.partition("=")
         try:
-            out[name] = float(number_text)
+            out[name] = float(text)
         except ValueError:
             out[name] = math.nan
-        if not (sep and name and math.isfinite(out[name])):
+        if not name or not math.isfinite(out[name]):
             raise InputError(f"--mock-param must be NAME=VALUE with a finite number, got {value!r}")
     return out
 
