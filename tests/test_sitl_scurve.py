@@ -172,3 +172,49 @@ def test_sitl_mock_scurve_legs_are_arducopter_only():
     )
     assert refused.returncode == 2 and "--scurve-legs are ArduCopter's" in refused.stderr, refused.stderr
     assert "Traceback" not in refused.stderr
+
+
+@pytest.mark.parametrize(("accel", "jerk"), [(2.5, 1.0), (3.5, 2.0)])
+def test_the_clients_model_and_the_mocks_port_pass_swarm_small_waypoints_together(accel, jerk):
+    """Two S-curve implementations that share no code: the client's (geometry.scurve, sampled, for
+    the pre-flight check) and the mock's (a port of SCurve.cpp's closed forms) put the target at
+    every waypoint of swarm_small's missions within 0.15 s of each other."""
+    from gcs_planner.geometry.scurve import WaypointNav as ClientNav
+    from gcs_planner.geometry.scurve import fly_legs
+    from gcs_planner.missions.items import mission_waypoints
+    from gcs_planner.planning import load_scenario, plan_scenario
+
+    for vp in plan_scenario(load_scenario(SWARM_SMALL)).vehicles:
+        route = mission_waypoints(vp)
+        waypoints = route["waypoints"][
+            np.r_[True, np.linalg.norm(np.diff(route["waypoints"], axis=0), axis=1) > 1e-3]
+        ]
+        client_t, client_p = fly_legs(
+            waypoints, np.full(len(waypoints), 10.0), ClientNav(accel, jerk, 4.0, 4.0)
+        )
+        nav = WaypointNav(params(WP_ACC=accel, WP_JERK=jerk))
+        nav.init(waypoints[0], 10.0)
+        k, t, times, positions = 0, 0.0, [0.0], [waypoints[0]]
+        while k < len(waypoints) - 1:
+            if k == 0 or nav.reached_destination:
+                k += 1
+                nav.set_destination(waypoints[k])
+                if k + 1 < len(waypoints):
+                    nav.set_destination_next(waypoints[k + 1])
+            position, _, _ = nav.update(0.01, *nav.target[:2])
+            t += 0.01
+            times.append(t)
+            positions.append(position)
+        while not nav.reached_destination:
+            position, _, _ = nav.update(0.01, *nav.target[:2])
+            t += 0.01
+            times.append(t)
+            positions.append(position)
+        times, positions = np.array(times), np.array(positions)
+        for w in waypoints[1:-1]:  # passed at speed
+            mock_s = times[np.linalg.norm(positions - w, axis=1).argmin()]
+            client_s = client_t[np.linalg.norm(client_p - w, axis=1).argmin()]
+            assert mock_s == pytest.approx(client_s, abs=0.15), vp.vehicle_id
+        stopped = [t[np.argmax(np.linalg.norm(p - waypoints[-1], axis=1) < 0.1)] for t, p in
+                   ((times, positions), (client_t, client_p))]  # fmt: skip
+        assert stopped[0] == pytest.approx(stopped[1], abs=0.15), vp.vehicle_id  # within 10 cm of the end
