@@ -99,19 +99,6 @@ class SCurve:
         self.seg_delta = np.zeros(3)
         self.seg_length = 0.0
 
-    def copy(self) -> SCurve:
-        other = SCurve()
-        for mine, theirs in zip(self.segment, other.segment, strict=True):
-            theirs.copy_from(mine)
-        other.snap_max, other.jerk_max, other.accel_max = self.snap_max, self.jerk_max, self.accel_max
-        other.accel_z_max, other.vel_max, other.time = self.accel_z_max, self.vel_max, self.time
-        other.num_segs, other.seg_delta, other.seg_length = (
-            self.num_segs,
-            self.seg_delta.copy(),
-            self.seg_length,
-        )
-        return other
-
     # --- planning -----------------------------------------------------------------------------
     def calculate_track(
         self,
@@ -358,62 +345,26 @@ class SCurve:
         return self._add_segment_decr_jerk(index, tj, jm)
 
     def _add_segment_const_jerk(self, index: int, tj: float, j0: float) -> int:
-        p = self.segment[index - 1]
-        if tj <= 0:
-            return self._add_segment(
-                index, p.end_time, SegmentType.CONSTANT_JERK, j0, p.end_accel, p.end_vel, p.end_pos
-            )
-        return self._add_segment(
-            index,
-            p.end_time + tj,
-            SegmentType.CONSTANT_JERK,
-            j0,
-            p.end_accel + j0 * tj,
-            p.end_vel + p.end_accel * tj + 0.5 * j0 * tj * tj,
-            p.end_pos + p.end_vel * tj + 0.5 * p.end_accel * tj * tj + j0 * tj**3 / 6.0,
-        )
+        return self._add_profile(index, tj, j0, SegmentType.CONSTANT_JERK)
 
     def _add_segment_incr_jerk(self, index: int, tj: float, jm: float) -> int:
-        p = self.segment[index - 1]
-        if tj <= 0:
-            return self._add_segment(
-                index, p.end_time, SegmentType.CONSTANT_JERK, 0.0, p.end_accel, p.end_vel, p.end_pos
-            )
-        beta, alpha = math.pi / tj, jm * 0.5
-        at = alpha * tj
-        vt = alpha * (tj * tj * 0.5 - 2.0 / beta**2)
-        pt = alpha * (-tj / beta**2 + tj**3 / 6.0)
-        return self._add_segment(
-            index,
-            p.end_time + tj,
-            SegmentType.POSITIVE_JERK,
-            jm,
-            p.end_accel + at,
-            p.end_vel + p.end_accel * tj + vt,
-            p.end_pos + p.end_vel * tj + 0.5 * p.end_accel * tj * tj + pt,
-        )
+        return self._add_profile(index, tj, jm, SegmentType.POSITIVE_JERK)
 
     def _add_segment_decr_jerk(self, index: int, tj: float, jm: float) -> int:
+        return self._add_profile(index, tj, jm, SegmentType.NEGATIVE_JERK)
+
+    def _add_profile(self, index: int, tj: float, jm: float, kind: SegmentType) -> int:
+        """Segment ``index``: ``tj`` of jerk ``kind`` from where the one before ends (its end values
+        are the profile's at ``tj``, which are SCurve.cpp's add_segment_* formulas); none long,
+        a copy of that end (constant jerk, the raised-cosine ones' jerk 0)."""
         p = self.segment[index - 1]
         if tj <= 0:
+            jerk = jm if kind == SegmentType.CONSTANT_JERK else 0.0
             return self._add_segment(
-                index, p.end_time, SegmentType.CONSTANT_JERK, 0.0, p.end_accel, p.end_vel, p.end_pos
+                index, p.end_time, SegmentType.CONSTANT_JERK, jerk, p.end_accel, p.end_vel, p.end_pos
             )
-        beta, alpha = math.pi / tj, jm * 0.5
-        at = alpha * tj
-        vt = alpha * (tj * tj * 0.5 - 2.0 / beta**2)
-        pt = alpha * (-tj / beta**2 + tj**3 / 6.0)
-        a2t, v2t = jm * tj, jm * tj * tj
-        p2t = alpha * (-2.0 * tj / beta**2 + 4.0 * tj**3 / 3.0)
-        return self._add_segment(
-            index,
-            p.end_time + tj,
-            SegmentType.NEGATIVE_JERK,
-            jm,
-            p.end_accel - at + a2t,
-            p.end_vel - vt + (p.end_accel - at) * tj + v2t,
-            p.end_pos - pt + (p.end_vel - vt) * tj + 0.5 * (p.end_accel - at) * tj * tj + p2t,
-        )
+        _, a, v, pos = _PROFILES[kind](tj, tj, jm, p.end_accel, p.end_vel, p.end_pos)
+        return self._add_segment(index, p.end_time + tj, kind, jm, a, v, pos)
 
     def _add_segment(
         self,
@@ -538,19 +489,9 @@ class SCurve:
             kind, jm, tj = s.seg_type, s.jerk_ref, s.end_time - p.end_time
             t0, a0, v0, p0 = p.end_time, p.end_accel, p.end_vel, p.end_pos
         t = time_now - t0
-        if kind == SegmentType.CONSTANT_JERK:
-            j, a, v, pos = (
-                jm,
-                a0 + jm * t,
-                v0 + a0 * t + 0.5 * jm * t * t,
-                p0 + v0 * t + 0.5 * a0 * t * t + jm * t**3 / 6.0,
-            )
-        elif tj <= 0:
-            j, a, v, pos = 0.0, a0, v0, p0
-        elif kind == SegmentType.POSITIVE_JERK:
-            j, a, v, pos = _incr_jerk(t, tj, jm, a0, v0, p0)
-        else:
-            j, a, v, pos = _decr_jerk(t, tj, jm, a0, v0, p0)
+        if kind != SegmentType.CONSTANT_JERK and tj <= 0:
+            return 0.0, a0, v0, max(0.0, p0)
+        j, a, v, pos = _PROFILES[kind](t, tj, jm, a0, v0, p0)
         return j, a, v, max(0.0, pos)
 
 
@@ -596,6 +537,19 @@ def _decr_jerk(
         + alpha / 6.0 * u**3
         + alpha / beta**3 * math.sin(beta * u),
     )
+
+
+def _const_jerk(
+    t: float, tj: float, jm: float, a0: float, v0: float, p0: float
+) -> tuple[float, float, float, float]:
+    return jm, a0 + jm * t, v0 + a0 * t + 0.5 * jm * t * t, p0 + v0 * t + 0.5 * a0 * t * t + jm * t**3 / 6.0
+
+
+_PROFILES = {
+    SegmentType.CONSTANT_JERK: _const_jerk,
+    SegmentType.POSITIVE_JERK: _incr_jerk,
+    SegmentType.NEGATIVE_JERK: _decr_jerk,
+}  # (t, tj, jm, a0, v0, p0) -> (jerk, acceleration, speed, distance) t into a segment
 
 
 def _t4(jm: float, v0: float, am: float, vm: float, length: float, tj: float) -> float:

@@ -4,13 +4,12 @@ What AC_WPNav does with the legs of sitl_mock.scurve: `init` where the copter ho
 (``wp_and_spline_init_m``: jerk and snap from WP_JERK and ATC_INPUT_TC), `set_destination`
 (``set_wp_destination_NED_m``: the leg preloaded by `set_destination_next` becomes this one, its
 motion so far kept), `set_speed` (``set_speed_NE_ms``: this leg and the next re-planned) and
-`update` (``advance_wp_target_along_track``: the position target after ``dt``; a fast waypoint is
-reached half way through its turn, the last one at its end within WP_RADIUS_M).
-
-The copter flies its target exactly: the position controller's lag and the time scaling that
-slows the target when the copter falls behind (``_track_dt_scalar``) are not modelled. Limits are
-read from the vehicle's parameters when a leg is planned, so a PARAM_SET of WP_ACC changes the
-next leg, as on the autopilot; WP_JERK and ATC_INPUT_TC apply from the next `init`.
+`update` (``advance_wp_target_along_track``: the position target after ``dt``, its time slowed
+while the copter trails it; a fast waypoint is reached half way through its turn, the last one at
+its end within WP_RADIUS_M). `acceleration` is AC_PosControl's demand to follow that target; the
+airframe's response to it is sitl_mock.flight's. Limits are read from the vehicle's parameters
+when a leg is planned, so a PARAM_SET of WP_ACC changes the next leg, as on the autopilot;
+WP_JERK and ATC_INPUT_TC apply from the next `init`.
 """
 
 from __future__ import annotations
@@ -48,14 +47,7 @@ class WaypointNav:
 
     def __init__(self, params: Mapping[str, float]) -> None:
         self.params = params  # the vehicle's own, read live
-        self.prev_leg, self.this_leg, self.next_leg = SCurve(), SCurve(), SCurve()
-        self.origin = self.destination = np.zeros(3)
-        self.speed_xy = 0.0
-        self.jerk_max = self.snap_max = 0.0
-        self.fast_waypoint = False
-        self.reached_destination = True
-        self.track_dt_scalar = 1.0
-        self.target = [np.zeros(3), np.zeros(3), np.zeros(3)]  # position, velocity, acceleration
+        self.init(np.zeros(3), 0.0)
 
     def init(self, stopping_point: np.ndarray, speed_mps: float) -> None:
         """Start from rest at ``stopping_point`` at horizontal speed ``speed_mps``."""
@@ -68,12 +60,11 @@ class WaypointNav:
         if accel_rp_radss > 0:
             snap = min(snap, accel_rp_radss * G_MPS2)
         self.snap_max = 0.5 * snap
-        for leg in (self.prev_leg, self.this_leg, self.next_leg):
-            leg.init()
+        self.prev_leg, self.this_leg, self.next_leg = SCurve(), SCurve(), SCurve()
         self.reached_destination, self.fast_waypoint = True, False
         self.origin = self.destination = np.asarray(stopping_point, dtype=float).copy()
         self.track_dt_scalar = 1.0
-        self.target = [self.origin.copy(), np.zeros(3), np.zeros(3)]
+        self.target = [self.origin.copy(), np.zeros(3), np.zeros(3)]  # position, velocity, acceleration
 
     def set_destination(self, destination: np.ndarray) -> None:
         """Fly from the last destination to ``destination``."""
