@@ -169,4 +169,6 @@ def test_short_legs_arducopter_flies_late_are_refused_and_fly_with_the_values_of
     assert main(["fly", str(scenario), "--homes"]) == 0  # what to start a SITL fleet with
     note = capsys.readouterr().err
     stock = r"stock WP_ACC 2\.5 / WP_JERK 1 the plan's short legs put uav\d \d\.\d s late \(bound 3 s\)"
-    assert re.search(stock + r"; set WP_ACC [\d.]+ and WP_JERK [\d.]+ \(fly checks them\)", note), note
+    offered = r"; set WP_ACC ([\d.]+) and WP_JERK ([\d.]+) \(fly checks them; `fly --mock-legs scurve"
+    offered += r" --mock-param WP_ACC=\1 --mock-param WP_JERK=\2` flies that on mock ArduCopters\)"
+    assert re.search(stock + offered, note), note

@@ -252,12 +252,16 @@ def _ramp_note(plan: Plan, bound_s: float) -> None:
         return
     worst_s, worst_by = max(late)
     found = faster_ramp(copters, nav, bound_s)
-    what = (
-        "plan longer or slower legs" if found is None else f"set WP_ACC {found[0]:g} and WP_JERK {found[1]:g}"
-    )
+    what = "plan longer or slower legs"
+    if found is not None:
+        accel, jerk = f"{found[0]:g}", f"{found[1]:g}"
+        what = (
+            f"set WP_ACC {accel} and WP_JERK {jerk} (fly checks them; `fly --mock-legs scurve --mock-param"
+            f" WP_ACC={accel} --mock-param WP_JERK={jerk}` flies that on mock ArduCopters)"
+        )
     print(
         f"note: at ArduCopter's stock WP_ACC {stock.accel_mps2:g} / WP_JERK {stock.jerk_mps3:g} the plan's"
-        f" short legs put {worst_by} {worst_s:.1f} s late (bound {bound_s:g} s); {what} (fly checks them)",
+        f" short legs put {worst_by} {worst_s:.1f} s late (bound {bound_s:g} s); {what}",
         file=sys.stderr,
     )
 
