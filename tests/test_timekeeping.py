@@ -49,3 +49,14 @@ def test_no_command_while_the_start_ramp_lasts():
     assert keeper.speed_command(1, -1.0, np.array([5.0, 0.0, 20.0])) is None  # 5 m ahead, before the start
     assert keeper.speed_command(1, 2.9, np.array([20.0, 0.0, 20.0])) is None  # 9 m behind, still on its ramp
     assert keeper.speed_command(1, 3.1, np.array([27.0, 0.0, 20.0])) == pytest.approx(12.0)  # 4 m behind
+
+
+def test_an_error_is_removed_over_the_vehicles_response_where_that_is_longer():
+    """A copter that takes 4 s to reach a new speed (ArduCopter's S-curve re-plan) is asked for half
+    the correction a 2 s horizon gives, so that it is not asked again before it has answered."""
+    keeper = ScheduleKeeper(horizon_s=2.0)
+    keeper.add(_route(speed=10.0), response_s=4.0)
+    assert keeper.speed_command(1, 1.0, np.array([6.0, 0.0, 20.0])) == pytest.approx(11.0)  # 4 m behind
+    quick = ScheduleKeeper(horizon_s=2.0)
+    quick.add(_route(speed=10.0), response_s=1.0)  # faster than the horizon: the horizon stands
+    assert quick.speed_command(1, 1.0, np.array([6.0, 0.0, 20.0])) == pytest.approx(12.0)

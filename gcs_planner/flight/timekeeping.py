@@ -8,9 +8,8 @@ path the vehicle is, compares that with where the plan says it should be at this
 commands a ground speed (MAV_CMD_DO_CHANGE_SPEED, param1 = 1 ground speed) that removes the
 along-track error over ``horizon_s``, or over the vehicle's own response time where that is longer
 (``add(response_s=...)``): ArduCopter re-plans a leg's speed on a jerk-limited S-curve that takes
-3-4 s to settle, and a keeper that asks again before then overshoots into an oscillation (the
-mock's ArduCopter legs: swarm_small 1.8 s late and two vehicles 2.6 m apart at 2 s, within 1.3 s
-and 11.2 m at 3-6 s; docs/real-autopilots.md).
+3-4 s to settle, and a keeper that asks again before then overshoots into an oscillation
+(docs/sitl-mock.md, "ArduCopter's S-curve legs").
 
 Choices: no command while a route's start ramp lasts (``settle_s`` after its planned start): the
 route starts early by its ramp's loss (flight.ops.accel_lead_s), so on the ramp the vehicle is
