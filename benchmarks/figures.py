@@ -261,6 +261,13 @@ FIGURES: tuple[Figure, ...] = (
         minutes=15,
     ),
     Figure(
+        "mock_scurve",
+        "What ArduCopter's S-curve legs cost the mock, against its tuned kinematics",
+        ("python benchmarks/mock_scurve.py --counts 10 100 250",),
+        quick=("python benchmarks/mock_scurve.py --counts 10 --steps 20 --rounds 1",),
+        minutes=1,
+    ),
+    Figure(
         "deconflict_tables",
         "4-D deconfliction (seed 004) Tables 1-3 and the scaled fleets",
         ("python benchmarks/deconflict_tables.py --seeds 3 --out {out}",),
