@@ -372,21 +372,22 @@ class Navigator:
             nav.init(kin.pos[i], float(kin.speed_cmd[i]))
         nav.set_destination(target)
         if passing:
-            nxt = next(k for k in range(seq + 1, self.last_seq + 1) if self.items[k].command in NAV_COMMANDS)
-            nav.set_destination_next(self._target(nxt))
+            nav.set_destination_next(self._target(self._next_nav(seq)))
         kin.command(i, Guidance.TRACK, target, Arrival.TRACKED)
 
+    def _next_nav(self, seq: int) -> int | None:
+        """The seq of the first nav item after ``seq`` in the run, None without one."""
+        return next(
+            (k for k in range(seq + 1, self.last_seq + 1) if self.items[k].command in NAV_COMMANDS), None
+        )
+
     def _next_nav_is_waypoint(self, seq: int) -> bool:
-        for item in self.items[seq + 1 : self.last_seq + 1]:
-            if item.command in NAV_COMMANDS:
-                return item.command == NAV_WAYPOINT
-        return False
+        nxt = self._next_nav(seq)
+        return nxt is not None and self.items[nxt].command == NAV_WAYPOINT
 
     def _corner_speed(self, seq: int, target: np.ndarray, radius_m: float) -> float:
         """Multirotor speed [m/s] at which the turn onto the next leg fits inside the acceptance radius."""
-        nxt = next(
-            (k for k in range(seq + 1, self.last_seq + 1) if self.items[k].command in NAV_COMMANDS), None
-        )
+        nxt = self._next_nav(seq)
         if nxt is None or self.airframe.kind == "fixed_wing":
             return np.inf
         here = self.world.kin.pos[self.i, :2]

@@ -84,7 +84,7 @@ class WaypointNav:
 
     def set_speed(self, speed_mps: float) -> None:
         """A new horizontal speed: this leg and the next are re-planned from where they are."""
-        if speed_mps < WP_SPD_MIN or self.speed_xy <= 0:
+        if speed_mps < WP_SPD_MIN:
             return
         self.speed_xy = speed_mps
         up, down = self.params["WP_SPD_UP"], self.params["WP_SPD_DN"]
